@@ -1,0 +1,97 @@
+"""The `darthand model ...` commands: each takes parsed arguments, calls the stage, prints a short report."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+
+from darthand.fileio import atomic_path
+from darthand.model.forward import forward
+from darthand.model.hand_model import HandModel
+from darthand.model.load import load_model
+from darthand.model.mirror import mirror_model
+from darthand.model.npz_io import save_npz
+from darthand.model.topology import boundary_loops, non_manifold_edges
+from darthand.model.wrist import add_wrist
+
+
+def describe(model: HandModel) -> dict:
+    """Counts and properties of a model, as `model info --json` prints them."""
+    loops = boundary_loops(model.faces)
+    return {
+        "source": model.meta.get("source"),
+        "side": model.side,
+        "vertices": model.num_vertices,
+        "faces": model.num_faces,
+        "joints": int(model.parents.shape[0]),
+        "correctives": int(model.posedirs.shape[2]),
+        "nonzero_correctives": int(np.count_nonzero(np.abs(model.posedirs).max(axis=(0, 1)))),
+        "shape_dims": model.num_betas,
+        "boundary_loops": [len(loop) for loop in loops],
+        "non_manifold_edges": int(len(non_manifold_edges(model.faces))),
+        "has_uvs": model.has_uvs,
+        "has_face_labels": model.face_labels is not None,
+        "tip_ids": model.tip_ids.tolist(),
+        "wrist": {k: v for k, v in model.meta["wrist"].items() if k != "loop"} if "wrist" in model.meta else None,
+        "fixes": model.meta.get("fixes", []),
+    }
+
+
+def info(args) -> int:
+    d = describe(load_model(args.model))
+    if args.json:
+        print(json.dumps(d, indent=2))
+        return 0
+    print(f"{d['source']}: {d['side']} hand, {d['vertices']} vertices, {d['faces']} faces, {d['joints']} joints")
+    print(f"  correctives {d['correctives']} ({d['nonzero_correctives']} non-zero), shape dims {d['shape_dims']}")
+    print(f"  boundary loops {d['boundary_loops']}, non-manifold edges {d['non_manifold_edges']}, "
+          f"UVs {'yes' if d['has_uvs'] else 'no'}, face labels {'yes' if d['has_face_labels'] else 'no'}")
+    if d["wrist"]:
+        print(f"  wrist: {d['wrist']['rings']} rings of {d['wrist']['ring_size']} added to "
+              f"{d['wrist']['base_vertices']} vertices")
+    for fix in d["fixes"]:
+        print(f"  fixed on load: {fix}")
+    return 0
+
+
+def pose(args) -> int:
+    from darthand.model.poses import load_pose_file
+
+    model = load_model(args.model)
+    poses, betas, flat_hand_mean = load_pose_file(args.pose)
+    dtype = np.dtype(args.dtype)
+    posed = forward(model, poses, betas, flat_hand_mean=flat_hand_mean, dtype=dtype, keypoint_order="openpose")
+    buf = io.BytesIO()
+    np.savez(buf, vertices=posed.vertices, joints=posed.joints, keypoints=posed.keypoints)
+    with atomic_path(args.out) as tmp:
+        tmp.write_bytes(buf.getvalue())
+    print(f"{args.out}: {posed.vertices.shape[0]} poses, {model.num_vertices} vertices, {dtype.name}")
+    return 0
+
+
+def wrist(args) -> int:
+    model = add_wrist(load_model(args.model), rings=args.rings, length=args.length, taper=args.taper,
+                      anchor=args.anchor, smooth=args.smooth)
+    save_npz(model, args.out)
+    w = model.meta["wrist"]
+    print(f"{args.out}: {w['base_vertices']} -> {model.num_vertices} vertices, {w['base_faces']} -> "
+          f"{model.num_faces} faces ({w['rings']} rings of {w['ring_size']}, anchor {w['anchor']})")
+    return 0
+
+
+def build(args) -> int:
+    """The pipeline's model step: the wrist-enhanced model of each side, as build/model/{right,left}.npz."""
+    source = load_model(args.model)
+    enhanced = add_wrist(source)
+    other = mirror_model(enhanced)
+    out = Path(args.out_dir)
+    for model in (enhanced, other):
+        save_npz(model, out / f"{model.side}.npz")
+    for fix in source.meta.get("fixes", []):
+        print(f"  fixed on load: {fix}")
+    print(f"{out}/right.npz, left.npz: {enhanced.num_vertices} vertices, {enhanced.num_faces} faces "
+          f"(from {args.model}, {source.num_vertices} vertices)")
+    return 0
