@@ -32,6 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(title="commands", metavar="COMMAND")
     _add_model_commands(sub)
     # -- stage command groups are added here (one function per stage, below) --
+    _add_manifest_command(sub)
     return parser
 
 
@@ -73,6 +74,23 @@ def _add_model_commands(sub) -> None:
     p.add_argument("model", metavar="MODEL", help=model_help)
     p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for right.npz and left.npz")
     p.set_defaults(run=commands.build)
+
+
+# ---------------------------------------------------------------- manifest
+def _add_manifest_command(sub) -> None:
+    p = sub.add_parser("manifest", help="write build/manifest.json: outputs with sha256, step seconds, checks",
+                       description="write build/manifest.json: outputs with sha256, step seconds, checks")
+    p.add_argument("--build", default="build", help="build folder (default: build)")
+    p.add_argument("--out", default=None, help="manifest path (default: BUILD/manifest.json)")
+
+    def run(args):
+        from darthand.manifest import write_manifest
+        m = write_manifest(args.build, args.out)
+        total = sum(e["bytes"] for e in m["outputs"])
+        print(f"manifest: {len(m['outputs'])} outputs, {total / 1e6:.1f} MB, checks: {sorted(m['checks'])}")
+        return 0
+
+    p.set_defaults(run=run)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,79 @@
+"""build/manifest.json: every output with its size and sha256, per-step seconds, the model used, check results.
+
+Hashes are reused from the previous manifest for files whose size and modification time are unchanged, so an
+incremental `make assets` does not re-read gigabytes of textures.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from darthand import __version__
+from darthand.fileio import sha256_file, write_json
+
+SKIP_DIRS = {"steps", "bench"}
+# Reports that stages write and the manifest gathers as check results: name -> path relative to build/.
+CHECK_REPORTS = {
+    "gestures": "template/gesture_report.json",
+    "textures": "textures/report.json",
+    "accessories": "accessories/report.json",
+    "usd": "usd/report.json",
+    "gltf": "gltf/report.json",
+    "render": "checks/report.json",
+}
+
+
+def output_files(build: Path, manifest_path: Path) -> list[Path]:
+    """Every regular file under build/, except the manifest, step records, benchmarks and hidden temporaries."""
+    files = []
+    for root, dirs, names in os.walk(build):
+        rel_root = Path(root).relative_to(build)
+        dirs[:] = sorted(d for d in dirs if not d.startswith(".") and not (rel_root == Path(".") and d in SKIP_DIRS))
+        files += [Path(root) / n for n in sorted(names) if not n.startswith(".") and Path(root) / n != manifest_path]
+    return files
+
+
+def file_entries(build: Path, manifest_path: Path, previous: dict) -> list[dict]:
+    """[{path, bytes, sha256}] with hashes reused when (bytes, mtime_ns) match the previous manifest."""
+    old = {e["path"]: e for e in previous.get("outputs", [])}
+    out = []
+    for f in output_files(build, manifest_path):
+        st = f.stat()
+        rel = f.relative_to(build).as_posix()
+        prev = old.get(rel)
+        same = prev and prev.get("bytes") == st.st_size and prev.get("mtime_ns") == st.st_mtime_ns
+        out.append({"path": rel, "bytes": st.st_size, "mtime_ns": st.st_mtime_ns,
+                    "sha256": prev["sha256"] if same else sha256_file(f)})
+    return out
+
+
+def model_used(build: Path) -> dict:
+    source = build / "model" / "source.txt"
+    info = {"source": source.read_text().strip() if source.is_file() else None}
+    right = build / "model" / "right.npz"
+    if right.is_file():
+        from darthand.model.npz_io import load_npz
+        m = load_npz(right)
+        info.update(vertices=m.num_vertices, faces=m.num_faces, side=m.side, fixes=m.meta.get("fixes", []),
+                    provenance=m.meta.get("provenance"))
+    return info
+
+
+def write_manifest(build: str | Path = "build", out: str | Path | None = None) -> dict:
+    build = Path(build)
+    out = Path(out) if out else build / "manifest.json"
+    previous = json.loads(out.read_text()) if out.is_file() else {}
+    steps = {p.stem: json.loads(p.read_text())["seconds"] for p in sorted((build / "steps").glob("*.json"))}
+    checks = {name: json.loads((build / rel).read_text()) for name, rel in CHECK_REPORTS.items()
+              if (build / rel).is_file()}
+    manifest = {
+        "darthand_version": __version__,
+        "model": model_used(build),
+        "steps_seconds": steps,
+        "checks": checks,
+        "outputs": file_entries(build, out, previous),
+    }
+    write_json(out, manifest)
+    return manifest
