@@ -95,3 +95,27 @@ def test_console_script_help_on_every_subcommand():
                  ["model", "wrist", "--help"], ["model", "build", "--help"]):
         r = subprocess.run([str(exe), *argv], capture_output=True, text=True, timeout=60)
         assert r.returncode == 0 and "usage:" in r.stdout, (argv, r.stderr)
+
+
+def test_mano_pickle_left_build_reports_the_fix(capsys, tmp_path):
+    from model.mano_fixture import write_mano_pkl
+
+    pkl = tmp_path / "MANO_LEFT.pkl"
+    write_mano_pkl(pkl, side="left", left_bug=True)
+    code, out, err = run(capsys, "model", "build", pkl, "--out-dir", tmp_path / "out")
+    assert code == 0, err
+    assert "left shapedirs x sign flipped" in out
+    right, left = load_npz(tmp_path / "out/right.npz"), load_npz(tmp_path / "out/left.npz")
+    assert (right.side, left.side) == ("right", "left")
+    # The build keeps the source's own side as given and mirrors the other from it.
+    np.testing.assert_allclose(right.v_template, left.v_template * [-1, 1, 1])
+
+
+def test_malicious_pickle_via_cli_executes_nothing(capsys, tmp_path):
+    from model.mano_fixture import malicious_pickle
+
+    marker = tmp_path / "pwned"
+    (tmp_path / "evil.pkl").write_bytes(malicious_pickle("os.system", marker))
+    code, _, err = run(capsys, "model", "info", tmp_path / "evil.pkl")
+    assert code == 2 and "evil.pkl" in err and err.count("\n") == 1
+    assert not marker.exists()

@@ -200,3 +200,8 @@ def test_bad_betas_and_dtype_rejected(model):
         forward(model, np.zeros(48), [np.nan])
     with pytest.raises(InputError, match="dtype"):
         forward(model, np.zeros(48), dtype=np.float16)
+
+
+def test_empty_batch(model):
+    out = forward(model, np.zeros((0, 48)))
+    assert out.vertices.shape == (0, model.num_vertices, 3) and out.keypoints.shape == (0, 21, 3)

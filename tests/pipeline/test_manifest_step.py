@@ -51,3 +51,14 @@ def test_failed_step_leaves_no_record(tmp_path):
     assert run_step("ok", [sys.executable, "-c", "pass"], steps_dir=steps) == 0
     assert run_step("ok", [sys.executable, "-c", "raise SystemExit(3)"], steps_dir=steps) == 3
     assert not (steps / "ok.json").exists()
+
+
+def test_atomic_outputs_get_normal_permissions(tmp_path):
+    from darthand.fileio import write_bytes
+
+    old = os.umask(0o022)
+    try:
+        write_bytes(tmp_path / "f.bin", b"x")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "f.bin").stat().st_mode & 0o777 == 0o644

@@ -118,13 +118,13 @@ def shape_blend(model: HandModel, arrays: dict, betas, B: int, dtype) -> tuple[n
 def pose_feature(rotations: np.ndarray) -> np.ndarray:
     """(B, 135) corrective feature flatten(R_i - I), i = 1..15, from (B, 16, 3, 3) rotations."""
     B = rotations.shape[0]
-    return (rotations[:, 1:] - np.eye(3, dtype=rotations.dtype)).reshape(B, -1)
+    return (rotations[:, 1:] - np.eye(3, dtype=rotations.dtype)).reshape(B, 9 * (rotations.shape[1] - 1))
 
 
 def corrective_offsets(arrays: dict, rotations: np.ndarray) -> np.ndarray:
     """(B, 3, V) pose-corrective offsets, coordinate-major: one (B, 135) x (135, 3V) product."""
     B = rotations.shape[0]
-    return (pose_feature(rotations) @ arrays["posedirs_T"]).reshape(B, 3, -1)
+    return (pose_feature(rotations) @ arrays["posedirs_T"]).reshape(B, 3, arrays["weights_T"].shape[1])
 
 
 def kinematic_chain(rotations: np.ndarray, joints: np.ndarray, parents: np.ndarray) -> np.ndarray:
