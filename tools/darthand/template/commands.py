@@ -1,0 +1,28 @@
+"""The `darthand template ...` commands: each takes parsed arguments, calls the stage, prints a short report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from darthand.template.importer import ImportParams, command_line, import_open_hand
+
+# argparse attribute -> ImportParams field, for the options `template import` accepts.
+IMPORT_OPTIONS = ("cut_distance", "hand_length", "target_vertices", "tip_tilt_deg", "nail_threshold", "weight_smoothing",
+                  "uv_resolution", "uv_padding", "correctives", "corrective_train", "corrective_test", "seed")
+
+
+def import_command(args) -> int:
+    """`darthand template import WHEEL [--out DIR] [options]`: write open_right.npz, PROVENANCE.json and
+    LICENSE-CC0.md into DIR (default assets_src/template)."""
+    params = {name: getattr(args, name) for name in IMPORT_OPTIONS if getattr(args, name, None) is not None}
+    out = getattr(args, "out", None) or "assets_src/template"
+    command = command_line(Path(args.wheel), Path(out), ImportParams(**params))
+    fig = import_open_hand(args.wheel, out, command=command, **params)
+    corr = fig["correctives"]
+    corr_text = (f"correctives fitted (LBS->DQS mean {corr.get('lbs_mean_mm', float('nan')):.3f} -> "
+                 f"{corr.get('corrected_mean_mm', float('nan')):.3f} mm)" if corr.get("fitted")
+                 else f"correctives not fitted: {corr.get('reason')}")
+    print(f"{out}/open_right.npz: {fig['vertices']} vertices, {fig['faces']} faces, wrist loop "
+          f"{fig['wrist_loop_vertices']}, hand length {fig['hand_length_m'] * 100:.1f} cm, regressor error "
+          f"{fig['regressor']['max_error_mm']:.3f} mm; {corr_text}")
+    return 0
