@@ -98,3 +98,23 @@ def tube_hand(seed: int = 0, n_betas: int = 4, corrective_scale: float = 1e-3, w
         face_labels=np.zeros(len(faces), dtype=np.int8),
         meta={"name": "tube_hand", "seed": seed},
     )
+
+
+CYL_RADIUS, CYL_LENGTH, CYL_RINGS, CYL_BLEND = 0.01, 0.16, 41, 0.04
+
+
+def two_bone_cylinder() -> HandModel:
+    """Tube along -X, radius 1 cm, 16 cm; joint 0 at x = 0, joint 1 at x = -8 cm on the axis; joint 1's weight
+    ramps linearly 0 -> 1 over the 4 cm around it; the other joints carry no weight."""
+    verts, faces = tube_mesh(CYL_RINGS, CYL_RADIUS, CYL_LENGTH)
+    w1 = np.clip((-verts[:, 0] - (CYL_LENGTH / 2 - CYL_BLEND / 2)) / CYL_BLEND, 0, 1)
+    weights = np.zeros((len(verts), NUM_JOINTS))
+    weights[:, 0], weights[:, 1] = 1 - w1, w1
+    ring_of = np.full(NUM_JOINTS, CYL_RINGS - 1)
+    ring_of[0], ring_of[1] = 0, (CYL_RINGS - 1) // 2
+    rows = np.repeat(np.arange(NUM_JOINTS), RING)
+    cols = (ring_of[:, None] * RING + np.arange(RING)).ravel()
+    regressor = sp.csr_matrix((np.full(len(rows), 1 / RING), (rows, cols)), shape=(NUM_JOINTS, len(verts)))
+    return HandModel.create(source="two_bone_cylinder", v_template=verts, faces=faces, weights=weights,
+                            posedirs=np.zeros((len(verts), 3, NUM_POSE_FEATURES)), J_regressor=regressor,
+                            parents=MANO_PARENTS, tip_ids=[len(verts) - 1] * 5)

@@ -101,6 +101,15 @@ def _add_template_commands(sub) -> None:
     p.add_argument("--seed", type=int, help="seed of the corrective fit's pose draws (default 0)")
     p.set_defaults(run=commands.import_command)
 
+    p = g.add_parser("gestures", help="pose a model through the named gestures: checks (gestures.json) and a "
+                                      "contact sheet (gestures.png); exit 1 when a check fails")
+    p.add_argument("model", metavar="MODEL", nargs="?", default="open",
+                   help="a MANO pkl, a darthand .npz or a built-in name (default: open)")
+    p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for gestures.json and gestures.png")
+    p.add_argument("--max-between-fingers", type=int, default=10,
+                   help="faces where two digits may intersect before a gesture fails (default 10)")
+    p.set_defaults(run=commands.gestures_command)
+
 
 
 # ---------------------------------------------------------------- accessories

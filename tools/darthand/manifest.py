@@ -16,7 +16,7 @@ from darthand.fileio import sha256_file, write_json
 SKIP_DIRS = {"steps", "bench"}
 # Reports that stages write and the manifest gathers as check results: name -> path relative to build/.
 CHECK_REPORTS = {
-    "gestures": "template/gesture_report.json",
+    "gestures": "template/gestures.json",
     "textures": "textures/report.json",
     "accessories": "accessories/report.json",
     "usd": "usd/report.json",

@@ -26,3 +26,18 @@ def import_command(args) -> int:
           f"{fig['wrist_loop_vertices']}, hand length {fig['hand_length_m'] * 100:.1f} cm, regressor error "
           f"{fig['regressor']['max_error_mm']:.3f} mm; {corr_text}")
     return 0
+
+
+def gestures_command(args) -> int:
+    """`darthand template gestures [MODEL] --out-dir DIR`: gesture checks and contact sheet; 1 if a check fails."""
+    from darthand.model.load import load_model
+    from darthand.template.gesture_checks import gesture_problems, write_gesture_checks
+
+    report = write_gesture_checks(load_model(args.model), args.out_dir)
+    problems = gesture_problems(report, max_between_fingers=args.max_between_fingers)
+    for line in problems:
+        print(line)
+    worst = max((r.get("between_fingers_faces", 0) for r in report.values()), default=0)
+    print(f"{args.out_dir}/gestures.png: {len(report)} gestures, {len(problems)} problems, "
+          f"at most {worst} faces where digits intersect")
+    return 1 if problems else 0

@@ -139,6 +139,23 @@ def gesture_report(model: HandModel, names: list[str] | None = None, poses_dir=N
     return report
 
 
+def gesture_problems(report: dict, max_between_fingers: int = 10) -> list[str]:
+    """One line per failed check in a `gesture_report`: non-finite vertices, inverted triangles, more than
+    `max_between_fingers` faces where two digits intersect."""
+    problems = []
+    for name, r in report.items():
+        if not r["finite"]:
+            problems.append(f"gesture '{name}': non-finite vertices")
+            continue
+        if r["inverted_faces"]:
+            problems.append(f"gesture '{name}': {r['inverted_faces']} inverted triangles")
+        if r["between_fingers_faces"] > max_between_fingers:
+            pairs = ", ".join(f"{k} {n}" for k, n in r["between"].items() if "palm" not in k)
+            problems.append(f"gesture '{name}': {r['between_fingers_faces']} faces where digits intersect ({pairs}), "
+                            f"more than {max_between_fingers}")
+    return problems
+
+
 def write_gesture_checks(model: HandModel, out_dir: str | Path, names: list[str] | None = None) -> dict:
     """Write `gestures.json` (the `gesture_report`) and `gestures.png` (the contact sheet) into `out_dir`;
     return the report."""
