@@ -1,23 +1,33 @@
 # darthand: `make assets` builds the default assets, `make test` runs the tests, `make bench` measures.
-# Each target bootstraps .venv from pyproject.toml on first use (idempotent).
-# Variables: MANO=path/to/MANO_RIGHT.pkl (source model; default: the open CC0 hand), RES (texture size), SIDE.
+# Each target bootstraps .venv from pyproject.toml on first use (idempotent); Node tooling (the Khronos glTF
+# validator, three.js) comes from package-lock.json when npm is on the machine.
+#
+# Variables: MANO=path/to/MANO_RIGHT.pkl (source model; default: the open CC0 hand), RES (texture size, default
+# 2048), SIDE (right, left or both), TEXTURE / ACCESSORY (for `make usdz`).
 
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 DH     := $(VENV)/bin/darthand
+STEP    = $(PY) -m darthand.step
 STAMP  := $(VENV)/.installed-stamp
+NODE_STAMP := node_modules/.installed-stamp
 MANO   ?=
 RES    ?= 2048
 SIDE   ?= both
+TEXTURE   ?= light_base_00
+ACCESSORY ?= none
 PYTEST_ARGS ?=
 
 SOURCE_MODEL := $(if $(MANO),$(MANO),open)
-SOURCE_DEPS  := $(if $(MANO),$(MANO),$(wildcard assets_src/template/*))
+SOURCE_DEPS  := $(if $(MANO),$(MANO),$(wildcard assets_src/template/*.npz))
+SIDES        := $(if $(filter both,$(SIDE)),right left,$(SIDE))
+POSES        := $(wildcard assets_src/poses/*.json)
 
-.PHONY: assets test test-all bench clean venv
+.PHONY: assets test test-all bench usdz clean venv node FORCE
 .DEFAULT_GOAL := assets
 
+# ------------------------------------------------------------------ set-up
 venv: $(STAMP)
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -25,25 +35,72 @@ $(STAMP): pyproject.toml
 	@$(PY) -m pip install -q --disable-pip-version-check -e '.[test]'
 	@touch $@
 
-# The source model is recorded so that switching MANO=... rebuilds what depends on it.
+node: $(NODE_STAMP)
+$(NODE_STAMP): package.json package-lock.json
+	@if command -v npm >/dev/null 2>&1; then npm ci --no-audit --no-fund --loglevel=error && touch $@; \
+	 else echo "npm not found: glTF validator tests will be skipped"; fi
+
+# ------------------------------------------------------------------ assets
+# The source model is recorded so that switching MANO=... rebuilds everything that depends on it.
 build/model/source.txt: FORCE | $(STAMP)
 	@mkdir -p build/model
 	@echo '$(SOURCE_MODEL)' | cmp -s - $@ || echo '$(SOURCE_MODEL)' > $@
-FORCE:
 
 build/model/right.npz build/model/left.npz &: build/model/source.txt $(SOURCE_DEPS) $(STAMP)
-	@echo "[model] wrist-enhanced right and left models from $(SOURCE_MODEL)"
-	@$(DH) model build $(SOURCE_MODEL) --out-dir build/model
+	@$(STEP) model -- $(DH) model build $(SOURCE_MODEL) --out-dir build/model --atlas-res $(RES)
 
-assets: build/model/right.npz build/model/left.npz
+build/template/gestures.json build/template/gestures.png &: build/model/right.npz $(POSES)
+	@$(STEP) gestures -- $(DH) template gestures build/model/right.npz --out-dir build/template
 
-test: $(STAMP)
-	@$(PY) -m pytest -q -m "not slow" -n 2 $(PYTEST_ARGS)
+build/textures/res.txt: FORCE | $(STAMP)
+	@mkdir -p build/textures
+	@echo '$(RES)' | cmp -s - $@ || echo '$(RES)' > $@
 
-test-all: $(STAMP)
-	@$(PY) -m pytest -q -n 2 $(PYTEST_ARGS)
+build/textures/catalog.json: build/model/right.npz build/textures/res.txt $(wildcard assets_src/textures/*.json)
+	@$(STEP) textures -- $(DH) textures build build/model/right.npz --out build/textures --res $(RES) --jobs 2
 
-bench: $(STAMP)
+build/accessories/catalog.json: build/model/right.npz $(wildcard assets_src/accessories/*.json)
+	@$(STEP) accessories -- $(DH) accessories build build/model/right.npz --out build/accessories
+
+# One USD package and one glTF file per side.
+define side_rules
+build/usd/$(1)/$(1).usda: build/model/$(1).npz build/textures/catalog.json build/accessories/catalog.json
+	@$$(STEP) usd-$(1) -- $$(DH) export usd build/model/$(1).npz --out build/usd/$(1) \
+	    --textures build/textures/catalog.json --accessories build/accessories/catalog.json
+
+build/gltf/$(1).glb: build/model/$(1).npz build/textures/catalog.json build/accessories/catalog.json
+	@$$(STEP) gltf-$(1) -- $$(DH) export gltf build/model/$(1).npz --out $$@ \
+	    --textures build/textures/catalog.json --accessories build/accessories/catalog.json
+endef
+$(foreach s,right left,$(eval $(call side_rules,$(s))))
+
+build/checks/report.json: $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb)
+	@$(STEP) checks -- $(DH) render checks $(foreach s,$(SIDES),build/usd/$(s)) --out build/checks
+
+ASSETS := build/model/right.npz build/template/gestures.json build/textures/catalog.json \
+          build/accessories/catalog.json $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb) \
+          build/checks/report.json
+
+build/manifest.json: $(ASSETS)
+	@$(DH) manifest --build build
+
+assets: build/manifest.json
+
+usdz: build/usd/right/right.usda
+	@$(DH) export usdz build/usd/right --texture $(TEXTURE) --accessory $(ACCESSORY) \
+	    --out build/usdz/right_$(TEXTURE)_$(ACCESSORY).usdz
+
+# ------------------------------------------------------------------ tests and benchmarks
+# Two pytest workers, each with single-threaded BLAS: threaded BLAS in both workers oversubscribes two cores.
+TEST_ENV := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+
+test: $(STAMP) $(NODE_STAMP)
+	@$(TEST_ENV) $(PY) -m pytest -q -m "not slow" -n 2 $(PYTEST_ARGS)
+
+test-all: $(STAMP) $(NODE_STAMP)
+	@$(TEST_ENV) $(PY) -m pytest -q -n 2 $(PYTEST_ARGS)
+
+bench: $(STAMP) $(NODE_STAMP) build/model/right.npz
 	@$(PY) -m darthand.bench --out build/bench
 
 clean:

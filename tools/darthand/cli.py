@@ -34,6 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     # -- stage command groups are added here (one function per stage, below) --
     _add_template_commands(sub)
     _add_accessories_commands(sub)
+    _add_export_commands(sub)
     _add_manifest_command(sub)
     return parser
 
@@ -132,6 +133,77 @@ def _add_accessories_commands(sub) -> None:
     p.add_argument("--no-refit", action="store_true", help="report penetrations without refitting")
     p.add_argument("--no-sheet", action="store_true", help="skip the contact sheet")
     p.set_defaults(run=commands.build)
+
+
+# ---------------------------------------------------------------- export
+def _add_export_commands(sub) -> None:
+    from darthand.export import commands_gltf, commands_usd
+    from darthand.export.common import INFLUENCE_CHOICES
+
+    g = _group(sub, "export", "skinned USD, usdz and glTF assets of a hand with texture and accessory variants")
+    model_help = ("wrist-enhanced model: build/model/<side>.npz, a darthand .npz, a MANO pkl or a built-in name "
+                  "(open, open-left)")
+    correctives_help = ("pose correctives as blend shapes: full (all 135), pca:K or pose-pca:K (K = 1..135 directions; "
+                        "pose-pca weights them by how anatomical poses use them, a smaller error for the same K), "
+                        "none (default full)")
+    size_help = "downsize textures so that their longer side is at most PX pixels (default: use the files unchanged)"
+
+    p = g.add_parser("usd", help="write a USD asset package: interface .usda, payload, texture and accessory variants")
+    p.add_argument("model", metavar="MODEL", help=model_help)
+    p.add_argument("--out", required=True, metavar="DIR", help="package folder, e.g. build/usd/right (replaced whole)")
+    p.add_argument("--textures", metavar="CATALOG", help="texture catalogue (build/textures/catalog.json or its "
+                   "folder): a `texture` variant per entry, the first the default (default: one plain skin variant)")
+    p.add_argument("--accessories", metavar="CATALOG", help="accessory catalogue (build/accessories/catalog.json or "
+                   "its folder): an `accessory` variant per entry besides `none`, mirrored for a left hand")
+    p.add_argument("--influences", default="all", choices=INFLUENCE_CHOICES,
+                   help="skin influences per vertex (default all: as many as any vertex has, lossless)")
+    p.add_argument("--correctives", default="full", metavar="MODE", help=correctives_help)
+    p.add_argument("--texture-size", type=int, metavar="PX", help=size_help)
+    p.add_argument("--name", metavar="NAME", help="name of the interface layer NAME.usda (default: the model's side)")
+    p.set_defaults(run=commands_usd.usd)
+
+    p = g.add_parser("usdz", help="write one variant combination of a USD package as a flattened .usdz")
+    p.add_argument("package", metavar="PACKAGE", help="USD package folder (or its interface .usda)")
+    p.add_argument("--out", required=True, metavar="FILE.usdz", help="the .usdz to write")
+    p.add_argument("--texture", metavar="ID", help="texture variant (default: the package's default)")
+    p.add_argument("--accessory", metavar="ID",
+                   help="accessory variant, or none (default: the package's default, none)")
+    p.set_defaults(run=commands_usd.usdz)
+
+    p = g.add_parser("usd-check", help="run OpenUSD's validators on a USD package or file (exit 1 on errors)")
+    p.add_argument("package", metavar="PACKAGE", help="USD package folder, or a .usda / .usdc / .usdz file")
+    p.add_argument("--all-variants", action="store_true",
+                   help="validate once per variant of every variant set (default: the default selection only)")
+    p.set_defaults(run=commands_usd.check)
+
+    p = g.add_parser("gltf", help="write a glTF 2.0 asset: one .glb, or a .gltf package with texture variants")
+    p.add_argument("model", metavar="MODEL", help=model_help)
+    p.add_argument("--out", required=True, metavar="OUT", help=".glb (one file, textures embedded) or .gltf (JSON, "
+                   ".bin and textures/ beside it: the variants package)")
+    p.add_argument("--textures", metavar="CATALOG",
+                   help="texture catalogue (build/textures/catalog.json or its folder)")
+    p.add_argument("--texture", action="append", metavar="ID", help="texture variant to include, repeatable, the "
+                   "first the default (default: the catalogue's first entry); needs --textures")
+    p.add_argument("--all-textures", action="store_true", help="include every catalogue texture as a "
+                   "KHR_materials_variants variant, in catalogue order; needs --textures")
+    p.add_argument("--texture-size", type=int, metavar="PX", help=size_help)
+    p.add_argument("--accessories", metavar="CATALOG", help="accessory catalogue (build/accessories/catalog.json or "
+                   "its folder), mirrored for a left hand")
+    p.add_argument("--accessory", action="append", metavar="ID",
+                   help="accessory to attach, repeatable (default: every accessory of the catalogue)")
+    p.add_argument("--influences", default="4", choices=INFLUENCE_CHOICES,
+                   help="skin influences per vertex (default 4: what real-time engines skin with)")
+    p.add_argument("--correctives", default="full", metavar="MODE", help=correctives_help)
+    p.add_argument("--clip-keys", type=int, default=5, metavar="N",
+                   help="keyframes per gesture animation, from rest to the gesture (default 5)")
+    p.add_argument("--validate", action="store_true",
+                   help="run the Khronos glTF validator on the result (exit 1 on errors)")
+    p.set_defaults(run=commands_gltf.gltf)
+
+    p = g.add_parser("gltf-validate", help="run the Khronos glTF validator on .glb / .gltf files (exit 1 on errors)")
+    p.add_argument("paths", nargs="+", metavar="FILE", help=".glb or .gltf files")
+    p.add_argument("--json", action="store_true", help="print the validator's reports as JSON")
+    p.set_defaults(run=commands_gltf.validate)
 
 
 # ---------------------------------------------------------------- manifest

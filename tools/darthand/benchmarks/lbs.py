@@ -7,25 +7,13 @@ a MANO-sized synthetic model; its vertex count is reported with the figures.
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 
+from darthand.benchmarks._common import bench_model
 from darthand.model.forward import forward
 
 BATCHES = (1, 64, 1024, 4096)
-
-
-def bench_model():
-    from darthand.model.load import TEMPLATE_DIR, load_model
-    from darthand.model.wrist import add_wrist
-
-    built = Path("build/model/right.npz")
-    if built.is_file():
-        return load_model(built), str(built)
-    if (TEMPLATE_DIR / "open_right.npz").is_file():
-        return add_wrist(load_model("open")), "open + wrist"
-    raise SystemExit("lbs benchmark: no model (run `make assets` first)")
 
 
 def poses_per_second(model, B: int, dtype, seconds: float = 1.0) -> float:

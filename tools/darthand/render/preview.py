@@ -16,6 +16,7 @@ from embreex.mesh_construction import TriangleMesh
 
 from darthand.errors import DarthandError
 from darthand.fileio import atomic_path
+from darthand.model.topology import vertex_normals
 
 SKIN = (0.80, 0.55, 0.45)          # linear RGB
 HIGHLIGHT = (0.90, 0.02, 0.02)
@@ -44,16 +45,6 @@ def camera_basis(view, side: str = "right") -> np.ndarray:
     right = np.cross(forward, hint)
     right /= np.linalg.norm(right)
     return np.stack([right, np.cross(right, forward), forward])
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(V, 3) unit area-weighted vertex normals."""
-    a, b, c = (vertices[faces[:, k]] for k in range(3))
-    fn = np.cross(b - a, c - a)
-    vn = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(vn, faces[:, k], fn)
-    return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
 
 
 def render_mesh(vertices: np.ndarray, faces: np.ndarray, *, view="three_quarter", size: int = 256,

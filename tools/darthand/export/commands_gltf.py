@@ -1,0 +1,64 @@
+"""The `darthand export gltf | gltf-validate` commands: each takes parsed arguments (cli.py defines them), calls the
+stage, prints a short report."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from darthand.errors import InputError
+from darthand.export.common import load_accessory_catalog, load_texture_catalog, parse_influences, select_textures
+
+
+def gltf(args) -> int:
+    """`darthand export gltf MODEL --out OUT.glb|OUT.gltf [--textures T [--texture ID ...] [--all-textures]]
+    [--texture-size N] [--accessories A [--accessory ID ...]] [--influences K] [--correctives C] [--clip-keys N]
+    [--validate]`; prints a JSON summary. Exit 1 if --validate found errors."""
+    from darthand.export.gltf_export import GltfOptions, export_gltf
+    from darthand.model.load import load_model
+
+    model = load_model(args.model)
+    textures = []
+    if args.textures:
+        sets = load_texture_catalog(args.textures)
+        textures = sets if args.all_textures else select_textures(sets, args.texture or [sets[0].id])
+    elif args.texture or args.all_textures:
+        raise InputError("--texture/--all-textures need --textures CATALOG.json")
+    accessories = load_accessory_catalog(args.accessories, args.accessory, side=model.side) \
+        if args.accessories else []
+    options = GltfOptions(influences=parse_influences(args.influences), correctives=args.correctives,
+                          texture_size=args.texture_size, clip_keys=args.clip_keys)
+    result = export_gltf(model, args.out, options=options, textures=textures, accessories=accessories)
+    summary = result.as_dict()
+    summary["variants"] = len(summary["variants"])
+    code = 0
+    if args.validate:
+        report = _validate(Path(args.out))
+        summary["validation"] = report.counts
+        code = 1 if report.errors else 0
+    print(json.dumps(summary, indent=2))
+    return code
+
+
+def validate(args) -> int:
+    """`darthand export gltf-validate FILE ... [--json]`: the Khronos validator; exit 1 if any file has errors."""
+    reports = [_validate(Path(p)) for p in args.paths]
+    if args.json:
+        print(json.dumps([{"path": r.path, "counts": r.counts, "messages": r.messages} for r in reports], indent=2))
+    else:
+        for r in reports:
+            print(r.summary())
+    return 1 if any(r.errors for r in reports) else 0
+
+
+def _validate(path: Path):
+    from darthand.export.gltf_validator import validate as run_validator
+
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    report = run_validator(path)
+    if report.errors:
+        for m in report.issues("errors")[:20]:
+            print(f"{path}: {m['code']} at {m.get('pointer', '')}: {m['message']}", file=sys.stderr)
+    return report

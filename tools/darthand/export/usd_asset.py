@@ -1,0 +1,189 @@
+"""One self-contained USD asset package per hand, in the common asset structure.
+
+    <out>/                       e.g. build/usd/right/
+      <name>.usda                interface layer: defaultPrim </Hand>, a SkelRoot of kind `component` with
+                                 assetInfo, stage metadata (metersPerUnit = 1, upAxis = Y, time codes), the
+                                 variant sets `texture` and `accessory`, and a payload to payload.usdc
+      payload.usdc               the rig: Skeleton, SkelAnimation of the gestures, the hand Mesh with its skin,
+                                 UVs, normals and pose-corrective BlendShapes, bound to </Hand/Looks/Skin>
+      texture/<id>.usda, texture/<id>/*.png        one skin material per texture variant
+      accessory/<id>.usdc, accessory/<id>/*.png    one accessory per accessory variant
+      asset.json                 what was written: options, counts, gesture names by time code, error bounds
+
+Every asset path is relative. The package is written into a temporary folder next to <out> and renamed into place,
+so an interrupted export never leaves a half-written package.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pxr import Sdf, UsdGeom, Vt
+
+import darthand
+from darthand.errors import InputError
+from darthand.export.common import (Accessory, Correctives, TextureSet, check_export_options, check_textures_fit,
+                                    export_correctives, gesture_poses)
+from darthand.export.usd_materials import MaterialSpec, bind_material
+from darthand.export.usd_skel import SPARSE_TOL, define_rig
+from darthand.export.usd_variants import (add_accessory_variants, add_texture_variants, new_layer_stage,
+                                          skin_material, write_accessory_variant, write_texture_variant)
+from darthand.fileio import write_json
+from darthand.model.hand_model import HandModel
+
+ROOT = Sdf.Path("/Hand")
+MATERIAL = ROOT.AppendPath("Looks/Skin")
+PLAIN_TEXTURE = "plain"  # the texture variant used when no texture catalogue is given: a constant skin colour
+
+
+@dataclass(frozen=True)
+class ExportOptions:
+    """influences: joints per vertex, at most (None: as many as any vertex has non-zero weights, lossless);
+    correctives: 'full' | 'pca:K' | 'pose-pca:K' | 'none' (common.export_correctives); texture_size: downsize
+    every texture so its longer side is at most this many pixels (common.place_texture; None: link the files
+    unchanged); sparse_tol: blend-shape offsets shorter than this (metres) are left out."""
+
+    influences: int | None = None
+    correctives: str = "full"
+    texture_size: int | None = None
+    sparse_tol: float = SPARSE_TOL
+
+    def check(self) -> None:
+        check_export_options(self.influences, self.correctives, self.texture_size)
+
+
+def export_usd(model: HandModel, out: str | os.PathLike, *, textures: list[TextureSet] = (),
+               default_texture: str | None = None, accessories: list[Accessory] = (),
+               options: ExportOptions = ExportOptions(), gestures: tuple[list[str], np.ndarray] | None = None,
+               name: str | None = None) -> dict:
+    """Write the asset package of `model` (wrist-enhanced, with UVs) to the folder `out`; returns asset.json's dict
+    plus `write_seconds`.
+
+    gestures: (names, poses (G, 48) axis-angle) for the animation (default: the named gestures of
+    assets_src/poses). textures: the `texture` variants (default: one constant-colour variant, 'plain').
+    accessories: the `accessory` variants besides 'none'.
+    """
+    out = Path(out)
+    options.check()
+    name = name or model.side
+    names, poses = gesture_poses(model) if gestures is None else (list(gestures[0]), np.asarray(gestures[1]))
+    if len(names) != len(poses) or len(names) == 0:
+        raise InputError(f"gestures: {len(names)} names for {len(poses)} poses (need at least one)")
+    check_textures_fit(model, textures)
+    materials = {t.id: skin_material(t) for t in textures} or {PLAIN_TEXTURE: MaterialSpec(wrap="clamp")}
+    _check_unique([t.id for t in textures], "texture")
+    default_texture = default_texture or next(iter(materials))
+    if default_texture not in materials:
+        raise InputError(f"texture: the default {default_texture!r} is not one of the texture variants")
+    _check_unique([a.id for a in accessories] + ["none"], "accessory")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        t0 = time.perf_counter()
+        correctives = export_correctives(model, options.correctives)
+        stats = write_payload(tmp / "payload.usdc", model, correctives, options, names, poses)
+        texture_layers = {vid: write_texture_variant(tmp, vid, spec, options.texture_size)
+                          for vid, spec in materials.items()}
+        accessory_layers = {a.id: write_accessory_variant(tmp, a, correctives, options.influences,
+                                                          options.texture_size, options.sparse_tol)
+                            for a in accessories}
+        write_interface(tmp / f"{name}.usda", name, names, texture_layers, accessory_layers, default_texture)
+        info = {
+            "name": name,
+            "side": model.side,
+            "interface": f"{name}.usda",
+            "payload": "payload.usdc",
+            "root_prim": str(ROOT),
+            "model": {"source": model.meta.get("source"), "vertices": model.num_vertices,
+                      "faces": model.num_faces},
+            "options": {"influences": options.influences or "all", "correctives": options.correctives,
+                        "texture_size": options.texture_size, "sparse_tol_m": options.sparse_tol},
+            "rig": stats.as_dict(),
+            "gestures": {"names": names, "time_codes": list(range(len(names))),
+                         "poses": np.asarray(poses, dtype=np.float64).round(12).tolist()},
+            "variants": {"texture": list(texture_layers), "accessory": ["none"] + list(accessory_layers)},
+        }
+        info["files"] = {p.relative_to(tmp).as_posix(): p.stat().st_size for p in sorted(tmp.rglob("*"))
+                         if p.is_file()}
+        write_json(tmp / "asset.json", info)
+        replace_folder(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    reload_open_layers(out)
+    return {**info, "write_seconds": round(time.perf_counter() - t0, 3)}
+
+
+def write_payload(path: Path, model: HandModel, correctives: Correctives, options: ExportOptions, names: list[str],
+                  poses: np.ndarray):
+    """payload.usdc: the SkelRoot </Hand> with the rig; the mesh bound to the texture variant's material."""
+    stage = new_layer_stage(path, ROOT.name)
+    _time_metadata(stage.GetRootLayer(), len(names))
+    stats = define_rig(stage, ROOT, model, correctives, names, poses, options.influences, options.sparse_tol)
+    UsdGeom.Scope.Define(stage, MATERIAL.GetParentPath())
+    bind_material(stage.GetPrimAtPath(ROOT.AppendChild("Hand")), MATERIAL)
+    stage.GetRootLayer().Save()
+    return stats
+
+
+def write_interface(path: Path, name: str, gesture_names: list[str], texture_layers: dict[str, str],
+                    accessory_layers: dict[str, str], default_texture: str) -> None:
+    """The interface layer: metadata, the component root prim with assetInfo, the payload, the variant sets."""
+    layer = Sdf.Layer.CreateNew(str(path))
+    layer.defaultPrim = ROOT.name
+    root = layer.pseudoRoot
+    root.SetInfo("metersPerUnit", 1.0)
+    root.SetInfo("upAxis", UsdGeom.Tokens.y)
+    _time_metadata(layer, len(gesture_names))
+    layer.customLayerData = {"darthand:gestures": Vt.StringArray(gesture_names)}
+    prim = Sdf.PrimSpec(layer, ROOT.name, Sdf.SpecifierDef, "SkelRoot")
+    prim.kind = "component"
+    prim.assetInfo = {"identifier": Sdf.AssetPath(f"./{path.name}"), "name": f"darthand_{name}",
+                      "version": darthand.__version__}
+    prim.payloadList.Prepend(Sdf.Payload("./payload.usdc"))
+    add_texture_variants(layer, ROOT, texture_layers, default_texture)
+    add_accessory_variants(layer, ROOT, accessory_layers, "none")
+    layer.Save()
+
+
+def replace_folder(tmp: Path, out: Path) -> None:
+    """Move the finished folder `tmp` to `out`, replacing a previous `out` (renamed aside first, then removed)."""
+    old = None
+    if out.exists():
+        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.parent))
+        os.replace(out, old / out.name)
+    os.chmod(tmp, 0o755)  # mkdtemp made it private
+    os.replace(tmp, out)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def reload_open_layers(folder: Path) -> None:
+    """Layers of a previous package at the same paths may still be open in this process (Sdf's layer registry
+    keeps them by path while anything holds them); reload them so that later opens see the new files."""
+    for path in folder.rglob("*.usd*"):
+        layer = Sdf.Layer.Find(str(path))
+        if layer is not None:
+            layer.Reload(force=True)
+
+
+def _time_metadata(layer: Sdf.Layer, count: int) -> None:
+    """One time code per gesture, one gesture per second."""
+    layer.startTimeCode = 0
+    layer.endTimeCode = max(0, count - 1)
+    layer.timeCodesPerSecond = 1
+    layer.framesPerSecond = 1
+
+
+def _check_unique(ids: list[str], what: str) -> None:
+    seen = set()
+    for i in ids:
+        if i in seen:
+            raise InputError(f"{what} id {i!r} is used twice")
+        seen.add(i)
