@@ -75,7 +75,7 @@ endef
 $(foreach s,right left,$(eval $(call side_rules,$(s))))
 
 build/checks/report.json: $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb)
-	@$(STEP) checks -- $(DH) render checks $(foreach s,$(SIDES),build/usd/$(s)) --out build/checks
+	@$(STEP) checks -- $(DH) render-checks --build build --sides $(SIDES)
 
 ASSETS := build/model/right.npz build/template/gestures.json build/textures/catalog.json \
           build/accessories/catalog.json $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb) \

@@ -35,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_template_commands(sub)
     _add_accessories_commands(sub)
     _add_export_commands(sub)
+    _add_render_commands(sub)
     _add_manifest_command(sub)
     return parser
 
@@ -204,6 +205,79 @@ def _add_export_commands(sub) -> None:
     p.add_argument("paths", nargs="+", metavar="FILE", help=".glb or .gltf files")
     p.add_argument("--json", action="store_true", help="print the validator's reports as JSON")
     p.set_defaults(run=commands_gltf.validate)
+
+
+# ---------------------------------------------------------------- render
+RENDER_PACKAGE_HELP = ("a USD package (build/usd/right, or its .usda), or a model for the internal path: a darthand "
+                       ".npz (build/model/right.npz), 'right' / 'left' (build/model/<side>.npz) or 'open'")
+
+
+def _add_render_commands(sub) -> None:
+    from darthand.render import commands
+
+    text = "render a labelled image (image.png, mask.png, labels.json) of a hand package"
+    p = sub.add_parser("render", help=text, description=text)
+    _add_render_arguments(p)
+    p.set_defaults(run=commands.render)
+    text = "render every USD package of a build, check the renders, write BUILD/checks/ (exit 1 if a check fails)"
+    p = sub.add_parser("render-checks", help=text, description=text)
+    _add_checks_arguments(p)
+    p.set_defaults(run=commands.checks)
+
+
+def _add_render_arguments(p) -> None:
+    from darthand.render.aa import PATTERNS
+    from darthand.render.preview import VIEWS
+
+    p.add_argument("package", metavar="PACKAGE", help=RENDER_PACKAGE_HELP)
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder for image.png, mask.png, labels.json")
+    p.add_argument("--pose", default=None, metavar="POSE",
+                   help="a gesture name (assets_src/poses), a pose file (schemas/pose.schema.json) or 48 "
+                        "comma-separated MANO axis-angle numbers relative to the flat hand; USD packages take a "
+                        "gesture name or a time code (default: the flat hand)")
+    p.add_argument("--pose-index", type=int, default=0, metavar="N", help="which pose of a pose file (default 0)")
+    p.add_argument("--texture", default=None, metavar="ID",
+                   help="texture id from the texture catalogue (or USD 'texture' variant), 'plain' or 'checker' "
+                        "(default: the catalogue's default)")
+    p.add_argument("--skin-tone-offset", type=float, default=0.0, metavar="X",
+                   help="added to the sRGB albedo before decoding, as the texture catalogue does (default 0)")
+    p.add_argument("--accessory", default=None, metavar="ID",
+                   help="accessory id from the accessory catalogue (or USD 'accessory' variant), 'none' (default)")
+    p.add_argument("--camera", default="three_quarter", metavar="VIEW|CAMERA.json",
+                   help=f"a view framed on the hand ({', '.join(VIEWS)}) or a camera file "
+                        "(schemas/camera.schema.json: K and R, t; or look_at; or view) (default three_quarter)")
+    p.add_argument("--lights", default=None, metavar="LIGHTS.json",
+                   help="ambient, directional and point lights (schemas/lights.schema.json) (default: a key light "
+                        "with shadows, a fill light and ambient, moving with the camera)")
+    p.add_argument("--background", default=None, metavar="IMAGE",
+                   help="background image, scaled to cover the frame and composited in linear light "
+                        "(default: transparent)")
+    p.add_argument("--size", type=int, default=512, metavar="N", help="square image size in pixels (default 512)")
+    p.add_argument("--width", type=int, default=None, metavar="W", help="image width (overrides --size)")
+    p.add_argument("--height", type=int, default=None, metavar="H", help="image height (overrides --size)")
+    p.add_argument("--samples", type=int, default=8, choices=sorted(PATTERNS),
+                   help="sub-samples per silhouette or material-edge pixel (default 8)")
+    p.add_argument("--depth", action="store_true", help="also write depth.exr (camera z in metres, 0 = background)")
+    p.add_argument("--keypoint-order", default="openpose", choices=("openpose", "mano"),
+                   help="order of the 21 keypoints in labels.json (default openpose)")
+    p.add_argument("--textures", default=None, metavar="CATALOG",
+                   help="internal path: texture catalogue file or folder (default: build/textures beside the model)")
+    p.add_argument("--accessories", default=None, metavar="CATALOG",
+                   help="internal path: accessory catalogue file or folder (default: build/accessories)")
+    p.add_argument("--model", default=None, metavar="MODEL.npz",
+                   help="USD path: the model the package was built from, for its fingertip ids when the package "
+                        "does not list them (default: build/model/<side>.npz)")
+    p.add_argument("--threads", type=int, default=None, metavar="N", help="render threads (default: all cores)")
+
+
+def _add_checks_arguments(p) -> None:
+    p.add_argument("--build", default="build", metavar="DIR", help="build folder (default build)")
+    p.add_argument("--out", default=None, metavar="DIR", help="output folder (default BUILD/checks)")
+    p.add_argument("--sides", nargs="+", default=None, choices=("right", "left"),
+                   help="packages to check (default: every build/usd/<side>)")
+    p.add_argument("--size", type=int, default=256, metavar="N", help="render size in pixels (default 256)")
+    p.add_argument("--all-accessories", action=argparse.BooleanOptionalAction, default=True,
+                   help="render every accessory variant to check it is visible next to its bone (default on)")
 
 
 # ---------------------------------------------------------------- manifest

@@ -101,7 +101,7 @@ def export_usd(model: HandModel, out: str | os.PathLike, *, textures: list[Textu
             "payload": "payload.usdc",
             "root_prim": str(ROOT),
             "model": {"source": model.meta.get("source"), "vertices": model.num_vertices,
-                      "faces": model.num_faces},
+                      "faces": model.num_faces, "tip_ids": model.tip_ids.tolist()},
             "options": {"influences": options.influences or "all", "correctives": options.correctives,
                         "texture_size": options.texture_size, "sparse_tol_m": options.sparse_tol},
             "rig": stats.as_dict(),

@@ -1,0 +1,278 @@
+"""The renderer's top level: `render(...)` one labelled image of a built package; `Renderer` for many (it keeps the
+loaded package, textures and the last scene); `write_frame` writes image.png, mask.png, labels.json (+ depth.exr).
+
+A frame: pose the subject (internal forward pass or UsdSkel), frame the camera, build (or reuse) the Embree scene,
+trace one sample per pixel inside the scene's projected bounds, shade with shadows, supersample the edge pixels,
+composite over the background, label.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from darthand.errors import InputError
+from darthand.fileio import write_json
+from darthand.render import aa
+from darthand.render.camera import Camera, load_camera
+from darthand.render.image import (composite, encode_mask8, encode_rgba8, encode_srgb, load_background,
+                                   straight_colour, write_exr, write_png)
+from darthand.render.labels import frame_labels
+from darthand.render.lights import Lighting, load_lighting, world_lights
+from darthand.render.scene import Scene, scene_for
+from darthand.render.subject import Subject
+from darthand.render.trace import (TILE, Context, Samples, default_threads, pixel_centres, scene_bounds,
+                                   touched_tiles, trace_parallel)
+
+DEFAULT_SAMPLES = 8
+IMAGE, MASK, LABELS, DEPTH = "image.png", "mask.png", "labels.json", "depth.exr"
+
+
+@dataclass
+class Frame:
+    """One rendered frame.
+
+    rgba (H, W, 4) uint8: image.png (sRGB, straight alpha; opaque over a background). colour (H, W, 3) float32
+    linear, premultiplied by alpha (composited when a background was given). alpha (H, W) float32 coverage of hand
+    and accessory. geom (H, W) int8 what the pixel centre's ray hit (-1 background, else the subject's surface
+    index: 0 hand, 1 accessory). depth (H, W) float32 camera z at pixel centres, 0 for background. labels: the
+    labels.json document. timings: seconds per step. stats: ray counts.
+    """
+
+    rgba: np.ndarray
+    colour: np.ndarray
+    alpha: np.ndarray
+    geom: np.ndarray
+    depth: np.ndarray
+    labels: dict
+    subject: Subject
+    camera: Camera
+    timings: dict = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
+
+
+class Renderer:
+    """Renders frames of one source (assets.HandAssets or usd_source.UsdPackage), keeping what does not change."""
+
+    def __init__(self, source, threads: int | None = None):
+        self.source = source
+        self.threads = default_threads() if threads is None else max(1, int(threads))
+        self._scene: Scene | None = None
+        self._lights: tuple | None = None
+
+    def _lighting(self, lights) -> Lighting:
+        """load_lighting, remembered for the same argument (validating a lights document costs milliseconds)."""
+        import json
+
+        key = json.dumps(lights, sort_keys=True, default=str) if not isinstance(lights, Lighting) else id(lights)
+        if isinstance(lights, (str, Path)):
+            key = (str(lights), Path(lights).stat().st_mtime_ns if Path(lights).is_file() else None)
+        if self._lights is None or self._lights[0] != key:
+            self._lights = (key, load_lighting(lights))
+        return self._lights[1]
+
+    def render(self, pose=None, *, texture: str | None = None, skin_tone_offset: float = 0.0,
+               accessory: str | None = None, camera="three_quarter", lights=None, background=None,
+               width: int = 512, height: int = 512, samples: int = DEFAULT_SAMPLES, labels: bool = True,
+               keypoint_order: str = "openpose") -> Frame:
+        """One frame. pose: None (flat), a gesture name, a pose file or (48,) MANO axis-angle (flat-hand relative).
+        camera: a Camera, a view name, a camera JSON path or dict (camera.load_camera), framed on the posed hand.
+        lights: a Lighting, a lights JSON path or dict, or None (lights.default_lighting). background: image path or
+        (H, W, 3) linear array, or None (transparent). samples: sub-samples per edge pixel (1, 4, 8, 16)."""
+        timings: dict = {}
+        t = time.perf_counter()
+        subject = self.source.subject(pose, texture=texture, skin_tone_offset=skin_tone_offset, accessory=accessory,
+                                      keypoint_order=keypoint_order)
+        timings["pose"] = _lap(t)
+        t = time.perf_counter()
+        points = subject.all_vertices()
+        cam = load_camera(camera, points, width=width, height=height, side=subject.side)
+        lighting = self._lighting(lights)
+        timings["setup"] = _lap(t)
+        t = time.perf_counter()
+        self._scene = scene = scene_for(subject, self._scene)
+        timings["scene"] = _lap(t)
+        frame = render_subject(subject, scene, cam, lighting, background=background, samples=samples,
+                               threads=self.threads, labels=labels, timings=timings)
+        return frame
+
+
+def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighting, *, background=None,
+                   samples: int = DEFAULT_SAMPLES, threads: int = 1, labels: bool = True,
+                   timings: dict | None = None) -> Frame:
+    """Render a posed subject whose scene is built: primary samples in the projected bounds, adaptive
+    supersampling of edges, compositing, labels."""
+    timings = {} if timings is None else timings
+    if samples not in aa.PATTERNS:
+        raise InputError(f"samples: {samples} is not one of {sorted(aa.PATTERNS)}")
+    H, W = cam.height, cam.width
+    ctx = Context(scene, cam, world_lights(lighting, cam.R, cam.t), lighting.ambient, threads)
+    stats: dict = {}
+
+    t = time.perf_counter()
+    r0, r1, c0, c1 = scene_bounds(cam, subject.all_vertices())
+    h, w = r1 - r0, c1 - c0
+    centres = pixel_centres(r0, r1, c0, c1)
+    tiles = touched_tiles(cam, subject.surfaces, (r0, r1, c0, c1))
+    traced = np.flatnonzero(np.repeat(np.repeat(tiles, TILE, 0), TILE, 1)[:h, :w].reshape(-1))
+    primary = scatter(trace_parallel(ctx, centres[traced], 1.0, stats), traced, h * w)
+    timings["primary"] = _lap(t)
+    stats["primary_rays"] = int(len(traced))
+
+    t = time.perf_counter()
+    geom = primary.geom.reshape(h, w)
+    premult = primary.radiance.reshape(3, h, w)        # zero where nothing was hit
+    alpha = (geom >= 0).astype(np.float32)
+    edge_count = 0
+    if samples > 1 and h and w:
+        edges = aa.edge_pixels(geom, primary.depth.reshape(h, w), primary.normal.reshape(3, h, w), cam.K[0, 0])
+        where = np.flatnonzero(edges.reshape(-1))
+        edge_count = len(where)
+        if edge_count:
+            offsets = aa.sample_offsets(samples)
+            sub_uv = (centres[where][:, None, :] + offsets[None]).reshape(-1, 2)
+            sub = trace_parallel(ctx, sub_uv, 1 / np.sqrt(samples), stats)
+            colour, cover = aa.resolve(sub.radiance, sub.geom, samples)
+            premult.reshape(3, -1)[:, where] = colour
+            alpha.reshape(-1)[where] = cover
+    timings["aa"] = _lap(t)
+    stats["edge_pixels"] = int(edge_count)
+    stats["aa_rays"] = int(edge_count * samples)
+
+    t = time.perf_counter()
+    region = (slice(r0, r1), slice(c0, c1))
+    fg = np.ascontiguousarray(premult.transpose(1, 2, 0))
+    full_alpha = np.zeros((H, W), np.float32)
+    full_alpha[region] = alpha
+    full_geom = np.full((H, W), -1, np.int8)
+    full_geom[region] = geom
+    full_depth = np.zeros((H, W), np.float32)
+    full_depth[region] = np.where(geom >= 0, primary.depth.reshape(h, w), 0)
+    rgba = np.zeros((H, W, 4), np.uint8)
+    if background is not None:
+        bg = (load_background(background, W, H) if isinstance(background, (str, Path))
+              else np.asarray(background, np.float32))
+        if bg.shape != (H, W, 3):
+            raise InputError(f"background: shape {bg.shape} does not match the image ({H}, {W}, 3)")
+        colour = bg.copy()
+        colour[region] = composite(fg, alpha, bg[region])
+        rgba[..., :3] = encode_srgb(colour)
+        rgba[..., 3] = 255
+    else:
+        colour = np.zeros((H, W, 3), np.float32)
+        colour[region] = fg
+        rgba[region] = encode_rgba8(straight_colour(fg, alpha), alpha)
+    timings["compose"] = _lap(t)
+
+    t = time.perf_counter()
+    doc = {}
+    if labels:
+        bg_name = Path(background).name if isinstance(background, (str, Path)) else (
+            None if background is None else "array")
+        doc = frame_labels(subject, cam, scene, full_alpha, files={"image": IMAGE, "mask": MASK},
+                           extra={"render": {"samples": samples, "background": bg_name,
+                                             "lights": lighting.to_json()}})
+    timings["labels"] = _lap(t)
+    stats["total_rays"] = stats.get("rays", 0) + stats.get("shadow_rays", 0) + (21 if labels else 0)
+    return Frame(rgba, colour, full_alpha, full_geom, full_depth, doc, subject, cam, timings, stats)
+
+
+def scatter(samples: Samples, index: np.ndarray, n: int) -> Samples:
+    """Samples of `n` pixels of which those at `index` were traced; the others are background."""
+    if len(index) == n:
+        return samples
+    out = Samples(np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.full(n, np.inf, np.float32),
+                  np.zeros((3, n), np.float32), np.zeros((3, n), np.float32))
+    out.geom[index], out.prim[index], out.depth[index] = samples.geom, samples.prim, samples.depth
+    out.normal[:, index], out.radiance[:, index] = samples.normal, samples.radiance
+    return out
+
+
+def write_frame(frame: Frame, out_dir: str | Path, *, depth: bool = False) -> dict:
+    """Write image.png (RGBA), mask.png (8-bit coverage), labels.json (and depth.exr, camera z in metres, 0 for
+    background) into `out_dir`; returns {kind: path}. Adds the write time to frame.timings['write']."""
+    t = time.perf_counter()
+    out = Path(out_dir)
+    paths = {"image": out / IMAGE, "mask": out / MASK, "labels": out / LABELS}
+    write_png(paths["image"], frame.rgba)
+    write_png(paths["mask"], encode_mask8(frame.alpha), srgb=False)
+    labels = dict(frame.labels)
+    if depth:
+        paths["depth"] = out / DEPTH
+        write_exr(paths["depth"], frame.depth)
+        labels["files"] = {**labels.get("files", {}), "depth": DEPTH}
+    write_json(paths["labels"], labels)
+    frame.timings["write"] = _lap(t)
+    return paths
+
+
+class FrameWriter:
+    """Writes frames on a background thread while the next ones render (OpenImageIO's PNG encoding releases the
+    GIL). At most `pending` frames wait; `close()` (or leaving the `with` block) waits for all and re-raises the
+    first error."""
+
+    def __init__(self, pending: int = 2):
+        from collections import deque
+        from concurrent.futures import ThreadPoolExecutor
+
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="darthand-write")
+        self._futures = deque()
+        self.pending = max(1, int(pending))
+
+    def submit(self, frame: Frame, out_dir: str | Path, *, depth: bool = False):
+        while len(self._futures) >= self.pending:
+            self._futures.popleft().result()
+        future = self._pool.submit(write_frame, frame, out_dir, depth=depth)
+        self._futures.append(future)
+        return future
+
+    def close(self) -> None:
+        try:
+            while self._futures:
+                self._futures.popleft().result()
+        finally:
+            self._pool.shutdown(wait=True)
+
+    def __enter__(self) -> "FrameWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def open_source(package, *, textures=None, accessories=None, model=None):
+    """The frame source of PACKAGE: a USD package (its folder or interface .usda/.usd) -> usd_source.UsdPackage;
+    a model (.npz, .pkl, 'open', 'right'/'left' for build/model/<side>.npz) -> assets.HandAssets with the texture
+    and accessory catalogues (default: the build's, next to build/model/)."""
+    from darthand.render.assets import HandAssets, default_catalogues
+
+    path = Path(str(package))
+    if path.is_dir() and (path / "asset.json").is_file() or path.suffix in (".usda", ".usd", ".usdc"):
+        from darthand.render.usd_source import UsdPackage
+
+        return UsdPackage.open(path, model=model)
+    if str(package) in ("right", "left"):
+        path = Path("build") / "model" / f"{package}.npz"
+        if not path.is_file():
+            raise InputError(f"{path}: not built yet (run `make assets` or `darthand model build`)")
+        package = path
+    if Path(str(package)).suffix == ".npz" and Path(str(package)).is_file():
+        tex, acc = default_catalogues(package)
+        textures = tex if textures is None else textures
+        accessories = acc if accessories is None else accessories
+    return HandAssets.load(package, textures or None, accessories or None)
+
+
+def render(package, pose=None, **options) -> Frame:
+    """One frame of PACKAGE (see `open_source`); options as `Renderer.render` plus textures=, accessories=
+    (catalogue paths for the internal path), model= (for a USD package without fingertip ids) and threads=."""
+    source_opts = {k: options.pop(k) for k in ("textures", "accessories", "model") if k in options}
+    threads = options.pop("threads", None)
+    return Renderer(open_source(package, **source_opts), threads).render(pose, **options)
+
+
+def _lap(t0: float) -> float:
+    return time.perf_counter() - t0

@@ -1,0 +1,195 @@
+"""The internal (fast) source of frames: a model npz plus the texture and accessory catalogues, posed by darthand's
+forward pass.
+
+Per frame only what moved is recomputed: the hand's vertices and normals when the pose changes; a rigid accessory is
+its fixed rest mesh moved by its joint's transform (its rest normals are computed once); a glove is skinned like the
+hand. Textures are loaded once per (files, skin-tone offset) (texture.load_maps's cache).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from darthand.errors import InputError
+from darthand.export.common import Accessory, TextureSet, load_accessory_catalog, load_texture_catalog
+from darthand.model.forward import forward
+from darthand.model.hand_model import HandModel
+from darthand.render.subject import (PLAIN_SKIN, Material, Subject, Surface, face_joints, skin_material,
+                                      vertex_normals)
+from darthand.render.texture import checker_texture, constant_texture, load_maps
+
+PLAIN = "plain"        # texture id of the untextured hand (a constant skin colour)
+CHECKER = "checker"    # texture id of the UV checker
+NONE = "none"          # accessory id of no accessory
+
+
+@dataclass(eq=False)
+class HandAssets:
+    """A model (wrist-enhanced, with UVs) and its catalogues (ids -> TextureSet / Accessory)."""
+
+    model: HandModel
+    textures: dict = field(default_factory=dict)
+    default_texture: str | None = None
+    accessories: dict = field(default_factory=dict)
+    source: str = "model"
+    _rest_normals: dict = field(default_factory=dict, repr=False)
+    _last: tuple | None = field(default=None, repr=False)
+    _last_accessory: tuple | None = field(default=None, repr=False)
+    _gestures: dict = field(default_factory=dict, repr=False)
+    _face_joints: dict = field(default_factory=dict, repr=False)    # also float32 glove arrays, ("f32", id)
+
+    @classmethod
+    def load(cls, model, textures=None, accessories=None) -> "HandAssets":
+        """From a model (HandModel or a path/name for model.load.load_model) and catalogue paths (file or folder;
+        None: none). Accessories fitted to the other hand are mirrored."""
+        from darthand.model.load import load_model
+
+        m = model if isinstance(model, HandModel) else load_model(model)
+        sets, default = texture_catalog(textures) if textures else ([], None)
+        accs = load_accessory_catalog(accessories, side=m.side) if accessories else []
+        return cls(m, {t.id: t for t in sets}, default, {a.id: a for a in accs},
+                   str(model) if not isinstance(model, HandModel) else m.meta.get("source", "model"))
+
+    # ---------------------------------------------------------------------------------------------- ids
+
+    def texture_ids(self) -> list[str]:
+        return list(self.textures) + [PLAIN, CHECKER]
+
+    def accessory_ids(self) -> list[str]:
+        return [NONE] + list(self.accessories)
+
+    def resolve_texture(self, texture: str | None) -> str:
+        texture = texture or self.default_texture or PLAIN
+        if texture not in (PLAIN, CHECKER) and texture not in self.textures:
+            known = ", ".join(list(self.textures)[:5]) + (" ..." if len(self.textures) > 5 else "")
+            raise InputError(f"texture: {texture!r} is not in the texture catalogue "
+                             f"({known or 'no catalogue given'}; or {PLAIN!r}, {CHECKER!r})")
+        return texture
+
+    def resolve_accessory(self, accessory: str | None) -> str:
+        accessory = accessory or NONE
+        if accessory != NONE and accessory not in self.accessories:
+            known = ", ".join(list(self.accessories)[:5]) + (" ..." if len(self.accessories) > 5 else "")
+            raise InputError(f"accessory: {accessory!r} is not in the accessory catalogue "
+                             f"({known or 'no catalogue given'}; or {NONE!r})")
+        return accessory
+
+    # ---------------------------------------------------------------------------------------------- posing
+
+    def subject(self, pose=None, *, texture: str | None = None, skin_tone_offset: float = 0.0,
+                accessory: str | None = None, betas=None, keypoint_order: str = "openpose") -> Subject:
+        """The posed hand (and accessory) for a pose: None (flat), a gesture name, a pose file, or (48,) axis-angle
+        relative to the flat hand."""
+        from darthand.render.poses import resolve_pose
+
+        pose_vec, gesture = resolve_pose(self.model, pose, cache=self._gestures)
+        texture, accessory = self.resolve_texture(texture), self.resolve_accessory(accessory)
+        key = (pose_vec.tobytes(), None if betas is None else np.asarray(betas, np.float64).tobytes(), keypoint_order)
+        if self._last is not None and self._last[0] == key:
+            posed, hand_v, hand_n = self._last[1:]
+        else:
+            # float32: the vertices Embree traces and the keypoints labelled come from the same pass (float32
+            # keeps them within a micrometre of float64 on a hand-sized model).
+            posed = forward(self.model, pose_vec[None], betas, keypoint_order=keypoint_order, dtype=np.float32)
+            hand_v = posed.vertices[0]
+            hand_n = vertex_normals(hand_v, self.model.faces)
+            self._last = (key, posed, hand_v, hand_n)
+        m = self.model
+        if "hand" not in self._face_joints:
+            self._face_joints["hand"] = face_joints(m.faces, m.weights)
+        hand = Surface("hand", hand_v, m.faces.astype(np.int32), hand_n,
+                       self.skin(texture, skin_tone_offset),
+                       None if m.uvs is None else m.uvs.astype(np.float32),
+                       None if m.faces_uv is None else m.faces_uv.astype(np.int32), m.v_template, "hand",
+                       self._face_joints["hand"])
+        surfaces = [hand]
+        if accessory != NONE:
+            if self._last_accessory is None or self._last_accessory[0] != (key, accessory):
+                self._last_accessory = ((key, accessory), self.posed_accessory(self.accessories[accessory], posed))
+            surfaces.append(self._last_accessory[1])
+        info = {"source": self.source, "texture": texture, "skin_tone_offset": float(skin_tone_offset),
+                "accessory": accessory, "gesture": gesture,
+                "accessory_parent_joint": None if accessory == NONE else self.accessories[accessory].parent_joint}
+        return Subject(tuple(surfaces), posed.joints[0].astype(np.float64), posed.keypoints[0].astype(np.float64),
+                       m.side, pose_vec, keypoint_order, info)
+
+    def skin(self, texture: str, offset: float = 0.0) -> Material:
+        """The hand's material for a texture id and skin-tone offset (added to the sRGB albedo)."""
+        if texture == PLAIN:
+            from darthand.textures.color import linear_to_srgb, srgb_to_linear
+
+            plain = srgb_to_linear(np.clip(linear_to_srgb(np.array(PLAIN_SKIN)) + offset, 0, 1))
+            return skin_material(constant_texture(plain), name=PLAIN)
+        if texture == CHECKER:
+            return dataclasses.replace(skin_material(checker_texture(), name=CHECKER), wrap=(0.0, 0.0, 0.0))
+        t: TextureSet = self.textures[texture]
+        if not self.model.has_uvs:
+            raise InputError(f"{self.source}: the model has no UVs, so texture {texture!r} cannot be mapped")
+        maps = load_maps(t.albedo, offset=offset, data=t.roughness, channels=(0,))
+        return skin_material(maps, 3 if t.roughness else None, name=texture)
+
+    def posed_accessory(self, acc: Accessory, posed) -> Surface:
+        """The accessory placed for a forward-pass result: rigid ones by their joint's skinning transform,
+        gloves skinned with their own correctives."""
+        if acc.parent_joint is not None:
+            G = posed.transforms[0, acc.parent_joint].astype(np.float64)
+            rest_n = self._rest_normals.get(acc.id)
+            if rest_n is None:
+                rest_n = self._rest_normals[acc.id] = vertex_normals(acc.vertices, acc.faces)
+            v = (acc.vertices @ G[:3, :3].T + G[:3, 3]).astype(np.float32)
+            n = (rest_n @ G[:3, :3].T.astype(np.float32)).astype(np.float32)
+        else:
+            from darthand.accessories.attach import pose_skinned
+            from darthand.model.layout import NUM_POSE_FEATURES
+
+            posedirs = acc.posedirs if acc.posedirs is not None else np.zeros((len(acc.vertices), 3,
+                                                                                 NUM_POSE_FEATURES))
+            if ("f32", acc.id) not in self._face_joints:
+                self._face_joints["f32", acc.id] = tuple(np.ascontiguousarray(a, np.float32)
+                                                         for a in (acc.vertices, acc.weights, posedirs))
+            v = pose_skinned(*self._face_joints["f32", acc.id], posed.rotations, posed.transforms)[0]
+            v = v.astype(np.float32)
+            n = vertex_normals(v, acc.faces)
+            if acc.id not in self._face_joints:
+                self._face_joints[acc.id] = face_joints(acc.faces, acc.weights)
+        return Surface(acc.id, v, acc.faces.astype(np.int32), n, accessory_material(acc),
+                       None if acc.uvs is None else acc.uvs.astype(np.float32),
+                       None if acc.faces_uv is None else acc.faces_uv.astype(np.int32), acc.vertices, "accessory",
+                       None if acc.parent_joint is not None else self._face_joints[acc.id])
+
+
+def texture_catalog(path) -> tuple[list[TextureSet], str | None]:
+    """The texture sets of a catalogue and its default id (export.common.load_texture_catalog returns the list,
+    default first, or -- in its earlier form -- the pair)."""
+    result = load_texture_catalog(path)
+    if isinstance(result, tuple):
+        return result
+    return list(result), (result[0].id if result else None)
+
+
+def accessory_material(acc: Accessory) -> Material:
+    """An accessory's metallic-roughness material: its textures (base colour sRGB; glTF layout G roughness,
+    B metallic), the catalogue's constants where a texture is missing."""
+    m = acc.material
+    base = tuple(m.get("base_color", (0.8, 0.8, 0.8))[:3])
+    has_uv = acc.uvs is not None
+    albedo = acc.base_color_png if has_uv else None
+    mr = acc.metallic_roughness_png if has_uv else None
+    maps = load_maps(albedo, data=mr, channels=(1, 2), base_color=base) if albedo or mr else constant_texture(base)
+    textured = mr is not None
+    return Material("pbr", maps, 3 if textured else None, float(m.get("roughness", 0.5)), 4 if textured else None,
+                    float(m.get("metallic", 0.0)), name=acc.id)
+
+
+def default_catalogues(model_path: str | Path) -> tuple[Path | None, Path | None]:
+    """The texture and accessory catalogues of a pipeline build next to build/model/<side>.npz (None if absent)."""
+    build = Path(model_path).resolve().parent.parent
+    tex = build / "textures" / "catalog.json"
+    acc = build / "accessories"
+    return (tex if tex.is_file() else None,
+            acc if (acc / "catalog.json").is_file() or any(acc.glob("*/catalog.json")) else None)
+

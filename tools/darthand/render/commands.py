@@ -1,0 +1,72 @@
+"""The `darthand render` and `darthand render-checks` commands: thin functions over render.api and render.checks.
+
+Their options are defined in cli.py.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from darthand.errors import InputError
+
+PACKAGE_HELP = ("a USD package (build/usd/right, or its .usda), or a model for the internal path: a darthand .npz "
+                "(build/model/right.npz), 'right' / 'left' (build/model/<side>.npz) or 'open'")
+
+
+def parse_pose(text: str | None):
+    """--pose: None, a gesture name or pose file path (strings), 48 comma-separated numbers, or an int time code."""
+    if text is None:
+        return None
+    parts = [p for p in text.replace(" ", ",").split(",") if p]
+    if len(parts) > 1:
+        try:
+            return np.array([float(p) for p in parts])
+        except ValueError:
+            raise InputError(f"--pose: {text[:40]!r} is not 48 comma-separated numbers") from None
+    if text.isdigit():
+        return int(text)
+    return text
+
+
+def render(args) -> int:
+    """Render one labelled image of PACKAGE into --out."""
+    from darthand.render.api import Renderer, open_source, write_frame
+
+    source = open_source(args.package, textures=args.textures, accessories=args.accessories, model=args.model)
+    pose = parse_pose(args.pose)
+    if isinstance(pose, str) and Path(pose).is_file() and args.pose_index and hasattr(source, "model"):
+        from darthand.render.poses import resolve_pose
+
+        pose = resolve_pose(source.model, pose, args.pose_index)[0]
+    if isinstance(pose, int) and not hasattr(source, "gestures"):
+        raise InputError("--pose: a time code needs a USD package; give a gesture name or a pose vector")
+    width, height = args.width or args.size, args.height or args.size
+    renderer = Renderer(source, args.threads)
+    frame = renderer.render(pose, texture=args.texture, skin_tone_offset=args.skin_tone_offset,
+                            accessory=args.accessory, camera=args.camera, lights=args.lights,
+                            background=args.background, width=width, height=height, samples=args.samples,
+                            keypoint_order=args.keypoint_order)
+    paths = write_frame(frame, args.out, depth=args.depth)
+    lab = frame.labels
+    total = sum(frame.timings.values())
+    print(f"{paths['image']}: {width}x{height}, {lab['side']} hand, texture {lab['texture']['id']}, accessory "
+          f"{lab['accessory']['id']}, coverage {lab['coverage']:.1%}, {sum(lab['visibility'])}/21 keypoints "
+          f"visible, {1000 * total:.0f} ms")
+    return 0
+
+
+def checks(args) -> int:
+    """Render every package of a build, check the renders, write BUILD/checks/*.png and report.json; exit 1 when
+    a check fails."""
+    from darthand.render.checks import run_checks
+
+    report = run_checks(args.build, args.out, sides=args.sides, size=args.size,
+                        all_accessories=args.all_accessories)
+    for side, pkg in report["packages"].items():
+        failed = [name for name, c in pkg["checks"].items() if not c["ok"]]
+        print(f"[render] {side}: {pkg['renders']} renders, {'all checks pass' if not failed else 'FAILED: ' + ', '.join(failed)}"
+              f" ({pkg['seconds']:.1f} s)")
+    print(f"[render] {Path(report['report'])}: {'ok' if report['ok'] else 'problems found'}")
+    return 0 if report["ok"] else 1

@@ -1,0 +1,130 @@
+"""Image output: compositing over a background in linear light, sRGB encoding, PNG / EXR writing.
+
+The renderer keeps colour premultiplied by coverage alpha. Over a background image B (linear):
+out = C_premult + (1 - alpha) B, which for an edge pixel is alpha * fg + (1 - alpha) * bg with fg the mean colour
+of the sub-samples that hit: no halo. Without a background, image.png stores straight (unpremultiplied) colour,
+sRGB-encoded, and alpha, as PNG defines, so compositing it with any "over" operator in linear light gives the same.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+from darthand.errors import InputError
+from darthand.fileio import atomic_path
+from darthand.textures.color import encode_srgb8, srgb_to_linear
+
+PNG_COMPRESSION = 1   # zlib level and libpng's 'Avg' filter: 5 ms for a 512^2 RGBA render; level 6 with
+PNG_FILTER = 64       # adaptive filtering saves 20% of the bytes for 4x the time
+_LUT_BITS = 16
+
+
+def straight_colour(premult: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """(H, W, 3) straight colour premult / alpha (0 where alpha = 0)."""
+    a = alpha[..., None]
+    return np.divide(premult, a, out=np.zeros_like(premult), where=a > 0)
+
+
+def composite(premult: np.ndarray, alpha: np.ndarray, background: np.ndarray) -> np.ndarray:
+    """(H, W, 3) premult + (1 - alpha) * background, linear light."""
+    return premult + (1 - alpha[..., None]) * background
+
+
+@functools.cache
+def _srgb_lut() -> np.ndarray:
+    """8-bit sRGB code of each of 2^16 linear values in [0, 1] (textures.color.encode_srgb8's table, built once)."""
+    return encode_srgb8(np.linspace(0.0, 1.0, 1 << _LUT_BITS, dtype=np.float32))
+
+
+def encode_srgb(linear: np.ndarray) -> np.ndarray:
+    """uint8 sRGB codes of linear values (clipped to [0, 1]), through a 65536-entry table."""
+    idx = np.clip(linear, 0, 1) * np.float32((1 << _LUT_BITS) - 1) + np.float32(0.5)
+    return np.take(_srgb_lut(), idx.astype(np.uint16))
+
+
+def encode_rgba8(colour: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """(H, W, 4) uint8: sRGB-encoded straight colour (H, W, 3) linear and 8-bit alpha (H, W) in [0, 1]."""
+    out = np.empty(colour.shape[:2] + (4,), np.uint8)
+    out[..., :3] = encode_srgb(colour)
+    out[..., 3] = encode_mask8(alpha)
+    return out
+
+
+def encode_mask8(alpha: np.ndarray) -> np.ndarray:
+    """(H, W) uint8 coverage, 0..255."""
+    return np.rint(np.clip(alpha, 0, 1) * 255).astype(np.uint8)
+
+
+@functools.lru_cache(maxsize=4)
+def _background(path: str, mtime: int, width: int, height: int) -> np.ndarray:
+    buf = oiio.ImageBuf(path)
+    if buf.has_error:
+        raise InputError(f"{path}: cannot read background image ({buf.geterror()})")
+    spec = buf.spec()
+    # Scale to cover the frame, keeping the aspect ratio, then crop the centre.
+    scale = max(width / spec.width, height / spec.height)
+    w, h = max(width, round(spec.width * scale)), max(height, round(spec.height * scale))
+    if spec.format == oiio.UINT8:
+        linear = srgb_to_linear(buf.get_pixels(oiio.FLOAT))
+    else:
+        linear = buf.get_pixels(oiio.FLOAT)
+    if linear.shape[2] == 1:
+        linear = np.repeat(linear, 3, axis=2)
+    lin = oiio.ImageBuf(np.ascontiguousarray(linear[..., :3], np.float32))
+    resized = oiio.ImageBufAlgo.resize(lin, roi=oiio.ROI(0, w, 0, h, 0, 1, 0, 3))
+    x0, y0 = (w - width) // 2, (h - height) // 2
+    pixels = resized.get_pixels(oiio.FLOAT).reshape(h, w, 3)
+    return np.ascontiguousarray(pixels[y0:y0 + height, x0:x0 + width], np.float32)
+
+
+def load_background(path: str | os.PathLike, width: int, height: int) -> np.ndarray:
+    """(height, width, 3) float32 linear background: the image (8-bit files are sRGB, float files linear) scaled to
+    cover the frame and centre-cropped."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such background image")
+    return _background(str(path.resolve()), path.stat().st_mtime_ns, int(width), int(height))
+
+
+def write_png(path: str | os.PathLike, pixels: np.ndarray, srgb: bool = True) -> None:
+    """Write (H, W, C) or (H, W) uint8 pixels as PNG, atomically; deterministic bytes for the same pixels."""
+    img = np.ascontiguousarray(pixels)
+    if img.ndim == 2:
+        img = img[..., None]
+    spec = oiio.ImageSpec(img.shape[1], img.shape[0], img.shape[2], oiio.UINT8)
+    spec.attribute("oiio:ColorSpace", "sRGB" if srgb else "Raw")
+    spec.attribute("png:compressionLevel", PNG_COMPRESSION)
+    spec.attribute("png:filter", PNG_FILTER)
+    if img.shape[2] == 4:
+        spec.attribute("oiio:UnassociatedAlpha", 1)
+    buf = oiio.ImageBuf(spec)
+    buf.set_pixels(oiio.ROI(), img)
+    with atomic_path(path) as tmp:
+        if not buf.write(str(tmp), fileformat="png"):
+            raise OSError(f"{path}: cannot write PNG ({buf.geterror()})")
+
+
+def write_exr(path: str | os.PathLike, values: np.ndarray, channel: str = "Z") -> None:
+    """Write a (H, W) float32 map as a single-channel EXR, atomically."""
+    img = np.ascontiguousarray(values, np.float32)[..., None]
+    spec = oiio.ImageSpec(img.shape[1], img.shape[0], 1, oiio.FLOAT)
+    spec.channelnames = (channel,)
+    spec.attribute("compression", "zip")
+    buf = oiio.ImageBuf(spec)
+    buf.set_pixels(oiio.ROI(), img)
+    with atomic_path(path) as tmp:
+        if not buf.write(str(tmp), fileformat="exr"):
+            raise OSError(f"{path}: cannot write EXR ({buf.geterror()})")
+
+
+def read_png(path: str | os.PathLike) -> np.ndarray:
+    """(H, W, C) uint8 pixels of a PNG (for checks and tests)."""
+    buf = oiio.ImageBuf(str(path))
+    if buf.has_error:
+        raise InputError(f"{path}: cannot read image ({buf.geterror()})")
+    return buf.get_pixels(oiio.UINT8)

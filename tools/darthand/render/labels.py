@@ -1,0 +1,138 @@
+"""Labels of a rendered frame (schemas/labels.schema.json): camera, 3D and 2D keypoints, visibility, bounding box,
+pose and the ids of what was rendered.
+
+Keypoints are projected exactly: keypoints_2d = the pixel position (u, v) of K (R X + t) / z in float64, with the
+image's convention (pixel centres at integer + 0.5; camera.py).
+
+Visibility: a ray from the camera centre toward the keypoint; the keypoint is visible when nothing is hit before it,
+or the first hit lies within VISIBILITY_SLACK_M of it, or the first hit is on the keypoint's own part of the hand
+(a face skinned mostly to the bones meeting at the joint; for a fingertip, its distal phalanx) within
+OWN_PART_FACTOR x the hand's thickness there + VISIBILITY_SLACK_M. The thickness is the keypoint's distance to the
+nearest hand vertex (a joint lies that deep inside its finger); a fingertip takes that of its distal joint. So a
+joint seen through its own finger is visible, one behind another finger, the palm or an object is not.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from darthand.model.layout import FINGER_JOINTS, FINGERS, JOINT_NAMES, KEYPOINT_ORDERS, MANO_PARENTS
+from darthand.render.camera import Camera
+from darthand.render.scene import Scene
+from darthand.render.subject import Subject
+
+OWN_PART_FACTOR = 2.0
+VISIBILITY_SLACK_M = 0.003
+LABELS_FORMAT = "darthand-render-labels"
+LABELS_VERSION = 1
+_MANO_KEYPOINT_NAMES = JOINT_NAMES + ("thumb4", "index4", "middle4", "ring4", "pinky4")
+
+
+def keypoint_names(order: str) -> list[str]:
+    """Names of the 21 keypoints in a named order (layout.KEYPOINT_ORDERS): MANO's joint names, tips '<finger>4'."""
+    return [_MANO_KEYPOINT_NAMES[i] for i in KEYPOINT_ORDERS[order]]
+
+
+def own_parts(order: str) -> list[frozenset]:
+    """Per keypoint of `order`, the joints whose faces are its own part: a joint j's bone and its parent's bone
+    (the wrist: the palm), a fingertip's distal phalanx."""
+    parts = []
+    for i in KEYPOINT_ORDERS[order]:
+        if i < len(JOINT_NAMES):
+            parts.append(frozenset({int(i), int(MANO_PARENTS[i])} - {-1}))
+        else:
+            parts.append(frozenset({FINGER_JOINTS[FINGERS[i - len(JOINT_NAMES)]][2]}))
+    return parts
+
+
+def keypoint_thickness(keypoints: np.ndarray, hand_vertices: np.ndarray, order: str) -> np.ndarray:
+    """(21,) metres: each keypoint's distance to the nearest hand vertex; a fingertip takes its distal joint's."""
+    d2 = ((keypoints[:, None, :] - hand_vertices[None, :, :].astype(np.float64)) ** 2).sum(-1)
+    depth = np.sqrt(d2.min(axis=1))
+    mano = KEYPOINT_ORDERS[order]
+    where = {int(m): k for k, m in enumerate(mano)}
+    for k, m in enumerate(mano):
+        if m >= len(JOINT_NAMES):
+            depth[k] = depth[where[FINGER_JOINTS[FINGERS[m - len(JOINT_NAMES)]][2]]]
+    return depth
+
+
+def visibility(scene: Scene, camera: Camera, keypoints: np.ndarray, thickness: np.ndarray,
+               parts: list[frozenset]) -> np.ndarray:
+    """(K,) bool visibility of keypoints (K, 3) (see the module docstring); keypoints behind the camera are not
+    visible."""
+    C = camera.centre
+    d = np.asarray(keypoints, np.float64) - C
+    length = np.linalg.norm(d, axis=1)
+    hit = scene.intersect(np.ascontiguousarray(np.broadcast_to(C, d.shape), np.float32),
+                          np.ascontiguousarray(d, np.float32), tfar=np.ones(len(d), np.float32))
+    _, z = camera.project(keypoints)
+    out = np.zeros(len(d), bool)
+    for k in range(len(d)):
+        prim, geom = int(hit["primID"][k]), int(hit["geomID"][k])
+        gap = (1.0 - float(hit["tfar"][k])) * length[k]
+        if prim < 0 or gap <= VISIBILITY_SLACK_M:
+            out[k] = True
+            continue
+        joints = scene.surfaces[geom].face_joints
+        own = joints is not None and int(joints[prim]) in parts[k]
+        out[k] = own and gap <= OWN_PART_FACTOR * thickness[k] + VISIBILITY_SLACK_M
+    return out & (z > 0)
+
+
+def mask_bbox(alpha: np.ndarray) -> list[float] | None:
+    """[x_min, y_min, x_max, y_max] in pixels (corners of the covered pixels) of alpha > 0; None if empty."""
+    rows = np.flatnonzero(alpha.max(axis=1) > 0)
+    cols = np.flatnonzero(alpha.max(axis=0) > 0)
+    if not len(rows):
+        return None
+    return [float(cols[0]), float(rows[0]), float(cols[-1] + 1), float(rows[-1] + 1)]
+
+
+def frame_labels(subject: Subject, camera: Camera, scene: Scene, alpha: np.ndarray, *, files: dict,
+                 extra: dict | None = None) -> dict:
+    """The labels.json document of a frame (schemas/labels.schema.json)."""
+    kp_world = np.asarray(subject.keypoints, np.float64)
+    kp_cam = camera.to_camera(kp_world)
+    kp_2d, _ = camera.project(kp_world)
+    thick = keypoint_thickness(kp_world, subject.hand.vertices, subject.keypoint_order)
+    visible = visibility(scene, camera, kp_world, thick, own_parts(subject.keypoint_order))
+    inside = (kp_2d[:, 0] >= 0) & (kp_2d[:, 0] < camera.width) & (kp_2d[:, 1] >= 0) & (kp_2d[:, 1] < camera.height)
+    kp_bbox = [float(kp_2d[:, 0].min()), float(kp_2d[:, 1].min()), float(kp_2d[:, 0].max()),
+               float(kp_2d[:, 1].max())]
+    acc = subject.accessory
+    info = subject.info
+    labels = {
+        "format": LABELS_FORMAT,
+        "version": LABELS_VERSION,
+        "image_size": [camera.width, camera.height],
+        "K": camera.K.tolist(),
+        "camera": {"R": camera.R.tolist(), "t": camera.t.tolist(), "extrinsics": camera.extrinsics.tolist(),
+                   "centre": camera.centre.tolist(), "convention": "opencv"},
+        "side": subject.side,
+        "keypoint_order": subject.keypoint_order,
+        "keypoint_names": keypoint_names(subject.keypoint_order),
+        "keypoints_3d": kp_cam.tolist(),
+        "keypoints_3d_world": kp_world.tolist(),
+        "keypoints_2d": kp_2d.tolist(),
+        "visibility": visible.tolist(),
+        "in_image": inside.tolist(),
+        "joints_3d": camera.to_camera(subject.joints).tolist(),
+        "joints_3d_world": np.asarray(subject.joints, np.float64).tolist(),
+        "mano_pose": np.asarray(subject.pose, np.float64).tolist(),
+        "flat_hand_mean": True,
+        "gesture": info.get("gesture"),
+        "texture": {"id": info.get("texture"), "skin_tone_offset": info.get("skin_tone_offset", 0.0)},
+        "accessory": {"id": info.get("accessory", "none"),
+                      "parent_joint": info.get("accessory_parent_joint"),
+                      "kind": "none" if acc is None else ("rigid" if info.get("accessory_parent_joint") is not None
+                                                          else "skinned")},
+        "bbox": mask_bbox(alpha),
+        "bbox_keypoints": kp_bbox,
+        "coverage": float(alpha.sum() / alpha.size),
+        "source": info.get("source"),
+        "files": files,
+    }
+    if extra:
+        labels.update(extra)
+    return labels

@@ -1,0 +1,52 @@
+"""The renderer's pose argument: nothing (the flat hand), a named gesture, a pose file, or a MANO vector."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from darthand.errors import InputError
+from darthand.model.hand_model import HandModel
+from darthand.model.layout import NUM_JOINTS
+
+
+def resolve_pose(model: HandModel, pose, index: int = 0, cache: dict | None = None) -> tuple[np.ndarray, str | None]:
+    """(48,) float64 MANO axis-angle relative to the flat hand, and the gesture name (None unless named).
+
+    pose: None (flat hand, zeros); a gesture name (assets_src/poses/<name>.json, turned into this model's pose);
+        a pose file path (schemas/pose.schema.json; pose number `index` of it); or 48 numbers.
+    cache: a dict the caller keeps per model, gesture name -> pose (reading and converting a gesture costs ms).
+    """
+    from darthand.model.poses import list_gestures, load_gesture, load_pose_file
+
+    if pose is None:
+        return np.zeros(3 * NUM_JOINTS), None
+    if isinstance(pose, (str, Path)):
+        name = str(pose)
+        if cache is not None and name in cache:
+            return cache[name].copy(), name
+        if name in list_gestures():
+            vec = load_gesture(name, model)
+            if cache is not None:
+                cache[name] = vec.copy()
+            return vec, name
+        path = Path(name)
+        if not path.is_file():
+            raise InputError(f"pose: {name!r} is neither a gesture ({', '.join(list_gestures())}) nor a pose file")
+        poses, betas, flat_hand_mean = load_pose_file(path)
+        if betas is not None:
+            raise InputError(f"{path}: field 'betas' is not supported by the renderer (shape the model instead)")
+        if not 0 <= index < len(poses):
+            raise InputError(f"{path}: has {len(poses)} poses, no pose number {index}")
+        vec = poses[index].copy()
+        if not flat_hand_mean:
+            vec[3:] += model.hands_mean
+        return vec, None
+    vec = np.asarray(pose, dtype=np.float64).reshape(-1)
+    if vec.shape != (3 * NUM_JOINTS,):
+        raise InputError(f"pose: a MANO pose has {3 * NUM_JOINTS} numbers, got {vec.size}")
+    if not np.isfinite(vec).all():
+        raise InputError(f"pose: value {vec[~np.isfinite(vec)][0]} at index {int(np.argmax(~np.isfinite(vec)))} "
+                         "is not finite")
+    return vec, None

@@ -1,0 +1,31 @@
+"""The renderer's JSON contracts (schemas/camera.schema.json, lights.schema.json, labels.schema.json): loading and
+checking a document with a one-line error naming the file and field."""
+
+from __future__ import annotations
+
+import functools
+import json
+from pathlib import Path
+
+import jsonschema
+
+from darthand.errors import InputError
+
+SCHEMA_DIR = Path(__file__).resolve().parents[3] / "schemas"
+
+
+@functools.cache
+def load_schema(name: str) -> dict:
+    """The parsed schemas/<name>."""
+    return json.loads((SCHEMA_DIR / name).read_text())
+
+
+def check_schema(doc, name: str, source: str) -> None:
+    """Raise InputError '<source>: field '<path>' <message>' for the most relevant violation of schemas/<name>."""
+    validator = jsonschema.Draft202012Validator(load_schema(name))
+    error = jsonschema.exceptions.best_match(validator.iter_errors(doc))
+    if error is None:
+        return
+    where = ".".join(str(p) for p in error.absolute_path)
+    message = error.message if len(error.message) <= 160 else error.message[:157] + "..."
+    raise InputError(f"{source}: field '{where}' {message}" if where else f"{source}: {message}")

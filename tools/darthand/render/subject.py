@@ -1,0 +1,130 @@
+"""What one frame renders: posed surfaces (hand, accessory) with their materials, and the hand's 3D keypoints.
+
+Both sources build a `Subject`: the internal path (assets.HandAssets: model npz + catalogue ids, posed by
+darthand's forward pass) and the USD path (usd_source.UsdPackage: the package posed by UsdSkel).
+
+Shapes: N vertices, F faces, T UV coordinates; world = the model's frame, metres.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from darthand.render.texture import MipTexture, constant_texture
+
+SKIN_F0 = 0.028                      # normal-incidence reflectance of skin (refractive index about 1.4)
+SKIN_WRAP = (0.32, 0.16, 0.10)       # per-channel wrap: red light reaches furthest past the terminator (scattering)
+DIELECTRIC_F0 = 0.04
+PLAIN_SKIN = (0.56, 0.36, 0.27)      # linear RGB of the untextured hand (export/usd_materials.SKIN_LINEAR)
+
+
+@dataclass(frozen=True, eq=False)
+class Material:
+    """A surface's look.
+
+    kind: 'skin' (wrap diffuse with per-channel `wrap`, dielectric specular `f0`) or 'pbr' (metallic-roughness:
+        Lambert diffuse of albedo * (1 - metallic), GGX specular with F0 = mix(f0, albedo, metallic)).
+    maps: one texture, channels 0..2 linear albedo, then roughness at `roughness_channel` and metallic at
+        `metallic_channel` when they are textured (None: the constants roughness_value / metallic_value).
+        Roughness is perceptual (GGX alpha = roughness^2).
+    specular: scale of the specular lobe (1 physically based, 0 a purely diffuse surface).
+    """
+
+    kind: str = "pbr"
+    maps: MipTexture = field(default_factory=lambda: constant_texture(PLAIN_SKIN))
+    roughness_channel: int | None = None
+    roughness_value: float = 0.5
+    metallic_channel: int | None = None
+    metallic_value: float = 0.0
+    wrap: tuple = (0.0, 0.0, 0.0)
+    f0: float = DIELECTRIC_F0
+    name: str = ""
+    specular: float = 1.0
+
+
+def skin_material(maps: MipTexture | None = None, roughness_channel: int | None = None,
+                  roughness_value: float = 0.5, name: str = "skin") -> Material:
+    """The hand's skin: wrap diffuse, skin's specular reflectance."""
+    return Material("skin", maps if maps is not None else constant_texture(PLAIN_SKIN), roughness_channel,
+                    roughness_value, None, 0.0, SKIN_WRAP, SKIN_F0, name)
+
+
+@dataclass(frozen=True, eq=False)
+class Surface:
+    """One posed triangle mesh: vertices (N, 3) float32 world, faces (F, 3) int32, vertex normals (N, 3) float32,
+    per-corner uvs (T, 2) float32 + faces_uv (F, 3) int32 (or None), rest-pose vertices (N, 3) (for checks), its
+    material, `role` 'hand' or 'accessory', and face_joints (F,) the joint that moves each face most (skinned
+    surfaces; None for rigid ones), for keypoint visibility."""
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+    material: Material
+    uvs: np.ndarray | None = None
+    faces_uv: np.ndarray | None = None
+    rest: np.ndarray | None = None
+    role: str = "hand"
+    face_joints: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Subject:
+    """A posed hand (and accessory) for one frame.
+
+    joints (16, 3) and keypoints (21, 3): world, metres, float64; keypoints in `keypoint_order`. pose (48,): MANO
+    axis-angle relative to the flat hand. info: ids for the labels (texture, skin_tone_offset, accessory, gesture,
+    source...).
+    """
+
+    surfaces: tuple
+    joints: np.ndarray
+    keypoints: np.ndarray
+    side: str
+    pose: np.ndarray
+    keypoint_order: str = "openpose"
+    info: dict = field(default_factory=dict)
+
+    @property
+    def hand(self) -> Surface:
+        return next(s for s in self.surfaces if s.role == "hand")
+
+    @property
+    def accessory(self) -> Surface | None:
+        return next((s for s in self.surfaces if s.role == "accessory"), None)
+
+    def all_vertices(self) -> np.ndarray:
+        return np.concatenate([s.vertices for s in self.surfaces])
+
+
+# ------------------------------------------------------------------------------------------------ normals
+
+
+def face_joints(faces: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(F,) int8 the joint with the largest skinning weight summed over each face's corners (weights (N, 16))."""
+    return np.argmax(weights[faces].sum(axis=1), axis=1).astype(np.int8)
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(N, 3) float32 area-weighted unit vertex normals of a posed mesh: one sparse product per pose (the
+    vertex-face incidence matrix is built once per topology), faster than np.add.at's scatter."""
+    v = np.asarray(vertices, np.float32)
+    faces = np.ascontiguousarray(faces, dtype=np.int32)
+    a, b, c = v[faces[:, 0]], v[faces[:, 1]], v[faces[:, 2]]
+    fn = np.cross(b - a, c - a)
+    n = _incidence(faces.tobytes(), len(v)) @ fn
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 0).astype(np.float32)
+
+
+@functools.lru_cache(maxsize=16)
+def _incidence(faces_bytes: bytes, num_vertices: int) -> sp.csr_matrix:
+    """(N, F) matrix with a 1 where vertex n is a corner of face f."""
+    rows = np.frombuffer(faces_bytes, dtype=np.int32)
+    num_faces = len(rows) // 3
+    cols = np.repeat(np.arange(num_faces), 3)
+    return sp.csr_matrix((np.ones(len(rows), np.float32), (rows, cols)), shape=(num_vertices, num_faces))

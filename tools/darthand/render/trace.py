@@ -1,0 +1,182 @@
+"""Tracing and shading batches of image samples, in parallel over chunks.
+
+A sample is a position (u, v) in pixels; its ray leaves the camera centre through it. Only the pixels inside the
+projected bounding box of the scene are traced (`scene_bounds`); every other pixel is background without a ray.
+Chunks of samples are traced, shadowed and shaded on a ThreadPoolExecutor: embreex's ray loop releases the GIL and
+so do numpy's large array operations, so two chunks run at once on two cores. The scene is committed before
+(scene.Scene), never by a parallel query.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from darthand.render.camera import Camera
+from darthand.render.scene import Scene
+from darthand.render.shade import shade, surface_hits
+
+MIN_CHUNK = 4096          # samples per parallel task, at least
+TILE = 8                  # pixels: primary rays are traced only in tiles some projected triangle touches
+_POOLS: dict[int, ThreadPoolExecutor] = {}
+_POOL_LOCK = threading.Lock()
+
+
+def default_threads() -> int:
+    """Both cores of the reference machine (os.cpu_count(), at most 8)."""
+    return max(1, min(8, os.cpu_count() or 1))
+
+
+def pool(threads: int) -> ThreadPoolExecutor:
+    """A process-wide executor with `threads` workers (created once)."""
+    with _POOL_LOCK:
+        if threads not in _POOLS:
+            _POOLS[threads] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="darthand-render")
+        return _POOLS[threads]
+
+
+@dataclass
+class Context:
+    """What every sample batch of one frame shares."""
+
+    scene: Scene
+    camera: Camera
+    lights: list
+    ambient: np.ndarray
+    threads: int = 1
+    dDdx: np.ndarray = field(init=False)
+    dDdy: np.ndarray = field(init=False)
+
+    def __post_init__(self):
+        dx, dy = self.camera.direction_derivatives()
+        self.dDdx, self.dDdy = dx.astype(np.float32), dy.astype(np.float32)
+        self.D0 = self.camera.directions(np.zeros((1, 2)))[0].astype(np.float32)
+
+    def directions(self, uv: np.ndarray) -> np.ndarray:
+        """(3, N) float32 world ray directions (camera z = 1) of pixel positions uv (N, 2): affine in (u, v)."""
+        u = uv[:, 0].astype(np.float32)
+        v = uv[:, 1].astype(np.float32)
+        return np.stack([self.D0[c] + u * self.dDdx[c] + v * self.dDdy[c] for c in range(3)])
+
+
+@dataclass
+class Samples:
+    """Per sample (N): geom (int32, -1 = background), prim (int32), depth (float32 camera z, inf for background),
+    normal (3, N) float32 shading normal (world, facing the camera), radiance (3, N) float32 linear."""
+
+    geom: np.ndarray
+    prim: np.ndarray
+    depth: np.ndarray
+    normal: np.ndarray
+    radiance: np.ndarray
+
+    @staticmethod
+    def concat(parts: list["Samples"]) -> "Samples":
+        return Samples(*(np.concatenate([getattr(p, f) for p in parts], axis=-1) for f in
+                         ("geom", "prim", "depth", "normal", "radiance")))
+
+
+def scene_bounds(camera: Camera, points: np.ndarray, pad: float = 1.0) -> tuple[int, int, int, int]:
+    """(r0, r1, c0, c1): the pixel rows [r0, r1) and columns [c0, c1) that the projection of `points` (N, 3) can
+    touch, padded by `pad` pixels and clipped to the image; the whole image when a point is behind the camera."""
+    uv, z = camera.project(points)
+    if (z <= 1e-9).any() or not np.isfinite(uv).all():
+        return 0, camera.height, 0, camera.width
+    lo = np.floor(uv.min(0) - pad).astype(int)
+    hi = np.ceil(uv.max(0) + pad).astype(int)
+    c0, r0 = np.maximum(lo, 0)
+    c1, r1 = np.minimum(hi, [camera.width, camera.height])
+    return int(r0), int(max(r0, r1)), int(c0), int(max(c0, c1))
+
+
+def trace_samples(ctx: Context, uv: np.ndarray, footprint: float = 1.0, stats: dict | None = None) -> Samples:
+    """Trace, shade and shadow the samples at pixel positions uv (N, 2) (one chunk, this thread).
+
+    footprint: the sample's share of a pixel's width (1 for one sample per pixel, 1/sqrt(S) for S sub-samples),
+    for the texture filter. stats: accumulates seconds 'trace', 'shade' (shading incl. shadow rays), and counts
+    'rays', 'shadow_rays'.
+    """
+    t0 = time.perf_counter()
+    cam = ctx.camera
+    n = len(uv)
+    directions = ctx.directions(uv)
+    origins = np.broadcast_to(cam.centre.astype(np.float32), (n, 3))
+    hit = ctx.scene.intersect(np.ascontiguousarray(origins), np.ascontiguousarray(directions.T))
+    t1 = time.perf_counter()
+    geom = hit["geomID"].astype(np.int32)
+    prim = hit["primID"].astype(np.int32)
+    geom[prim < 0] = -1
+    depth = np.where(geom >= 0, hit["tfar"], np.float32(np.inf)).astype(np.float32)
+    normal = np.zeros((3, n), np.float32)
+    radiance = np.zeros((3, n), np.float32)
+    counters: dict = {}
+    pixel_angle = footprint / float(np.sqrt(abs(np.linalg.det(cam.K[:2, :2]))))
+    for g, surface in enumerate(ctx.scene.surfaces):
+        idx = np.flatnonzero(geom == g)
+        if not len(idx):
+            continue
+        hits = surface_hits(ctx.scene.faces[g], prim[idx], hit["u"][idx], hit["v"][idx], directions[:, idx],
+                            depth[idx], pixel_angle)
+        normal[:, idx] = hits.normal
+        radiance[:, idx] = shade(surface.material, hits, ctx.lights, ctx.ambient, ctx.scene.occluded,
+                              ctx.scene.extent, counters)
+    t2 = time.perf_counter()
+    if stats is not None:
+        stats["trace"] = stats.get("trace", 0.0) + (t1 - t0)
+        stats["shade"] = stats.get("shade", 0.0) + (t2 - t1)
+        stats["rays"] = stats.get("rays", 0) + n
+        stats["shadow_rays"] = stats.get("shadow_rays", 0) + counters.get("shadow_rays", 0)
+    return Samples(geom, prim, depth, normal, radiance)
+
+
+def trace_parallel(ctx: Context, uv: np.ndarray, footprint: float = 1.0, stats: dict | None = None) -> Samples:
+    """`trace_samples` over chunks of uv on `ctx.threads` threads; results in input order."""
+    n = len(uv)
+    chunks = max(1, min(4 * ctx.threads, n // MIN_CHUNK)) if ctx.threads > 1 else 1
+    if chunks == 1:
+        return trace_samples(ctx, uv, footprint, stats)
+    bounds = np.linspace(0, n, chunks + 1).astype(int)
+    part_stats = [dict() for _ in range(chunks)]
+    futures = [pool(ctx.threads).submit(trace_samples, ctx, uv[a:b], footprint, s)
+               for a, b, s in zip(bounds[:-1], bounds[1:], part_stats)]
+    parts = [f.result() for f in futures]
+    if stats is not None:
+        for s in part_stats:
+            for k, v in s.items():
+                stats[k] = stats.get(k, 0) + v
+    return Samples.concat(parts)
+
+
+def touched_tiles(camera: Camera, surfaces, bounds: tuple[int, int, int, int], tile: int = TILE) -> np.ndarray:
+    """(rows, cols) bool over the tiles (tile x tile pixels) of the bounds (r0, r1, c0, c1): True where the
+    projected bounding box of some triangle (padded by a pixel) overlaps the tile. Pixels of other tiles cannot see
+    any geometry and are not traced. All True when a vertex is behind the camera."""
+    r0, r1, c0, c1 = bounds
+    rows, cols = -(-(r1 - r0) // tile), -(-(c1 - c0) // tile)
+    count = np.zeros((rows + 1) * (cols + 1), np.int64)
+    for s in surfaces:
+        uv, z = camera.project(s.vertices)
+        if (z <= 1e-9).any() or not np.isfinite(uv).all():
+            return np.ones((rows, cols), bool)
+        a, b, c = uv[s.faces[:, 0]], uv[s.faces[:, 1]], uv[s.faces[:, 2]]
+        lo = np.minimum(np.minimum(a, b), c) - [c0 + 1.0, r0 + 1.0]
+        hi = np.maximum(np.maximum(a, b), c) - [c0 - 1.0, r0 - 1.0]
+        tx0, ty0 = (np.clip(np.floor(lo / tile), 0, [cols, rows]).astype(np.int64)).T
+        tx1, ty1 = (np.clip(np.floor(hi / tile) + 1, 0, [cols, rows]).astype(np.int64)).T
+        keep = (tx1 > tx0) & (ty1 > ty0)
+        tx0, tx1, ty0, ty1 = tx0[keep], tx1[keep], ty0[keep], ty1[keep]
+        # Summed-area trick: +1 at each box's first corner, -1 past its ends, +1 past both; prefix sums count boxes.
+        for ys, xs, sign in ((ty0, tx0, 1), (ty0, tx1, -1), (ty1, tx0, -1), (ty1, tx1, 1)):
+            count += sign * np.bincount(ys * (cols + 1) + xs, minlength=len(count))
+    return np.cumsum(np.cumsum(count.reshape(rows + 1, cols + 1), 0), 1)[:rows, :cols] > 0
+
+
+def pixel_centres(r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+    """(H*W, 2) float64 pixel-centre positions (c + 0.5, r + 0.5) of rows [r0, r1), columns [c0, c1), row-major."""
+    rows, cols = np.mgrid[r0:r1, c0:c1]
+    return np.stack([cols.ravel() + 0.5, rows.ravel() + 0.5], axis=1).astype(np.float64)
