@@ -33,6 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_model_commands(sub)
     # -- stage command groups are added here (one function per stage, below) --
     _add_template_commands(sub)
+    _add_textures_commands(sub)
     _add_accessories_commands(sub)
     _add_export_commands(sub)
     _add_render_commands(sub)
@@ -112,6 +113,40 @@ def _add_template_commands(sub) -> None:
                    help="faces where two digits may intersect before a gesture fails (default 10)")
     p.set_defaults(run=commands.gestures_command)
 
+
+
+# ---------------------------------------------------------------- textures
+def _add_textures_commands(sub) -> None:
+    from darthand.textures import commands
+
+    g = _group(sub, "textures", "procedural skin texture catalogue (325 albedo variants)")
+    model_help = "a MANO pkl, a darthand .npz, or a built-in name (open, open-left)"
+    res_help = "texture size, a power of two (default: $RES or 2048; 4096 for DART parity)"
+
+    p = g.add_parser("build", help="render the texture catalogue (or a subset) for a model")
+    p.add_argument("model", metavar="MODEL", help=model_help)
+    p.add_argument("--out", default="build/textures", metavar="DIR", help="output folder (default build/textures)")
+    p.add_argument("--res", type=int, default=None, help=res_help)
+    p.add_argument("--ids", nargs="+", default=[], metavar="ID", help="only these entries, e.g. light_tattoos_07")
+    p.add_argument("--category", nargs="+", default=[], metavar="C", help="only these categories, e.g. tattoos")
+    p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    p.add_argument("--no-tx", action="store_true", help="skip the tiled mip-mapped .tx files")
+    p.add_argument("--no-roughness", action="store_true", help="skip the roughness maps")
+    p.add_argument("--no-sheet", action="store_true", help="skip the contact sheet")
+    p.add_argument("--force", action="store_true", help="render even entries whose files are up to date")
+    p.add_argument("--spec", default=None, metavar="SPEC.json",
+                   help="catalogue spec (default assets_src/textures/catalog.json)")
+    p.set_defaults(run=commands.build)
+
+    p = g.add_parser("sheet", help="rebuild the contact sheet of a built catalogue")
+    p.add_argument("--out", default="build/textures", metavar="DIR", help="the catalogue's folder")
+    p.set_defaults(run=commands.sheet)
+
+    p = g.add_parser("list", help="list the catalogue's entries")
+    p.add_argument("--category", nargs="+", default=[], metavar="C", help="only these categories")
+    p.add_argument("--spec", default=None, metavar="SPEC.json", help="catalogue spec")
+    p.add_argument("--json", action="store_true", help="print every entry with its parameters as JSON")
+    p.set_defaults(run=commands.list_entries)
 
 
 # ---------------------------------------------------------------- accessories
