@@ -119,3 +119,18 @@ def test_malicious_pickle_via_cli_executes_nothing(capsys, tmp_path):
     code, _, err = run(capsys, "model", "info", tmp_path / "evil.pkl")
     assert code == 2 and "evil.pkl" in err and err.count("\n") == 1
     assert not marker.exists()
+
+
+def test_build_gives_a_model_without_uvs_an_atlas(capsys, tmp_path):
+    from model.mano_fixture import write_mano_pkl
+
+    pkl = tmp_path / "MANO_RIGHT.pkl"
+    write_mano_pkl(pkl, side="right")
+    code, out, err = run(capsys, "model", "build", pkl, "--out-dir", tmp_path / "out", "--atlas-res", "256")
+    assert code == 0, err
+    right, left = load_npz(tmp_path / "out/right.npz"), load_npz(tmp_path / "out/left.npz")
+    assert right.has_uvs and left.has_uvs and "xatlas" in out
+    assert right.uvs.min() >= 0 and right.uvs.max() <= 1
+    # The left hand carries the right's atlas (mirroring keeps UVs), so one texture serves both sides.
+    np.testing.assert_array_equal(left.uvs, right.uvs)
+    assert right.meta["uv_atlas"]["resolution"] == 256

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from darthand.model.layout import FACE_LABEL_IDS, FACE_LABELS
-from darthand.textures.atlas import atlas_padding, compute_atlas, ensure_uvs, seam_edges
+from darthand.model.atlas import atlas_padding, compute_atlas, ensure_uvs, seam_edges
 from darthand.textures.raster import rasterize
 from darthand.textures.regions import derive_face_labels, ensure_face_labels, skeleton
 from texture_hand import fixture_model

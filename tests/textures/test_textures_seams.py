@@ -7,7 +7,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from darthand.model.layout import FACE_LABEL_IDS
-from darthand.textures.atlas import ensure_uvs, seam_edges
+from darthand.model.atlas import ensure_uvs, seam_edges
 from darthand.textures.build import build_textures
 from darthand.textures.imageio import mip_levels, read_image
 from darthand.textures.variant import render_variant

@@ -196,7 +196,7 @@ def fixture_model(with_uvs: bool = True, with_labels: bool = True) -> HandModel:
 @functools.lru_cache(maxsize=None)
 def fixture_bake(res: int = 128, atlas: bool = False):
     """The fixture's bake at `res` (its own UVs, or an xatlas atlas with `atlas=True`), once per process."""
-    from darthand.textures.atlas import ensure_uvs
+    from darthand.model.atlas import ensure_uvs
     from darthand.textures.bake import bake
 
     model = ensure_uvs(fixture_model(with_uvs=False), res) if atlas else fixture_model()

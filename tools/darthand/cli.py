@@ -78,6 +78,8 @@ def _add_model_commands(sub) -> None:
     p = g.add_parser("build", help="write wrist-enhanced right.npz and left.npz for the pipeline")
     p.add_argument("model", metavar="MODEL", help=model_help)
     p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for right.npz and left.npz")
+    p.add_argument("--atlas-res", type=int, default=2048, metavar="PX",
+                   help="texture size the xatlas UV atlas is padded for, when the model has no UVs (default 2048)")
     p.set_defaults(run=commands.build)
 
 

@@ -20,7 +20,7 @@ SAMPLE_IDS = ("dark_bandage_00", "brown_palm_prints_01", "light_scars_02", "dark
 
 
 def _model():
-    from darthand.textures.atlas import ensure_uvs
+    from darthand.model.atlas import ensure_uvs
 
     src = Path(__file__).resolve().parents[3] / "assets_src" / "template" / "open_right.npz"
     if src.is_file():

@@ -22,7 +22,7 @@ Export options (`parse_influences`, `parse_correctives`):
 UV convention: the model's UVs (`HandModel.uvs`) are OpenGL / OBJ / USD `st` style, v up: (0, 0) is the
 bottom-left corner of the image and the texel in row r (row 0 at the top of the file), column c of a W x H image
 has its centre at (u, v) = ((c + 0.5) / W, 1 - (r + 0.5) / H). The textures stage bakes with it
-(textures/atlas.py, textures/bake.py), USD writes it unchanged as `st`, glTF (origin top-left) stores (u, 1 - v).
+(model/atlas.py, textures/bake.py), USD writes it unchanged as `st`, glTF (origin top-left) stores (u, 1 - v).
 """
 
 from __future__ import annotations
@@ -447,7 +447,7 @@ def check_textures_fit(model: HandModel, textures: list[TextureSet]) -> None:
     """InputError when skin textures are asked for a model without UVs (they could not be mapped)."""
     if textures and not model.has_uvs:
         raise InputError(f"{model.meta.get('source', 'model')}: the model has no UVs, so the skin textures cannot "
-                         "be mapped (darthand.textures.atlas.ensure_uvs makes the atlas they were baked for)")
+                         "be mapped (darthand.model.atlas.ensure_uvs makes the atlas they were baked for)")
 
 
 def select_textures(sets: list[TextureSet], ids) -> list[TextureSet]:

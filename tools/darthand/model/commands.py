@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from darthand.fileio import atomic_path
+from darthand.model.atlas import ensure_uvs
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
 from darthand.model.load import load_model
@@ -83,15 +84,20 @@ def wrist(args) -> int:
 
 
 def build(args) -> int:
-    """The pipeline's model step: the wrist-enhanced model of each side, as build/model/{right,left}.npz."""
+    """The pipeline's model step: the wrist-enhanced model of each side, as build/model/{right,left}.npz.
+
+    A model without UVs (MANO) gets a deterministic xatlas atlas for textures of `--atlas-res` texels, made once on
+    the wrist-enhanced mesh and mirrored with it, so textures, USD and glTF all use the same UVs.
+    """
     source = load_model(args.model)
-    enhanced = add_wrist(source)
+    enhanced = ensure_uvs(add_wrist(source), args.atlas_res)
     other = mirror_model(enhanced)
     out = Path(args.out_dir)
     for model in (enhanced, other):
         save_npz(model, out / f"{model.side}.npz")
     for fix in source.meta.get("fixes", []):
         print(f"  fixed on load: {fix}")
+    uv = "xatlas atlas" if "uv_atlas" in enhanced.meta else "the template's UVs"
     print(f"{out}/right.npz, left.npz: {enhanced.num_vertices} vertices, {enhanced.num_faces} faces "
-          f"(from {args.model}, {source.num_vertices} vertices)")
+          f"(from {args.model}, {source.num_vertices} vertices; {uv})")
     return 0

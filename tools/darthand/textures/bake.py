@@ -115,7 +115,7 @@ def prepare_model(model: HandModel) -> HandModel:
     right hand's, mirrored) with face labels (derived where missing); UVs must be present."""
     if not model.has_uvs:
         raise InputError(f"{model.meta.get('source', 'model')}: field 'uvs' missing: give the model an atlas first "
-                         "(darthand.textures.atlas.ensure_uvs)")
+                         "(darthand.model.atlas.ensure_uvs)")
     if model.side == "left":
         from darthand.model.mirror import mirror_model
 

@@ -35,7 +35,7 @@ from darthand.errors import InputError
 from darthand.fileio import sha256_file, write_json
 from darthand.model.hand_model import HandModel
 from darthand.textures import sheet as sheet_mod
-from darthand.textures.atlas import ensure_uvs
+from darthand.model.atlas import ensure_uvs
 from darthand.textures.bake import Bake, cached_bake, load_bake, source_digest
 from darthand.textures.catalog import Entry, expand_catalog, select
 from darthand.textures.imageio import image_buffer, read_small, write_png, write_tx
