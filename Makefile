@@ -23,6 +23,8 @@ SOURCE_MODEL := $(if $(MANO),$(MANO),open)
 SOURCE_DEPS  := $(if $(MANO),$(MANO),$(wildcard assets_src/template/*.npz))
 SIDES        := $(if $(filter both,$(SIDE)),right left,$(SIDE))
 POSES        := $(wildcard assets_src/poses/*.json)
+# A stage's outputs depend on its own code too, so editing a generator rebuilds what it made.
+src = $(wildcard tools/darthand/$(1)/*.py tools/darthand/$(1)/*/*.py)
 
 .PHONY: assets test test-all bench usdz clean venv node FORCE
 .DEFAULT_GOAL := assets
@@ -46,39 +48,48 @@ build/model/source.txt: FORCE | $(STAMP)
 	@mkdir -p build/model
 	@echo '$(SOURCE_MODEL)' | cmp -s - $@ || echo '$(SOURCE_MODEL)' > $@
 
-build/model/right.npz build/model/left.npz &: build/model/source.txt $(SOURCE_DEPS) $(STAMP)
+build/model/right.npz build/model/left.npz &: build/model/source.txt $(SOURCE_DEPS) $(call src,model) $(STAMP)
 	@$(STEP) model -- $(DH) model build $(SOURCE_MODEL) --out-dir build/model --atlas-res $(RES)
 
-build/template/gestures.json build/template/gestures.png &: build/model/right.npz $(POSES)
+build/template/gestures.json build/template/gestures.png &: build/model/right.npz $(POSES) $(call src,template)
 	@$(STEP) gestures -- $(DH) template gestures build/model/right.npz --out-dir build/template
 
 build/textures/res.txt: FORCE | $(STAMP)
 	@mkdir -p build/textures
 	@echo '$(RES)' | cmp -s - $@ || echo '$(RES)' > $@
 
-build/textures/catalog.json: build/model/right.npz build/textures/res.txt $(wildcard assets_src/textures/*.json)
+build/textures/catalog.json: build/model/right.npz build/textures/res.txt $(wildcard assets_src/textures/*.json) \
+                             $(call src,textures)
 	@$(STEP) textures -- $(DH) textures build build/model/right.npz --out build/textures --res $(RES) --jobs 2
 
-build/accessories/catalog.json: build/model/right.npz $(wildcard assets_src/accessories/*.json)
+build/accessories/catalog.json: build/model/right.npz $(wildcard assets_src/accessories/*.json) \
+                                $(call src,accessories)
 	@$(STEP) accessories -- $(DH) accessories build build/model/right.npz --out build/accessories
 
 # One USD package and one glTF file per side.
 define side_rules
-build/usd/$(1)/$(1).usda: build/model/$(1).npz build/textures/catalog.json build/accessories/catalog.json
+build/usd/$(1)/$(1).usda: build/model/$(1).npz build/textures/catalog.json build/accessories/catalog.json \
+                          $(call src,export)
 	@$$(STEP) usd-$(1) -- $$(DH) export usd build/model/$(1).npz --out build/usd/$(1) \
 	    --textures build/textures/catalog.json --accessories build/accessories/catalog.json
 
-build/gltf/$(1).glb: build/model/$(1).npz build/textures/catalog.json build/accessories/catalog.json
+# glTF: the hand with the default texture (.glb), and every texture as KHR_materials_variants (.gltf package).
+build/gltf/$(1).glb: build/model/$(1).npz build/textures/catalog.json $(call src,export) $(NODE_STAMP)
 	@$$(STEP) gltf-$(1) -- $$(DH) export gltf build/model/$(1).npz --out $$@ \
-	    --textures build/textures/catalog.json --accessories build/accessories/catalog.json
+	    --textures build/textures/catalog.json --validate
+
+build/gltf/$(1)/$(1).gltf: build/model/$(1).npz build/textures/catalog.json $(call src,export) $(NODE_STAMP)
+	@$$(STEP) gltf-variants-$(1) -- $$(DH) export gltf build/model/$(1).npz --out $$@ \
+	    --textures build/textures/catalog.json --all-textures --validate
 endef
 $(foreach s,right left,$(eval $(call side_rules,$(s))))
 
-build/checks/report.json: $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb)
+build/checks/report.json: $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda) $(call src,render)
 	@$(STEP) checks -- $(DH) render-checks --build build --sides $(SIDES)
 
 ASSETS := build/model/right.npz build/template/gestures.json build/textures/catalog.json \
-          build/accessories/catalog.json $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb) \
+          build/accessories/catalog.json \
+          $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb build/gltf/$(s)/$(s).gltf) \
           build/checks/report.json
 
 build/manifest.json: $(ASSETS)

@@ -14,13 +14,9 @@ from darthand import __version__
 from darthand.fileio import sha256_file, write_json
 
 SKIP_DIRS = {"steps", "bench"}
-# Reports that stages write and the manifest gathers as check results: name -> path relative to build/.
+# Reports that stages write and the manifest gathers whole as check results: name -> path relative to build/.
 CHECK_REPORTS = {
     "gestures": "template/gestures.json",
-    "textures": "textures/report.json",
-    "accessories": "accessories/report.json",
-    "usd": "usd/report.json",
-    "gltf": "gltf/report.json",
     "render": "checks/report.json",
 }
 
@@ -49,6 +45,24 @@ def file_entries(build: Path, manifest_path: Path, previous: dict) -> list[dict]
     return out
 
 
+def catalogue_checks(build: Path) -> dict:
+    """The figures the texture and accessory catalogues record about themselves."""
+    checks = {}
+    textures = build / "textures" / "catalog.json"
+    if textures.is_file():
+        cat = json.loads(textures.read_text())
+        checks["textures"] = {"variants": len(cat["entries"]), "resolution": cat["resolution"]}
+    accessories = build / "accessories" / "catalog.json"
+    if accessories.is_file():
+        cat = json.loads(accessories.read_text())
+        checks["accessories"] = {
+            a["id"]: {"type": a["type"], "parent_joint": a["parent_joint"],
+                      "max_penetration_mm": {k: a["max_penetration_mm"][k] for k in ("rest", "gestures", "poses")},
+                      "max_axis_drift_mm": a.get("max_axis_drift_mm")}
+            for a in cat["accessories"]}
+    return checks
+
+
 def model_used(build: Path) -> dict:
     source = build / "model" / "source.txt"
     info = {"source": source.read_text().strip() if source.is_file() else None}
@@ -68,6 +82,7 @@ def write_manifest(build: str | Path = "build", out: str | Path | None = None) -
     steps = {p.stem: json.loads(p.read_text())["seconds"] for p in sorted((build / "steps").glob("*.json"))}
     checks = {name: json.loads((build / rel).read_text()) for name, rel in CHECK_REPORTS.items()
               if (build / rel).is_file()}
+    checks.update(catalogue_checks(build))
     manifest = {
         "darthand_version": __version__,
         "model": model_used(build),

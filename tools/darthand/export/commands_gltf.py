@@ -14,7 +14,7 @@ from darthand.export.common import load_accessory_catalog, load_texture_catalog,
 def gltf(args) -> int:
     """`darthand export gltf MODEL --out OUT.glb|OUT.gltf [--textures T [--texture ID ...] [--all-textures]]
     [--texture-size N] [--accessories A [--accessory ID ...]] [--influences K] [--correctives C] [--clip-keys N]
-    [--validate]`; prints a JSON summary. Exit 1 if --validate found errors."""
+    [--validate]`; prints a one-line summary. Exit 1 if --validate found errors."""
     from darthand.export.gltf_export import GltfOptions, export_gltf
     from darthand.model.load import load_model
 
@@ -29,16 +29,17 @@ def gltf(args) -> int:
         if args.accessories else []
     options = GltfOptions(influences=parse_influences(args.influences), correctives=args.correctives,
                           texture_size=args.texture_size, clip_keys=args.clip_keys)
-    result = export_gltf(model, args.out, options=options, textures=textures, accessories=accessories)
-    summary = result.as_dict()
-    summary["variants"] = len(summary["variants"])
-    code = 0
-    if args.validate:
-        report = _validate(Path(args.out))
-        summary["validation"] = report.counts
-        code = 1 if report.errors else 0
-    print(json.dumps(summary, indent=2))
-    return code
+    r = export_gltf(model, args.out, options=options, textures=textures, accessories=accessories)
+    size = sum(Path(f).stat().st_size for f in r.files if Path(f).is_file())
+    print(f"{args.out}: {model.side} hand, {r.vertices} glTF vertices ({r.model_vertices} model), "
+          f"{r.influence_slots} influences (max error {1000 * r.influence_error_m:.2f} mm), {r.morph_targets} morph "
+          f"targets ({r.correctives}), {len(r.animations)} animations, {max(1, len(r.variants))} textures, "
+          f"{len(r.accessories)} accessories, {size / 1e6:.1f} MB")
+    if not args.validate:
+        return 0
+    report = _validate(Path(args.out))
+    print(f"Khronos glTF validator: {report.summary()}")
+    return 1 if report.errors else 0
 
 
 def validate(args) -> int:
