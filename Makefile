@@ -87,10 +87,15 @@ $(foreach s,right left,$(eval $(call side_rules,$(s))))
 build/checks/report.json: $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda) $(call src,render)
 	@$(STEP) checks -- $(DH) render-checks --build build --sides $(SIDES)
 
+build/validate/report.json: $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb build/gltf/$(s)/$(s).gltf) \
+                            $(call src,validate)
+	@$(STEP) validate -- $(DH) validate $(foreach s,$(SIDES),build/usd/$(s) build/gltf/$(s).glb build/gltf/$(s)) \
+	    --out $@
+
 ASSETS := build/model/right.npz build/template/gestures.json build/textures/catalog.json \
           build/accessories/catalog.json \
           $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb build/gltf/$(s)/$(s).gltf) \
-          build/checks/report.json
+          build/checks/report.json build/validate/report.json
 
 build/manifest.json: $(ASSETS)
 	@$(DH) manifest --build build

@@ -62,3 +62,15 @@ def test_atomic_outputs_get_normal_permissions(tmp_path):
     finally:
         os.umask(old)
     assert (tmp_path / "f.bin").stat().st_mode & 0o777 == 0o644
+
+
+def test_atomic_hard_link_over_the_same_file_leaves_no_temporary(tmp_path):
+    from darthand.fileio import atomic_path
+
+    src = tmp_path / "src.png"
+    src.write_bytes(b"png")
+    for _ in range(2):      # the second time, dst is already a link to src
+        with atomic_path(tmp_path / "dst.png") as tmp:
+            tmp.unlink()
+            os.link(src, tmp)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dst.png", "src.png"]

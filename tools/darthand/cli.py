@@ -37,6 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_accessories_commands(sub)
     _add_export_commands(sub)
     _add_render_commands(sub)
+    _add_validate_command(sub)
     _add_manifest_command(sub)
     return parser
 
@@ -315,6 +316,23 @@ def _add_checks_arguments(p) -> None:
     p.add_argument("--size", type=int, default=256, metavar="N", help="render size in pixels (default 256)")
     p.add_argument("--all-accessories", action=argparse.BooleanOptionalAction, default=True,
                    help="render every accessory variant to check it is visible next to its bone (default on)")
+
+
+# ---------------------------------------------------------------- validate
+def _add_validate_command(sub) -> None:
+    from darthand.validate import commands
+
+    p = sub.add_parser("validate", help=commands.HELP, description=commands.HELP)
+    p.add_argument("paths", nargs="+", metavar="PATH",
+                   help="package files (.usda/.usdc/.usd/.usdz/.glb/.gltf) or package folders (build/usd/right)")
+    p.add_argument("--json", action="store_true",
+                   help="print the report as JSON (schemas/validation_report.schema.json) instead of text")
+    p.add_argument("--render", action="store_true",
+                   help="also render each asset with the reference renderer and apply its checks")
+    p.add_argument("--deep", action="store_true",
+                   help="decode every texture fully and check every PNG chunk's CRC (default: header and end only)")
+    p.add_argument("--out", metavar="REPORT.json", help="also write the JSON report to this file")
+    p.set_defaults(run=commands.validate)
 
 
 # ---------------------------------------------------------------- manifest

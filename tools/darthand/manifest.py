@@ -18,6 +18,7 @@ SKIP_DIRS = {"steps", "bench"}
 CHECK_REPORTS = {
     "gestures": "template/gestures.json",
     "render": "checks/report.json",
+    "validate": "validate/report.json",
 }
 
 
