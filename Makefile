@@ -3,7 +3,8 @@
 # validator, three.js) comes from package-lock.json when npm is on the machine.
 #
 # Variables: MANO=path/to/MANO_RIGHT.pkl (source model; default: the open CC0 hand), RES (texture size, default
-# 2048), SIDE (right, left or both), TEXTURE / ACCESSORY (for `make usdz`).
+# 2048), SIDE (right, left or both), TEXTURE / ACCESSORY (catalogue ids for `make usdz`; default: the package's
+# default texture and no accessory).
 
 PYTHON ?= python3
 VENV   := .venv
@@ -15,7 +16,7 @@ NODE_STAMP := node_modules/.installed-stamp
 MANO   ?=
 RES    ?= 2048
 SIDE   ?= both
-TEXTURE   ?= light_base_00
+TEXTURE   ?=
 ACCESSORY ?= none
 PYTEST_ARGS ?=
 
@@ -102,9 +103,10 @@ build/manifest.json: $(ASSETS)
 
 assets: build/manifest.json
 
+# One variant combination as a .usdz: make usdz TEXTURE=light_tattoos_07 ACCESSORY=watch_03_round_metal
 usdz: build/usd/right/right.usda
-	@$(DH) export usdz build/usd/right --texture $(TEXTURE) --accessory $(ACCESSORY) \
-	    --out build/usdz/right_$(TEXTURE)_$(ACCESSORY).usdz
+	@$(DH) export usdz build/usd/right $(if $(TEXTURE),--texture $(TEXTURE)) --accessory $(ACCESSORY) \
+	    --out build/usdz/right_$(or $(TEXTURE),default)_$(ACCESSORY).usdz
 
 # ------------------------------------------------------------------ tests and benchmarks
 # Two pytest workers, each with single-threaded BLAS: threaded BLAS in both workers oversubscribes two cores.

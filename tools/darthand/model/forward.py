@@ -56,10 +56,13 @@ def forward(model: HandModel, pose, betas=None, *, flat_hand_mean: bool = True, 
     arrays = _prepared(model, dtype)
     v_shaped, joints = shape_blend(model, arrays, betas, B, dtype)         # (1|B, 3, V), (1|B, 16, 3)
     rotations = axis_angle_to_matrix(aa)                                   # (B, 16, 3, 3)
-    v_posed = v_shaped + corrective_offsets(arrays, rotations) if correctives else v_shaped
-    transforms = kinematic_chain(rotations, joints, model.parents)         # (B, 16, 4, 4)
+    if correctives:
+        v_posed = corrective_offsets(arrays, rotations)
+        v_posed += v_shaped
+    else:
+        v_posed = v_shaped
+    transforms, posed_joints = kinematic_chain(rotations, joints, model.parents)  # (B, 16, 4, 4), (B, 16, 3)
     vertices = skin(arrays["weights_T"], transforms, v_posed)              # (B, V, 3)
-    posed_joints = transforms[:, :, :3, 3] + np.einsum("bjik,bjk->bji", transforms[:, :, :3, :3], joints)
     if trans is not None:
         t = _batch(trans, (3,), B, "trans").astype(dtype, copy=False)[:, None, :]
         vertices = vertices + t
@@ -127,8 +130,9 @@ def corrective_offsets(arrays: dict, rotations: np.ndarray) -> np.ndarray:
     return (pose_feature(rotations) @ arrays["posedirs_T"]).reshape(B, 3, arrays["weights_T"].shape[1])
 
 
-def kinematic_chain(rotations: np.ndarray, joints: np.ndarray, parents: np.ndarray) -> np.ndarray:
-    """(B, 16, 4, 4) skinning transforms G_i = A_i [I, -J_i], A_i = A_parent [R_i, J_i - J_parent].
+def kinematic_chain(rotations: np.ndarray, joints: np.ndarray, parents: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(B, 16, 4, 4) skinning transforms G_i = A_i [I, -J_i], A_i = A_parent [R_i, J_i - J_parent], and the posed
+    joint centres (B, 16, 3) (the translations of A_i).
 
     rotations: (B, 16, 3, 3); joints: (1 or B, 16, 3) rest joint centres. Joints of one depth are composed together
     (three levels for MANO), so the chain costs a few batched products instead of 15.
@@ -148,7 +152,7 @@ def kinematic_chain(rotations: np.ndarray, joints: np.ndarray, parents: np.ndarr
     G[:, :, :3, :3] = world_R
     G[:, :, :3, 3] = world_t - np.einsum("bjik,bjk->bji", world_R, joints)
     G[:, :, 3, 3] = 1
-    return G
+    return G, world_t
 
 
 def skin(weights_T: np.ndarray, transforms: np.ndarray, v_posed: np.ndarray, chunk: int = 32) -> np.ndarray:
@@ -161,14 +165,22 @@ def skin(weights_T: np.ndarray, transforms: np.ndarray, v_posed: np.ndarray, chu
     B, V = transforms.shape[0], weights_T.shape[1]
     G = np.ascontiguousarray(transforms[:, :, :3, :].reshape(B, NUM_JOINTS, 12).transpose(0, 2, 1))
     G = G.reshape(B * 12, NUM_JOINTS)
-    out = np.empty((B, V, 3), dtype=transforms.dtype)
+    dtype = transforms.dtype
+    out = np.empty((B, V, 3), dtype=dtype)
+    # Scratch buffers reused across chunks: fresh temporaries of this size cost page faults on every call.
+    T_buf = np.empty((chunk * 12, V), dtype=dtype)
+    blended_buf = np.empty((chunk, 3, V), dtype=dtype)
+    term_buf = np.empty((chunk, 3, V), dtype=dtype)
     for s in range(0, B, chunk):
         e = min(B, s + chunk)
-        T = (G[12 * s:12 * e] @ weights_T).reshape(e - s, 3, 4, V)
+        n = e - s
+        T = np.matmul(G[12 * s:12 * e], weights_T, out=T_buf[:12 * n]).reshape(n, 3, 4, V)
         v = v_posed[s:e] if v_posed.shape[0] > 1 else v_posed
-        blended = T[:, :, 3].copy()
+        blended, term = blended_buf[:n], term_buf[:n]
+        np.copyto(blended, T[:, :, 3])
         for k in range(3):
-            blended += T[:, :, k] * v[:, None, k]
+            np.multiply(T[:, :, k], v[:, None, k], out=term)
+            blended += term
         out[s:e] = blended.transpose(0, 2, 1)
     return out
 
