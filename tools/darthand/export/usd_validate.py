@@ -44,9 +44,9 @@ def all_validators() -> list:
     return _VALIDATORS
 
 
-def validate_stage(stage: Usd.Stage, variants: tuple = ()) -> list[Issue]:
-    """Every finding of every registered validator on `stage`."""
-    context = UsdValidation.ValidationContext(all_validators())
+def validate_stage(stage: Usd.Stage, variants: tuple = (), skip=frozenset()) -> list[Issue]:
+    """Every finding of every registered validator on `stage`, except the validators named in `skip`."""
+    context = UsdValidation.ValidationContext([v for v in all_validators() if v.GetMetadata().name not in skip])
     issues = []
     for err in context.Validate(stage):
         if err.HasNoError():

@@ -14,11 +14,18 @@ def directed_edges(faces: np.ndarray) -> np.ndarray:
     return np.stack([f, np.roll(f, -1, axis=1)], axis=-1).reshape(-1, 2)
 
 
+def _unique_edges(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct (a, b) pairs (E, 2) and their counts, counted on one int64 key per pair: np.unique(axis=0) sorts
+    rows as opaque records, about ten times slower on large meshes."""
+    n = int(max(a.max(initial=0), b.max(initial=0))) + 1
+    keys, counts = np.unique(a.astype(np.int64) * n + b, return_counts=True)
+    return np.stack(np.divmod(keys, n), 1), counts
+
+
 def edge_face_counts(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Undirected edges (E, 2) with a < b, and how many faces use each."""
-    e = np.sort(directed_edges(faces), axis=1)
-    edges, counts = np.unique(e, axis=0, return_counts=True)
-    return edges, counts
+    d = directed_edges(faces)
+    return _unique_edges(d.min(1), d.max(1))
 
 
 def non_manifold_edges(faces: np.ndarray) -> np.ndarray:
@@ -29,8 +36,9 @@ def non_manifold_edges(faces: np.ndarray) -> np.ndarray:
 
 def inconsistent_edges(faces: np.ndarray) -> np.ndarray:
     """(K, 2) directed edges that occur twice in the same direction (neighbouring faces wound oppositely)."""
-    d, counts = np.unique(directed_edges(faces), axis=0, return_counts=True)
-    return d[counts > 1]
+    d = directed_edges(faces)
+    edges, counts = _unique_edges(d[:, 0], d[:, 1])
+    return edges[counts > 1]
 
 
 def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:

@@ -142,6 +142,9 @@ class HandAssets:
                 rest_n = self._rest_normals[acc.id] = vertex_normals(acc.vertices, acc.faces)
             v = (acc.vertices @ G[:3, :3].T + G[:3, 3]).astype(np.float32)
             n = (rest_n @ G[:3, :3].T.astype(np.float32)).astype(np.float32)
+            local = self._rest_normals.get(("f32", acc.id))
+            if local is None:
+                local = self._rest_normals["f32", acc.id] = np.ascontiguousarray(acc.vertices, np.float32)
         else:
             from darthand.accessories.attach import pose_skinned
             from darthand.model.layout import NUM_POSE_FEATURES
@@ -159,7 +162,8 @@ class HandAssets:
         return Surface(acc.id, v, acc.faces.astype(np.int32), n, accessory_material(acc),
                        None if acc.uvs is None else acc.uvs.astype(np.float32),
                        None if acc.faces_uv is None else acc.faces_uv.astype(np.int32), acc.vertices, "accessory",
-                       None if acc.parent_joint is not None else self._face_joints[acc.id])
+                       None if acc.parent_joint is not None else self._face_joints[acc.id],
+                       *((local, G) if acc.parent_joint is not None else ()))
 
 
 def texture_catalog(path) -> tuple[list[TextureSet], str | None]:

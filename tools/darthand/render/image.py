@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import functools
 import os
+import struct
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -19,8 +21,7 @@ from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.textures.color import encode_srgb8, srgb_to_linear
 
-PNG_COMPRESSION = 1   # zlib level and libpng's 'Avg' filter: 5 ms for a 512^2 RGBA render; level 6 with
-PNG_FILTER = 64       # adaptive filtering saves 20% of the bytes for 4x the time
+PNG_COMPRESSION = 1   # zlib level: about 3 ms for a 512^2 RGBA render; level 6 saves 20% of the bytes for 3x the time
 _LUT_BITS = 16
 
 
@@ -92,21 +93,41 @@ def load_background(path: str | os.PathLike, width: int, height: int) -> np.ndar
 
 
 def write_png(path: str | os.PathLike, pixels: np.ndarray, srgb: bool = True) -> None:
-    """Write (H, W, C) or (H, W) uint8 pixels as PNG, atomically; deterministic bytes for the same pixels."""
-    img = np.ascontiguousarray(pixels)
+    """Write (H, W, C) or (H, W) uint8 pixels (C = 1 gray, 2 gray + alpha, 3 RGB, 4 RGBA, straight alpha) as an
+    8-bit PNG, atomically; deterministic bytes for the same pixels. srgb: tag the file with an sRGB chunk.
+
+    Encoded here with zlib rather than through OpenImageIO because OpenImageIO's Python write holds the GIL for
+    most of its run, which stalls the renderer while a FrameWriter thread writes; zlib.compress releases it. Every
+    row uses PNG's 'Up' filter (the difference to the row above: one vectorised subtraction).
+    """
+    img = np.ascontiguousarray(pixels, np.uint8)
     if img.ndim == 2:
         img = img[..., None]
-    spec = oiio.ImageSpec(img.shape[1], img.shape[0], img.shape[2], oiio.UINT8)
-    spec.attribute("oiio:ColorSpace", "sRGB" if srgb else "Raw")
-    spec.attribute("png:compressionLevel", PNG_COMPRESSION)
-    spec.attribute("png:filter", PNG_FILTER)
-    if img.shape[2] == 4:
-        spec.attribute("oiio:UnassociatedAlpha", 1)
-    buf = oiio.ImageBuf(spec)
-    buf.set_pixels(oiio.ROI(), img)
+    h, w, c = img.shape
+    if c not in _PNG_COLOUR_TYPES:
+        raise ValueError(f"{path}: cannot write {c} channels as PNG")
+    rows = img.reshape(h, w * c)
+    filtered = np.empty((h, w * c + 1), np.uint8)
+    filtered[:, 0] = 2                                   # filter type 'Up'
+    filtered[0, 0] = 0                                   # the first row has no row above: 'None'
+    filtered[0, 1:] = rows[0]
+    np.subtract(rows[1:], rows[:-1], out=filtered[1:, 1:])  # uint8 arithmetic wraps modulo 256, as PNG specifies
+    header = struct.pack(">IIBBBBB", w, h, 8, _PNG_COLOUR_TYPES[c], 0, 0, 0)
+    chunks = [_png_chunk(b"IHDR", header)]
+    if srgb:
+        chunks.append(_png_chunk(b"sRGB", b"\x00"))      # perceptual rendering intent
+    chunks += [_png_chunk(b"IDAT", zlib.compress(filtered.data, PNG_COMPRESSION)), _png_chunk(b"IEND", b"")]
     with atomic_path(path) as tmp:
-        if not buf.write(str(tmp), fileformat="png"):
-            raise OSError(f"{path}: cannot write PNG ({buf.geterror()})")
+        with open(tmp, "wb") as f:
+            f.write(b"\x89PNG\r\n\x1a\n")
+            f.writelines(chunks)
+
+
+_PNG_COLOUR_TYPES = {1: 0, 2: 4, 3: 2, 4: 6}
+
+
+def _png_chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(data, zlib.crc32(kind)))
 
 
 def write_exr(path: str | os.PathLike, values: np.ndarray, channel: str = "Z") -> None:

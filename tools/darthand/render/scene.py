@@ -1,9 +1,9 @@
 """The ray-tracing scene: one Embree triangle mesh per posed surface (geomID = its index in the subject).
 
-embreex builds static scenes only (no vertex-buffer updates, no instancing), so a pose change means a new scene;
-what did not move is not recomputed on the numpy side (see assets.HandAssets), and a scene whose surfaces are the
-same arrays is reused (only the camera or the lights changed). Building the hand (3.5k triangles) and a ring (6.4k)
-costs a few milliseconds (benchmarks/render.py reports it).
+embreex builds static scenes only (no vertex-buffer updates, no instancing), so a pose change means a new scene
+for the skinned hand; a rigid accessory keeps one scene in its joint's frame and the rays are moved into it (see
+Scene). What did not move is not recomputed on the numpy side (see assets.HandAssets), and a scene whose surfaces
+are the same arrays is reused (only the camera or the lights changed).
 
 The scene is committed on construction (a one-ray query) so that the parallel queries of trace.py start from a
 committed scene.
@@ -64,38 +64,108 @@ class FaceData:
 
 
 class Scene:
-    """The Embree scene of a subject's surfaces, committed, with the scene's size for ray offsets and the per-face
-    shading data of each surface."""
+    """The Embree scenes of a subject's surfaces, committed, with the scene's size for ray offsets and the per-face
+    shading data of each surface.
+
+    Skinned surfaces (the hand) go into one scene built for the pose. A rigid surface (a ring: `Surface.transform`)
+    keeps its own scene, built once in its joint's frame (`Surface.local`) and reused for every pose: rays are
+    moved into that frame by the inverse transform and the nearer hit wins. The transform is rigid, so a ray
+    parameter (tfar) means the same distance in both frames, and barycentrics and primID are those of the posed
+    face."""
 
     def __init__(self, subject: Subject):
         self.subject = subject
         self.surfaces = subject.surfaces
         self.faces = [FaceData(s) for s in self.surfaces]
         self.embree = rtcore_scene.EmbreeScene(device())
-        for s in self.surfaces:
-            TriangleMesh(self.embree, np.ascontiguousarray(s.vertices, np.float32),
-                         np.ascontiguousarray(s.faces, np.int32))
+        self.rigid = []                 # (surface index, embree scene, R (3, 3) float32, t (3,) float32)
+        baked = []
+        for i, s in enumerate(self.surfaces):
+            if _is_rigid(s):
+                G = np.asarray(s.transform, np.float64)
+                self.rigid.append((i, _local_scene(s.local, s.faces), G[:3, :3].astype(np.float32),
+                                   G[:3, 3].astype(np.float32)))
+            else:
+                TriangleMesh(self.embree, np.ascontiguousarray(s.vertices, np.float32),
+                             np.ascontiguousarray(s.faces, np.int32))
+                baked.append(i)
+        self.baked = np.array(baked + [-1], np.int32)     # geomID of the baked scene -> surface index (-1 -> -1)
         pts = subject.all_vertices()
         self.lo, self.hi = pts.min(0), pts.max(0)
         self.extent = float(np.linalg.norm(self.hi - self.lo))
-        # Commit now, single-threaded, before any parallel query.
-        one = np.zeros((1, 3), np.float32)
-        self.embree.run(one, np.array([[0, 0, 1]], np.float32), output=1)
+        _commit(self.embree)
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray, tfar=None) -> dict:
-        """Closest hits of rays (N, 3) float32: {'primID', 'geomID' (-1 for a miss), 'u', 'v', 'tfar'}."""
-        d = None if tfar is None else np.array(tfar, np.float32, copy=True)
-        return self.embree.run(origins, directions, dists=d, output=1)
+        """Closest hits of rays (N, 3) float32: {'primID', 'geomID' (surface index, -1 for a miss), 'u', 'v',
+        'tfar'}."""
+        n = len(origins)
+        d = np.full(n, np.inf, np.float32) if tfar is None else np.array(
+            np.broadcast_to(np.asarray(tfar, np.float32), (n,)), np.float32, copy=True)
+        hit = self.embree.run(origins, directions, dists=d, output=1)
+        hit["geomID"] = self.baked[np.where(hit["primID"] >= 0, hit["geomID"], -1)]
+        for i, embree, R, t in self.rigid:
+            o, dl = _to_local(origins, directions, R, t)
+            near = np.array(hit["tfar"], np.float32, copy=True)
+            local = embree.run(o, dl, dists=near, output=1)
+            won = np.flatnonzero(local["primID"] >= 0)
+            if len(won):
+                for key in ("primID", "u", "v", "tfar"):
+                    hit[key][won] = local[key][won]
+                hit["geomID"][won] = i
+        return hit
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, tfar) -> np.ndarray:
         """(N,) bool: something lies along each ray within (0, tfar)."""
         d = np.array(np.broadcast_to(np.asarray(tfar, np.float32), (len(origins),)), np.float32, copy=True)
-        return self.embree.run(origins, directions, dists=d, query="OCCLUDED") >= 0
+        blocked = self.embree.run(origins, directions, dists=d.copy(), query="OCCLUDED") >= 0
+        for _, embree, R, t in self.rigid:
+            rest = np.flatnonzero(~blocked)
+            if not len(rest):
+                break
+            o, dl = _to_local(origins[rest], directions[rest], R, t)
+            blocked[rest] = embree.run(o, dl, dists=d[rest], query="OCCLUDED") >= 0
+        return blocked
 
     def matches(self, subject: Subject) -> bool:
         """The same surfaces (same vertex arrays): the scene can be reused."""
         return len(subject.surfaces) == len(self.surfaces) and all(
             a.vertices is b.vertices and a.faces is b.faces for a, b in zip(subject.surfaces, self.surfaces))
+
+
+_LOCAL_SCENES: dict = {}
+
+
+def _is_rigid(surface: Surface) -> bool:
+    """A surface with a local mesh and a transform whose 3x3 part is a rotation (no scale: tfar must carry over)."""
+    if surface.local is None or surface.transform is None:
+        return False
+    R = np.asarray(surface.transform, np.float64)[:3, :3]
+    return bool(np.allclose(R.T @ R, np.eye(3), atol=1e-5))
+
+
+def _local_scene(local: np.ndarray, faces: np.ndarray):
+    """The committed Embree scene of a rigid surface's local mesh, built once per (vertex array, face array)."""
+    key = (id(local), id(faces))
+    entry = _LOCAL_SCENES.get(key)
+    if entry is None or entry[0] is not local or entry[1] is not faces:
+        if len(_LOCAL_SCENES) > 64:
+            _LOCAL_SCENES.clear()
+        embree = rtcore_scene.EmbreeScene(device())
+        TriangleMesh(embree, np.ascontiguousarray(local, np.float32), np.ascontiguousarray(faces, np.int32))
+        _commit(embree)
+        entry = _LOCAL_SCENES[key] = (local, faces, embree)
+    return entry[2]
+
+
+def _to_local(origins: np.ndarray, directions: np.ndarray, R: np.ndarray, t: np.ndarray):
+    """Rays (N, 3) moved by the inverse of the rigid transform x -> R x + t: o' = R^T (o - t), d' = R^T d."""
+    return (np.ascontiguousarray((origins - t) @ R, np.float32), np.ascontiguousarray(directions @ R, np.float32))
+
+
+def _commit(embree) -> None:
+    """Commit a scene now, single-threaded, before any parallel query (a one-ray query)."""
+    one = np.zeros((1, 3), np.float32)
+    embree.run(one, np.array([[0, 0, 1]], np.float32), output=1)
 
 
 def scene_for(subject: Subject, previous: Scene | None = None) -> Scene:

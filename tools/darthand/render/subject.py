@@ -58,7 +58,9 @@ class Surface:
     """One posed triangle mesh: vertices (N, 3) float32 world, faces (F, 3) int32, vertex normals (N, 3) float32,
     per-corner uvs (T, 2) float32 + faces_uv (F, 3) int32 (or None), rest-pose vertices (N, 3) (for checks), its
     material, `role` 'hand' or 'accessory', and face_joints (F,) the joint that moves each face most (skinned
-    surfaces; None for rigid ones), for keypoint visibility."""
+    surfaces; None for rigid ones), for keypoint visibility. A rigid surface also carries `local` (N, 3) float32,
+    its vertices in its joint's frame (the same array every frame, so its ray-tracing structure is built once), and
+    `transform` (4, 4) float64, the rigid transform G with vertices = G @ [local, 1]."""
 
     name: str
     vertices: np.ndarray
@@ -70,6 +72,8 @@ class Surface:
     rest: np.ndarray | None = None
     role: str = "hand"
     face_joints: np.ndarray | None = None
+    local: np.ndarray | None = None
+    transform: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)

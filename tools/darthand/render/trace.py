@@ -137,7 +137,9 @@ def trace_samples(ctx: Context, uv: np.ndarray, footprint: float = 1.0, stats: d
 def trace_parallel(ctx: Context, uv: np.ndarray, footprint: float = 1.0, stats: dict | None = None) -> Samples:
     """`trace_samples` over chunks of uv on `ctx.threads` threads; results in input order."""
     n = len(uv)
-    chunks = max(1, min(4 * ctx.threads, n // MIN_CHUNK)) if ctx.threads > 1 else 1
+    # One chunk per thread: the per-chunk Python and small-array numpy work holds the GIL, so fewer, larger chunks
+    # let the GIL-free parts (Embree's ray loop, numpy's big element-wise ops) overlap.
+    chunks = max(1, min(ctx.threads, n // MIN_CHUNK))
     if chunks == 1:
         return trace_samples(ctx, uv, footprint, stats)
     bounds = np.linspace(0, n, chunks + 1).astype(int)

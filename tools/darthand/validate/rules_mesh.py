@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from darthand.model.topology import boundary_loops
+from darthand.model.topology import boundary_loops, inconsistent_edges, non_manifold_edges
 from darthand.validate.asset import Mesh
 from darthand.validate.findings import Finding, examples, finding
 
@@ -106,16 +106,13 @@ def duplicate_faces(welded: np.ndarray, keep: np.ndarray) -> np.ndarray:
 
 def edge_problems(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Undirected edges (K, 2) used by more than two faces, and directed edges (M, 2) that both faces of a
-    two-face edge traverse the same way: topology.non_manifold_edges and topology.inconsistent_edges (less the
-    edges of the first kind), counted on 1-D int64 keys for speed (see `weld`)."""
-    n = int(faces.max()) + 1
-    a, b = faces.reshape(-1), np.roll(faces, -1, axis=1).reshape(-1)
-    undirected, u_count = np.unique(edge_keys(np.minimum(a, b), np.maximum(a, b), n), return_counts=True)
-    fans = undirected[u_count > 2]
-    directed, d_count = np.unique(edge_keys(a, b, n), return_counts=True)
-    sa, sb = np.divmod(directed[d_count > 1], n)
-    same_way = ~np.isin(edge_keys(np.minimum(sa, sb), np.maximum(sa, sb), n), fans)
-    return np.stack(np.divmod(fans, n), 1), np.stack([sa[same_way], sb[same_way]], 1)
+    two-face edge traverse the same way (topology's inconsistent edges, less those of the first kind)."""
+    fans = non_manifold_edges(faces)
+    flipped = inconsistent_edges(faces)
+    if len(fans) and len(flipped):
+        fan_set = {tuple(e) for e in fans.tolist()}
+        flipped = flipped[[tuple(sorted(e)) not in fan_set for e in flipped.tolist()]]
+    return fans, flipped
 
 
 def check_topology(mesh: Mesh, faces: np.ndarray, boundaries: bool = True) -> list[Finding]:

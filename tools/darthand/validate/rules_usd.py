@@ -30,9 +30,9 @@ import os
 import re
 from pathlib import Path
 
-from pxr import Ar, Sdf, Tf, Usd, UsdValidation
+from pxr import Ar, Sdf, Tf, Usd
 
-from darthand.export.usd_validate import Issue, all_validators, validate_stage
+from darthand.export.usd_validate import Issue, validate_stage
 from darthand.validate.asset import Limits, Package
 from darthand.validate.findings import UNREADABLE, Finding, finding
 from darthand.validate.usd_reader import (Unreadable, open_stage, read_meshes, read_skeletons, read_textures,
@@ -221,29 +221,8 @@ class UsdCheck:
 
 
 def run_validators(stage: Usd.Stage, skip=frozenset()) -> list[Issue]:
-    """export.usd_validate.validate_stage (every registered validator), or the same without the validators named in
-    `skip` (validate_stage has no way to leave some out; the conversion below mirrors its own)."""
-    if not skip:
-        return validate_stage(stage)
-    context = UsdValidation.ValidationContext([v for v in all_validators() if v.GetMetadata().name not in skip])
-    issues = []
-    for err in context.Validate(stage):
-        if err.HasNoError():
-            continue
-        validator = err.GetValidator()
-        issues.append(Issue(str(err.GetType()).rsplit(".", 1)[-1],
-                            validator.GetMetadata().name if validator else err.GetName(), err.GetMessage(),
-                            tuple(_site(site) for site in err.GetSites())))
-    return issues
-
-
-def _site(site) -> str:
-    if site.IsPrim():
-        return str(site.GetPrim().GetPath())
-    if site.IsProperty():
-        return str(site.GetProperty().GetPath())
-    layer = site.GetLayer()
-    return layer.identifier if isinstance(layer, Sdf.Layer) else ""
+    """export.usd_validate.validate_stage: every registered validator but those named in `skip`."""
+    return validate_stage(stage, skip=skip)
 
 
 def variant_arcs(prim: Usd.Prim, set_name: str, name: str) -> list[tuple]:
