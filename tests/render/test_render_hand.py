@@ -174,3 +174,18 @@ def test_bad_arguments_are_input_errors(renderer, kw, match):
     pose = kw.pop("pose", None)
     with pytest.raises(InputError, match=match):
         renderer.render(pose, width=32, height=32, **kw)
+
+
+def test_render_many_matches_frame_by_frame(assets):
+    """The pipelined loop (next frame prepared on a helper thread) gives the frames `render` gives one by one,
+    including a repeated pose whose scene is reused while the frame before it is still being traced."""
+    poses = ["point", "ok", "ok", "flat"]
+    options = dict(camera="three_quarter", width=SIZE, height=SIZE, accessory="ring_test")
+    many = list(Renderer(assets, threads=2).render_many(poses, **options))
+    single = Renderer(assets, threads=2)
+    assert len(many) == len(poses)
+    for pose, frame in zip(poses, many):
+        ref = single.render(pose, **options)
+        assert np.array_equal(frame.rgba, ref.rgba), pose
+        assert frame.labels == ref.labels, pose
+    assert list(Renderer(assets).render_many([], **options)) == []

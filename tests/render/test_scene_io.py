@@ -73,3 +73,25 @@ def test_png_round_trip_is_lossless(tmp_path):
         first = path.read_bytes()
         write_png(path, img, srgb=len(shape) == 3)
         assert path.read_bytes() == first
+
+
+def test_sphere_culling_keeps_every_ray_that_passes_near():
+    """scene._rays_near_sphere against float64 point-to-ray distances: no ray within the radius is dropped, and
+    rays clearly outside it (or pointing away) are."""
+    from darthand.render.scene import _rays_near_sphere
+
+    rng = np.random.default_rng(1)
+    n = 20000
+    origins = rng.normal(scale=2.0, size=(n, 3)).astype(np.float32)
+    centre, radius = np.float32([0.1, -0.2, 0.3]), 0.05
+    aim = centre + rng.normal(scale=0.06, size=(n, 3))
+    dirs = (aim - origins) * rng.choice([-1.0, 1.0], size=(n, 1)) * rng.uniform(0.1, 3, size=(n, 1))
+    dirs = dirs.astype(np.float32)
+    o, d, c = origins.astype(np.float64), dirs.astype(np.float64), centre.astype(np.float64)
+    s = np.maximum(np.einsum("ij,ij->i", c - o, d) / np.einsum("ij,ij->i", d, d), 0)
+    dist = np.linalg.norm(o + s[:, None] * d - c, axis=1)
+    kept = np.zeros(n, bool)
+    kept[_rays_near_sphere(origins, dirs, centre, radius)] = True
+    assert (dist < radius).sum() > 1000 and (dist > radius * 1.01).sum() > 1000
+    assert kept[dist < radius].all()
+    assert not kept[dist > radius * 1.01].any()

@@ -11,6 +11,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -25,7 +26,7 @@ from darthand.render.lights import Lighting, load_lighting, world_lights
 from darthand.render.scene import Scene, scene_for
 from darthand.render.subject import Subject
 from darthand.render.trace import (TILE, Context, Samples, default_threads, pixel_centres, scene_bounds,
-                                   touched_tiles, trace_parallel)
+                                   single_threaded_blas, touched_tiles, trace_parallel)
 
 DEFAULT_SAMPLES = 8
 IMAGE, MASK, LABELS, DEPTH = "image.png", "mask.png", "labels.json", "depth.exr"
@@ -82,6 +83,35 @@ class Renderer:
         camera: a Camera, a view name, a camera JSON path or dict (camera.load_camera), framed on the posed hand.
         lights: a Lighting, a lights JSON path or dict, or None (lights.default_lighting). background: image path or
         (H, W, 3) linear array, or None (transparent). samples: sub-samples per edge pixel (1, 4, 8, 16)."""
+        with single_threaded_blas():
+            prepared = self._prepare(pose, texture=texture, skin_tone_offset=skin_tone_offset, accessory=accessory,
+                                     camera=camera, lights=lights, width=width, height=height,
+                                     keypoint_order=keypoint_order)
+            return self._finish(prepared, background=background, samples=samples, labels=labels)
+
+    def render_many(self, poses, **options) -> Iterator[Frame]:
+        """Frames of `poses` (an iterable of what `render` takes as pose), in order, with the other options of
+        `render` shared by all. Frame k+1 is posed and its scene built on a helper thread while frame k is traced
+        and shaded, so the work outside tracing overlaps it: the loop's throughput, not each frame's latency, is
+        what improves. OpenBLAS runs single-threaded while the generator is active (trace.single_threaded_blas).
+        Do not call `render` on the same Renderer while iterating: the helper thread owns its caches meanwhile."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        finish = {k: options.pop(k) for k in ("background", "samples", "labels") if k in options}
+        poses = iter(poses)
+        # The helper is the only thread that calls _prepare (the source's caches and self._scene are not locked).
+        with single_threaded_blas(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="darthand-prepare") as helper:
+            first = next(poses, _END)
+            ahead = None if first is _END else helper.submit(self._prepare, first, **options)
+            while ahead is not None:
+                prepared = ahead.result()
+                following = next(poses, _END)
+                ahead = None if following is _END else helper.submit(self._prepare, following, **options)
+                yield self._finish(prepared, **finish)
+
+    def _prepare(self, pose, *, texture=None, skin_tone_offset=0.0, accessory=None, camera="three_quarter",
+                 lights=None, width=512, height=512, keypoint_order="openpose") -> tuple:
+        """(subject, scene, camera, lighting, timings): the frame's work before tracing."""
         timings: dict = {}
         t = time.perf_counter()
         subject = self.source.subject(pose, texture=texture, skin_tone_offset=skin_tone_offset, accessory=accessory,
@@ -95,9 +125,16 @@ class Renderer:
         t = time.perf_counter()
         self._scene = scene = scene_for(subject, self._scene)
         timings["scene"] = _lap(t)
-        frame = render_subject(subject, scene, cam, lighting, background=background, samples=samples,
-                               threads=self.threads, labels=labels, timings=timings)
-        return frame
+        return subject, scene, cam, lighting, timings
+
+    def _finish(self, prepared: tuple, *, background=None, samples: int = DEFAULT_SAMPLES,
+                labels: bool = True) -> Frame:
+        subject, scene, cam, lighting, timings = prepared
+        return render_subject(subject, scene, cam, lighting, background=background, samples=samples,
+                              threads=self.threads, labels=labels, timings=timings)
+
+
+_END = object()
 
 
 def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighting, *, background=None,

@@ -101,11 +101,9 @@ class HandAssets:
         m = self.model
         if "hand" not in self._face_joints:
             self._face_joints["hand"] = face_joints(m.faces, m.weights)
-        hand = Surface("hand", hand_v, m.faces.astype(np.int32), hand_n,
-                       self.skin(texture, skin_tone_offset),
-                       None if m.uvs is None else m.uvs.astype(np.float32),
-                       None if m.faces_uv is None else m.faces_uv.astype(np.int32), m.v_template, "hand",
-                       self._face_joints["hand"])
+        faces, uvs, faces_uv = self._static_arrays("hand", m)
+        hand = Surface("hand", hand_v, faces, hand_n, self.skin(texture, skin_tone_offset), uvs, faces_uv,
+                       m.v_template, "hand", self._face_joints["hand"])
         surfaces = [hand]
         if accessory != NONE:
             if self._last_accessory is None or self._last_accessory[0] != (key, accessory):
@@ -131,6 +129,18 @@ class HandAssets:
             raise InputError(f"{self.source}: the model has no UVs, so texture {texture!r} cannot be mapped")
         maps = load_maps(t.albedo, offset=offset, data=t.roughness, channels=(0,))
         return skin_material(maps, 3 if t.roughness else None, name=texture)
+
+    def _static_arrays(self, key, mesh) -> tuple:
+        """(faces int32, uvs float32 or None, faces_uv int32 or None) of a model or accessory, converted once: the
+        same arrays every frame, so that a rigid accessory's cached Embree scene (scene._local_scene, keyed by
+        array identity) is found again."""
+        arrays = self._rest_normals.get(("static", key))
+        if arrays is None:
+            arrays = self._rest_normals["static", key] = (
+                np.ascontiguousarray(mesh.faces, np.int32),
+                None if mesh.uvs is None else np.ascontiguousarray(mesh.uvs, np.float32),
+                None if mesh.faces_uv is None else np.ascontiguousarray(mesh.faces_uv, np.int32))
+        return arrays
 
     def posed_accessory(self, acc: Accessory, posed) -> Surface:
         """The accessory placed for a forward-pass result: rigid ones by their joint's skinning transform,
@@ -159,9 +169,8 @@ class HandAssets:
             n = vertex_normals(v, acc.faces)
             if acc.id not in self._face_joints:
                 self._face_joints[acc.id] = face_joints(acc.faces, acc.weights)
-        return Surface(acc.id, v, acc.faces.astype(np.int32), n, accessory_material(acc),
-                       None if acc.uvs is None else acc.uvs.astype(np.float32),
-                       None if acc.faces_uv is None else acc.faces_uv.astype(np.int32), acc.vertices, "accessory",
+        faces, uvs, faces_uv = self._static_arrays(("acc", acc.id), acc)
+        return Surface(acc.id, v, faces, n, accessory_material(acc), uvs, faces_uv, acc.vertices, "accessory",
                        None if acc.parent_joint is not None else self._face_joints[acc.id],
                        *((local, G) if acc.parent_joint is not None else ()))
 

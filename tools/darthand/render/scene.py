@@ -11,6 +11,8 @@ committed scene.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
@@ -78,13 +80,15 @@ class Scene:
         self.surfaces = subject.surfaces
         self.faces = [FaceData(s) for s in self.surfaces]
         self.embree = rtcore_scene.EmbreeScene(device())
-        self.rigid = []                 # (surface index, embree scene, R (3, 3) float32, t (3,) float32)
+        # (surface index, embree scene, R (3, 3) float32, t (3,) float32, world bounding-sphere centre (3,), radius)
+        self.rigid = []
         baked = []
         for i, s in enumerate(self.surfaces):
             if _is_rigid(s):
                 G = np.asarray(s.transform, np.float64)
-                self.rigid.append((i, _local_scene(s.local, s.faces), G[:3, :3].astype(np.float32),
-                                   G[:3, 3].astype(np.float32)))
+                embree, centre, radius = _local_scene(s.local, s.faces)
+                R, t = G[:3, :3].astype(np.float32), G[:3, 3].astype(np.float32)
+                self.rigid.append((i, embree, R, t, (R @ centre + t).astype(np.float32), radius))
             else:
                 TriangleMesh(self.embree, np.ascontiguousarray(s.vertices, np.float32),
                              np.ascontiguousarray(s.faces, np.int32))
@@ -103,14 +107,18 @@ class Scene:
             np.broadcast_to(np.asarray(tfar, np.float32), (n,)), np.float32, copy=True)
         hit = self.embree.run(origins, directions, dists=d, output=1)
         hit["geomID"] = self.baked[np.where(hit["primID"] >= 0, hit["geomID"], -1)]
-        for i, embree, R, t in self.rigid:
-            o, dl = _to_local(origins, directions, R, t)
-            near = np.array(hit["tfar"], np.float32, copy=True)
+        for i, embree, R, t, centre, radius in self.rigid:
+            near_sphere = _rays_near_sphere(origins, directions, centre, radius)
+            if not len(near_sphere):
+                continue
+            o, dl = _to_local(origins[near_sphere], directions[near_sphere], R, t)
+            near = np.array(hit["tfar"][near_sphere], np.float32, copy=True)
             local = embree.run(o, dl, dists=near, output=1)
-            won = np.flatnonzero(local["primID"] >= 0)
-            if len(won):
+            hits = np.flatnonzero(local["primID"] >= 0)
+            if len(hits):
+                won = near_sphere[hits]
                 for key in ("primID", "u", "v", "tfar"):
-                    hit[key][won] = local[key][won]
+                    hit[key][won] = local[key][hits]
                 hit["geomID"][won] = i
         return hit
 
@@ -118,10 +126,11 @@ class Scene:
         """(N,) bool: something lies along each ray within (0, tfar)."""
         d = np.array(np.broadcast_to(np.asarray(tfar, np.float32), (len(origins),)), np.float32, copy=True)
         blocked = self.embree.run(origins, directions, dists=d.copy(), query="OCCLUDED") >= 0
-        for _, embree, R, t in self.rigid:
+        for _, embree, R, t, centre, radius in self.rigid:
             rest = np.flatnonzero(~blocked)
+            rest = rest[_rays_near_sphere(origins[rest], directions[rest], centre, radius)]
             if not len(rest):
-                break
+                continue
             o, dl = _to_local(origins[rest], directions[rest], R, t)
             blocked[rest] = embree.run(o, dl, dists=d[rest], query="OCCLUDED") >= 0
         return blocked
@@ -144,7 +153,8 @@ def _is_rigid(surface: Surface) -> bool:
 
 
 def _local_scene(local: np.ndarray, faces: np.ndarray):
-    """The committed Embree scene of a rigid surface's local mesh, built once per (vertex array, face array)."""
+    """(committed Embree scene, bounding-sphere centre (3,) float32, radius) of a rigid surface's local mesh, built
+    once per (vertex array, face array)."""
     key = (id(local), id(faces))
     entry = _LOCAL_SCENES.get(key)
     if entry is None or entry[0] is not local or entry[1] is not faces:
@@ -153,8 +163,27 @@ def _local_scene(local: np.ndarray, faces: np.ndarray):
         embree = rtcore_scene.EmbreeScene(device())
         TriangleMesh(embree, np.ascontiguousarray(local, np.float32), np.ascontiguousarray(faces, np.int32))
         _commit(embree)
-        entry = _LOCAL_SCENES[key] = (local, faces, embree)
-    return entry[2]
+        centre = (local.min(0) + local.max(0)) / 2
+        radius = float(np.linalg.norm(local - centre, axis=1).max())
+        entry = _LOCAL_SCENES[key] = (local, faces, embree, centre.astype(np.float32), radius)
+    return entry[2:]
+
+
+def _rays_near_sphere(origins: np.ndarray, directions: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
+    """Indices of the rays (N, 3) (origin + s direction, s > 0) that pass within `radius` of `centre`: the only
+    rays that can hit a mesh inside that sphere. Culling the others before a small rigid surface's own Embree query
+    saves moving every ray into its frame and a query per ray. Conservative: the radius is padded for float32
+    rounding, which in |w|^2 |d|^2 - (w.d)^2 grows with |w|^2 (hence the 1e-6 |w|^2 term)."""
+    w = (centre[None, :] - origins).T                               # (3, N)
+    d = directions.T
+    wd = w[0] * d[0] + w[1] * d[1] + w[2] * d[2]                   # (faster than einsum on (N, 3) rows)
+    dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    ww = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
+    r2 = np.float32((radius * (1 + 1e-3) + 1e-6) ** 2)
+    # squared distance from the centre to the ray's line, times |d|^2; a centre behind the origin counts as near
+    # only if the origin is inside the sphere.
+    near = (ww * dd - wd * wd < (r2 + np.float32(1e-6) * ww) * dd) & ((wd > 0) | (ww < r2))
+    return np.flatnonzero(near)
 
 
 def _to_local(origins: np.ndarray, directions: np.ndarray, R: np.ndarray, t: np.ndarray):
@@ -169,8 +198,10 @@ def _commit(embree) -> None:
 
 
 def scene_for(subject: Subject, previous: Scene | None = None) -> Scene:
-    """`previous` when it holds the same posed surfaces, else a new scene."""
+    """`previous`'s Embree scenes when it holds the same posed surfaces (in a copy carrying the new subject: the
+    materials may differ, and `previous` may still be tracing an earlier frame), else a new scene."""
     if previous is not None and previous.matches(subject):
-        previous.subject, previous.surfaces = subject, subject.surfaces   # materials may differ
-        return previous
+        scene = copy.copy(previous)
+        scene.subject, scene.surfaces = subject, subject.surfaces
+        return scene
     return Scene(subject)

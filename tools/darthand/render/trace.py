@@ -16,6 +16,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from darthand.render.camera import Camera
 from darthand.render.scene import Scene
@@ -30,6 +31,15 @@ _POOL_LOCK = threading.Lock()
 def default_threads() -> int:
     """Both cores of the reference machine (os.cpu_count(), at most 8)."""
     return max(1, min(8, os.cpu_count() or 1))
+
+
+def single_threaded_blas():
+    """A context in which the BLAS libraries loaded in the process (numpy's, scipy's) run on one thread.
+
+    The renderer parallelises over its own pool; BLAS worker threads for the many small matrix products of a frame
+    (skinning, projections, ray transforms) spin-wait on the cores that pool needs, which on two cores costs more
+    than they save."""
+    return threadpool_limits(limits=1, user_api="blas")
 
 
 def pool(threads: int) -> ThreadPoolExecutor:
