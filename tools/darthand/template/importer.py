@@ -249,6 +249,8 @@ def license_notice(hm08: Hm08) -> str:
         "  release were Data Collection AB, Joel Palmius and Jonas Hauquier (http://www.makehumancommunity.org).\n"
         "- the rigify weights file declares `\"license\": \"CC0\"`.\n"
         f"- the MPFB2 data folder carries the CC0 text below (`{LICENSE_PATH}`).\n\n"
+        f"darthand dedicates `{MODEL_FILE}` itself to the public domain under the same CC0 1.0 Universal terms, so\n"
+        "it may be used, modified and redistributed for any purpose, commercial ones included.\n\n"
         "---\n\n" + hm08.license_text.rstrip() + "\n"
     )
 
