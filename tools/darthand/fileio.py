@@ -54,6 +54,22 @@ def write_json(path: str | os.PathLike, obj, indent: int = 2) -> None:
     write_bytes(path, (json.dumps(obj, indent=indent, sort_keys=True) + "\n").encode())
 
 
+def read_json(path: str | os.PathLike, what: str = "JSON file"):
+    """The parsed JSON of `path`; InputError naming the file (and `what` it should be) when it is missing, not
+    UTF-8 text or not valid JSON."""
+    from darthand.errors import InputError
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such {what}")
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a UTF-8 text file, so not a {what}") from None
+    except json.JSONDecodeError as e:
+        raise InputError(f"{path}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from None
+
+
 def sha256_file(path: str | os.PathLike, chunk: int = 1 << 20) -> str:
     """Hex sha256 of a file's bytes."""
     h = hashlib.sha256()

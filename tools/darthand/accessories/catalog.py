@@ -15,6 +15,7 @@ import jsonschema
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.fileio import read_json
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_SPEC = REPO_ROOT / "assets_src" / "accessories" / "catalog.json"
@@ -26,12 +27,7 @@ TYPES = ("ring", "watch", "bracelet", "glove")
 def load_spec(path: str | Path = DEFAULT_SPEC) -> dict:
     """The parsed, schema-checked catalogue spec; InputError names the file and the offending field."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such accessory catalogue")
-    try:
-        spec = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise InputError(f"{path}: not valid JSON ({e})") from None
+    spec = read_json(path, "accessory catalogue")
     check_spec(spec, str(path))
     return spec
 

@@ -19,6 +19,7 @@ import jsonschema
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.fileio import read_json
 from darthand.model.anatomy import AXES, LIMITS, angles_to_axis_angle
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import JOINT_NAMES, NUM_JOINTS
@@ -39,17 +40,6 @@ def _validator(kind: str) -> jsonschema.protocols.Validator:
     schema = pose_schema()
     sub = dict(schema["$defs"][kind], **{"$defs": schema["$defs"]})
     return jsonschema.Draft202012Validator(sub)
-
-
-def _read_json(path: Path):
-    if not path.is_file():
-        raise InputError(f"{path}: no such pose file")
-    try:
-        return json.loads(path.read_text())
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a UTF-8 text file") from None
-    except json.JSONDecodeError as e:
-        raise InputError(f"{path}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from None
 
 
 def _check_schema(path: Path, doc, kind: str) -> None:
@@ -124,7 +114,7 @@ def load_pose_file(path: str | Path) -> tuple[np.ndarray, np.ndarray | None, boo
     Raises InputError naming the file and field on bad JSON, wrong lengths, NaN/Infinity, unknown fields.
     """
     path = Path(path)
-    doc = _read_json(path)
+    doc = read_json(path, "pose file")
     _check_schema(path, doc, "pose_file")
     raw = np.asarray(doc["pose"], dtype=np.float64)
     _check_finite(path, "pose", raw)
@@ -156,7 +146,7 @@ def gesture_angles(name: str, poses_dir: str | Path | None = None) -> np.ndarray
     path = folder / f"{name}.json"
     if not path.is_file():
         raise InputError(f"{path}: no such gesture (known: {', '.join(list_gestures(folder)) or 'none'})")
-    doc = _read_json(path)
+    doc = read_json(path, "pose file")
     _check_schema(path, doc, "gesture")
     if doc["name"] != path.stem:
         raise InputError(f"{path}: field 'name' is {doc['name']!r}, expected the file name {path.stem!r}")

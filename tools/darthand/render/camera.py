@@ -13,13 +13,13 @@ Conventions (schemas/camera.schema.json, schemas/labels.schema.json):
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.fileio import read_json
 from darthand.render.preview import VIEWS, camera_basis
 
 DEFAULT_FOV_DEG = 30.0
@@ -194,13 +194,7 @@ def load_camera(spec, points=None, *, width: int | None = None, height: int | No
         spec, source = {"view": str(spec)}, f"camera view {spec}"
     elif isinstance(spec, (str, Path)):
         path = Path(spec)
-        if not path.is_file():
-            raise InputError(f"{path}: no such camera file, and not a view name ({', '.join(VIEWS)})")
-        try:
-            spec = json.loads(path.read_text())
-        except (UnicodeDecodeError, json.JSONDecodeError) as e:
-            raise InputError(f"{path}: not a JSON camera file ({e})") from None
-        source = str(path)
+        spec, source = read_json(path, f"camera file, and not a view name ({', '.join(VIEWS)})"), str(path)
     _validate(spec, source)
     w = int(spec.get("width", width or 512))
     h = int(spec.get("height", height or 512))

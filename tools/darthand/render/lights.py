@@ -13,13 +13,13 @@ Units and conventions (schemas/lights.schema.json):
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.fileio import read_json
 
 LIGHT_TYPES = ("directional", "point")
 FRAMES = ("world", "camera")
@@ -88,13 +88,7 @@ def load_lighting(spec, source: str = "lights") -> Lighting:
         return spec
     if isinstance(spec, (str, Path)):
         path = Path(spec)
-        if not path.is_file():
-            raise InputError(f"{path}: no such lights file")
-        try:
-            spec = json.loads(path.read_text())
-        except (UnicodeDecodeError, json.JSONDecodeError) as e:
-            raise InputError(f"{path}: not a JSON lights file ({e})") from None
-        source = str(path)
+        spec, source = read_json(path, "lights file"), str(path)
     from darthand.render.schemas import check_schema
 
     check_schema(spec, "lights.schema.json", source)

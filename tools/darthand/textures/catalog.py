@@ -17,6 +17,7 @@ import jsonschema
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.fileio import read_json
 from darthand.textures import color
 from darthand.textures.overlays import OVERLAYS
 from darthand.textures.skin import BASE_VARIATIONS, sample_base
@@ -82,12 +83,7 @@ def entry_seed(catalogue_seed: int, entry_id: str) -> int:
 def load_spec(path: str | Path | None = None) -> dict:
     """Read and validate a catalogue spec (schemas/texture_catalog_spec.schema.json); InputError on problems."""
     path = Path(path) if path is not None else default_spec_path()
-    if not path.is_file():
-        raise InputError(f"{path}: no such texture catalogue spec")
-    try:
-        spec = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise InputError(f"{path}: not valid JSON (line {e.lineno}: {e.msg})") from None
+    spec = read_json(path, "texture catalogue spec")
     validate_spec(spec, str(path))
     return spec
 

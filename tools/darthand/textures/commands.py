@@ -17,6 +17,7 @@ import os
 from pathlib import Path
 
 from darthand.errors import InputError
+from darthand.fileio import read_json
 
 
 def _res(value) -> int:
@@ -49,12 +50,7 @@ def sheet(args) -> int:
     from darthand.textures.build import make_contact_sheet
 
     path = Path(args.out) / "catalog.json"
-    if not path.is_file():
-        raise InputError(f"{path}: no catalog; run 'darthand textures build' first")
-    try:
-        catalog = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise InputError(f"{path}: not valid JSON (line {e.lineno}: {e.msg})") from None
+    catalog = read_json(path, "texture catalogue (run 'darthand textures build' first)")
     if not catalog.get("entries"):
         raise InputError(f"{path}: field 'entries' is empty; nothing to show")
     out = make_contact_sheet(args.out, catalog)
