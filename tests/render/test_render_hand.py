@@ -8,17 +8,15 @@ import json
 import jsonschema
 import numpy as np
 import pytest
-from render_scenes import RING_JOINT
-
 from darthand.errors import InputError
 from darthand.render.api import Renderer, write_frame
 from darthand.render.camera import look_at
 from darthand.render.image import read_png
 from darthand.render.lights import Lighting
 from darthand.render.scene import Scene
-from darthand.render.schemas import load_schema
 from darthand.render.subject import Subject
-from render_scenes import quad
+from darthand.schemas import load_schema
+from render_scenes import RING_JOINT, quad
 
 SIZE = 160
 

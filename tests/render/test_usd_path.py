@@ -9,13 +9,12 @@ import dataclasses
 import jsonschema
 import numpy as np
 import pytest
-
 from darthand.errors import InputError
 from darthand.export.usd_asset import export_usd
 from darthand.model.poses import gesture_poses
 from darthand.render.api import Renderer, open_source
 from darthand.render.checks import check_package, check_uv_seams
-from darthand.render.schemas import load_schema
+from darthand.schemas import load_schema
 
 GESTURES = ["flat", "fist", "ok"]
 SIZE = 128

@@ -7,23 +7,22 @@ import jsonschema
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-
 from darthand.errors import InputError
 from darthand.model import anatomy
 from darthand.model.forward import forward
 from darthand.model.layout import JOINT_NAMES
 from darthand.model.mirror import mirror_model, mirror_pose
 from darthand.model.npz_io import load_npz
-from darthand.model.poses import (POSES_DIR, SCHEMA_PATH, gesture_angles, list_gestures, load_gesture,
-                                  load_pose_file)
+from darthand.model.poses import POSES_DIR, gesture_angles, list_gestures, load_gesture, load_pose_file
 from darthand.render.preview import render_mesh, write_gesture_sheet
+from darthand.schemas import load_schema
 from darthand.template.gesture_checks import (face_parts, gesture_problems, gesture_report, inverted_faces,
                                               part_intersections, self_intersecting, write_gesture_checks)
 from synthetic import tube_hand, tube_mesh
 
 REQUIRED = {"flat", "relaxed", "fist", "point", "pinch", "ok", "spread", "thumbs_up"}
 OPEN_TEMPLATE = Path(__file__).resolve().parents[2] / "assets_src" / "template" / "open_right.npz"
-SCHEMA = json.loads(SCHEMA_PATH.read_text())
+SCHEMA = load_schema("pose.schema.json")
 TUBE = tube_hand(0)
 
 

@@ -8,17 +8,16 @@ import jsonschema
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-
 from darthand.errors import InputError
 from darthand.fileio import sha256_file
+from darthand.schemas import load_schema
 from darthand.textures import commands
 from darthand.textures.build import build_textures
-from darthand.textures.catalog import schema_dir
 from darthand.textures.imageio import mip_levels, read_image
 from texture_hand import fixture_model, spec
 
 RES = 64
-SCHEMA = json.loads((schema_dir() / "texture_catalog.schema.json").read_text())
+SCHEMA = load_schema("texture_catalog.schema.json")
 
 
 @pytest.fixture(scope="module")

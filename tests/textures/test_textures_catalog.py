@@ -7,15 +7,15 @@ import re
 
 import jsonschema
 import pytest
-
 from darthand.errors import InputError
+from darthand.schemas import load_schema
 from darthand.textures.catalog import (BASE_CATEGORIES, OVERLAY_CATEGORIES, default_spec_path, entry_seed,
-                                       expand_catalog, load_spec, schema_dir, select, validate_spec)
+                                       expand_catalog, load_spec, select, validate_spec)
 from texture_hand import entries, spec
 
 
 def test_shipped_spec_validates_against_its_schema():
-    schema = json.loads((schema_dir() / "texture_catalog_spec.schema.json").read_text())
+    schema = load_schema("texture_catalog_spec.schema.json")
     jsonschema.Draft202012Validator.check_schema(schema)
     jsonschema.validate(json.loads(default_spec_path().read_text()), schema)
 

@@ -8,19 +8,16 @@ its id -- not on which other items are built, or in which order.
 from __future__ import annotations
 
 import hashlib
-import json
 from pathlib import Path
 
-import jsonschema
 import numpy as np
 
 from darthand.errors import InputError
 from darthand.fileio import read_json
+from darthand.schemas import check_schema
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_SPEC = REPO_ROOT / "assets_src" / "accessories" / "catalog.json"
-SPEC_SCHEMA = REPO_ROOT / "schemas" / "accessory_catalog_spec.schema.json"
-CATALOG_SCHEMA = REPO_ROOT / "schemas" / "accessory_catalog.schema.json"
 TYPES = ("ring", "watch", "bracelet", "glove")
 
 
@@ -34,12 +31,7 @@ def load_spec(path: str | Path = DEFAULT_SPEC) -> dict:
 
 def check_spec(spec: dict, source: str = "catalogue") -> None:
     """Schema errors and duplicate ids raise InputError('<source>: field <path> ...')."""
-    validator = jsonschema.Draft202012Validator(json.loads(SPEC_SCHEMA.read_text()))
-    errors = sorted(validator.iter_errors(spec), key=lambda e: list(e.absolute_path))
-    if errors:
-        e = errors[0]
-        field = ".".join(str(p) for p in e.absolute_path) or "(top level)"
-        raise InputError(f"{source}: field '{field}' {e.message}")
+    check_schema(spec, "accessory_catalog_spec.schema.json", source)
     seen = set()
     for i, item in enumerate(spec["items"]):
         if item["id"] in seen:
@@ -84,9 +76,4 @@ def item_rng(seed: int, item_id: str) -> np.random.Generator:
 
 def check_catalog(catalog: dict, source: str = "catalog.json") -> None:
     """Validate a built catalogue against schemas/accessory_catalog.schema.json (InputError on failure)."""
-    validator = jsonschema.Draft202012Validator(json.loads(CATALOG_SCHEMA.read_text()))
-    errors = sorted(validator.iter_errors(catalog), key=lambda e: list(e.absolute_path))
-    if errors:
-        e = errors[0]
-        field = ".".join(str(p) for p in e.absolute_path) or "(top level)"
-        raise InputError(f"{source}: field '{field}' {e.message}")
+    check_schema(catalog, "accessory_catalog.schema.json", source)

@@ -28,23 +28,21 @@ has its centre at (u, v) = ((c + 0.5) / W, 1 - (r + 0.5) / H). The textures stag
 from __future__ import annotations
 
 import dataclasses
-import functools
-import json
 import os
 import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import jsonschema
 import numpy as np
 
 from darthand.errors import InputError
-from darthand.fileio import atomic_path
+from darthand.fileio import atomic_path, read_json
 from darthand.model.forward import forward, pose_feature
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import NUM_JOINTS, NUM_POSE_FEATURES
 from darthand.model.rotations import axis_angle_to_matrix, matrix_to_quaternion
+from darthand.schemas import check_schema
 
 INFLUENCE_CHOICES = ("4", "8", "all")  # the --influences values the CLI offers
 POSE_PCA_SAMPLES = 4096
@@ -54,7 +52,6 @@ REST_GESTURE = "flat"
 # (also that of a skin texture variant without a roughness map).
 SKIN_COLOR = (0.56, 0.36, 0.27)
 SKIN_ROUGHNESS = 0.5
-SCHEMA_DIR = Path(__file__).resolve().parents[3] / "schemas"
 
 
 # ------------------------------------------------------------------------------------------------ skin weights
@@ -547,23 +544,10 @@ def _catalog_file(path: str | Path) -> Path:
     return path / "catalog.json" if path.is_dir() else path
 
 
-@functools.cache
-def _validator(schema: str) -> jsonschema.Draft202012Validator:
-    return jsonschema.Draft202012Validator(json.loads((SCHEMA_DIR / schema).read_text()))
-
-
 def _read_catalog(path: Path, what: str, schema: str) -> dict:
     """The catalogue at `path`, checked against schemas/<schema>; InputError naming the file and field."""
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such {what} catalogue (build it with the {what} stage)") from None
-    except (OSError, ValueError) as e:
-        raise InputError(f"{path}: not a readable JSON {what} catalogue ({e})") from None
-    err = jsonschema.exceptions.best_match(_validator(schema).iter_errors(data))
-    if err is not None:
-        where = ".".join(str(p) for p in err.absolute_path) or "(top level)"
-        raise InputError(f"{path}: field '{where}' {err.message} (schemas/{schema})")
+    data = read_json(path, f"{what} catalogue (build it with the {what} stage)")
+    check_schema(data, schema, str(path))
     return data
 
 

@@ -11,8 +11,6 @@ A pose file (`darthand model pose --pose POSE.json`) holds axis-angle vectors di
 
 from __future__ import annotations
 
-import functools
-import json
 from pathlib import Path
 
 import jsonschema
@@ -23,21 +21,15 @@ from darthand.fileio import read_json
 from darthand.model.anatomy import AXES, LIMITS, angles_to_axis_angle
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import JOINT_NAMES, NUM_JOINTS
+from darthand.schemas import load_schema
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
-SCHEMA_PATH = REPO_ROOT / "schemas" / "pose.schema.json"
 POSES_DIR = REPO_ROOT / "assets_src" / "poses"
-
-
-@functools.cache
-def pose_schema() -> dict:
-    """The parsed schemas/pose.schema.json."""
-    return json.loads(SCHEMA_PATH.read_text())
 
 
 def _validator(kind: str) -> jsonschema.protocols.Validator:
     """A validator for one of the schema's definitions ('gesture' or 'pose_file')."""
-    schema = pose_schema()
+    schema = load_schema("pose.schema.json")
     sub = dict(schema["$defs"][kind], **{"$defs": schema["$defs"]})
     return jsonschema.Draft202012Validator(sub)
 

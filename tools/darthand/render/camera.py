@@ -215,6 +215,6 @@ def load_camera(spec, points=None, *, width: int | None = None, height: int | No
 
 
 def _validate(spec, source: str) -> None:
-    from darthand.render.schemas import check_schema
+    from darthand.schemas import check_schema
 
     check_schema(spec, "camera.schema.json", source)

@@ -89,7 +89,7 @@ def load_lighting(spec, source: str = "lights") -> Lighting:
     if isinstance(spec, (str, Path)):
         path = Path(spec)
         spec, source = read_json(path, "lights file"), str(path)
-    from darthand.render.schemas import check_schema
+    from darthand.schemas import check_schema
 
     check_schema(spec, "lights.schema.json", source)
     amb = spec.get("ambient", {})

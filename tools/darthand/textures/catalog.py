@@ -13,11 +13,11 @@ import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import jsonschema
 import numpy as np
 
 from darthand.errors import InputError
 from darthand.fileio import read_json
+from darthand.schemas import check_schema
 from darthand.textures import color
 from darthand.textures.overlays import OVERLAYS
 from darthand.textures.skin import BASE_VARIATIONS, sample_base
@@ -25,11 +25,6 @@ from darthand.textures.skin import BASE_VARIATIONS, sample_base
 SPEC_FORMAT = "darthand-texture-spec"
 OVERLAY_CATEGORIES = tuple(OVERLAYS)
 BASE_CATEGORIES = tuple(BASE_VARIATIONS)
-
-
-def schema_dir() -> Path:
-    """The repository's schemas/ folder."""
-    return Path(__file__).resolve().parents[3] / "schemas"
 
 
 def default_spec_path() -> Path:
@@ -90,11 +85,7 @@ def load_spec(path: str | Path | None = None) -> dict:
 
 def validate_spec(spec: dict, source: str = "catalogue spec") -> None:
     """Check `spec` against the JSON Schema and the cross-field rules the schema cannot express."""
-    schema = json.loads((schema_dir() / "texture_catalog_spec.schema.json").read_text())
-    err = jsonschema.exceptions.best_match(jsonschema.Draft202012Validator(schema).iter_errors(spec))
-    if err is not None:
-        where = ".".join(str(p) for p in err.absolute_path) or "(top level)"
-        raise InputError(f"{source}: field '{where}' {err.message}")
+    check_schema(spec, "texture_catalog_spec.schema.json", source)
     for name, tone in spec["tones"].items():
         if not 1.0 <= tone <= len(spec["tone_scale"]["anchors_srgb"]):
             raise InputError(f"{source}: field 'tones.{name}' is {tone}, outside the tone scale")

@@ -1,5 +1,5 @@
-"""The renderer's JSON contracts (schemas/camera.schema.json, lights.schema.json, labels.schema.json): loading and
-checking a document with a one-line error naming the file and field."""
+"""The project's JSON contracts (schemas/*.schema.json): loading a schema and checking a document against it with a
+one-line error naming the file and field."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import jsonschema
 
 from darthand.errors import InputError
 
-SCHEMA_DIR = Path(__file__).resolve().parents[3] / "schemas"
+SCHEMA_DIR = Path(__file__).resolve().parents[2] / "schemas"
 
 
 @functools.cache
@@ -26,6 +26,6 @@ def check_schema(doc, name: str, source: str) -> None:
     error = jsonschema.exceptions.best_match(validator.iter_errors(doc))
     if error is None:
         return
-    where = ".".join(str(p) for p in error.absolute_path)
+    where = ".".join(str(p) for p in error.absolute_path) or "(top level)"
     message = error.message if len(error.message) <= 160 else error.message[:157] + "..."
-    raise InputError(f"{source}: field '{where}' {message}" if where else f"{source}: {message}")
+    raise InputError(f"{source}: field '{where}' {message}")
