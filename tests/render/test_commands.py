@@ -21,7 +21,7 @@ def parser(name: str) -> argparse.ArgumentParser:
     return sub.choices[name]
 
 
-@pytest.mark.parametrize("name", ["render", "render-checks"])
+@pytest.mark.parametrize("name", ["render", "render-checks", "render-dataset"])
 def test_every_option_has_help(name):
     p = parser(name)
     for action in p._actions:

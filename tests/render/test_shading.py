@@ -158,3 +158,41 @@ def test_metal_reflects_its_albedo_in_ambient_light():
     c = frame.colour[8, 8]
     # No diffuse for a metal; the ambient specular is F0 A + B with F0 = albedo: ordered like the albedo.
     assert c[0] > c[1] > c[2] > 0
+
+
+def faceted_frames(samples: int = 8):
+    """Two flat-shaded triangles of one surface (no shared vertices: constant normals), tilted differently so a
+    directional Lambert light gives each its own constant radiance, the second in front of and overlapping the
+    first, plus a third triangle of a second surface (another colour) overlapping both: edge pixels mix background,
+    two triangles of one surface and two surfaces. Rendered with 'triangle' and 'sample' anti-aliasing shading."""
+    back = [[-0.5, -0.4, 0.0], [0.45, -0.35, 0.1], [-0.1, 0.5, 0.0]]
+    front = [[-0.2, -0.5, 0.3], [0.5, 0.1, 0.3], [-0.35, 0.3, 0.5]]
+    both = surface(back + front, [[0, 1, 2], [3, 4, 5]], material=flat_material((0.7, 0.5, 0.3)))
+    other = surface([[0.0, -0.1, 0.6], [0.4, 0.4, 0.65], [-0.3, 0.2, 0.62]], [[0, 1, 2]],
+                    material=flat_material((0.2, 0.6, 0.8)), role="accessory", name="other")
+    cam = top_camera(height=2.5, size=72, fov_deg=35)
+    lighting = one_light((0.3, -0.2, -1.0), intensity=1.2, shadows=False)
+    return [render(subject(both, other), cam, lighting, samples=samples, aa_shading=mode, labels=False)
+            for mode in ("triangle", "sample")], (both, other), lighting
+
+
+@pytest.mark.parametrize("samples", [4, 8, 16])
+def test_triangle_shading_equals_per_sample_shading_where_each_triangle_is_constant(samples):
+    """When every triangle's radiance is constant, shading once per pixel per triangle must give what shading every
+    sub-sample gives: the same coverage, and each edge pixel the coverage-weighted mix of its triangles' closed-form
+    Lambert radiances."""
+    (tri, per_sample), (both, other), lighting = faceted_frames(samples)
+    assert np.array_equal(tri.alpha, per_sample.alpha)
+    assert np.allclose(tri.colour, per_sample.colour, atol=1e-6)
+    mixed = (tri.alpha > 0) & (tri.alpha < 1)
+    assert mixed.sum() > 40
+    # Closed form on fully covered pixels: albedo * intensity * max(0, n . -light direction) per triangle.
+    l = -np.asarray(lighting.lights[0].direction, float)
+    l /= np.linalg.norm(l)
+    for s in (both, other):
+        for face in s.faces:
+            a, b, c = s.vertices[face].astype(float)
+            n = np.cross(b - a, c - a)
+            n /= np.linalg.norm(n)
+            value = np.asarray(s.material.maps.levels[-1]).reshape(-1)[:3] * 1.2 * abs(n @ l)
+            assert np.isclose(np.abs(tri.colour.reshape(-1, 3) - value).sum(1), 0, atol=1e-5).any()

@@ -261,10 +261,14 @@ def _add_render_commands(sub) -> None:
     p = sub.add_parser("render-checks", help=text, description=text)
     _add_checks_arguments(p)
     p.set_defaults(run=commands.checks)
+    text = ("render a labelled dataset (OUT/images/, masks/, labels/, dataset.json): frames planned from a seed or "
+            "read from a jobs file, rendered in parallel worker processes")
+    p = sub.add_parser("render-dataset", help=text, description=text)
+    _add_dataset_arguments(p)
+    p.set_defaults(run=commands.dataset)
 
 
 def _add_render_arguments(p) -> None:
-    from darthand.render.aa import PATTERNS
     from darthand.render.preview import VIEWS
 
     p.add_argument("package", metavar="PACKAGE", help=RENDER_PACKAGE_HELP)
@@ -293,11 +297,80 @@ def _add_render_arguments(p) -> None:
     p.add_argument("--size", type=int, default=512, metavar="N", help="square image size in pixels (default 512)")
     p.add_argument("--width", type=int, default=None, metavar="W", help="image width (overrides --size)")
     p.add_argument("--height", type=int, default=None, metavar="H", help="image height (overrides --size)")
-    p.add_argument("--samples", type=int, default=8, choices=sorted(PATTERNS),
-                   help="sub-samples per silhouette or material-edge pixel (default 8)")
+    _add_antialiasing_options(p)
     p.add_argument("--depth", action="store_true", help="also write depth.exr (camera z in metres, 0 = background)")
     p.add_argument("--keypoint-order", default="openpose", choices=("openpose", "mano"),
                    help="order of the 21 keypoints in labels.json (default openpose)")
+    _add_source_options(p)
+    p.add_argument("--threads", type=int, default=None, metavar="N", help="render threads (default: all cores)")
+
+
+def _add_dataset_arguments(p) -> None:
+    from darthand.render.preview import VIEWS
+
+    p.add_argument("package", metavar="PACKAGE", help=RENDER_PACKAGE_HELP)
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder: images/NNNNNN.png, masks/NNNNNN.png, labels/NNNNNN.json, dataset.json")
+    p.add_argument("--count", type=int, default=100, metavar="N", help="frames to plan (default 100)")
+    p.add_argument("--seed", type=int, default=0, metavar="S",
+                   help="seed of the plan: frame i depends only on (seed, i) (default 0)")
+    p.add_argument("--start", type=int, default=0, metavar="K",
+                   help="first frame index: frames K .. K+N-1 (to extend a dataset or split it over machines)")
+    p.add_argument("--jobs", default=None, metavar="JOBS.json",
+                   help="render the frames of a jobs file (schemas/dataset_jobs.schema.json) instead of planning")
+    p.add_argument("--plan", default=None, metavar="JOBS.json",
+                   help="write the planned jobs to this file (schemas/dataset_jobs.schema.json) and render nothing")
+    p.add_argument("--gestures", default=None, metavar="NAMES|all",
+                   help="comma-separated gesture names, or 'all' (default: all, unless --poses is given)")
+    p.add_argument("--poses", default=None, metavar="POSES.json",
+                   help="a pose file (schemas/pose.schema.json): its poses join the gestures drawn from")
+    p.add_argument("--pose-jitter", type=float, default=None, metavar="DEG",
+                   help="std of a random change to each finger joint's twist, spread and bend, kept within the "
+                        "joint limits (default 5 for a model, 0 for a USD package)")
+    p.add_argument("--texture-ids", default="all", metavar="IDS|all",
+                   help="comma-separated texture ids to draw from, or 'all' (default: every catalogue texture)")
+    p.add_argument("--skin-tone-range", default="-0.1,0.1", metavar="LO,HI",
+                   help="range of the sRGB skin-tone offset; write --skin-tone-range=-0.2,0.1 when LO is negative "
+                        "(default -0.1,0.1)")
+    p.add_argument("--skin-tone-steps", type=int, default=5, metavar="N",
+                   help="the offset is one of N evenly spaced levels of the range, so that frames share decoded "
+                        "textures (default 5)")
+    p.add_argument("--accessory-ids", default="all", metavar="IDS|all|none",
+                   help="comma-separated accessory ids to draw from, 'all' (default) or 'none' (no accessories)")
+    p.add_argument("--no-accessory-share", type=float, default=0.3, metavar="X",
+                   help="share of the frames without an accessory (default 0.3)")
+    p.add_argument("--views", default="random", metavar="random|VIEWS",
+                   help=f"'random' (directions all around the hand, not along the forearm) and/or views "
+                        f"({', '.join(VIEWS)}), comma-separated, one drawn per frame (default random)")
+    p.add_argument("--roll-range", default="-30,30", metavar="LO,HI",
+                   help="range of the camera roll about its axis, degrees; write --roll-range=-45,45 when LO is "
+                        "negative (default -30,30)")
+    p.add_argument("--lights", default=None, metavar="LIGHTS.json",
+                   help="lights for every frame (schemas/lights.schema.json) (default: key, fill and ambient moving "
+                        "with the camera)")
+    p.add_argument("--background", default=None, metavar="IMAGE",
+                   help="background image composited under every frame (default: transparent)")
+    p.add_argument("--size", type=int, default=512, metavar="N", help="square image size in pixels (default 512)")
+    _add_antialiasing_options(p)
+    p.add_argument("--processes", type=int, default=None, metavar="N",
+                   help="worker processes, each rendering whole frames (default: the number of cores; 1 renders "
+                        "in this process)")
+    p.add_argument("--no-resume", dest="resume", action="store_false",
+                   help="render every frame again (default: skip frames whose files exist from the same job)")
+    _add_source_options(p)
+
+
+def _add_antialiasing_options(p) -> None:
+    from darthand.render.aa import PATTERNS, SHADING
+
+    p.add_argument("--samples", type=int, default=8, choices=sorted(PATTERNS),
+                   help="sub-samples per silhouette or material-edge pixel (default 8)")
+    p.add_argument("--aa-shading", default="triangle", choices=SHADING,
+                   help="shade the sub-samples once per pixel per triangle, as GPU multisampling does (triangle, "
+                        "default), or each one (sample: slower, exact supersampling)")
+
+
+def _add_source_options(p) -> None:
     p.add_argument("--textures", default=None, metavar="CATALOG",
                    help="internal path: texture catalogue file or folder (default: build/textures beside the model)")
     p.add_argument("--accessories", default=None, metavar="CATALOG",
@@ -305,7 +378,6 @@ def _add_render_arguments(p) -> None:
     p.add_argument("--model", default=None, metavar="MODEL.npz",
                    help="USD path: the model the package was built from, for its fingertip ids when the package "
                         "does not list them (default: build/model/<side>.npz)")
-    p.add_argument("--threads", type=int, default=None, metavar="N", help="render threads (default: all cores)")
 
 
 def _add_checks_arguments(p) -> None:

@@ -85,6 +85,43 @@ def _frames(renderer, gestures, out: Path, count: int, threads: int) -> dict:
             "breakdown_ms": {k: round(1000 * float(np.median(v)), 2) for k, v in steps.items()}}
 
 
+def _aa_shading_error(renderer, gestures, texture_id: str) -> dict:
+    """Speed against error of the anti-aliasing's shading: 'triangle' (once per pixel per triangle, the default)
+    against 'sample' (every sub-sample), with 8 sub-samples, and 'sample' with 16 as the scale of sampling error.
+    Differences in 8-bit sRGB codes of the images composited over mid grey, over pixels the hand covers; render
+    ms single-threaded (median over the gestures)."""
+    from darthand.render.image import encode_srgb
+
+    def over_grey(frame):
+        return encode_srgb(frame.colour + (1 - frame.alpha[..., None]) * np.float32(0.5)).astype(np.int16)
+
+    renderer.threads = 1
+    diffs = {"triangle_vs_sample": [], "sample8_vs_sample16": []}
+    ms = {"triangle": [], "sample": [], "sample16": []}
+    shaded = {"triangle": [], "sample": []}
+    for pose in gestures:
+        frames = {}
+        for name, mode, samples in (("triangle", "triangle", 8), ("sample", "sample", 8), ("sample16", "sample", 16)):
+            t0 = time.perf_counter()
+            frames[name] = renderer.render(pose, texture=texture_id, accessory=ACCESSORY, camera="three_quarter",
+                                           lights=LIGHTS, samples=samples, aa_shading=mode)
+            ms[name].append(1000 * (time.perf_counter() - t0))
+            if name in shaded:
+                shaded[name].append(frames[name].stats["aa_shaded"])
+        covered = frames["sample"].alpha > 0
+        for key, (a, b) in (("triangle_vs_sample", ("triangle", "sample")),
+                            ("sample8_vs_sample16", ("sample", "sample16"))):
+            diffs[key].append(np.abs(over_grey(frames[a]) - over_grey(frames[b])).max(-1)[covered])
+    out = {"render_ms_median": {k: round(float(np.median(v)), 2) for k, v in ms.items()},
+           "aa_shaded_samples_per_image": {k: round(float(np.mean(v))) for k, v in shaded.items()}}
+    for key, parts in diffs.items():
+        d = np.concatenate(parts)
+        out[key] = {"mean_codes": round(float(d.mean()), 3), "p99_9_codes": float(np.percentile(d, 99.9)),
+                    "max_codes": int(d.max()),
+                    "pixels_over_8_codes_per_image": round(float((d > 8).sum()) / len(parts), 1)}
+    return out
+
+
 def run(frames: int = 24) -> dict:
     from darthand.model.poses import list_gestures
     from darthand.render.api import Renderer, open_source
@@ -104,6 +141,7 @@ def run(frames: int = 24) -> dict:
         parallel = _frames(renderer, gestures, tmp / "out", frames, threads)
         single = _frames(renderer, gestures, tmp / "out1", max(4, frames // 3), 1)
         stats = first.stats
+        aa_error = _aa_shading_error(renderer, gestures[:8], texture_id)
     return {
         "image": "512x512 RGBA + mask + labels.json, textured hand with a ring, 1 shadowed light + ambient, "
                  "8 sub-samples on edge pixels, pose changing every frame",
@@ -113,7 +151,9 @@ def run(frames: int = 24) -> dict:
         "single_thread": {k: v for k, v in single.items() if k != "breakdown_ms"},
         "single_thread_breakdown_ms": single["breakdown_ms"],
         "first_image_s": round(first_s, 3),
-        "per_image_counts": {k: int(stats[k]) for k in ("primary_rays", "edge_pixels", "aa_rays", "shadow_rays")},
+        "per_image_counts": {k: int(stats[k]) for k in ("primary_rays", "edge_pixels", "aa_rays", "aa_shaded",
+                                                          "shadow_rays")},
+        "aa_shading": aa_error,
         "goal_ms": 50,
     }
 

@@ -8,6 +8,7 @@ composite over the background, label.
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -77,17 +78,19 @@ class Renderer:
 
     def render(self, pose=None, *, texture: str | None = None, skin_tone_offset: float = 0.0,
                accessory: str | None = None, camera="three_quarter", lights=None, background=None,
-               width: int = 512, height: int = 512, samples: int = DEFAULT_SAMPLES, labels: bool = True,
-               keypoint_order: str = "openpose") -> Frame:
+               width: int = 512, height: int = 512, samples: int = DEFAULT_SAMPLES, aa_shading: str = "triangle",
+               labels: bool = True, keypoint_order: str = "openpose") -> Frame:
         """One frame. pose: None (flat), a gesture name, a pose file or (48,) MANO axis-angle (flat-hand relative).
         camera: a Camera, a view name, a camera JSON path or dict (camera.load_camera), framed on the posed hand.
         lights: a Lighting, a lights JSON path or dict, or None (lights.default_lighting). background: image path or
-        (H, W, 3) linear array, or None (transparent). samples: sub-samples per edge pixel (1, 4, 8, 16)."""
+        (H, W, 3) linear array, or None (transparent). samples: sub-samples per edge pixel (1, 4, 8, 16);
+        aa_shading: shade them once per pixel per triangle ('triangle') or each ('sample') (see aa.py)."""
         with single_threaded_blas():
             prepared = self._prepare(pose, texture=texture, skin_tone_offset=skin_tone_offset, accessory=accessory,
                                      camera=camera, lights=lights, width=width, height=height,
                                      keypoint_order=keypoint_order)
-            return self._finish(prepared, background=background, samples=samples, labels=labels)
+            return self._finish(prepared, background=background, samples=samples, aa_shading=aa_shading,
+                                labels=labels)
 
     def render_many(self, poses, **options) -> Iterator[Frame]:
         """Frames of `poses` (an iterable of what `render` takes as pose), in order, with the other options of
@@ -97,7 +100,7 @@ class Renderer:
         Do not call `render` on the same Renderer while iterating: the helper thread owns its caches meanwhile."""
         from concurrent.futures import ThreadPoolExecutor
 
-        finish = {k: options.pop(k) for k in ("background", "samples", "labels") if k in options}
+        finish = {k: options.pop(k) for k in ("background", "samples", "aa_shading", "labels") if k in options}
         poses = iter(poses)
         # The helper is the only thread that calls _prepare (the source's caches and self._scene are not locked).
         with single_threaded_blas(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="darthand-prepare") as helper:
@@ -128,23 +131,26 @@ class Renderer:
         return subject, scene, cam, lighting, timings
 
     def _finish(self, prepared: tuple, *, background=None, samples: int = DEFAULT_SAMPLES,
-                labels: bool = True) -> Frame:
+                aa_shading: str = "triangle", labels: bool = True) -> Frame:
         subject, scene, cam, lighting, timings = prepared
         return render_subject(subject, scene, cam, lighting, background=background, samples=samples,
-                              threads=self.threads, labels=labels, timings=timings)
+                              aa_shading=aa_shading, threads=self.threads, labels=labels, timings=timings)
 
 
 _END = object()
 
 
 def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighting, *, background=None,
-                   samples: int = DEFAULT_SAMPLES, threads: int = 1, labels: bool = True,
-                   timings: dict | None = None) -> Frame:
+                   samples: int = DEFAULT_SAMPLES, aa_shading: str = "triangle", threads: int = 1,
+                   labels: bool = True, timings: dict | None = None) -> Frame:
     """Render a posed subject whose scene is built: primary samples in the projected bounds, adaptive
-    supersampling of edges, compositing, labels."""
+    supersampling of edges (aa.supersample: `samples` sub-samples, `aa_shading` 'triangle' or 'sample'),
+    compositing, labels."""
     timings = {} if timings is None else timings
     if samples not in aa.PATTERNS:
         raise InputError(f"samples: {samples} is not one of {sorted(aa.PATTERNS)}")
+    if aa_shading not in aa.SHADING:
+        raise InputError(f"aa_shading: {aa_shading!r} is not one of {', '.join(aa.SHADING)}")
     H, W = cam.height, cam.width
     ctx = Context(scene, cam, world_lights(lighting, cam.R, cam.t), lighting.ambient, threads)
     stats: dict = {}
@@ -169,10 +175,8 @@ def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighti
         where = np.flatnonzero(edges.reshape(-1))
         edge_count = len(where)
         if edge_count:
-            offsets = aa.sample_offsets(samples)
-            sub_uv = (centres[where][:, None, :] + offsets[None]).reshape(-1, 2)
-            sub = trace_parallel(ctx, sub_uv, 1 / np.sqrt(samples), stats)
-            colour, cover = aa.resolve(sub.radiance, sub.geom, samples)
+            colour, cover = aa.supersample(ctx, centres[where], primary.geom[where], primary.prim[where],
+                                           primary.radiance[:, where], samples, aa_shading, stats)
             premult.reshape(3, -1)[:, where] = colour
             alpha.reshape(-1)[where] = cover
     timings["aa"] = _lap(t)
@@ -210,7 +214,7 @@ def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighti
         bg_name = Path(background).name if isinstance(background, (str, Path)) else (
             None if background is None else "array")
         doc = frame_labels(subject, cam, scene, full_alpha, files={"image": IMAGE, "mask": MASK},
-                           extra={"render": {"samples": samples, "background": bg_name,
+                           extra={"render": {"samples": samples, "aa_shading": aa_shading, "background": bg_name,
                                              "lights": lighting.to_json()}})
     timings["labels"] = _lap(t)
     stats["total_rays"] = stats.get("rays", 0) + stats.get("shadow_rays", 0) + (21 if labels else 0)
@@ -228,19 +232,23 @@ def scatter(samples: Samples, index: np.ndarray, n: int) -> Samples:
     return out
 
 
-def write_frame(frame: Frame, out_dir: str | Path, *, depth: bool = False) -> dict:
+def write_frame(frame: Frame, out_dir: str | Path, *, depth: bool = False, names: dict | None = None) -> dict:
     """Write image.png (RGBA), mask.png (8-bit coverage), labels.json (and depth.exr, camera z in metres, 0 for
-    background) into `out_dir`; returns {kind: path}. Adds the write time to frame.timings['write']."""
+    background) into `out_dir`; returns {kind: path}. names: other file names for some kinds ('image', 'mask',
+    'labels', 'depth'), relative paths under `out_dir` (e.g. {'image': 'images/000042.png'}); labels.json's
+    'files' then gives the image, mask and depth paths relative to the labels file's folder. Adds the write time to
+    frame.timings['write']."""
     t = time.perf_counter()
     out = Path(out_dir)
-    paths = {"image": out / IMAGE, "mask": out / MASK, "labels": out / LABELS}
+    names = {"image": IMAGE, "mask": MASK, "labels": LABELS, "depth": DEPTH, **(names or {})}
+    paths = {kind: out / names[kind] for kind in ("image", "mask", "labels") + (("depth",) if depth else ())}
     write_png(paths["image"], frame.rgba)
     write_png(paths["mask"], encode_mask8(frame.alpha), srgb=False)
-    labels = dict(frame.labels)
     if depth:
-        paths["depth"] = out / DEPTH
         write_exr(paths["depth"], frame.depth)
-        labels["files"] = {**labels.get("files", {}), "depth": DEPTH}
+    labels = dict(frame.labels)
+    labels["files"] = {**labels.get("files", {}), **{
+        kind: os.path.relpath(path, paths["labels"].parent) for kind, path in paths.items() if kind != "labels"}}
     write_json(paths["labels"], labels)
     frame.timings["write"] = _lap(t)
     return paths

@@ -16,7 +16,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from darthand.render.camera import Camera
 from darthand.render.scene import Scene
@@ -38,8 +38,14 @@ def single_threaded_blas():
 
     The renderer parallelises over its own pool; BLAS worker threads for the many small matrix products of a frame
     (skinning, projections, ray transforms) spin-wait on the cores that pool needs, which on two cores costs more
-    than they save."""
-    return threadpool_limits(limits=1, user_api="blas")
+    than they save. The libraries are looked up once per process (a lookup costs milliseconds)."""
+    global _BLAS
+    if _BLAS is None:
+        _BLAS = ThreadpoolController()
+    return _BLAS.limit(limits=1, user_api="blas")
+
+
+_BLAS: ThreadpoolController | None = None
 
 
 def pool(threads: int) -> ThreadPoolExecutor:
@@ -104,64 +110,118 @@ def scene_bounds(camera: Camera, points: np.ndarray, pad: float = 1.0) -> tuple[
     return int(r0), int(max(r0, r1)), int(c0), int(max(c0, c1))
 
 
-def trace_samples(ctx: Context, uv: np.ndarray, footprint: float = 1.0, stats: dict | None = None) -> Samples:
-    """Trace, shade and shadow the samples at pixel positions uv (N, 2) (one chunk, this thread).
+@dataclass
+class RayHits:
+    """Closest hits of N camera rays: geom (N,) int32 surface index (-1 background), prim (N,) int32, barycentrics
+    u, v (N,) float32, depth (N,) float32 camera z (inf for background), directions (3, N) float32 (camera z = 1)."""
 
-    footprint: the sample's share of a pixel's width (1 for one sample per pixel, 1/sqrt(S) for S sub-samples),
-    for the texture filter. stats: accumulates seconds 'trace', 'shade' (shading incl. shadow rays), and counts
-    'rays', 'shadow_rays'.
-    """
+    geom: np.ndarray
+    prim: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    depth: np.ndarray
+    directions: np.ndarray
+
+    def take(self, index: np.ndarray) -> "RayHits":
+        return RayHits(self.geom[index], self.prim[index], self.u[index], self.v[index], self.depth[index],
+                       self.directions[:, index])
+
+    @staticmethod
+    def concat(parts: list["RayHits"]) -> "RayHits":
+        return RayHits(*(np.concatenate([getattr(p, f) for p in parts], axis=-1) for f in
+                         ("geom", "prim", "u", "v", "depth", "directions")))
+
+
+def intersect_samples(ctx: Context, uv: np.ndarray, stats: dict | None = None) -> RayHits:
+    """Closest hits of the camera rays through pixel positions uv (N, 2). stats: adds seconds 'trace', count
+    'rays'."""
     t0 = time.perf_counter()
-    cam = ctx.camera
     n = len(uv)
     directions = ctx.directions(uv)
-    origins = np.broadcast_to(cam.centre.astype(np.float32), (n, 3))
+    origins = np.broadcast_to(ctx.camera.centre.astype(np.float32), (n, 3))
     hit = ctx.scene.intersect(np.ascontiguousarray(origins), np.ascontiguousarray(directions.T))
-    t1 = time.perf_counter()
     geom = hit["geomID"].astype(np.int32)
     prim = hit["primID"].astype(np.int32)
     geom[prim < 0] = -1
     depth = np.where(geom >= 0, hit["tfar"], np.float32(np.inf)).astype(np.float32)
+    if stats is not None:
+        stats["trace"] = stats.get("trace", 0.0) + time.perf_counter() - t0
+        stats["rays"] = stats.get("rays", 0) + n
+    return RayHits(geom, prim, hit["u"], hit["v"], depth, directions)
+
+
+def shade_hits(ctx: Context, hits: RayHits, footprint: float = 1.0,
+               stats: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(normal (3, N), radiance (3, N)) float32 at ray hits (zero for background): shading normal facing the
+    camera, and outgoing radiance (linear) with shadows.
+
+    footprint: the sample's share of a pixel's width (1 for one sample per pixel), for the texture filter. stats:
+    adds seconds 'shade' (incl. shadow rays) and count 'shadow_rays'."""
+    t0 = time.perf_counter()
+    n = len(hits.geom)
     normal = np.zeros((3, n), np.float32)
     radiance = np.zeros((3, n), np.float32)
     counters: dict = {}
-    pixel_angle = footprint / float(np.sqrt(abs(np.linalg.det(cam.K[:2, :2]))))
+    pixel_angle = footprint / float(np.sqrt(abs(np.linalg.det(ctx.camera.K[:2, :2]))))
     for g, surface in enumerate(ctx.scene.surfaces):
-        idx = np.flatnonzero(geom == g)
+        idx = np.flatnonzero(hits.geom == g)
         if not len(idx):
             continue
-        hits = surface_hits(ctx.scene.faces[g], prim[idx], hit["u"][idx], hit["v"][idx], directions[:, idx],
-                            depth[idx], pixel_angle)
-        normal[:, idx] = hits.normal
-        radiance[:, idx] = shade(surface.material, hits, ctx.lights, ctx.ambient, ctx.scene.occluded,
-                              ctx.scene.extent, counters)
-    t2 = time.perf_counter()
+        at = surface_hits(ctx.scene.faces[g], hits.prim[idx], hits.u[idx], hits.v[idx], hits.directions[:, idx],
+                          hits.depth[idx], pixel_angle)
+        normal[:, idx] = at.normal
+        radiance[:, idx] = shade(surface.material, at, ctx.lights, ctx.ambient, ctx.scene.occluded,
+                                 ctx.scene.extent, counters)
     if stats is not None:
-        stats["trace"] = stats.get("trace", 0.0) + (t1 - t0)
-        stats["shade"] = stats.get("shade", 0.0) + (t2 - t1)
-        stats["rays"] = stats.get("rays", 0) + n
+        stats["shade"] = stats.get("shade", 0.0) + time.perf_counter() - t0
         stats["shadow_rays"] = stats.get("shadow_rays", 0) + counters.get("shadow_rays", 0)
-    return Samples(geom, prim, depth, normal, radiance)
+    return normal, radiance
 
 
-def trace_parallel(ctx: Context, uv: np.ndarray, footprint: float = 1.0, stats: dict | None = None) -> Samples:
-    """`trace_samples` over chunks of uv on `ctx.threads` threads; results in input order."""
-    n = len(uv)
-    # One chunk per thread: the per-chunk Python and small-array numpy work holds the GIL, so fewer, larger chunks
-    # let the GIL-free parts (Embree's ray loop, numpy's big element-wise ops) overlap.
+def trace_samples(ctx: Context, uv: np.ndarray, footprint: float = 1.0, stats: dict | None = None) -> Samples:
+    """Trace, shade and shadow the samples at pixel positions uv (N, 2) (one chunk, this thread); see
+    `intersect_samples` and `shade_hits` for footprint and stats."""
+    hits = intersect_samples(ctx, uv, stats)
+    normal, radiance = shade_hits(ctx, hits, footprint, stats)
+    return Samples(hits.geom, hits.prim, hits.depth, normal, radiance)
+
+
+def in_chunks(ctx: Context, n: int, work, stats: dict | None = None) -> list:
+    """[work(a, b, chunk_stats), ...] over consecutive chunks [a, b) of n items, on `ctx.threads` threads, in
+    order; the chunks' stats are added into `stats`.
+
+    One chunk per thread: the per-chunk Python and small-array numpy work holds the GIL, so fewer, larger chunks
+    let the GIL-free parts (Embree's ray loop, numpy's big element-wise ops) overlap."""
     chunks = max(1, min(ctx.threads, n // MIN_CHUNK))
     if chunks == 1:
-        return trace_samples(ctx, uv, footprint, stats)
+        return [work(0, n, stats)]
     bounds = np.linspace(0, n, chunks + 1).astype(int)
     part_stats = [dict() for _ in range(chunks)]
-    futures = [pool(ctx.threads).submit(trace_samples, ctx, uv[a:b], footprint, s)
-               for a, b, s in zip(bounds[:-1], bounds[1:], part_stats)]
+    futures = [pool(ctx.threads).submit(work, a, b, s) for a, b, s in zip(bounds[:-1], bounds[1:], part_stats)]
     parts = [f.result() for f in futures]
     if stats is not None:
         for s in part_stats:
             for k, v in s.items():
                 stats[k] = stats.get(k, 0) + v
-    return Samples.concat(parts)
+    return parts
+
+
+def trace_parallel(ctx: Context, uv: np.ndarray, footprint: float = 1.0, stats: dict | None = None) -> Samples:
+    """`trace_samples` of uv (N, 2) over chunks on `ctx.threads` threads; results in input order."""
+    return Samples.concat(in_chunks(ctx, len(uv), lambda a, b, s: trace_samples(ctx, uv[a:b], footprint, s), stats))
+
+
+def intersect_parallel(ctx: Context, uv: np.ndarray, stats: dict | None = None) -> RayHits:
+    """`intersect_samples` of uv (N, 2) over chunks on `ctx.threads` threads."""
+    return RayHits.concat(in_chunks(ctx, len(uv), lambda a, b, s: intersect_samples(ctx, uv[a:b], s), stats))
+
+
+def shade_parallel(ctx: Context, hits: RayHits, footprint: float = 1.0,
+                   stats: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """`shade_hits` over chunks on `ctx.threads` threads: (normal (3, N), radiance (3, N))."""
+    parts = in_chunks(ctx, len(hits.geom), lambda a, b, s: shade_hits(ctx, hits.take(slice(a, b)), footprint, s),
+                      stats)
+    return tuple(np.concatenate(p, axis=1) for p in zip(*parts))
 
 
 def touched_tiles(camera: Camera, surfaces, bounds: tuple[int, int, int, int], tile: int = TILE) -> np.ndarray:
