@@ -1,7 +1,10 @@
 """Texture lookups against closed form: texel centres, bilinear weights, the v-up convention, box mips, the mip
-level of a tilted plane's footprint, the sRGB offset."""
+level of a tilted plane's footprint, the sRGB offset; 8-bit (SRGB8-style) pyramids: decode tables at fetch, mips
+within 8-bit quantisation of the linear-light box filter, one decode of a file for every skin-tone offset."""
 
 from __future__ import annotations
+
+import os
 
 import numpy as np
 import OpenImageIO as oiio
@@ -11,7 +14,9 @@ from render_scenes import flat_material, one_light, quad, render, subject, top_c
 from darthand.render.camera import look_at
 from darthand.render.scene import Scene
 from darthand.render.shade import surface_hits
-from darthand.render.texture import (MipTexture, load_maps, load_texture, mip_levels, srgb8_to_linear_lut)
+from darthand.render import texture as texture_module
+from darthand.render.texture import (MipTexture, checker_texture, code_pyramid, constant_texture, decode_tables,
+                                     load_maps, load_texture, mip_levels, srgb8_to_linear_lut)
 from darthand.render.trace import Context
 from darthand.textures.color import srgb_to_linear
 
@@ -147,3 +152,151 @@ def test_rendered_texture_reads_the_right_texel():
     c = frame.colour
     assert np.allclose(c[16, 16], [1, 0, 0], atol=1e-5) and np.allclose(c[16, 48], [0, 1, 0], atol=1e-5)
     assert np.allclose(c[48, 16], [0, 0, 1], atol=1e-5) and np.allclose(c[48, 48], [1, 1, 0], atol=1e-5)
+
+
+# ------------------------------------------------------------------------------------------------ 8-bit storage
+
+
+def srgb_decode64(codes, offset=0.0):
+    """IEC 61966-2-1 sRGB -> linear in float64, after adding `offset` to the encoded value (clipped to [0, 1])."""
+    c = np.clip(np.asarray(codes, np.float64) / 255 + offset, 0, 1)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def srgb_encode64(linear):
+    c = np.clip(np.asarray(linear, np.float64), 0, 1)
+    return np.where(c <= 0.0031308, c * 12.92, 1.055 * c ** (1 / 2.4) - 0.055)
+
+
+def random_codes(h, w, c, seed=0):
+    return np.random.default_rng(seed).integers(0, 256, (h, w, c), dtype=np.uint8)
+
+
+def centres(h, w):
+    """(2, H*W) uv of every texel centre of an H x W level, row-major."""
+    rows, cols = np.mgrid[0:h, 0:w]
+    return np.stack([(cols.ravel() + 0.5) / w, 1 - (rows.ravel() + 0.5) / h]).astype(np.float32)
+
+
+def test_code_texel_centres_return_their_texel_through_the_decode_table():
+    codes = random_codes(16, 32, 4)
+    tex = code_pyramid(codes, colour=3).with_decode(decode_tables(4, 3, offset=0.05))
+    table = tex.decode
+    assert tex.flat.dtype == np.uint8 and tex.channels == 4
+    for k in range(len(tex.levels)):
+        stored = tex.texels(k)
+        h, w = stored.shape[:2]
+        got = tex.bilinear(centres(h, w), k)                       # (C, H*W)
+        want = np.stack([table[c][stored[..., c].ravel()] for c in range(4)])
+        assert np.array_equal(got, want)
+        assert np.array_equal(tex.levels[k], want.T.reshape(h, w, 4))
+
+
+def test_code_bilinear_interpolates_decoded_values():
+    """Between texels the lookup blends the decoded (linear) values, not the codes."""
+    codes = np.zeros((2, 2, 3), np.uint8)
+    codes[:, 1] = 255                                    # left column black, right column white
+    tex = code_pyramid(codes, colour=3)
+    mid = tex.bilinear(np.array([[0.5], [0.5]], np.float32), 0)[:, 0]
+    assert np.allclose(mid, 0.5, atol=1e-6)              # half of linear 1, not the decode of code 127.5
+
+
+def test_offset_at_fetch_equals_the_per_texel_decode_at_level_0(tmp_path):
+    codes = random_codes(8, 16, 3, seed=1)
+    path = write_png(tmp_path / "skin.png", codes)
+    for offset in (0.0, -0.1, 0.07, -1.0):
+        tex = load_maps(path, offset=offset)
+        assert tex.flat.dtype == np.uint8
+        got = tex.bilinear(centres(8, 16), 0).T.reshape(8, 16, 3)
+        assert np.array_equal(got, srgb8_to_linear_lut(offset)[codes])        # the earlier load-time decode
+        assert np.allclose(got, srgb_decode64(codes, offset), atol=1e-6)      # and the sRGB formula
+
+
+# Worst error, in 8-bit codes, of re-encoding a linear value: half a code from rounding, plus the encoder's
+# 65536-entry table on the linear value (index rounded by half a step of 1 / 65535, times the steepest slope of
+# the sRGB curve, 12.92, times 255 codes), plus a margin for float32 sums.
+ENCODE_BOUND = 0.5 + 255 * 12.92 * 0.5 / 65535 + 1e-3
+
+
+@pytest.mark.parametrize("shape", [(16, 16), (32, 8), (8, 2), (1, 8), (8, 1)])
+def test_mip_texels_are_linear_light_box_averages_within_8bit_quantisation(shape):
+    h, w = shape
+    codes = random_codes(h, w, 4, seed=2)
+    codes[: h // 2, : w // 2, :3] = 3                    # a dark block: the linear segment of the sRGB curve
+    tex = code_pyramid(codes, colour=3)
+    linear = srgb_decode64(codes[..., :3])
+    for k in range(1, len(tex.levels)):
+        stored = tex.texels(k).astype(np.float64)
+        bh, bw = h // stored.shape[0], w // stored.shape[1]           # level-0 texels under one level-k texel
+        blocks = lambda a: a.reshape(stored.shape[0], bh, stored.shape[1], bw, -1).mean(axis=(1, 3))
+        colour_err = np.abs(stored[..., :3] - 255 * srgb_encode64(blocks(linear)))
+        data_err = np.abs(stored[..., 3:] - blocks(codes[..., 3:].astype(np.float64)))
+        assert colour_err.max() <= ENCODE_BOUND, (k, colour_err.max())
+        assert data_err.max() <= 0.5 + 1e-3, (k, data_err.max())
+    assert tex.texels(-1).shape == (1, 1, 4)
+
+
+def test_odd_sizes_repeat_the_last_row_and_column_in_level_1():
+    codes = random_codes(5, 7, 2, seed=3)
+    tex = code_pyramid(codes, colour=1)
+    assert [lv.shape[:2] for lv in tex.levels] == [(5, 7), (3, 4), (2, 2), (1, 1)]
+    linear = srgb_decode64(codes[..., 0])
+    stored = tex.texels(1).astype(np.float64)
+    for r in range(3):
+        for c in range(4):
+            rows, cols = [2 * r, min(2 * r + 1, 4)], [2 * c, min(2 * c + 1, 6)]
+            block = np.ix_(rows, cols)
+            assert abs(stored[r, c, 0] - 255 * srgb_encode64(linear[block].mean())) <= ENCODE_BOUND
+            assert abs(stored[r, c, 1] - codes[..., 1][block].astype(float).mean()) <= 0.5 + 1e-3
+
+
+def test_two_offsets_decode_the_file_once(tmp_path, monkeypatch):
+    codes = random_codes(16, 16, 3, seed=4)
+    albedo = write_png(tmp_path / "albedo.png", codes)
+    rough = write_png(tmp_path / "rough.png", random_codes(16, 16, 1, seed=5))
+    reads = []
+    real = texture_module.read_codes
+    monkeypatch.setattr(texture_module, "read_codes", lambda path: reads.append(str(path)) or real(path))
+    a = load_maps(albedo, offset=0.0, data=rough)
+    b = load_maps(albedo, offset=-0.1, data=rough)
+    assert sorted(reads) == sorted([str(albedo.resolve()), str(rough.resolve())])      # each file decoded once
+    assert a.flat is b.flat                                                           # one pyramid, two tables
+    assert np.array_equal(b.levels[0][..., :3], srgb8_to_linear_lut(-0.1)[codes])
+    assert np.array_equal(a.levels[0][..., 3], b.levels[0][..., 3])                  # data ignores the offset
+    # A changed file (new modification time) is decoded again (with the map packed beside it).
+    write_png(albedo, codes[::-1].copy())
+    os.utime(albedo, ns=(os.stat(albedo).st_atime_ns, os.stat(albedo).st_mtime_ns + 10**9))
+    c = load_maps(albedo, offset=-0.1, data=rough)
+    assert len(reads) == 4 and np.array_equal(c.levels[0][..., :3], srgb8_to_linear_lut(-0.1)[codes[::-1]])
+
+
+def test_data_maps_without_albedo_use_the_constant_base_colour(tmp_path):
+    mr = random_codes(8, 8, 3, seed=6)
+    path = write_png(tmp_path / "mr.png", mr)
+    base = (0.9, 0.5, 0.1)
+    tex = load_maps(None, data=path, channels=(1, 2), base_color=base)
+    for k in range(len(tex.levels)):
+        level = tex.levels[k]
+        assert np.array_equal(level[..., :3], np.broadcast_to(np.float32(base), level.shape[:2] + (3,)))
+    assert np.array_equal(tex.levels[0][..., 3:], mr[..., 1:].astype(np.float32) * np.float32(1 / 255))
+
+
+def test_float_textures_keep_float_storage(tmp_path):
+    # Values that are not 8-bit codes (positions in metres, say) are stored and returned as given.
+    img = np.array([[[-3.5, 1e3], [0.25, 7.0]], [[2.0, -1.0], [0.0, 1.5]]], np.float32)
+    tex = MipTexture(mip_levels(img))
+    assert tex.flat.dtype == np.float32 and tex.decode is None
+    assert np.array_equal(tex.bilinear(centres(2, 2), 0).T, img.reshape(-1, 2))
+    assert np.allclose(tex.sample(np.array([[0.5], [0.5]], np.float32), 5.0)[:, 0], img.reshape(-1, 2).mean(0))
+    assert np.array_equal(constant_texture((0.1, 0.2, 0.3)).levels[-1].ravel(), np.float32([0.1, 0.2, 0.3]))
+    assert checker_texture(64, 4).flat.dtype == np.float32
+    # A 16-bit sRGB file keeps its precision: float storage, the offset applied at load.
+    values = (np.arange(4 * 4 * 3, dtype=np.uint16).reshape(4, 4, 3) * 1300)
+    spec = oiio.ImageSpec(4, 4, 3, oiio.UINT16)
+    buf = oiio.ImageBuf(spec)
+    buf.set_pixels(oiio.ROI(), values)
+    assert buf.write(str(tmp_path / "deep.png"))
+    tex16 = load_maps(tmp_path / "deep.png", offset=-0.05)
+    assert tex16.flat.dtype == np.float32
+    want = srgb_decode64(values / 65535 * 255, -0.05)
+    assert np.allclose(tex16.levels[0], want, atol=1e-5)

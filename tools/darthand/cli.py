@@ -332,9 +332,8 @@ def _add_dataset_arguments(p) -> None:
     p.add_argument("--skin-tone-range", default="-0.1,0.1", metavar="LO,HI",
                    help="range of the sRGB skin-tone offset; write --skin-tone-range=-0.2,0.1 when LO is negative "
                         "(default -0.1,0.1)")
-    p.add_argument("--skin-tone-steps", type=int, default=5, metavar="N",
-                   help="the offset is one of N evenly spaced levels of the range, so that frames share decoded "
-                        "textures (default 5)")
+    p.add_argument("--skin-tone-steps", type=int, default=None, metavar="N",
+                   help="draw the offset from N evenly spaced levels of the range (default: uniform in the range)")
     p.add_argument("--accessory-ids", default="all", metavar="IDS|all|none",
                    help="comma-separated accessory ids to draw from, 'all' (default) or 'none' (no accessories)")
     p.add_argument("--no-accessory-share", type=float, default=0.3, metavar="X",

@@ -8,7 +8,7 @@ worker has started (1000 / images per second); startup_s the time until then (sp
 source); cpu_ms_per_image the CPU time of the rendering processes per image; tail_idle_s the sharding's imbalance.
 
 'catalogue' renders frames whose textures, skin tones and accessories are drawn from the whole catalogue, as a real
-dataset does: with few frames per texture the texture decoding (about 0.6 s per 2048^2 texture and tone) dominates.
+dataset does: with few frames per texture, loading textures (0.1-0.2 s per 2048^2 texture) is a large share.
 """
 
 from __future__ import annotations

@@ -3,7 +3,8 @@ forward pass.
 
 Per frame only what moved is recomputed: the hand's vertices and normals when the pose changes; a rigid accessory is
 its fixed rest mesh moved by its joint's transform (its rest normals are computed once); a glove is skinned like the
-hand. Textures are loaded once per (files, skin-tone offset) (texture.load_maps's cache).
+hand. Textures are decoded once per file pair; a skin-tone offset is a decode table on the shared pyramid
+(texture.load_maps).
 """
 
 from __future__ import annotations

@@ -12,10 +12,10 @@ camera spec (camera.load_camera: a view name or {"view": [x, y, z], "roll_deg", 
 hand) and lights (a lights document or None for the default rig). Frame i's job depends only on (seed, i), so
 sharding, resuming or `start` never change a frame.
 
-Why the frames are grouped by texture: decoding a 2048^2 skin texture and building its mip pyramid costs about
-0.4 to 0.7 s (per texture and skin-tone offset; render/texture.py caches the last 8), ten times a 512^2 frame. So skin-tone
-offsets come from a few levels (`skin_tone_steps`), and the frames are handed to the workers in chunks of one
-(texture, offset) pair, sorted by accessory inside (an accessory change costs about 20 ms).
+Why the frames are grouped by texture: decoding a 2048^2 skin texture and building its mip pyramid costs 0.1 to
+0.2 s (render/texture.py caches 32; a skin-tone offset is only a decode table on the cached pyramid, about 0.5 ms),
+three to five 512^2 frames. So the frames are handed to the workers in chunks of one texture, sorted by accessory
+inside (an accessory change costs about 20 ms).
 
 Workers are started with 'spawn' (a fresh interpreter: nothing inherited from a parent that may hold an Embree
 device or thread pools); each opens the source once and renders single-threaded. Frames go back to the parent only
@@ -57,7 +57,7 @@ _DRAWS = 10
 
 
 def plan_frames(source, count: int, *, seed: int = 0, start: int = 0, poses=None, textures=None,
-                accessories=None, views=None, skin_tone_range=(-0.1, 0.1), skin_tone_steps: int = 5,
+                accessories=None, views=None, skin_tone_range=(-0.1, 0.1), skin_tone_steps: int | None = None,
                 no_accessory_share: float = 0.3, pose_jitter_deg: float | None = None,
                 roll_range_deg=DEFAULT_ROLL_RANGE, margin_range=DEFAULT_MARGIN_RANGE, lights=None) -> list[dict]:
     """Jobs of frames start .. start + count - 1 of a random dataset of `source` (an opened api.open_source).
@@ -71,8 +71,8 @@ def plan_frames(source, count: int, *, seed: int = 0, start: int = 0, poses=None
         that lies outside them); None: DEFAULT_JITTER_DEG for a model source, 0 for a USD package (which renders its
         baked gestures only). A perturbed pose is written as 48 numbers, its gesture kept in 'gesture'.
     textures: texture ids (None: every catalogue texture; 'plain' without a catalogue; never the UV 'checker').
-    skin_tone_range, skin_tone_steps: the sRGB offset is one of `skin_tone_steps` evenly spaced levels in the range
-        (1: its middle), few so that decoded textures are shared between frames.
+    skin_tone_range, skin_tone_steps: the sRGB offset is uniform in the range (rounded to 1e-4), or one of
+        `skin_tone_steps` evenly spaced levels of it (1: its middle).
     accessories: accessory ids (None: all); a share `no_accessory_share` of the frames gets 'none'.
     views: 'random' (or None) and/or named views (camera.VIEWS), one chosen per frame. A random view is a direction
         uniform on the sphere outside the forearm cone (WRIST_CONE_COS). Every view gets a roll uniform in
@@ -102,7 +102,8 @@ def plan_frames(source, count: int, *, seed: int = 0, start: int = 0, poses=None
             "index": start + k,
             "pose": poses[k], "gesture": pool.entries[which[k]]["gesture"],
             "texture": tex[_choose(u[TEXTURE], len(tex))],
-            "skin_tone_offset": tones[_choose(u[TONE], len(tones))],
+            "skin_tone_offset": (tones[_choose(u[TONE], len(tones))] if skin_tone_steps else
+                                 round(float(tones[0] + (tones[-1] - tones[0]) * u[TONE]), 4)),
             "accessory": "none" if not acc or u[BARE] < no_accessory_share else acc[_choose(u[ACCESSORY], len(acc))],
             "camera": {"view": random_view(u[DIRECTION], u[DIRECTION + 1]) if name == RANDOM_VIEW else name,
                        "roll_deg": round(float(roll[0] + (roll[1] - roll[0]) * u[ROLL]), 2),
@@ -182,9 +183,12 @@ def pose_pool(source, poses=None, jitter_deg: float | None = None) -> PosePool:
     return PosePool(entries, np.deg2rad(jitter), model)
 
 
-def skin_tones(value_range=(-0.1, 0.1), steps: int = 5) -> list[float]:
-    """The skin-tone offsets a plan draws from: `steps` levels evenly spaced over the range (1: its middle)."""
+def skin_tones(value_range=(-0.1, 0.1), steps: int | None = None) -> list[float]:
+    """The skin-tone offsets a plan draws from: `steps` levels evenly spaced over the range (1: its middle); None:
+    the range's ends (the offset is drawn uniformly between them)."""
     lo, hi = _range("skin_tone_range", value_range, -0.5, 0.5)
+    if steps is None:
+        return [round(float(lo), 6), round(float(hi), 6)]
     if int(steps) < 1:
         raise InputError(f"skin_tone_steps: {steps} must be at least 1")
     levels = [0.5 * (lo + hi)] if int(steps) == 1 else np.linspace(lo, hi, int(steps)).tolist()
@@ -452,8 +456,8 @@ def existing_frames(out: Path, jobs: list[dict], digests: dict, settings: dict) 
 
 
 def make_chunks(jobs: list[dict], processes: int, chunk_size: int | None = None) -> list[list[dict]]:
-    """The jobs in tasks for the workers: grouped by (texture, skin-tone offset) so that a worker decodes a texture
-    once for many frames, each group split into chunks of at most `chunk_size` frames (default: a quarter of an even
+    """The jobs in tasks for the workers: grouped by texture so that a worker decodes a texture once for many
+    frames, each group split into chunks of at most `chunk_size` frames (default: a quarter of an even
     share per process, at most MAX_CHUNK), frames sorted by accessory inside a chunk; largest chunks first (the
     small ones then even out the workers' finishing times)."""
     if not jobs:
@@ -461,7 +465,7 @@ def make_chunks(jobs: list[dict], processes: int, chunk_size: int | None = None)
     size = chunk_size or min(MAX_CHUNK, max(1, math.ceil(len(jobs) / (4 * processes))))
     groups: dict = {}
     for job in jobs:
-        groups.setdefault((str(job.get("texture")), float(job.get("skin_tone_offset", 0.0))), []).append(job)
+        groups.setdefault(str(job.get("texture")), []).append(job)
     chunks = []
     for key in sorted(groups):
         group = sorted(groups[key], key=lambda j: (str(j.get("accessory")), j["index"]))

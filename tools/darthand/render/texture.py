@@ -1,9 +1,22 @@
-"""Textures for shading: a mip pyramid in linear light, trilinear lookups, the mip level from a pixel's UV footprint.
+"""Textures for shading: mip pyramids, trilinear lookups in linear light, the mip level from a pixel's UV footprint.
 
 UV convention (verified against the textures stage's baker, textures/bake.py, which rasterises a UV triangle at
 pixel coordinates (u * res, (1 - v) * res) with texel centres at integer + 0.5): OpenGL-style st, u to the right,
 v UP, v = 0 at the BOTTOM row of the image. Texel (row r, column c) of an H x W level has its centre at
 u = (c + 0.5) / W, v = 1 - (r + 0.5) / H. Lookups clamp to the edge (the textures carry padded gutters).
+
+Storage. Texture files of 8 bits per channel are kept as GPUs keep them (SRGB8 / UNORM8 formats): every mip level
+as 8-bit codes, decoded to linear light at fetch time, before filtering, through a 256-entry table per channel --
+the sRGB transfer function for colour channels, code / 255 for data channels (roughness, metallic). Levels >= 1 are
+2x2 box averages in linear light (of the level-0 values they cover), re-encoded to 8 bits. Because the skin-tone
+offset is added to the sRGB code before decoding (textures/color.encode_srgb8's convention), it is a different
+table on the same codes: one pyramid per file serves every offset (`load_maps`). At level 0 this is exactly a
+per-texel decode with the offset; at levels >= 1 the offset is applied to the re-encoded average rather than
+averaged after it (the lossy part, with the 8-bit re-quantisation; benchmarks/textures_load.py measures both).
+
+Textures made from float arrays (constants, the UV checker, the position textures of render/checks.py, tests) and
+image files of more than 8 bits keep float32 storage: their values are not 8-bit codes (positions in metres, data
+outside [0, 1], 16-bit precision), so quantising them would change what they hold; none of them is loaded often.
 
 Written here rather than through OpenImageIO's TextureSystem because its Python binding samples one point per call;
 these lookups are numpy gathers over every shaded sample at once.
@@ -11,31 +24,78 @@ these lookups are numpy gathers over every shaded sample at once.
 
 from __future__ import annotations
 
+import copy
 import functools
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import OpenImageIO as oiio
 
 from darthand.errors import InputError
+from darthand.render.image import encode_srgb
 from darthand.textures.color import srgb_to_linear
 
 BLEND = 0.25     # half-width of the band of fractional mip levels (around .5) in which two levels are blended
+CACHE_PYRAMIDS = 32   # 8-bit pyramids kept by load_maps: ~22 MB each for 2048^2 RGB + roughness (the float32
+                      # pyramids of the earlier cache of 8 were ~90 MB each, per texture *and* offset)
 
 
 class MipTexture:
-    """A mip pyramid: levels[k] (H_k, W_k, C) float32, level 0 the full image, each next level half the size (2x2
-    box filter in linear light), down to 1 x 1. All levels are also kept in one flat (texels, C) array so that a
-    lookup at per-sample levels is one gather, whatever the levels."""
+    """A mip pyramid: level 0 the full image, each next level half the size, down to 1 x 1. All levels are kept in
+    one flat (texels, C) array `flat` (level k's rows from offsets[k], row-major, heights[k] x widths[k]) so that a
+    lookup at per-sample levels is one gather, whatever the levels.
 
-    def __init__(self, levels):
-        self.levels = tuple(np.ascontiguousarray(a, np.float32) for a in levels)
-        sizes = np.array([a.shape[0] * a.shape[1] for a in self.levels], np.int64)
-        self.offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-        self.widths = np.array([a.shape[1] for a in self.levels], np.int64)
-        self.heights = np.array([a.shape[0] for a in self.levels], np.int64)
-        self.flat = np.concatenate([a.reshape(-1, a.shape[2]) for a in self.levels])
+    `flat` is float32 values (`decode` None), or uint8 codes with `decode` (C, 256) float32: channel c's code q
+    reads as decode[c, q]. `levels` gives the (H_k, W_k, C) float32 values of each level (decoded on access).
+
+    MipTexture(levels) stores float arrays (H_k, W_k, C) as given (any sizes); with `decode`, uint8 codes.
+    """
+
+    def __init__(self, levels, decode=None):
+        dtype = np.float32 if decode is None else np.uint8
+        shapes = [np.shape(a) for a in levels]
+        self._allocate([s[:2] for s in shapes], shapes[0][2], dtype, decode)
+        for k, a in enumerate(levels):
+            self.texels(k)[...] = a
+
+    @classmethod
+    def empty(cls, height: int, width: int, channels: int, dtype=np.float32, decode=None) -> "MipTexture":
+        """A full pyramid of a height x width image (sizes halved, rounded up, down to 1 x 1), storage uninitialised:
+        write level 0 into texels(0), then call build_mips."""
+        tex = cls.__new__(cls)
+        tex._allocate(mip_sizes(height, width), channels, dtype, decode)
+        return tex
+
+    def _allocate(self, sizes, channels: int, dtype, decode) -> None:
+        self.heights = np.array([s[0] for s in sizes], np.int64)
+        self.widths = np.array([s[1] for s in sizes], np.int64)
+        counts = self.heights * self.widths
+        self.offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        self.flat = np.empty((int(counts.sum()), channels), dtype)
+        self.decode = None
+        if decode is not None:
+            self.decode = _check_decode(decode, channels)
+
+    def texels(self, k: int) -> np.ndarray:
+        """(H_k, W_k, C) view of level k's storage (codes or float values)."""
+        k = range(len(self.offsets))[k]
+        start = int(self.offsets[k])
+        h, w = int(self.heights[k]), int(self.widths[k])
+        return self.flat[start:start + h * w].reshape(h, w, -1)
+
+    def with_decode(self, decode) -> "MipTexture":
+        """The same codes read through other tables (C, 256): a view, no copy of the pyramid."""
+        if self.decode is None:
+            raise ValueError("with_decode: a float texture has no decode table")
+        out = copy.copy(self)
+        out.decode = _check_decode(decode, self.channels)
+        return out
+
+    @property
+    def levels(self) -> "Levels":
+        return Levels(self)
 
     @property
     def width(self) -> int:
@@ -49,33 +109,55 @@ class MipTexture:
     def channels(self) -> int:
         return int(self.flat.shape[1])
 
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the pyramid's storage (shared by every `with_decode` view of it)."""
+        return int(self.flat.nbytes)
+
+    # ---------------------------------------------------------------------------------------------- lookups
+
     def bilinear(self, uv: np.ndarray, level=0) -> np.ndarray:
-        """(C, N) float32 bilinear lookup at uv (2, N) in mip level `level` (an int or (N,) ints)."""
+        """(C, N) float32 bilinear lookup at uv (2, N) in mip level `level` (an int or (N,) ints). 8-bit textures
+        are decoded before the interpolation (linear light)."""
+        n = uv.shape[1]
+        rows, fx, fy = self._corners(uv, level)
+        if self.decode is None:
+            a, b, c, d = np.take(self.flat, rows.ravel(), axis=0, mode="clip").reshape(4, n, -1)
+            return np.ascontiguousarray(_bilerp(a, b, c, d, fx[:, None], fy[:, None]).T)
+        codes = np.take(self.flat, rows.ravel(), axis=0, mode="clip")          # (4N, C) uint8
+        values = np.empty((self.channels, 4 * n), np.float32)
+        for c in range(self.channels):
+            np.take(self.decode[c], codes[:, c], out=values[c], mode="clip")
+        a, b, c, d = values.reshape(self.channels, 4, n).transpose(1, 0, 2)
+        return _bilerp(a, b, c, d, fx, fy)
+
+    def _corners(self, uv: np.ndarray, level) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(4, N) flat rows of the texels around each uv (top-left, top-right, bottom-left, bottom-right, clamped
+        to the edge) and the (N,) weights fx, fy of the right and bottom ones."""
         n = uv.shape[1]
         level = np.broadcast_to(np.asarray(level, np.int64), (n,))
         w, h = self.widths[level], self.heights[level]
         x = uv[0] * w.astype(np.float32) - np.float32(0.5)
         y = (np.float32(1.0) - uv[1]) * h.astype(np.float32) - np.float32(0.5)
         x0, y0 = np.floor(x), np.floor(y)
-        fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+        fx, fy = (x - x0).astype(np.float32), (y - y0).astype(np.float32)
         x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
         xa, xb = np.clip(x0, 0, w - 1), np.clip(x0 + 1, 0, w - 1)
         row_a = self.offsets[level] + np.clip(y0, 0, h - 1) * w
         row_b = self.offsets[level] + np.clip(y0 + 1, 0, h - 1) * w
-        flat = self.flat
-        top = np.take(flat, row_a + xa, axis=0)
-        top += (np.take(flat, row_a + xb, axis=0) - top) * fx
-        bottom = np.take(flat, row_b + xa, axis=0)
-        bottom += (np.take(flat, row_b + xb, axis=0) - bottom) * fx
-        top += (bottom - top) * fy
-        return np.ascontiguousarray(top.T)
+        rows = np.empty((4, n), np.int64)
+        np.add(row_a, xa, out=rows[0])
+        np.add(row_a, xb, out=rows[1])
+        np.add(row_b, xa, out=rows[2])
+        np.add(row_b, xb, out=rows[3])
+        return rows, fx, fy
 
     def sample(self, uv: np.ndarray, lod: np.ndarray | float = 0.0) -> np.ndarray:
         """(C, N) float32 lookup at uv (2, N), mip level `lod` (N,): bilinear in the nearer level, blended with the
         other level around the middle between two levels (where frac(lod) is within BLEND of 0.5) -- trilinear
         filtering with a narrowed blend band ("brilinear"), half the texel reads of full trilinear."""
         n = uv.shape[1]
-        last = len(self.levels) - 1
+        last = len(self.offsets) - 1
         lod = np.clip(np.broadcast_to(np.asarray(lod, np.float32), (n,)), 0, last)
         base = np.floor(lod).astype(np.int64)
         frac = lod - base
@@ -105,32 +187,196 @@ class MipTexture:
         with np.errstate(divide="ignore"):
             return np.maximum(np.float32(0.5) * np.log2(np.maximum(ex, ey)), 0).astype(np.float32)
 
+    # ---------------------------------------------------------------------------------------------- mips
+
+    def build_mips(self, colour: int = 0) -> "MipTexture":
+        """Fill levels >= 1 from level 0 (in place; returns self). Float storage: 2x2 box averages of the values.
+        8-bit storage: 2x2 box averages in linear light of the level-0 values each texel covers (the first `colour`
+        channels decoded as sRGB, the others as code / 255), re-encoded to 8 bits (sRGB for colour) -- each level
+        is quantised once, from unquantised averages, so errors do not accumulate down the pyramid."""
+        if len(self.offsets) == 1:
+            return self
+        if self.decode is None:
+            for k in range(1, len(self.offsets)):
+                box_average(quarters(self.texels(k - 1)), self.texels(k))
+            return self
+        # Linear values of levels >= 1 before quantisation, laid out as the tail of `flat`.
+        tail = MipTexture.empty(int(self.heights[1]), int(self.widths[1]), self.channels, np.float32)
+        table = decode_tables(self.channels, colour)
+        _linear_box_of_codes(self.texels(0), table, tail.texels(0))
+        for k in range(1, len(tail.offsets)):
+            box_average(quarters(tail.texels(k - 1)), tail.texels(k))
+        stored = self.flat[int(self.offsets[1]):]
+        stored[:, :colour] = encode_srgb(tail.flat[:, :colour])
+        data = tail.flat[:, colour:]
+        data *= np.float32(255)
+        stored[:, colour:] = np.rint(data, out=data)
+        return self
+
+
+class Levels(Sequence):
+    """The levels of a MipTexture as (H_k, W_k, C) float32 arrays: views of float storage, decoded copies of 8-bit
+    storage (made on access)."""
+
+    def __init__(self, texture: MipTexture):
+        self._texture = texture
+
+    def __len__(self) -> int:
+        return len(self._texture.offsets)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return [self[i] for i in range(len(self))[k]]
+        stored = self._texture.texels(k)
+        table = self._texture.decode
+        if table is None:
+            return stored
+        out = np.empty(stored.shape, np.float32)
+        for c in range(stored.shape[2]):
+            out[..., c] = table[c][stored[..., c]]
+        return out
+
+
+def _check_decode(decode, channels: int) -> np.ndarray:
+    decode = np.ascontiguousarray(decode, np.float32)
+    if decode.shape != (channels, 256):
+        raise ValueError(f"decode table of shape {decode.shape}, expected ({channels}, 256)")
+    return decode
+
+
+def _bilerp(a, b, c, d, fx, fy):
+    """Bilinear blend of corner values a (top-left), b (top-right), c (bottom-left), d (bottom-right) with weights
+    fx (toward b, d) and fy (toward c, d); a new array."""
+    top = b - a
+    top *= fx
+    top += a
+    bottom = d - c
+    bottom *= fx
+    bottom += c
+    bottom -= top
+    bottom *= fy
+    top += bottom
+    return top
+
+
+def _linear_box_of_codes(codes: np.ndarray, table: np.ndarray, out: np.ndarray) -> None:
+    """out (h, w, C) = the 2x2 box average of (H, W, C) codes decoded through the tables (C, 256): level 1 of a code
+    pyramid, in linear light, without a float copy of level 0.
+
+    When W is even, through tables of pair sums: with each channel's codes in a plane, a uint16 holds two
+    horizontally adjacent codes, and one gather in a 65536-entry table decodes and adds both (half the gathers of
+    decoding every texel; this step dominates building a pyramid)."""
+    h, w, channels = codes.shape
+    if w % 2 or w < 2:
+        parts = []
+        for q in quarters(codes):
+            part = np.empty(q.shape, np.float32)
+            for c in range(channels):
+                part[..., c] = np.take(table[c], q[..., c])
+            parts.append(part)
+        box_average(parts, out)
+        return
+    pair = np.arange(1 << 16, dtype=np.uint16).view(np.uint8).reshape(-1, 2)    # the two codes of each uint16
+    scale = np.float32(1 / 4 if h > 1 else 1 / 2)
+    for c in range(channels):
+        plane = np.ascontiguousarray(codes[..., c]).view(np.uint16)            # (H, W / 2) code pairs
+        sums = table[c][pair[:, 0]] + table[c][pair[:, 1]]
+        if h > 1:
+            if h % 2:
+                plane = np.concatenate([plane, plane[-1:]])
+            acc = np.take(sums, plane[0::2])
+            acc += np.take(sums, plane[1::2])
+        else:
+            acc = np.take(sums, plane)
+        acc *= scale
+        out[..., c] = acc
+
+
+# ------------------------------------------------------------------------------------------------ pyramids
+
+
+def mip_sizes(height: int, width: int) -> list[tuple[int, int]]:
+    """(H_k, W_k) of every level: halved and rounded up (an odd last row or column is repeated), down to 1 x 1."""
+    sizes = [(int(height), int(width))]
+    while sizes[-1] != (1, 1):
+        h, w = sizes[-1]
+        sizes.append(((h + 1) // 2, (w + 1) // 2))
+    return sizes
+
+
+def quarters(image: np.ndarray) -> list[np.ndarray]:
+    """The strided views of (H, W, C) whose sum is the 2x2 box sum: the four quarters (two when one side is 1),
+    after repeating an odd last row or column."""
+    h, w = image.shape[:2]
+    pad = ((0, h % 2 if h > 1 else 0), (0, w % 2 if w > 1 else 0), (0, 0))
+    if pad[0][1] or pad[1][1]:
+        image = np.pad(image, pad, mode="edge")
+    rows = [image[0::2], image[1::2]] if h > 1 else [image]
+    return [r[:, j::2] for r in rows for j in (0, 1)] if w > 1 else rows
+
+
+def box_average(parts: list[np.ndarray], out: np.ndarray) -> np.ndarray:
+    """out = mean of the equally shaped `parts` (the quarters of a level): the 2x2 box filter, written in place."""
+    if len(parts) == 1:
+        np.copyto(out, parts[0])
+    else:
+        np.add(parts[0], parts[1], out=out)
+    for p in parts[2:]:
+        out += p
+    out *= np.float32(1 / len(parts))
+    return out
+
+
+def mip_levels(image: np.ndarray) -> tuple:
+    """Levels of a (H, W, C) float32 image: 2x2 box averages (an odd row or column is repeated) down to 1 x 1."""
+    return tuple(float_pyramid(image).levels)
+
+
+def float_pyramid(image: np.ndarray) -> MipTexture:
+    """The float32 MipTexture of an (H, W, C) image, built in place."""
+    image = np.asarray(image)
+    tex = MipTexture.empty(image.shape[0], image.shape[1], image.shape[2], np.float32)
+    tex.texels(0)[...] = image
+    return tex.build_mips()
+
+
+def code_pyramid(codes: np.ndarray, colour: int = 0) -> MipTexture:
+    """The 8-bit MipTexture of (H, W, C) uint8 codes whose first `colour` channels are sRGB colour, the others data,
+    read through decode_tables(C, colour) (offset 0)."""
+    codes = np.asarray(codes)
+    if codes.dtype != np.uint8 or codes.ndim != 3:
+        raise ValueError("code_pyramid: expects (H, W, C) uint8 codes")
+    h, w, c = codes.shape
+    tex = MipTexture.empty(h, w, c, np.uint8, decode_tables(c, colour))
+    tex.texels(0)[...] = codes
+    return tex.build_mips(colour)
+
+
+def decode_tables(channels: int, colour: int = 0, *, offset: float = 0.0, constant=None) -> np.ndarray:
+    """(channels, 256) float32 decode tables: the first `colour` channels sRGB after the skin-tone `offset`
+    (srgb8_to_linear_lut), or, with `constant` (colour,) linear values, those values whatever the code; the other
+    channels code / 255."""
+    table = np.empty((channels, 256), np.float32)
+    if colour:
+        table[:colour] = (srgb8_to_linear_lut(offset) if constant is None
+                          else np.asarray(constant, np.float32)[:colour, None])
+    table[colour:] = np.arange(256, dtype=np.float32) * np.float32(1 / 255)     # as read_image scales data
+    return table
+
 
 def pack_textures(*textures: MipTexture) -> MipTexture:
-    """One texture whose channels are those of `textures` (same size) side by side, for a single lookup."""
+    """One float texture whose channels are those of `textures` (same size) side by side, for a single lookup."""
     if len({(t.width, t.height) for t in textures}) != 1:
         raise ValueError("pack_textures: the textures differ in size")
     return MipTexture([np.concatenate(lv, axis=2) for lv in zip(*(t.levels for t in textures))])
 
 
-def mip_levels(image: np.ndarray) -> tuple:
-    """Levels of a (H, W, C) float32 image: 2x2 box averages (an odd row or column is repeated) down to 1 x 1."""
-    levels = [np.ascontiguousarray(image, dtype=np.float32)]
-    while levels[-1].shape[0] > 1 or levels[-1].shape[1] > 1:
-        img = levels[-1]
-        if img.shape[0] % 2 and img.shape[0] > 1:
-            img = np.concatenate([img, img[-1:]], 0)
-        if img.shape[1] % 2 and img.shape[1] > 1:
-            img = np.concatenate([img, img[:, -1:]], 1)
-        h, w = max(1, img.shape[0] // 2), max(1, img.shape[1] // 2)
-        fy, fx = img.shape[0] // h, img.shape[1] // w
-        levels.append(np.ascontiguousarray(img.reshape(h, fy, w, fx, -1).mean(axis=(1, 3), dtype=np.float32)))
-    return tuple(levels)
-
-
 def constant_texture(value) -> MipTexture:
     """A 1 x 1 texture of one value (C,)."""
     return MipTexture([np.asarray(value, np.float32).reshape(1, 1, -1)])
+
+
+# ------------------------------------------------------------------------------------------------ files
 
 
 def srgb8_to_linear_lut(offset: float = 0.0) -> np.ndarray:
@@ -139,13 +385,33 @@ def srgb8_to_linear_lut(offset: float = 0.0) -> np.ndarray:
     return srgb_to_linear(np.clip(np.arange(256, dtype=np.float32) / 255 + np.float32(offset), 0, 1))
 
 
-def read_image(path: str | os.PathLike, *, srgb: bool, offset: float = 0.0) -> np.ndarray:
-    """(H, W, C) float32 pixels of an image file: sRGB images decoded to linear light (after the sRGB `offset`),
-    data images (srgb=False) as stored, scaled to [0, 1]."""
-    path = Path(path)
+def _open(path: Path) -> oiio.ImageBuf:
     buf = oiio.ImageBuf(str(path))
     if buf.has_error or not path.is_file():
         raise InputError(f"{path}: cannot read image ({buf.geterror() or 'no such file'})")
+    return buf
+
+
+def read_codes(path: str | os.PathLike) -> np.ndarray:
+    """(H, W, C) uint8 codes of an 8-bit image file."""
+    return _open(Path(path)).get_pixels(oiio.UINT8)
+
+
+def is_8bit(path: str | os.PathLike) -> bool:
+    """Whether an image file stores 8 bits per channel (reads the header only)."""
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise InputError(f"{path}: cannot read image ({oiio.geterror() or 'unknown format'})")
+    try:
+        return inp.spec().format == oiio.UINT8
+    finally:
+        inp.close()
+
+
+def read_image(path: str | os.PathLike, *, srgb: bool, offset: float = 0.0) -> np.ndarray:
+    """(H, W, C) float32 pixels of an image file: sRGB images decoded to linear light (after the sRGB `offset`),
+    data images (srgb=False) as stored, scaled to [0, 1]."""
+    buf = _open(Path(path))
     if buf.spec().format == oiio.UINT8:
         codes = buf.get_pixels(oiio.UINT8)
         if srgb:
@@ -159,53 +425,91 @@ def load_texture(path: str | os.PathLike, *, srgb: bool, offset: float = 0.0) ->
     """The mip pyramid of one image file: sRGB colour (cached, see `load_maps`) or raw data."""
     if srgb:
         return load_maps(path, offset=offset)
-    return MipTexture(mip_levels(read_image(path, srgb=False)))
+    if is_8bit(_file_key(path)[0]):
+        return code_pyramid(read_codes(path))
+    return float_pyramid(read_image(path, srgb=False))
 
 
 def load_maps(albedo: str | os.PathLike | None, *, offset: float = 0.0, data: str | os.PathLike | None = None,
-              channels=(0,), base_color=(0.8, 0.8, 0.8)) -> MipTexture:
+              channels=(0,), base_color=(0.8, 0.8, 0.8), codes: bool = True) -> MipTexture:
     """One texture for a material's single lookup: channels 0..2 linear albedo (the sRGB image `albedo` after the
     sRGB `offset`, or the constant linear `base_color`), then `channels` of the data image `data` (raw, [0, 1]),
-    resized to the albedo's size if they differ. Cached by the files (path, modification time) and arguments."""
-    keys = []
-    for path in (albedo, data):
-        if path is None:
-            keys.append(None)
-            continue
-        path = Path(path)
-        try:
-            keys.append((str(path.resolve()), path.stat().st_mtime_ns))
-        except OSError:
-            raise InputError(f"{path}: texture file not found") from None
-    return _load_maps(keys[0], keys[1], round(float(offset), 6), tuple(int(c) for c in channels),
-                      tuple(float(c) for c in base_color))
+    resized to the albedo's size if they differ.
+
+    8-bit files: the code pyramid is cached by the files (path, modification time) and `channels` only; the offset
+    and base colour are decode tables on it (a view, see MipTexture.with_decode). Other files, or codes=False: a
+    float32 pyramid of linear values with the offset applied at load (the earlier storage, kept for comparisons:
+    benchmarks/textures_load.py), cached by files and arguments."""
+    if albedo is None and data is None:
+        return constant_texture(base_color)
+    keys = [None if p is None else _file_key(p) for p in (albedo, data)]
+    channels = tuple(int(c) for c in channels)
+    if codes and all(k is None or is_8bit(k[0]) for k in keys):
+        pyramid = _code_maps(keys[0], keys[1], channels if keys[1] else ())
+        constant = None if albedo is not None else tuple(float(c) for c in base_color)
+        return pyramid.with_decode(decode_tables(pyramid.channels, 3, offset=float(offset), constant=constant))
+    return _float_maps(keys[0], keys[1], round(float(offset), 6), channels, tuple(float(c) for c in base_color))
 
 
-@functools.lru_cache(maxsize=8)
-def _load_maps(albedo_key, data_key, offset: float, channels: tuple, base_color: tuple) -> MipTexture:
+def _file_key(path: str | os.PathLike) -> tuple[str, int]:
+    path = Path(path)
+    try:
+        return str(path.resolve()), path.stat().st_mtime_ns
+    except OSError:
+        raise InputError(f"{path}: texture file not found") from None
+
+
+@functools.lru_cache(maxsize=CACHE_PYRAMIDS)
+def _code_maps(albedo_key, data_key, channels: tuple) -> MipTexture:
+    """The 8-bit pyramid of load_maps: channels 0..2 the albedo's sRGB codes (0 without an albedo: the base colour
+    is a constant decode table), then `channels` of the data image. Level 0 is written straight into the pyramid."""
+    rgb = read_codes(albedo_key[0]) if albedo_key else None
+    data = _data_channels(data_key[0], read_codes(data_key[0]), channels) if data_key else None
+    h, w = rgb.shape[:2] if rgb is not None else data.shape[:2]
+    if data is not None and data.shape[:2] != (h, w):
+        data = _resize(data, w, h)
+    tex = MipTexture.empty(h, w, 3 + len(channels), np.uint8, decode_tables(3 + len(channels), 3))
+    level0 = tex.texels(0)
+    if rgb is None:
+        level0[..., :3] = 0
+    else:
+        level0[..., :3] = rgb[..., :3] if rgb.shape[2] >= 3 else rgb[..., :1]     # grey (+ alpha): repeated
+    if data is not None:
+        level0[..., 3:] = data
+    return tex.build_mips(colour=3)
+
+
+@functools.lru_cache(maxsize=4)
+def _float_maps(albedo_key, data_key, offset: float, channels: tuple, base_color: tuple) -> MipTexture:
+    """load_maps for files of more than 8 bits: float32 linear values, the offset applied at load."""
     data = read_image(data_key[0], srgb=False) if data_key else None
     if data is not None:
-        if max(channels) >= data.shape[2]:
-            raise InputError(f"{data_key[0]}: has {data.shape[2]} channels, channel {max(channels)} was asked for")
-        data = data[..., list(channels)]
+        data = _data_channels(data_key[0], data, channels)
     if albedo_key is not None:
-        rgb = read_image(albedo_key[0], srgb=True, offset=offset)[..., :3]
-        if rgb.shape[2] == 1:
-            rgb = np.repeat(rgb, 3, axis=2)
+        rgb = read_image(albedo_key[0], srgb=True, offset=offset)
+        rgb = rgb[..., :3] if rgb.shape[2] >= 3 else np.repeat(rgb[..., :1], 3, axis=2)
     else:
         shape = data.shape[:2] if data is not None else (1, 1)
         rgb = np.broadcast_to(np.asarray(base_color, np.float32), shape + (3,))
     if data is None:
-        return MipTexture(mip_levels(rgb))
+        return float_pyramid(rgb)
     if data.shape[:2] != rgb.shape[:2]:
         data = _resize(data, rgb.shape[1], rgb.shape[0])
-    return MipTexture(mip_levels(np.concatenate([rgb, data], axis=2)))
+    return float_pyramid(np.concatenate([rgb, data], axis=2))
+
+
+def _data_channels(path: str, image: np.ndarray, channels: tuple) -> np.ndarray:
+    if max(channels) >= image.shape[2]:
+        raise InputError(f"{path}: has {image.shape[2]} channels, channel {max(channels)} was asked for")
+    return image[..., list(channels)]
 
 
 def _resize(image: np.ndarray, width: int, height: int) -> np.ndarray:
-    buf = oiio.ImageBuf(np.ascontiguousarray(image, np.float32))
+    """(height, width, C) image resized by OpenImageIO, in its own type (uint8 codes stay codes)."""
+    fmt = oiio.UINT8 if image.dtype == np.uint8 else oiio.FLOAT
+    buf = oiio.ImageBuf(np.ascontiguousarray(image))
     out = oiio.ImageBufAlgo.resize(buf, roi=oiio.ROI(0, width, 0, height, 0, 1, 0, image.shape[2]))
-    return out.get_pixels(oiio.FLOAT).reshape(height, width, image.shape[2])
+    return out.get_pixels(fmt).reshape(height, width, image.shape[2])
 
 
 @functools.lru_cache(maxsize=2)
@@ -219,4 +523,4 @@ def checker_texture(size: int = 1024, cells: int = 16) -> MipTexture:
     light = ((col + row) % 2 == 0)[..., None]
     shade = (0.35 + 0.6 * row / cells)[..., None]
     img = np.where(light, 0.85 * tint * shade + 0.1, 0.08 * tint + 0.02)
-    return MipTexture(mip_levels(img.astype(np.float32)))
+    return float_pyramid(img.astype(np.float32))
