@@ -8,7 +8,8 @@ worker has started (1000 / images per second); startup_s the time until then (sp
 source); cpu_ms_per_image the CPU time of the rendering processes per image; tail_idle_s the sharding's imbalance.
 
 'catalogue' renders frames whose textures, skin tones and accessories are drawn from the whole catalogue, as a real
-dataset does: with few frames per texture, loading textures (0.1-0.2 s per 2048^2 texture) is a large share.
+dataset does, but few: nearly every frame loads a new texture (0.1-0.2 s per 2048^2 texture), the worst case; a
+large dataset's frames share each texture (render-dataset hands a texture's frames to one worker together).
 """
 
 from __future__ import annotations
