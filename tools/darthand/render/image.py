@@ -21,7 +21,11 @@ from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.textures.color import encode_srgb8, srgb_to_linear
 
-PNG_COMPRESSION = 1   # zlib level: about 3 ms for a 512^2 RGBA render; level 6 saves 20% of the bytes for 3x the time
+# zlib run-length strategy: on the 'Up'-filtered rows of a render (long runs of zeros around and inside the hand) it
+# is a little faster than level 1's default strategy and its files are about 20% smaller (2.5 ms, 46 kB against
+# 2.8 ms, 57 kB for a 512^2 RGBA frame); the default strategy at level 6 gets 41 kB in 9.8 ms.
+PNG_COMPRESSION = 1
+PNG_STRATEGY = zlib.Z_RLE
 _LUT_BITS = 16
 
 
@@ -97,7 +101,7 @@ def write_png(path: str | os.PathLike, pixels: np.ndarray, srgb: bool = True) ->
     8-bit PNG, atomically; deterministic bytes for the same pixels. srgb: tag the file with an sRGB chunk.
 
     Encoded here with zlib rather than through OpenImageIO because OpenImageIO's Python write holds the GIL for
-    most of its run, which stalls the renderer while a FrameWriter thread writes; zlib.compress releases it. Every
+    most of its run, which stalls the renderer while a FrameWriter thread writes; zlib's compressor releases it. Every
     row uses PNG's 'Up' filter (the difference to the row above: one vectorised subtraction).
     """
     img = np.ascontiguousarray(pixels, np.uint8)
@@ -116,7 +120,8 @@ def write_png(path: str | os.PathLike, pixels: np.ndarray, srgb: bool = True) ->
     chunks = [_png_chunk(b"IHDR", header)]
     if srgb:
         chunks.append(_png_chunk(b"sRGB", b"\x00"))      # perceptual rendering intent
-    chunks += [_png_chunk(b"IDAT", zlib.compress(filtered.data, PNG_COMPRESSION)), _png_chunk(b"IEND", b"")]
+    deflate = zlib.compressobj(PNG_COMPRESSION, zlib.DEFLATED, 15, 9, PNG_STRATEGY)
+    chunks += [_png_chunk(b"IDAT", deflate.compress(filtered.data) + deflate.flush()), _png_chunk(b"IEND", b"")]
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:
             f.write(b"\x89PNG\r\n\x1a\n")
