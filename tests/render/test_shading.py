@@ -196,3 +196,22 @@ def test_triangle_shading_equals_per_sample_shading_where_each_triangle_is_const
             n /= np.linalg.norm(n)
             value = np.asarray(s.material.maps.levels[-1]).reshape(-1)[:3] * 1.2 * abs(n @ l)
             assert np.isclose(np.abs(tri.colour.reshape(-1, 3) - value).sum(1), 0, atol=1e-5).any()
+
+
+def test_default_lights_do_not_overexpose_a_white_surface():
+    """The default rig is exposed for albedos up to 1 (the brightest skin textures): a white Lambert sphere, which
+    shows every normal facing the camera, stays below radiance 1 everywhere and reaches at least 0.8 where the key
+    light meets it head-on (closed form: key + ambient, plus the fill's share at that normal)."""
+    import trimesh
+
+    from darthand.render.lights import default_lighting
+
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.5)
+    ball = surface(sphere.vertices, sphere.faces, material=flat_material((1.0, 1.0, 1.0)))
+    lighting = default_lighting()
+    frame = render(subject(ball), top_camera(height=3.0, size=96, fov_deg=25), lighting, samples=1, labels=False)
+    lit = frame.colour[frame.alpha == 1]
+    assert lit.max() < 1.0
+    key = lighting.lights[0]
+    peak = key.intensity * np.asarray(key.color) + lighting.ambient
+    assert lit.max(axis=0)[0] >= 0.8 and lit.max(axis=0)[0] >= 0.95 * peak[0]

@@ -20,9 +20,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[3]
 TEXTURE = "light_moles_00"
 ACCESSORY = "ring_01_court_gold"
-LIGHTS = {"ambient": {"color": [0.85, 0.9, 1.0], "intensity": 0.3},
+LIGHTS = {"ambient": {"color": [0.85, 0.9, 1.0], "intensity": 0.2},
           "lights": [{"type": "directional", "direction": [0.5, 0.6, 0.62], "color": [1.0, 0.96, 0.9],
-                      "intensity": 2.6, "shadows": True, "frame": "camera"}]}
+                      "intensity": 0.8, "shadows": True, "frame": "camera"}]}
 
 
 def _sources(tmp: Path):
