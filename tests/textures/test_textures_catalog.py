@@ -9,8 +9,8 @@ import jsonschema
 import pytest
 from darthand.errors import InputError
 from darthand.schemas import load_schema
-from darthand.textures.catalog import (BASE_CATEGORIES, OVERLAY_CATEGORIES, default_spec_path, entry_seed,
-                                       expand_catalog, load_spec, select, validate_spec)
+from darthand.textures.catalog import (BASE_CATEGORIES, MAX_TONE_SRGB, OVERLAY_CATEGORIES, default_spec_path,
+                                       entry_seed, expand_catalog, load_spec, select, validate_spec)
 from texture_hand import entries, spec
 
 
@@ -48,6 +48,7 @@ def test_entries_are_plain_json_with_ranges_respected():
     for e in entries():
         json.dumps(e.to_json())
         assert lo <= e.offset <= hi
+        assert max(e.tone_srgb) + e.offset <= max(MAX_TONE_SRGB, max(e.tone_srgb)) + 1e-5, e.id  # offset: 5 decimals
         assert 1.0 <= e.mst <= 10.0
         if e.kind == "overlay":
             assert abs(e.mst - s["tones"][e.tone]) <= s["tone_jitter"] + 1e-9
