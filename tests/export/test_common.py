@@ -255,6 +255,10 @@ def test_texture_catalogue_in_the_stage_format(tmp_path):
     assert sets[0].albedo == tmp_path / "tex" / "a.png" and sets[0].albedo.read_bytes() == a.read_bytes()
     assert sets[0].roughness is None and sets[1].roughness == tmp_path / "tex" / "rough.png"
     assert load_texture_catalog(tmp_path / "tex") == sets      # the folder works too
+    doc = json.loads(catalog.read_text())
+    doc["default"] = "dark_tattoos_01"
+    catalog.write_text(json.dumps(doc))
+    assert [s.id for s in load_texture_catalog(catalog)] == ["dark_tattoos_01", "light_freckles_00"]
 
 
 def test_texture_catalogue_written_by_the_textures_stage(model, tmp_path):

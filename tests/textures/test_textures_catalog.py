@@ -108,6 +108,10 @@ def test_bad_specs_name_the_field(tmp_path):
     bad["offset"] = [0.1, -0.1]
     with pytest.raises(InputError, match="offset"):
         validate_spec(bad, "spec.json")
+    bad = copy.deepcopy(spec())
+    bad["default"] = "light_moles_99"
+    with pytest.raises(InputError, match="'default' 'light_moles_99'"):
+        validate_spec(bad, "spec.json")
     p = tmp_path / "broken.json"
     p.write_text("{ not json")
     with pytest.raises(InputError, match="broken.json"):

@@ -425,8 +425,9 @@ class Accessory:
 
 
 def load_texture_catalog(path: str | Path) -> list[TextureSet]:
-    """The skin texture variants of a textures-stage catalogue (build/textures/catalog.json, or its folder), in
-    catalogue order; the first is the default variant.
+    """The skin texture variants of a textures-stage catalogue (build/textures/catalog.json, or its folder), the
+    default variant first (the catalogue's 'default' when it names an entry, else its first entry), then the others
+    in catalogue order.
 
     The file must validate against schemas/texture_catalog.schema.json (InputError naming the field otherwise).
     Each entry's files.albedo (sRGB PNG) and files.roughness (raw PNG or null) are relative to the catalogue.
@@ -435,9 +436,10 @@ def load_texture_catalog(path: str | Path) -> list[TextureSet]:
     data = _read_catalog(path, "texture", "texture_catalog.schema.json")
     if not data["entries"]:
         raise InputError(f"{path}: field 'entries' is empty (build textures with the textures stage)")
+    entries = sorted(data["entries"], key=lambda e: e["id"] != data.get("default"))     # stable: default first
     return [TextureSet(e["id"], path.parent / e["files"]["albedo"],
                        path.parent / e["files"]["roughness"] if e["files"]["roughness"] else None)
-            for e in data["entries"]]
+            for e in entries]
 
 
 def check_textures_fit(model: HandModel, textures: list[TextureSet]) -> None:

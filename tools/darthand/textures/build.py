@@ -97,6 +97,8 @@ def build_textures(model: HandModel, spec: dict, out_dir: str | Path, res: int =
         "contact_sheet": "contact_sheet.png" if sheet and listed else None,
         "entries": listed,
     }
+    if spec.get("default") in {r["id"] for r in listed}:
+        catalog["default"] = spec["default"]
     if sheet and listed:
         make_contact_sheet(out_dir, catalog, bake, thumbs)
     write_json(out_dir / "catalog.json", catalog)

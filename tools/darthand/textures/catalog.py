@@ -93,6 +93,8 @@ def validate_spec(spec: dict, source: str = "catalogue spec") -> None:
     lo, hi = spec["offset"]
     if lo > hi:
         raise InputError(f"{source}: field 'offset' has min {lo} > max {hi}")
+    if "default" in spec and spec["default"] not in {e.id for e in expand_catalog(spec)}:
+        raise InputError(f"{source}: field 'default' {spec['default']!r} is not an id of the catalogue")
 
 
 def expand_catalog(spec: dict) -> list[Entry]:
