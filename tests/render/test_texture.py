@@ -270,6 +270,28 @@ def test_two_offsets_decode_the_file_once(tmp_path, monkeypatch):
     assert len(reads) == 4 and np.array_equal(c.levels[0][..., :3], srgb8_to_linear_lut(-0.1)[codes[::-1]])
 
 
+def test_the_cache_keeps_many_small_maps_within_its_memory_budget(tmp_path, monkeypatch):
+    """Sixty small maps (an accessory catalogue's worth) stay cached together; past the byte budget the least
+    recently used pyramid is dropped and decoded again when asked for."""
+    paths = [write_png(tmp_path / f"m{i}.png", random_codes(8, 8, 3, seed=i)) for i in range(60)]
+    texture_module.clear_cache()
+    reads = []
+    real = texture_module.read_codes
+    monkeypatch.setattr(texture_module, "read_codes", lambda path: reads.append(str(path)) or real(path))
+    for _ in range(2):
+        for p in paths:
+            load_maps(p)
+    assert len(reads) == 60
+    size = load_maps(paths[0]).nbytes
+    monkeypatch.setattr(texture_module, "CACHE_BYTES", 10 * size)
+    load_maps(write_png(tmp_path / "new.png", random_codes(8, 8, 3, seed=99)))   # over budget: keeps the last 10
+    load_maps(paths[-1])
+    assert len(reads) == 61
+    load_maps(paths[1])
+    assert len(reads) == 62
+    texture_module.clear_cache()
+
+
 def test_data_maps_without_albedo_use_the_constant_base_colour(tmp_path):
     mr = random_codes(8, 8, 3, seed=6)
     path = write_png(tmp_path / "mr.png", mr)

@@ -66,7 +66,7 @@ class _Loader:
 def _loaders(before) -> dict:
     from darthand.render import texture
 
-    after = _Loader(texture.load_maps, texture._code_maps.cache_clear)
+    after = _Loader(texture.load_maps, texture.clear_cache)
     if before is None:
         ref = _Loader(lambda *a, **k: texture.load_maps(*a, **k, codes=False), texture._float_maps.cache_clear)
     else:

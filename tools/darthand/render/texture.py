@@ -27,6 +27,8 @@ from __future__ import annotations
 import copy
 import functools
 import os
+import threading
+from collections import OrderedDict
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -38,8 +40,10 @@ from darthand.render.image import encode_srgb
 from darthand.textures.color import srgb_to_linear
 
 BLEND = 0.25     # half-width of the band of fractional mip levels (around .5) in which two levels are blended
-CACHE_PYRAMIDS = 32   # 8-bit pyramids kept by load_maps: ~22 MB each for 2048^2 RGB + roughness (the float32
-                      # pyramids of the earlier cache of 8 were ~90 MB each, per texture *and* offset)
+# 8-bit pyramids kept by load_maps, least recently used dropped first, within a memory budget rather than a count:
+# a skin texture (2048^2 RGB + roughness) is ~22 MB, an accessory's maps often under 1 MB, and a dataset that
+# cycles through all 50 accessories with a few skins must not reload them (a count of 32 did: 8 ms a switch).
+CACHE_BYTES = 512 << 20
 
 
 class MipTexture:
@@ -459,8 +463,33 @@ def _file_key(path: str | os.PathLike) -> tuple[str, int]:
         raise InputError(f"{path}: texture file not found") from None
 
 
-@functools.lru_cache(maxsize=CACHE_PYRAMIDS)
+_PYRAMIDS: OrderedDict = OrderedDict()
+_PYRAMIDS_LOCK = threading.Lock()
+
+
 def _code_maps(albedo_key, data_key, channels: tuple) -> MipTexture:
+    """`_build_code_maps`, cached (CACHE_BYTES)."""
+    key = (albedo_key, data_key, channels)
+    with _PYRAMIDS_LOCK:
+        if key in _PYRAMIDS:
+            _PYRAMIDS.move_to_end(key)
+            return _PYRAMIDS[key]
+    tex = _build_code_maps(albedo_key, data_key, channels)
+    with _PYRAMIDS_LOCK:
+        _PYRAMIDS[key] = tex
+        total = sum(t.nbytes for t in _PYRAMIDS.values())
+        while len(_PYRAMIDS) > 1 and total > CACHE_BYTES:
+            total -= _PYRAMIDS.popitem(last=False)[1].nbytes
+    return tex
+
+
+def clear_cache() -> None:
+    """Forget the cached pyramids (benchmarks time cold loads)."""
+    with _PYRAMIDS_LOCK:
+        _PYRAMIDS.clear()
+
+
+def _build_code_maps(albedo_key, data_key, channels: tuple) -> MipTexture:
     """The 8-bit pyramid of load_maps: channels 0..2 the albedo's sRGB codes (0 without an albedo: the base colour
     is a constant decode table), then `channels` of the data image. Level 0 is written straight into the pyramid."""
     rgb = read_codes(albedo_key[0]) if albedo_key else None
