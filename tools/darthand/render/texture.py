@@ -368,13 +368,6 @@ def decode_tables(channels: int, colour: int = 0, *, offset: float = 0.0, consta
     return table
 
 
-def pack_textures(*textures: MipTexture) -> MipTexture:
-    """One float texture whose channels are those of `textures` (same size) side by side, for a single lookup."""
-    if len({(t.width, t.height) for t in textures}) != 1:
-        raise ValueError("pack_textures: the textures differ in size")
-    return MipTexture([np.concatenate(lv, axis=2) for lv in zip(*(t.levels for t in textures))])
-
-
 def constant_texture(value) -> MipTexture:
     """A 1 x 1 texture of one value (C,)."""
     return MipTexture([np.asarray(value, np.float32).reshape(1, 1, -1)])
