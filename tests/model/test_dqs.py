@@ -18,6 +18,13 @@ def twist(angle: float) -> np.ndarray:
     return p
 
 
+def single_influence(m):
+    """The model with each vertex bound to its heaviest joint alone (DQS and LBS then agree exactly)."""
+    hard = np.zeros_like(m.weights)
+    hard[np.arange(m.num_vertices), m.weights.argmax(1)] = 1
+    return m.replace(weights=hard)
+
+
 def random_poses(rng, n, max_angle=np.pi):
     axes = rng.standard_normal((n, 16, 3))
     axes /= np.linalg.norm(axes, axis=-1, keepdims=True)
@@ -32,10 +39,7 @@ def test_cylinder_fixture_is_what_the_closed_forms_assume():
 
 
 def test_single_influence_equals_lbs():
-    m = tube_hand(3)
-    hard = np.zeros_like(m.weights)
-    hard[np.arange(m.num_vertices), m.weights.argmax(1)] = 1
-    m = m.replace(weights=hard)
+    m = single_influence(tube_hand(3))
     poses = random_poses(np.random.default_rng(0), 8)
     for corr in (False, True):
         np.testing.assert_allclose(dqs(m, poses, correctives=corr),
@@ -94,10 +98,7 @@ def test_antipodal_quaternions_are_aligned():
 
 
 def test_betas_move_the_rest_shape_like_forward():
-    m = tube_hand(4)
-    hard = np.zeros_like(m.weights)
-    hard[np.arange(m.num_vertices), m.weights.argmax(1)] = 1
-    m = m.replace(weights=hard)
+    m = single_influence(tube_hand(4))
     poses = random_poses(np.random.default_rng(7), 3)
     betas = np.random.default_rng(8).normal(0, 1, (3, m.num_betas))
     np.testing.assert_allclose(dqs(m, poses, betas), forward(m, poses, betas, correctives=False).vertices,

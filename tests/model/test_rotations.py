@@ -418,6 +418,14 @@ def assert_le(err, bound):
     assert not bad.any(), f"{bad.sum()} over tolerance: err {err[bad].max():.3g}, bound {bound[bad].min():.3g}"
 
 
+def axis_angle_error(back, aa, dtype):
+    """(B,) max-abs distance of axis-angles `back` from wrap_axis_angle(aa), where the sign is free at pi."""
+    wrapped = wrap_axis_angle(aa)
+    near_pi = PI - _angles(wrapped) < (1e-12 if dtype == np.float64 else 1e-5)
+    err = np.abs(back - wrapped).max(axis=-1)
+    return np.where(near_pi, np.minimum(err, np.abs(back + wrapped).max(axis=-1)), err)
+
+
 def _angles(aa):
     return np.linalg.norm(aa.astype(np.float64), axis=-1)
 
@@ -450,11 +458,7 @@ def test_axis_angle_matrix_round_trip(dtype, data):
     # same rotation, always
     assert_le(np.abs(axis_angle_to_matrix(back) - R).max(axis=(1, 2)), 8 * TOL[dtype] * scale)
     # same vector as the wrapped input, except where pi makes the sign free
-    wrapped = wrap_axis_angle(aa)
-    near_pi = PI - _angles(wrapped) < (1e-12 if dtype == np.float64 else 1e-5)
-    err = np.abs(back - wrapped).max(axis=-1)
-    err = np.where(near_pi, np.minimum(err, np.abs(back + wrapped).max(axis=-1)), err)
-    assert_le(err, TOL[dtype] * scale)
+    assert_le(axis_angle_error(back, aa, dtype), TOL[dtype] * scale)
 
 
 @pytest.mark.parametrize("dtype", DTYPES, ids=["f64", "f32"])
@@ -469,11 +473,7 @@ def test_axis_angle_quaternion_round_trip(dtype, data):
     R = axis_angle_to_matrix(aa)
     assert_le(np.abs(quaternion_to_matrix(q) - R).max(axis=(1, 2)), TOL[dtype] * scale)
     back = quaternion_to_axis_angle(q)
-    wrapped = wrap_axis_angle(aa)
-    near_pi = PI - _angles(wrapped) < (1e-12 if dtype == np.float64 else 1e-5)
-    err = np.abs(back - wrapped).max(axis=-1)
-    err = np.where(near_pi, np.minimum(err, np.abs(back + wrapped).max(axis=-1)), err)
-    assert_le(err, TOL[dtype] * scale)
+    assert_le(axis_angle_error(back, aa, dtype), TOL[dtype] * scale)
     # -q is the same rotation
     assert_le(np.abs(quaternion_to_axis_angle(-q) - back), TOL[dtype] * scale[:, None])
 

@@ -97,23 +97,21 @@ def good_usd(model, sources, tmp_path_factory) -> Path:
     return out
 
 
-@pytest.fixture(scope="session")
-def good_glb(model, sources, tmp_path_factory) -> Path:
+def _export_gltf(model, sources, out: Path) -> Path:
     from darthand.export.gltf_export import export_gltf
 
     textures, accessories = sources
-    out = tmp_path_factory.mktemp("glb") / "right.glb"
+    out.parent.mkdir(parents=True, exist_ok=True)
     export_gltf(model, out, textures=textures, accessories=accessories, gestures=GESTURES)
     return out
+
+
+@pytest.fixture(scope="session")
+def good_glb(model, sources, tmp_path_factory) -> Path:
+    return _export_gltf(model, sources, tmp_path_factory.mktemp("glb") / "right.glb")
 
 
 @pytest.fixture(scope="session")
 def good_gltf(model, sources, tmp_path_factory) -> Path:
     """A .gltf package: right.gltf, right.bin, textures/*.png."""
-    from darthand.export.gltf_export import export_gltf
-
-    textures, accessories = sources
-    out = tmp_path_factory.mktemp("gltf") / "pkg" / "right.gltf"
-    out.parent.mkdir()
-    export_gltf(model, out, textures=textures, accessories=accessories, gestures=GESTURES)
-    return out
+    return _export_gltf(model, sources, tmp_path_factory.mktemp("gltf") / "pkg" / "right.gltf")
