@@ -11,7 +11,8 @@ from darthand.render.api import render_subject
 from darthand.render.camera import look_at
 from darthand.render.lights import Light, Lighting
 from darthand.render.scene import Scene
-from darthand.render.subject import Material, Subject, Surface, vertex_normals
+from darthand.model.topology import vertex_normals
+from darthand.render.subject import Material, Subject, Surface
 from darthand.render.texture import constant_texture
 
 

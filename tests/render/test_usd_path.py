@@ -69,7 +69,7 @@ def test_checks_pass_on_a_good_package_and_catch_flipped_uvs(package, hand):
     assert result["checks"]["uv_seams"]["max_error_m"] < 3 * result["checks"]["uv_seams"]["texel_m"]
 
     # The position texture is rasterised from the unflipped package, the lookup uses flipped UVs.
-    good = check_uv_seams(Renderer(src), src, 96)["result"]
+    good = check_uv_seams(Renderer(src), 96)["result"]
     assert not good["failures"]
     from darthand.render import checks as checks_module
 
@@ -77,7 +77,7 @@ def test_checks_pass_on_a_good_package_and_catch_flipped_uvs(package, hand):
     try:
         checks_module.position_texture = lambda surface, res=checks_module.SEAM_RES: original(
             dataclasses.replace(surface, uvs=surface.uvs * [1, -1] + [0, 1]), res)
-        bad = check_uv_seams(Renderer(src), src, 96)["result"]
+        bad = check_uv_seams(Renderer(src), 96)["result"]
     finally:
         checks_module.position_texture = original
     assert bad["failures"] and bad["max_error_m"] > 0.01

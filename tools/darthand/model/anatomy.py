@@ -35,6 +35,7 @@ from darthand.errors import InputError
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import FACE_LABEL_IDS, FINGER_JOINTS, FINGERS, JOINT_NAMES, NUM_JOINTS
 from darthand.model.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from darthand.model.topology import face_joints
 
 AXES = ("twist", "spread", "bend")
 PALM_JOINTS = (0, 1, 4, 7, 10)  # wrist and the four finger MCPs: the palm plane
@@ -109,7 +110,7 @@ def thumb_pad_direction(model: HandModel, bone: np.ndarray, palm: np.ndarray) ->
     nail faces; the palm normal rolled by THUMB_PAD_ROLL_DEG about the bone if the model has no usable nail labels.
     """
     if model.face_labels is not None:
-        thumb = np.isin(np.argmax(model.weights[model.faces].sum(axis=1), axis=1), FINGER_JOINTS["thumb"])
+        thumb = np.isin(face_joints(model.faces, model.weights), FINGER_JOINTS["thumb"])
         nails = thumb & (model.face_labels == FACE_LABEL_IDS["nail"])
         v = model.v_template[model.faces[nails]]
         normals = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])

@@ -9,7 +9,6 @@ hand. Textures are decoded once per file pair; a skin-tone offset is a decode ta
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,9 +18,9 @@ from darthand.errors import InputError
 from darthand.export.common import Accessory, TextureSet, load_accessory_catalog, load_texture_catalog
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
-from darthand.render.subject import (PLAIN_SKIN, Material, Subject, Surface, face_joints, skin_material,
-                                      vertex_normals)
-from darthand.render.texture import checker_texture, constant_texture, load_maps
+from darthand.model.topology import face_joints, vertex_normals
+from darthand.render.subject import PLAIN_SKIN, Material, Subject, Surface, checker_material, skin_material
+from darthand.render.texture import constant_texture, load_maps
 
 PLAIN = "plain"        # texture id of the untextured hand (a constant skin colour)
 CHECKER = "checker"    # texture id of the UV checker
@@ -124,7 +123,7 @@ class HandAssets:
             plain = srgb_to_linear(np.clip(linear_to_srgb(np.array(PLAIN_SKIN)) + offset, 0, 1))
             return skin_material(constant_texture(plain), name=PLAIN)
         if texture == CHECKER:
-            return dataclasses.replace(skin_material(checker_texture(), name=CHECKER), wrap=(0.0, 0.0, 0.0))
+            return checker_material()
         t: TextureSet = self.textures[texture]
         if not self.model.has_uvs:
             raise InputError(f"{self.source}: the model has no UVs, so texture {texture!r} cannot be mapped")
@@ -177,12 +176,9 @@ class HandAssets:
 
 
 def texture_catalog(path) -> tuple[list[TextureSet], str | None]:
-    """The texture sets of a catalogue and its default id (export.common.load_texture_catalog returns the list,
-    default first, or -- in its earlier form -- the pair)."""
-    result = load_texture_catalog(path)
-    if isinstance(result, tuple):
-        return result
-    return list(result), (result[0].id if result else None)
+    """The texture sets of a catalogue and its default id (load_texture_catalog lists the default first)."""
+    sets = load_texture_catalog(path)
+    return sets, (sets[0].id if sets else None)
 
 
 def accessory_material(acc: Accessory) -> Material:

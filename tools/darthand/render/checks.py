@@ -29,8 +29,8 @@ from darthand.fileio import write_json
 from darthand.model.layout import MANO_PARENTS
 from darthand.render.api import Frame, Renderer, render_subject
 from darthand.render.scene import Scene
-from darthand.render.subject import Subject, skin_material
-from darthand.render.texture import MipTexture, checker_texture, mip_levels
+from darthand.render.subject import Subject, checker_material
+from darthand.render.texture import MipTexture, mip_levels
 
 COVERAGE_RANGE = (0.02, 0.75)
 KEYPOINT_SLACK_PX = 3.0
@@ -105,7 +105,7 @@ def check_package(package, *, size: int = 256, all_accessories: bool = True) -> 
         name = f"{gesture} {view}"
         _check_frame(frame, name, checks)
         tiles.append((frame, f"{gesture}/{view} {texture[:18]}"))
-    uv = check_uv_seams(renderer, package, size)
+    uv = check_uv_seams(renderer, size)
     checks["uv_seams"].update(uv.pop("result"))
     tiles.append((uv.pop("frame"), "uv checker"))
     renders += 1
@@ -224,12 +224,11 @@ def position_texture(surface, res: int = SEAM_RES) -> tuple[MipTexture, float]:
     return MipTexture(mip_levels(img.astype(np.float32))), texel
 
 
-def check_uv_seams(renderer: Renderer, package, size: int) -> dict:
+def check_uv_seams(renderer: Renderer, size: int) -> dict:
     """The UV-checker render of the flat hand (three-quarter view) and the position-texture test of its UVs."""
     subject = renderer.source.subject(None, accessory="none")
     hand = subject.hand
-    checker = dataclasses.replace(hand, material=dataclasses.replace(skin_material(checker_texture(), name="checker"),
-                                                                     wrap=(0.0, 0.0, 0.0)))
+    checker = dataclasses.replace(hand, material=checker_material())
     subj = Subject((checker,), subject.joints, subject.keypoints, subject.side, subject.pose, subject.keypoint_order,
                    {**subject.info, "texture": "checker"})
     from darthand.render.camera import load_camera

@@ -12,9 +12,6 @@ import numpy as np
 
 from darthand.errors import InputError
 
-PACKAGE_HELP = ("a USD package (build/usd/right, or its .usda), or a model for the internal path: a darthand .npz "
-                "(build/model/right.npz), 'right' / 'left' (build/model/<side>.npz) or 'open'")
-
 
 def parse_pose(text: str | None):
     """--pose: None, a gesture name or pose file path (strings), 48 comma-separated numbers, or an int time code."""

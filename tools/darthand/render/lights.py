@@ -21,9 +21,6 @@ import numpy as np
 from darthand.errors import InputError
 from darthand.fileio import read_json
 
-LIGHT_TYPES = ("directional", "point")
-FRAMES = ("world", "camera")
-
 
 @dataclass(frozen=True)
 class Light:

@@ -32,7 +32,6 @@ from darthand.render.subject import Material
 
 SHADOW_LIFT = 2e-3          # shadow-ray origin offset, relative to the scene's bounding-box diagonal
 MIN_ROUGHNESS = 0.045       # GGX is singular at alpha = 0
-_PI = np.float32(np.pi)
 
 
 @dataclass

@@ -8,13 +8,12 @@ Shapes: N vertices, F faces, T UV coordinates; world = the model's frame, metres
 
 from __future__ import annotations
 
-import functools
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
 
-from darthand.render.texture import MipTexture, constant_texture
+from darthand.render.texture import MipTexture, checker_texture, constant_texture
 
 SKIN_F0 = 0.028                      # normal-incidence reflectance of skin (refractive index about 1.4)
 SKIN_WRAP = (0.32, 0.16, 0.10)       # per-channel wrap: red light reaches furthest past the terminator (scattering)
@@ -44,6 +43,11 @@ class Material:
     f0: float = DIELECTRIC_F0
     name: str = ""
     specular: float = 1.0
+
+
+def checker_material() -> Material:
+    """The UV checker as an unlit-looking skin (no wrap: the pattern's edges stay where the UVs put them)."""
+    return dataclasses.replace(skin_material(checker_texture(), name="checker"), wrap=(0.0, 0.0, 0.0))
 
 
 def skin_material(maps: MipTexture | None = None, roughness_channel: int | None = None,
@@ -103,32 +107,3 @@ class Subject:
 
     def all_vertices(self) -> np.ndarray:
         return np.concatenate([s.vertices for s in self.surfaces])
-
-
-# ------------------------------------------------------------------------------------------------ normals
-
-
-def face_joints(faces: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """(F,) int8 the joint with the largest skinning weight summed over each face's corners (weights (N, 16))."""
-    return np.argmax(weights[faces].sum(axis=1), axis=1).astype(np.int8)
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(N, 3) float32 area-weighted unit vertex normals of a posed mesh: one sparse product per pose (the
-    vertex-face incidence matrix is built once per topology), faster than np.add.at's scatter."""
-    v = np.asarray(vertices, np.float32)
-    faces = np.ascontiguousarray(faces, dtype=np.int32)
-    a, b, c = v[faces[:, 0]], v[faces[:, 1]], v[faces[:, 2]]
-    fn = np.cross(b - a, c - a)
-    n = _incidence(faces.tobytes(), len(v)) @ fn
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, length, out=np.zeros_like(n), where=length > 0).astype(np.float32)
-
-
-@functools.lru_cache(maxsize=16)
-def _incidence(faces_bytes: bytes, num_vertices: int) -> sp.csr_matrix:
-    """(N, F) matrix with a 1 where vertex n is a corner of face f."""
-    rows = np.frombuffer(faces_bytes, dtype=np.int32)
-    num_faces = len(rows) // 3
-    cols = np.repeat(np.arange(num_faces), 3)
-    return sp.csr_matrix((np.ones(len(rows), np.float32), (rows, cols)), shape=(num_vertices, num_faces))

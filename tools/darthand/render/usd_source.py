@@ -17,8 +17,10 @@ import numpy as np
 from pxr import Usd, UsdGeom, UsdShade, UsdSkel
 
 from darthand.errors import InputError
+from darthand.export.common import dense_weights
 from darthand.model.layout import KEYPOINT_ORDERS, NUM_JOINTS
-from darthand.render.subject import (Material, Subject, Surface, face_joints, skin_material, vertex_normals)
+from darthand.model.topology import face_joints, vertex_normals
+from darthand.render.subject import Material, Subject, Surface, skin_material
 from darthand.render.texture import constant_texture, load_maps
 
 HAND_MESH = "Hand"
@@ -213,11 +215,8 @@ def _dense_weights(prim: Usd.Prim, n: int) -> np.ndarray | None:
     if not idx_pv or idx_pv.GetInterpolation() == UsdGeom.Tokens.constant:
         return None
     k = idx_pv.GetElementSize()
-    idx = np.asarray(idx_pv.Get(), np.int64).reshape(n, k)
-    w = np.asarray(w_pv.Get(), np.float64).reshape(n, k)
-    dense = np.zeros((n, NUM_JOINTS))
-    np.add.at(dense, (np.repeat(np.arange(n), k), idx.reshape(-1)), w.reshape(-1))
-    return dense
+    return dense_weights(np.asarray(idx_pv.Get(), np.int64).reshape(n, k),
+                         np.asarray(w_pv.Get(), np.float64).reshape(n, k))
 
 
 def _rigid_joint(prim: Usd.Prim) -> int | None:

@@ -26,6 +26,7 @@ from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import FINGER_JOINTS, FINGERS, NUM_JOINTS
 from darthand.model.poses import gesture_poses
+from darthand.model.topology import face_joints
 from darthand.render.preview import write_gesture_sheet
 
 PARTS = ("palm",) + FINGERS
@@ -42,7 +43,7 @@ def joint_parts() -> np.ndarray:
 
 def face_parts(model: HandModel) -> np.ndarray:
     """(F,) index into PARTS of each face: the part of the joint with the largest summed corner weight."""
-    return joint_parts()[np.argmax(model.weights[model.faces].sum(axis=1), axis=1)]
+    return joint_parts()[face_joints(model.faces, model.weights)]
 
 
 def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

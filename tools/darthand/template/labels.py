@@ -17,6 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from darthand.model.layout import FACE_LABEL_IDS, FINGER_JOINTS
+from darthand.model.topology import face_joints
 
 PALM_NORMAL = np.array([0.0, -1.0, 0.0])  # MANO's frame: the palm faces -Y
 
@@ -34,11 +35,6 @@ def nail_coverage(uvs: np.ndarray, faces_uv: np.ndarray, mask: np.ndarray, sampl
     col = np.clip((pts[..., 0] * W).astype(np.int64), 0, W - 1)
     row = np.clip(((1.0 - pts[..., 1]) * H).astype(np.int64), 0, H - 1)
     return (mask[row, col] > 0.5).mean(1)
-
-
-def face_segments(faces: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """(F,) joint whose summed weight over the face's corners is largest."""
-    return np.argmax(weights[faces].sum(1), axis=1)
 
 
 def smoothed_face_normals(vertices: np.ndarray, faces: np.ndarray, iterations: int) -> np.ndarray:
@@ -63,7 +59,7 @@ def label_faces(vertices: np.ndarray, faces: np.ndarray, weights: np.ndarray, jo
     toward the elbow.
     """
     centres = vertices[faces].mean(1)
-    segment = face_segments(faces, weights)
+    segment = face_joints(faces, weights)
     metacarpal = np.isin(segment, (0, FINGER_JOINTS["thumb"][0]))
     finger_palm_side = np.einsum("fd,fd->f", centres - joints[segment], bone_palmar[segment]) > 0
     palm_facing = smoothed_face_normals(vertices, faces, normal_smoothing) @ PALM_NORMAL > 0

@@ -20,16 +20,6 @@ TIP_RADIUS = 0.0075
 _CHUNK = 1 << 18
 
 
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals (V, 3)."""
-    tri = vertices[faces]
-    fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    vn = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(vn, faces[:, k], fn)
-    return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
-
-
 def face_bones(vertices: np.ndarray, faces: np.ndarray, skel: Skeleton) -> np.ndarray:
     """Nearest bone of each face's centroid (F,) int64."""
     return nearest_bones(face_geometry(vertices, faces)[0], skel)[0]

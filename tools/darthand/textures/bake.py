@@ -22,6 +22,7 @@ from scipy import ndimage
 from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.model.hand_model import HandModel
+from darthand.model.topology import vertex_normals
 from darthand.textures import anatomy, noise
 from darthand.textures.raster import rasterize
 from darthand.textures.regions import ensure_face_labels, face_geometry, skeleton
@@ -156,7 +157,7 @@ def bake(model: HandModel, res: int) -> Bake:
     if len(frags.pixel) == 0:
         raise InputError(f"{model.meta.get('source', 'model')}: field 'uvs' covers no texel of a {res}x{res} texture")
     verts, faces = model.v_template, model.faces
-    vnormals = anatomy.vertex_normals(verts, faces)
+    vnormals = vertex_normals(verts, faces)
     corners = faces[frags.face]
     position = np.einsum("nk,nki->ni", frags.bary, verts[corners])
     normal = np.einsum("nk,nki->ni", frags.bary, vnormals[corners])
