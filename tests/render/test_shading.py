@@ -11,7 +11,7 @@ import pytest
 from render_scenes import flat_material, one_light, quad, render, subject, surface, top_camera
 
 from darthand.render.camera import look_at
-from darthand.render.image import encode_srgb
+from darthand.textures.color import encode_srgb8
 from darthand.render.lights import Light, Lighting
 from darthand.render.shade import ambient_specular, ggx_specular, wrap_diffuse
 from darthand.render.subject import Material
@@ -43,7 +43,13 @@ def test_surface_facing_away_is_black_and_ambient_adds_albedo_times_ambient():
     # With its specular lobe, the ambient specular adds Karis' F0 A + B (A, B from the split-sum fit).
     glossy = dataclasses.replace(flat_material(), specular=1.0, f0=0.04)
     frame = render(subject(quad(size=4.0, material=glossy)), top_camera(size=16), light, samples=1)
-    env = ambient_specular(np.float32(0.04), np.array([0.5], np.float32), np.array([1.0], np.float32))[0]
+    # Karis 2014 at roughness 0.5, n.v = 1, by hand: r = 0.5 c0 + c1 = (0.5, 0.02875, 0.754, -0.029);
+    # a004 = min(0.25, 2^-9.28) 0.5 + 0.02875; A = -1.04 a004 + 0.754; B = 1.04 a004 - 0.029.
+    a004 = min(0.25, 2 ** -9.28) * 0.5 + 0.02875
+    env = 0.04 * (-1.04 * a004 + 0.754) + (1.04 * a004 - 0.029)
+    assert np.isclose(env, 0.03066, atol=1e-5)
+    assert np.isclose(ambient_specular(np.float32(0.04), np.array([0.5], np.float32),
+                                       np.array([1.0], np.float32))[0], env, atol=1e-6)
     assert np.allclose(frame.colour[8, 8], 0.25 * (0.5 + env), atol=1e-4)
 
 
@@ -62,10 +68,10 @@ def test_ggx_peak_closed_form():
         one = np.ones(1, np.float32)
         spec = ggx_specular(one, one, one, one, np.array([rough], np.float32), np.float32(0.04))
         assert np.isclose(spec[0], 0.04 / (4 * rough ** 4), rtol=1e-5)
-    # Grazing view: Schlick's Fresnel goes to 1.
-    g = ggx_specular(np.array([1.0], np.float32), np.array([1e-4], np.float32), np.array([0.7], np.float32),
-                     np.array([0.0], np.float32), np.array([0.5], np.float32), np.float32(0.04))
-    assert g[0] > 0
+    # Grazing (v.h = 0): Schlick's Fresnel is 1 whatever f0, so f0 no longer matters.
+    cosines = [np.array([x], np.float32) for x in (1.0, 1e-4, 0.7, 0.0)]
+    g = ggx_specular(*cosines, np.array([0.5], np.float32), np.float32(0.04))
+    assert g[0] > 0 and np.isclose(g[0], ggx_specular(*cosines, np.array([0.5], np.float32), np.float32(1.0))[0])
 
 
 def test_point_light_inverse_square():
@@ -136,11 +142,11 @@ def test_compositing_over_a_background_has_no_halo():
     assert ((frame.alpha > 0) & (frame.alpha < 1)).sum() > 50
     assert np.allclose(frame.colour, a * fg + (1 - a) * bg, atol=1e-6)
     assert (frame.rgba[..., 3] == 255).all()
-    assert np.array_equal(frame.rgba[..., :3], encode_srgb(frame.colour))
+    assert np.array_equal(frame.rgba[..., :3], encode_srgb8(frame.colour))
     # Without a background the PNG holds straight colour: edge pixels have the foreground's colour, alpha < 1.
     plain, _, _ = triangle_frame(8)
     edge = (plain.alpha > 0) & (plain.alpha < 1)
-    assert (plain.rgba[edge][:, :3] == encode_srgb(fg)).all()
+    assert (plain.rgba[edge][:, :3] == encode_srgb8(fg)).all()
     assert np.array_equal(plain.rgba[..., 3], np.rint(plain.alpha * 255).astype(np.uint8))
 
 

@@ -98,10 +98,10 @@ def _antialiasing_error(renderer, gestures, texture_id: str) -> dict:
     shaded every one. Differences in 8-bit sRGB codes of the images composited over mid grey, over the pixels the
     hand covers in either; the anti-aliasing step's ms single-threaded (median over the gestures; the rest of a
     frame is the same for all) and the sub-samples it shaded."""
-    from darthand.render.image import encode_srgb
+    from darthand.textures.color import encode_srgb8
 
     def over_grey(frame):
-        return encode_srgb(frame.colour + (1 - frame.alpha[..., None]) * np.float32(0.5)).astype(np.int16)
+        return encode_srgb8(frame.colour + (1 - frame.alpha[..., None]) * np.float32(0.5)).astype(np.int16)
 
     renderer.threads = 1
     rows = {name: {"aa_ms": [], "shaded": [], "diff": []} for name, _, _ in AA_CONFIGS + (AA_REFERENCE,)}

@@ -132,10 +132,10 @@ def _render_times(renderers, loaders, gestures, texture_id, frames: int, repeats
 def _image_difference(renderers, loaders, gestures, texture_id) -> dict:
     """Per offset: differences in 8-bit sRGB codes (max over channels) between the storages' images, composited
     over mid grey, over the pixels whose centre ray hits the hand."""
-    from darthand.render.image import encode_srgb
+    from darthand.textures.color import encode_srgb8
 
     def codes(frame):
-        return encode_srgb(frame.colour + (1 - frame.alpha[..., None]) * np.float32(0.5)).astype(np.int16)
+        return encode_srgb8(frame.colour + (1 - frame.alpha[..., None]) * np.float32(0.5)).astype(np.int16)
 
     out = {}
     for offset in OFFSETS:

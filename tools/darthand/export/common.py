@@ -268,8 +268,7 @@ def option_errors(model: HandModel, correctives: Correctives, influences: int | 
     exported correctives (with the full weights)."""
     if len(poses) and truth is None:
         truth = forward(model, poses).vertices
-    full = export_correctives(model, "full")
-    return {"influence_error_m": rig_error(model, exported_model(model, full, influences), poses, truth),
+    return {"influence_error_m": rig_error(model, pruned_model(model, influences), poses, truth),
             "corrective_error_m": rig_error(model, exported_model(model, correctives), poses, truth)}
 
 

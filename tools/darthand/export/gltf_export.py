@@ -16,7 +16,7 @@ images of the variant it shows.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -74,9 +74,6 @@ class GltfExport:
     # max posed vertex error (m) over the exported gestures of the pruned influences / compressed correctives
     influence_error_m: float = 0.0
     corrective_error_m: float = 0.0
-
-    def as_dict(self) -> dict:
-        return asdict(self)
 
 
 def export_gltf(model: HandModel, out: str | Path, *, options: GltfOptions = GltfOptions(),

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from darthand.errors import InputError
 from darthand.render.trace import Context, intersect_parallel, shade_parallel
 
 # Direct3D 11 standard sample patterns, in 1/16 pixel from the pixel centre.
@@ -33,10 +34,17 @@ DEPTH_STEP = 4.0
 NORMAL_ANGLE_DEG = 40.0
 
 
+def check_options(samples: int, shading: str) -> None:
+    """InputError naming the option when `samples` or `shading` is not one the anti-aliasing knows."""
+    if samples not in PATTERNS:
+        raise InputError(f"samples: {samples} is not one of {sorted(PATTERNS)}")
+    if shading not in SHADING:
+        raise InputError(f"aa_shading: {shading!r} is not one of {', '.join(SHADING)}")
+
+
 def sample_offsets(samples: int) -> np.ndarray:
     """(S, 2) sub-sample offsets in pixels (u, v) from the pixel centre."""
-    if samples not in PATTERNS:
-        raise ValueError(f"samples: {samples} is not one of {sorted(PATTERNS)}")
+    check_options(samples, SHADING[0])
     return np.asarray(PATTERNS[samples], np.float64) / 16.0
 
 
@@ -80,8 +88,7 @@ def supersample(ctx: Context, centres: np.ndarray, centre_geom: np.ndarray, cent
     """Premultiplied colour (3, P) and coverage (P,) of P edge pixels at pixel centres (P, 2), from S = `samples`
     sub-samples each. centre_geom, centre_prim (P,) and centre_radiance (3, P): the pixels' primary samples (reused
     by 'triangle' shading). stats: as trace.intersect_samples / shade_hits, plus 'aa_shaded' (samples shaded)."""
-    if shading not in SHADING:
-        raise ValueError(f"shading: {shading!r} is not one of {SHADING}")
+    check_options(samples, shading)
     P, S = len(centres), samples
     sub = intersect_parallel(ctx, (centres[:, None, :] + sample_offsets(S)[None]).reshape(-1, 2), stats)
     if shading == "sample":

@@ -20,7 +20,7 @@ from darthand.errors import InputError
 from darthand.fileio import write_json
 from darthand.render import aa
 from darthand.render.camera import Camera, load_camera
-from darthand.render.image import (composite, encode_mask8, encode_rgba8, encode_srgb, load_background,
+from darthand.render.image import (composite, encode_mask8, encode_rgba8, load_background,
                                    straight_colour, write_exr, write_png)
 from darthand.render.labels import frame_labels
 from darthand.render.lights import Lighting, load_lighting, world_lights
@@ -28,6 +28,7 @@ from darthand.render.scene import Scene, scene_for
 from darthand.render.subject import Subject
 from darthand.render.trace import (TILE, Context, Samples, default_threads, pixel_centres, scene_bounds,
                                    single_threaded_blas, touched_tiles, trace_parallel)
+from darthand.textures.color import encode_srgb8
 
 DEFAULT_SAMPLES = 8
 IMAGE, MASK, LABELS, DEPTH = "image.png", "mask.png", "labels.json", "depth.exr"
@@ -147,10 +148,7 @@ def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighti
     supersampling of edges (aa.supersample: `samples` sub-samples, `aa_shading` 'triangle' or 'sample'),
     compositing, labels."""
     timings = {} if timings is None else timings
-    if samples not in aa.PATTERNS:
-        raise InputError(f"samples: {samples} is not one of {sorted(aa.PATTERNS)}")
-    if aa_shading not in aa.SHADING:
-        raise InputError(f"aa_shading: {aa_shading!r} is not one of {', '.join(aa.SHADING)}")
+    aa.check_options(samples, aa_shading)
     H, W = cam.height, cam.width
     ctx = Context(scene, cam, world_lights(lighting, cam.R, cam.t), lighting.ambient, threads)
     stats: dict = {}
@@ -200,7 +198,7 @@ def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighti
             raise InputError(f"background: shape {bg.shape} does not match the image ({H}, {W}, 3)")
         colour = bg.copy()
         colour[region] = composite(fg, alpha, bg[region])
-        rgba[..., :3] = encode_srgb(colour)
+        rgba[..., :3] = encode_srgb8(colour)
         rgba[..., 3] = 255
     else:
         colour = np.zeros((H, W, 3), np.float32)

@@ -101,7 +101,7 @@ def dataset(args) -> int:
     doc = render_dataset(args.package, args.out, jobs, processes=args.processes, size=args.size,
                          samples=args.samples, aa_shading=args.aa_shading, background=args.background,
                          textures=args.textures, accessories=args.accessories, model=args.model, resume=args.resume,
-                         progress=progress_lines(), source=source, jobs_source=origin)
+                         progress=True, source=source, jobs_source=origin)
     t = doc["timings"]
     line = f"[render-dataset] {Path(args.out) / 'dataset.json'}: {doc['rendered']} frames rendered"
     if doc["skipped"]:
@@ -111,18 +111,6 @@ def dataset(args) -> int:
                  f"{t['startup_s']:.1f} s start-up, {t['processes']} processes)")
     print(line)
     return 0
-
-
-def progress_lines(lines: int = 20):
-    """A render_dataset progress callback printing about `lines` lines over the run."""
-    shown = [0]
-
-    def report(done: int, total: int, seconds: float) -> None:
-        step = max(1, total // lines)
-        if done // step > shown[0] // step or done == total:
-            shown[0] = done
-            print(f"[render-dataset] {done}/{total} frames, {seconds:.1f} s", flush=True)
-    return report
 
 
 def _names(text: str | None) -> list[str] | None:

@@ -387,10 +387,7 @@ def render_dataset(package, out_dir, jobs, *, processes: int | None = None, size
         jobs = load_jobs(jobs)
     else:
         jobs = check_jobs(list(jobs))
-    if samples not in aa.PATTERNS:
-        raise InputError(f"samples: {samples} is not one of {sorted(aa.PATTERNS)}")
-    if aa_shading not in aa.SHADING:
-        raise InputError(f"aa_shading: {aa_shading!r} is not one of {', '.join(aa.SHADING)}")
+    aa.check_options(samples, aa_shading)
     if int(size) < 8:
         raise InputError(f"size: {size} pixels is too small (at least 8)")
     if background is not None:

@@ -26,7 +26,6 @@ from darthand.textures.color import encode_srgb8, srgb_to_linear
 # 2.8 ms, 57 kB for a 512^2 RGBA frame); the default strategy at level 6 gets 41 kB in 9.8 ms.
 PNG_COMPRESSION = 1
 PNG_STRATEGY = zlib.Z_RLE
-_LUT_BITS = 16
 
 
 def straight_colour(premult: np.ndarray, alpha: np.ndarray) -> np.ndarray:
@@ -40,22 +39,10 @@ def composite(premult: np.ndarray, alpha: np.ndarray, background: np.ndarray) ->
     return premult + (1 - alpha[..., None]) * background
 
 
-@functools.cache
-def _srgb_lut() -> np.ndarray:
-    """8-bit sRGB code of each of 2^16 linear values in [0, 1] (textures.color.encode_srgb8's table, built once)."""
-    return encode_srgb8(np.linspace(0.0, 1.0, 1 << _LUT_BITS, dtype=np.float32))
-
-
-def encode_srgb(linear: np.ndarray) -> np.ndarray:
-    """uint8 sRGB codes of linear values (clipped to [0, 1]), through a 65536-entry table."""
-    idx = np.clip(linear, 0, 1) * np.float32((1 << _LUT_BITS) - 1) + np.float32(0.5)
-    return np.take(_srgb_lut(), idx.astype(np.uint16))
-
-
 def encode_rgba8(colour: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """(H, W, 4) uint8: sRGB-encoded straight colour (H, W, 3) linear and 8-bit alpha (H, W) in [0, 1]."""
     out = np.empty(colour.shape[:2] + (4,), np.uint8)
-    out[..., :3] = encode_srgb(colour)
+    out[..., :3] = encode_srgb8(colour)
     out[..., 3] = encode_mask8(alpha)
     return out
 

@@ -36,7 +36,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from darthand.errors import InputError
-from darthand.render.image import encode_srgb
+from darthand.textures.color import encode_srgb8
 from darthand.textures.color import srgb_to_linear
 
 BLEND = 0.25     # half-width of the band of fractional mip levels (around .5) in which two levels are blended
@@ -211,7 +211,7 @@ class MipTexture:
         for k in range(1, len(tail.offsets)):
             box_average(quarters(tail.texels(k - 1)), tail.texels(k))
         stored = self.flat[int(self.offsets[1]):]
-        stored[:, :colour] = encode_srgb(tail.flat[:, :colour])
+        stored[:, :colour] = encode_srgb8(tail.flat[:, :colour])
         data = tail.flat[:, colour:]
         data *= np.float32(255)
         stored[:, colour:] = np.rint(data, out=data)

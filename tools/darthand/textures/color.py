@@ -11,6 +11,8 @@ Albedo is never lit: no shading, no occlusion, no highlights.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 # Relative absorbance per unit density in linear R, G, B (melanin: fitted to the ramp of the tone scale itself,
@@ -85,11 +87,16 @@ def encode_srgb8(linear_rgb, offset: float = 0.0) -> np.ndarray:
     """Linear RGB -> 8-bit sRGB, after adding the global skin-tone `offset` to the sRGB-encoded values.
 
     Through a 65536-entry lookup table on the linear value (one step is far below an 8-bit sRGB step), so the
-    transfer function is evaluated 65536 times rather than per texel."""
-    lin = np.linspace(0.0, 1.0, 1 << _LUT_BITS, dtype=np.float64)
-    srgb = np.where(lin <= 0.0031308, lin * 12.92, 1.055 * lin ** (1 / 2.4) - 0.055) + float(offset)
-    lut = np.rint(np.clip(srgb, 0.0, 1.0) * 255.0).astype(np.uint8)
+    transfer function is evaluated 65536 times (once per offset) rather than per texel."""
     idx = np.clip(np.asarray(linear_rgb, np.float32), 0.0, 1.0)
     idx *= np.float32((1 << _LUT_BITS) - 1)
     idx += np.float32(0.5)
-    return lut[idx.astype(np.uint16)]
+    return np.take(_srgb8_table(float(offset)), idx.astype(np.uint16))
+
+
+@functools.lru_cache(maxsize=16)
+def _srgb8_table(offset: float) -> np.ndarray:
+    """(65536,) uint8 sRGB code of each linear value step, after the sRGB offset."""
+    lin = np.linspace(0.0, 1.0, 1 << _LUT_BITS, dtype=np.float64)
+    srgb = np.where(lin <= 0.0031308, lin * 12.92, 1.055 * lin ** (1 / 2.4) - 0.055) + offset
+    return np.rint(np.clip(srgb, 0.0, 1.0) * 255.0).astype(np.uint8)

@@ -12,7 +12,6 @@ else 0 (warnings and infos are reported but do not fail a package).
 
 from __future__ import annotations
 
-import re
 from dataclasses import asdict, dataclass, field
 
 SEVERITIES = ("error", "warning", "info")
@@ -83,18 +82,6 @@ RULES: dict[str, Rule] = {
     "render.failed": Rule("error", "the reference renderer could not render the asset"),
     "render.unsupported": Rule("info", "the asset is not a USD package, so the reference renderer did not render it"),
 }
-
-# Ids of findings passed through from other validators, by family.
-EXTERNAL_RULE_PATTERNS = {
-    "usd": r"^usd\.[A-Za-z0-9_]+:[A-Za-z0-9_]+$",
-    "gltf": r"^gltf\.[A-Z0-9_]+$",
-    "render": r"^render\.[a-z0-9_][a-z0-9_.-]*$",
-}
-
-
-def is_known_rule(rule: str) -> bool:
-    return rule in RULES or any(re.match(p, rule) for p in EXTERNAL_RULE_PATTERNS.values())
-
 
 @dataclass(frozen=True)
 class Finding:

@@ -34,7 +34,6 @@ from darthand.validate.findings import Finding, finding
 COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 GLB_MAGIC, JSON_CHUNK, BIN_CHUNK = b"glTF", 0x4E4F534A, 0x004E4942
-COLOR_SLOTS = ("baseColorTexture", "emissiveTexture")
 VARIANTS = "KHR_materials_variants"
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from darthand.validate.findings import Report
+from darthand.validate.findings import Report, counts
 
 WIDTH = 8
 
@@ -13,7 +13,7 @@ def render_text(report: Report) -> str:
     """One header line per package, one line per finding, and a summary line."""
     lines = []
     for pkg in report.packages:
-        c = {s: sum(1 for f in pkg.findings if f.severity == s) for s in ("error", "warning", "info")}
+        c = counts(pkg.findings)
         parts = [f"{n} {s}{'s' if n != 1 else ''}" for s, n in c.items() if n]
         state = {"clean": "clean", "problems": "PROBLEMS", "unreadable": "UNREADABLE"}[pkg.status]
         lines.append(f"{pkg.path} ({pkg.format}): {state}" + (f", {', '.join(parts)}" if parts else "") +

@@ -32,7 +32,7 @@ from pathlib import Path
 
 from pxr import Ar, Sdf, Tf, Usd
 
-from darthand.export.usd_validate import Issue, validate_stage
+from darthand.export.usd_validate import validate_stage
 from darthand.validate.asset import Limits, Package
 from darthand.validate.findings import UNREADABLE, Finding, finding
 from darthand.validate.usd_reader import (Unreadable, open_stage, read_meshes, read_skeletons, read_textures,
@@ -100,7 +100,7 @@ class UsdCheck:
         """OpenUSD's validators on `stage`, each distinct (validator, site, message) reported once."""
         out = []
         try:
-            issues = run_validators(stage, skip)
+            issues = validate_stage(stage, skip=skip)
         except Tf.ErrorException as e:     # a validator opened a layer that does not parse
             return self.unparsable_layers(stage, label) or [
                 finding(UNREADABLE, self.path.name, f"OpenUSD's validators stopped: {tf_message(e)}")]
@@ -218,11 +218,6 @@ class UsdCheck:
                                accessory_id=name if set_name == "accessory" else None)
             read_textures(sub, self.pkg, label, under=top)
         return out
-
-
-def run_validators(stage: Usd.Stage, skip=frozenset()) -> list[Issue]:
-    """export.usd_validate.validate_stage: every registered validator but those named in `skip`."""
-    return validate_stage(stage, skip=skip)
 
 
 def variant_arcs(prim: Usd.Prim, set_name: str, name: str) -> list[tuple]:
