@@ -75,13 +75,13 @@ build/usd/$(1)/$(1).usda: build/model/$(1).npz build/textures/catalog.json build
 	    --textures build/textures/catalog.json --accessories build/accessories/catalog.json
 
 # glTF: the hand with the default texture (.glb), and every texture as KHR_materials_variants (.gltf package).
-build/gltf/$(1).glb: build/model/$(1).npz build/textures/catalog.json $(call src,export) $(NODE_STAMP)
+build/gltf/$(1).glb: build/model/$(1).npz build/textures/catalog.json $(call src,export)
 	@$$(STEP) gltf-$(1) -- $$(DH) export gltf build/model/$(1).npz --out $$@ \
-	    --textures build/textures/catalog.json --validate
+	    --textures build/textures/catalog.json
 
-build/gltf/$(1)/$(1).gltf: build/model/$(1).npz build/textures/catalog.json $(call src,export) $(NODE_STAMP)
+build/gltf/$(1)/$(1).gltf: build/model/$(1).npz build/textures/catalog.json $(call src,export)
 	@$$(STEP) gltf-variants-$(1) -- $$(DH) export gltf build/model/$(1).npz --out $$@ \
-	    --textures build/textures/catalog.json --all-textures --validate
+	    --textures build/textures/catalog.json --all-textures
 endef
 $(foreach s,right left,$(eval $(call side_rules,$(s))))
 
@@ -89,7 +89,7 @@ build/checks/report.json: $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda) $(call 
 	@$(STEP) checks -- $(DH) render-checks --build build --sides $(SIDES)
 
 build/validate/report.json: $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb build/gltf/$(s)/$(s).gltf) \
-                            $(call src,validate)
+                            $(call src,validate) $(NODE_STAMP)
 	@$(STEP) validate -- $(DH) validate $(foreach s,$(SIDES),build/usd/$(s) build/gltf/$(s).glb build/gltf/$(s)) \
 	    --out $@
 

@@ -14,7 +14,7 @@ from darthand.model.layout import JOINT_NAMES, MANO_PARENTS
 from darthand.validate.asset import Limits, Mesh, Skeleton, Skin
 from darthand.validate.findings import PackageResult, Report, examples, finding
 from darthand.validate.gltf_reader import Buffers, Malformed, TooLarge, node_parents, triangles
-from darthand.validate.rules_accessories import point_triangle_distance, surface_gap
+from darthand.accessories.collide import surface_distance, surface_trees
 from darthand.validate.rules_mesh import check_mesh
 from darthand.validate.rules_rig import check_skeleton, check_skin
 from darthand.validate.rules_textures import check_png_chunks, png_info
@@ -84,38 +84,16 @@ def test_uv_rules():
 # ------------------------------------------------------------------------------------------------ distances
 
 
-def test_point_triangle_distance_exact_cases():
-    a, b, c = np.array([[0.0, 0, 0]]), np.array([[1.0, 0, 0]]), np.array([[0.0, 1, 0]])
-    p = np.array([[0.2, 0.2, 0.3],      # above the interior: the height
-                  [-1.0, -1.0, 0.0],    # beyond vertex a: |p - a|
-                  [0.5, -2.0, 1.0],     # beyond edge ab: distance to the line
-                  [1.0, 1.0, 0.0]])     # beyond edge bc, in the plane
-    expected = [0.3, np.sqrt(2), np.sqrt(5), np.sqrt(2) / 2]
-    assert np.allclose(point_triangle_distance(p, a, b, c)[:, 0], expected)
-
-
-def test_point_triangle_distance_matches_dense_sampling():
-    rng = np.random.default_rng(3)
-    tri = rng.normal(size=(5, 3, 3))
-    p = rng.normal(size=(40, 3)) * 2
-    d = point_triangle_distance(p, tri[:, 0], tri[:, 1], tri[:, 2])
-    s, t = np.meshgrid(np.linspace(0, 1, 201), np.linspace(0, 1, 201))
-    keep = s + t <= 1
-    bary = np.stack([1 - s[keep] - t[keep], s[keep], t[keep]], 1)                 # (S, 3)
-    samples = np.einsum("sk,fkd->fsd", bary, tri)                                   # (F, S, 3)
-    sampled = np.linalg.norm(p[:, None, None] - samples[None], axis=-1).min(-1)    # (P, F)
-    assert (d <= sampled + 1e-12).all()                  # exact is never above a sample
-    assert np.abs(d - sampled).max() < 0.02              # and sampling at 1/200 gets within a few mm of it
-
-
-def test_surface_gap_of_a_shell_around_the_octahedron():
-    """Points pushed out along the face normal of a face centre by h are h from the surface."""
+def test_accessory_gap_of_a_shell_around_the_octahedron():
+    """Points pushed out along the face normal of a face centre by h are h from the surface (the distance the
+    acc.distance rule measures, with the trees it builds once per hand)."""
     a, b, c = (OCTA_V[OCTA_F[:, k]] for k in range(3))
     centres = (a + b + c) / 3
     normals = np.cross(b - a, c - a)
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     for h in (0.001, 0.05):
-        assert surface_gap(centres + h * normals, OCTA_V, OCTA_F) == pytest.approx(h, abs=1e-12)
+        gap = surface_distance(centres + h * normals, OCTA_V, OCTA_F, surface_trees(OCTA_V, OCTA_V[OCTA_F])).min()
+        assert gap == pytest.approx(h, abs=1e-12)
 
 
 # ------------------------------------------------------------------------------------------------ rig

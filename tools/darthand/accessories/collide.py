@@ -35,7 +35,7 @@ def surface_distance(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray
     """
     tris = vertices[faces]
     if trees is None:
-        trees = _trees(vertices, tris)
+        trees = surface_trees(vertices, tris)
     vtree, ctree, reach = trees
     d0, _ = vtree.query(points)
     cands = ctree.query_ball_point(points, d0 + reach + 1e-12)
@@ -49,7 +49,8 @@ def surface_distance(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray
     return out
 
 
-def _trees(vertices: np.ndarray, tris: np.ndarray):
+def surface_trees(vertices: np.ndarray, tris: np.ndarray):
+    """(vertex KD-tree, face-centroid KD-tree, reach) of a mesh, for repeated `surface_distance` queries."""
     centroids = tris.mean(1)
     reach = float(np.linalg.norm(tris - centroids[:, None], axis=2).max())
     return cKDTree(vertices), cKDTree(centroids), reach
@@ -80,7 +81,7 @@ class Solid:
         if len(inside) == 0:
             return 0.0
         if self._trees is None:
-            self._trees = _trees(self.vertices, self.vertices[self.faces])
+            self._trees = surface_trees(self.vertices, self.vertices[self.faces])
         bound, _ = self._trees[0].query(points[inside])
         order = np.argsort(-bound)
         best = 0.0

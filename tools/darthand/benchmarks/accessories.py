@@ -14,25 +14,11 @@ import numpy as np
 
 from darthand.accessories.build import generate, measure, sweep_poses
 from darthand.accessories.catalog import entries, load_spec
-
-
-def _model():
-    from darthand.model.npz_io import load_npz
-    from darthand.model.wrist import add_wrist
-
-    src = Path(__file__).resolve().parents[3] / "assets_src" / "template" / "open_right.npz"
-    if src.is_file():
-        return add_wrist(load_npz(src)), "open_right"
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "tests"))
-    from synthetic import tube_hand
-
-    return add_wrist(tube_hand(0), rings=4, length=0.06), "tube_hand"
+from darthand.benchmarks._common import bench_model
 
 
 def run(n_poses: int = 32) -> dict:
-    model, name = _model()
+    model, name = bench_model()
     spec = load_spec()
     items = entries(spec)
     t0 = time.perf_counter()

@@ -14,26 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.benchmarks._common import bench_model
+
 # A spread of categories (cheap and expensive overlays) for the per-variant figures.
 SAMPLE_IDS = ("dark_bandage_00", "brown_palm_prints_01", "light_scars_02", "dark_tattoos_03", "brown_moles_04",
               "light_nail_colors_05", "base_freckles_00", "base_veins_01")
-
-
-def _model():
-    from darthand.model.atlas import ensure_uvs
-
-    src = Path(__file__).resolve().parents[3] / "assets_src" / "template" / "open_right.npz"
-    if src.is_file():
-        from darthand.model.npz_io import load_npz
-        from darthand.model.wrist import add_wrist
-
-        return add_wrist(load_npz(src)), "open_right+wrist"
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "tests"))
-    from synthetic import tube_hand
-
-    return ensure_uvs(tube_hand(0, with_uvs=False), 2048), "tube_hand+xatlas"
 
 
 def per_variant(model, res: int, ids=SAMPLE_IDS) -> dict:
@@ -100,7 +85,7 @@ def whole_catalogue(model, res: int = 2048, workers: int = 2) -> dict:
 
 
 def run(catalogue: bool = True, resolutions=(1024, 2048, 4096)) -> dict:
-    model, name = _model()
+    model, name = bench_model()
     out = {"model": name, "cores": os.cpu_count(),
            "per_variant": {str(r): per_variant(model, r) for r in resolutions}}
     if catalogue:

@@ -27,24 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.benchmarks._common import bench_model
+
 REPEATS = 3
 TEXTURES = 325
 DEEP_TEXTURES = 16
 RIGID, GLOVES = 40, 10
-
-
-def _model():
-    from darthand.model.load import TEMPLATE_DIR, load_model
-    from darthand.model.wrist import add_wrist
-
-    built = Path("build/model/right.npz")
-    if built.is_file():
-        return load_model(built), str(built)
-    if (TEMPLATE_DIR / "open_right.npz").is_file():
-        return add_wrist(load_model("open")), "open + wrist"
-    sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "tests"))
-    from synthetic import tube_hand
-    return add_wrist(tube_hand(0)), "tube_hand + wrist (synthetic)"
 
 
 def _png(path: Path, size: int, seed: int) -> Path:
@@ -105,7 +93,7 @@ def run() -> dict:
     from darthand.textures.catalog import expand_catalog, load_spec as texture_spec
     from darthand.validate.rules_gltf import khronos_findings
 
-    model, source = _model()
+    model, source = bench_model()
     if not model.has_uvs:
         from darthand.model.atlas import ensure_uvs
         model = ensure_uvs(model, 1024)

@@ -11,7 +11,7 @@ import numpy as np
 
 from darthand.accessories import textures as tx
 from darthand.accessories.generators.shapes import band, cylinder_z, gem, place, rope, rounded_box, samples_for
-from darthand.accessories.mesh import (AccessoryMesh, circle2d, combine, ellipse, ellipse_normals, rounded_rect2d,
+from darthand.accessories.mesh import (AccessoryMesh, circle2d, combine, rounded_rect2d,
                                        superellipse2d, sweep)
 
 STYLES = ("flat", "court", "twisted", "braided", "signet", "solitaire", "bezel")
@@ -74,7 +74,7 @@ def _twisted(r: float, w: float, t: float, twists: int, n: int):
     rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)        # (n, 2, 2)
     prof = np.einsum("nij,mj->nmi", rot, sq) + [reach, 0.0]
     prof[..., 1] *= w / side                                                 # stretch across the band width
-    return sweep(ellipse(r, r, n), ellipse_normals(r, r, n), np.tile(X, (n, 1)), prof)
+    return band(r, r, prof, n)
 
 
 def _signet(r: float, w: float, t: float, params: dict, n: int):
@@ -87,7 +87,7 @@ def _signet(r: float, w: float, t: float, params: dict, n: int):
     prof = np.empty((n, len(base), 2))
     prof[..., 0] = base[None, :, 0] * (t + (top_t - t) * bump)[:, None]
     prof[..., 1] = base[None, :, 1] * (w + (0.8 * face_l - w) * bump)[:, None]
-    shank = sweep(ellipse(r, r, n), ellipse_normals(r, r, n), np.tile(X, (n, 1)), prof)
+    shank = band(r, r, prof, n)
     plate_t = float(params.get("face_thickness", 0.0012))
     plate = rounded_box(face_w / 2, face_l / 2, 0.0, plate_t, power=2.4, slot=0)
     plate[1] = plate[1].with_uv(slot=1)
