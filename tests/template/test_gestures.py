@@ -14,10 +14,11 @@ from darthand.model.layout import JOINT_NAMES
 from darthand.model.mirror import mirror_model, mirror_pose
 from darthand.model.npz_io import load_npz
 from darthand.model.poses import POSES_DIR, gesture_angles, list_gestures, load_gesture, load_pose_file
-from darthand.render.preview import render_mesh, write_gesture_sheet
+from darthand.model.preview import render_mesh
 from darthand.schemas import load_schema
 from darthand.template.gesture_checks import (face_parts, gesture_problems, gesture_report, inverted_faces,
-                                              part_intersections, self_intersecting, write_gesture_checks)
+                                              part_intersections, self_intersecting, write_gesture_checks,
+                                              write_gesture_sheet)
 from synthetic import tube_hand, tube_mesh
 
 REQUIRED = {"flat", "relaxed", "fist", "point", "pinch", "ok", "spread", "thumbs_up"}

@@ -269,7 +269,7 @@ def _add_render_commands(sub) -> None:
 
 
 def _add_render_arguments(p) -> None:
-    from darthand.render.preview import VIEWS
+    from darthand.model.preview import VIEWS
 
     p.add_argument("package", metavar="PACKAGE", help=RENDER_PACKAGE_HELP)
     p.add_argument("--out", required=True, metavar="DIR", help="output folder for image.png, mask.png, labels.json")
@@ -306,7 +306,7 @@ def _add_render_arguments(p) -> None:
 
 
 def _add_dataset_arguments(p) -> None:
-    from darthand.render.preview import VIEWS
+    from darthand.model.preview import VIEWS
 
     p.add_argument("package", metavar="PACKAGE", help=RENDER_PACKAGE_HELP)
     p.add_argument("--out", required=True, metavar="DIR",

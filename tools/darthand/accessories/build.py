@@ -358,7 +358,7 @@ def write_image(path: str | Path, image: np.ndarray, srgb: bool) -> None:
 def write_contact_sheet(model: HandModel, built: list[Built], path: Path, tile: int = 192) -> None:
     """All accessories on the rest hand, one tile each (rings close up from the back of the hand, wrist items
     three-quarter, gloves the whole hand), labelled with their ids."""
-    from darthand.render.preview import contact_sheet, write_png
+    from darthand.model.preview import contact_sheet, write_png
 
     hand = {"vertices": model.v_template, "faces": model.faces}
     images, labels = [], []

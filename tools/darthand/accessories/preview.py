@@ -1,8 +1,8 @@
 """A textured Embree preview of accessories on the hand (tiles of the catalogue's contact sheet).
 
-render/preview.py draws one untextured mesh; accessories need several meshes and their base-colour textures, so
+model/preview.py draws one untextured mesh; accessories need several meshes and their base-colour textures, so
 this draws: an orthographic camera, first-hit rays through embreex (trimesh's ray interface), textured base colour,
-a headlight Lambert term and a highlight scaled by metallic. Tiling and PNG writing use render/preview.py.
+a headlight Lambert term and a highlight scaled by metallic. Tiling and PNG writing use model/preview.py.
 """
 
 from __future__ import annotations

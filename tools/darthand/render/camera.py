@@ -20,7 +20,7 @@ import numpy as np
 
 from darthand.errors import InputError
 from darthand.fileio import read_json
-from darthand.render.preview import VIEWS, camera_basis
+from darthand.model.preview import VIEWS, camera_basis
 
 DEFAULT_FOV_DEG = 30.0
 DEFAULT_MARGIN = 0.08

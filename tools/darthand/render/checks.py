@@ -283,7 +283,7 @@ def annotated(frame: Frame) -> np.ndarray:
 
 def write_sheet(path: Path, tiles: list, cols: int) -> None:
     """A contact sheet of (frame, label) tiles, all resized to the first tile's size."""
-    from darthand.render.preview import contact_sheet, write_png
+    from darthand.model.preview import contact_sheet, write_png
 
     if not tiles:
         return

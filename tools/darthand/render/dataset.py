@@ -230,7 +230,7 @@ def _pick_ids(what: str, wanted, default: list[str], known: list[str], allow_emp
 
 
 def _views(views) -> list[str]:
-    from darthand.render.preview import VIEWS
+    from darthand.model.preview import VIEWS
 
     names = [RANDOM_VIEW] if views is None else ([views] if isinstance(views, str) else list(views))
     for name in names:
@@ -319,7 +319,7 @@ def validate_jobs(source, jobs: list[dict], where: str = "jobs") -> None:
     """InputError (naming the frame and field) for what the source cannot render: unknown texture, accessory or
     gesture ids, poses a USD package cannot take, bad camera or lights documents. Runs before any rendering."""
     from darthand.render.lights import load_lighting
-    from darthand.render.preview import VIEWS
+    from darthand.model.preview import VIEWS
     from darthand.schemas import check_schema
 
     textures, accessories = set(source.texture_ids()), set(source.accessory_ids()) | {"none"}

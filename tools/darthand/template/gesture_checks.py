@@ -26,8 +26,8 @@ from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import FINGER_JOINTS, FINGERS, NUM_JOINTS
 from darthand.model.poses import gesture_poses
+from darthand.model.preview import HIGHLIGHT, SKIN, contact_sheet, render_mesh, write_png
 from darthand.model.topology import face_joints
-from darthand.render.preview import write_gesture_sheet
 
 PARTS = ("palm",) + FINGERS
 DEGENERATE_AREA = 1e-12  # m^2 (1 mm^2 = 1e-6 m^2)
@@ -93,13 +93,14 @@ def intersections_within_parts(vertices: np.ndarray, faces: np.ndarray,
     return everywhere, alone
 
 
-def part_intersections(vertices: np.ndarray, faces: np.ndarray, parts: np.ndarray) -> dict:
-    """Self-intersections of one posed mesh (V, 3), split by part.
+def part_intersections(vertices: np.ndarray, faces: np.ndarray, parts: np.ndarray, masks=None) -> dict:
+    """Self-intersections of one posed mesh (V, 3), split by part (masks: its `intersections_within_parts`, when
+    already computed).
 
     Returns {"faces": all self-intersecting faces, "within": {part: faces intersecting their own part},
     "between": {"a-b": faces of a or b that intersect the other part}} (counts).
     """
-    everywhere, alone = intersections_within_parts(vertices, faces, parts)
+    everywhere, alone = intersections_within_parts(vertices, faces, parts) if masks is None else masks
     out = {"faces": int(everywhere.sum()),
            "within": {PARTS[p]: int(alone[parts == p].sum()) for p in np.unique(parts[alone])},
            "between": {}}
@@ -118,18 +119,27 @@ def gesture_report(model: HandModel, names: list[str] | None = None, poses_dir=N
             "between_fingers_faces": n (faces of one digit intersecting another digit),
             "finger_palm_faces": n (digit-palm), "within": {...}, "between": {...}}}
     """
+    return checked_gestures(model, names, poses_dir)[3]
+
+
+def checked_gestures(model: HandModel, names: list[str] | None = None, poses_dir=None) -> tuple:
+    """(names, posed vertices (G, V, 3), crossing (G, F) bool: faces intersecting another part of the hand,
+    `gesture_report`): what the report and the contact sheet both need, computed once."""
     names, poses = gesture_poses(model, names, poses_dir)
     posed = forward(model, poses)
     inverted, degenerate = inverted_faces(model, posed.vertices, posed.world_rotations)
     parts = face_parts(model)
     report = {}
+    crossing = np.zeros((len(names), model.num_faces), bool)
     for g, name in enumerate(names):
         v = posed.vertices[g]
         finite = bool(np.isfinite(v).all())
         entry = {"finite": finite, "inverted_faces": int(inverted[g].sum()),
                  "degenerate_faces": int(degenerate[g].sum())}
         if finite:
-            inter = part_intersections(v, model.faces, parts)
+            everywhere, alone = masks = intersections_within_parts(v, model.faces, parts)
+            crossing[g] = everywhere & ~alone
+            inter = part_intersections(v, model.faces, parts, masks)
             between = inter["between"]
             entry.update(
                 self_intersecting_faces=inter["faces"],
@@ -137,7 +147,7 @@ def gesture_report(model: HandModel, names: list[str] | None = None, poses_dir=N
                 finger_palm_faces=sum(n for k, n in between.items() if "palm" in k),
                 within=inter["within"], between=between)
         report[name] = entry
-    return report
+    return names, posed.vertices, crossing, report
 
 
 def gesture_problems(report: dict, max_between_fingers: int = 10) -> list[str]:
@@ -161,7 +171,25 @@ def write_gesture_checks(model: HandModel, out_dir: str | Path, names: list[str]
     """Write `gestures.json` (the `gesture_report`) and `gestures.png` (the contact sheet) into `out_dir`;
     return the report."""
     out_dir = Path(out_dir)
-    report = gesture_report(model, names)
-    write_json(out_dir / "gestures.json", {"model": model.meta.get("source"), "gestures": report})
-    write_gesture_sheet(model, out_dir / "gestures.png", names)
-    return report
+    checked = checked_gestures(model, names)
+    write_json(out_dir / "gestures.json", {"model": model.meta.get("source"), "gestures": checked[3]})
+    write_gesture_sheet(model, out_dir / "gestures.png", checked=checked)
+    return checked[3]
+
+
+def write_gesture_sheet(model: HandModel, out_png: str | Path, names: list[str] | None = None, *, checked=None,
+                        views=("three_quarter", "radial", "palmar"), size: int = 256,
+                        cols: int | None = None) -> list[str]:
+    """Render every named gesture of `model` from `views` into one contact sheet PNG, the faces that intersect
+    another part of the hand in red; return the gesture names. checked: `checked_gestures` (computed when not
+    given). cols: tiles per row (default: two gestures per row)."""
+    names, vertices, crossing, _ = checked if checked is not None else checked_gestures(model, names)
+    images, labels = [], []
+    for name, v, cross in zip(names, vertices, crossing):
+        colors = np.tile(SKIN, (model.num_faces, 1))
+        colors[cross] = HIGHLIGHT
+        for view in views:
+            images.append(render_mesh(v, model.faces, view=view, size=size, face_colors=colors, side=model.side))
+            labels.append(name if len(views) == 1 else f"{name} ({view})")
+    write_png(out_png, contact_sheet(images, labels, cols or 2 * len(views)))
+    return names

@@ -1,8 +1,8 @@
 """A small preview renderer for contact sheets: orthographic embreex ray casting, headlight Lambert shading.
 
-Meant for a person to look at a posed hand (e.g. build/template/gestures.png), not for training images: no
-textures, no shadows, one ray per sub-pixel. The full renderer lives elsewhere in `render`; this one only needs
-embreex for the visibility and OpenImageIO for resizing, text and PNG writing.
+Meant for a person to look at a posed hand or accessory (build/template/gestures.png, the accessory and render
+contact sheets), not for training images: no textures, no shadows, one ray per sub-pixel. It sits in `model`
+because the template, accessories and render stages all use it; the full renderer is the `render` stage.
 """
 
 from __future__ import annotations
@@ -126,34 +126,3 @@ def write_png(path: str | Path, image: np.ndarray) -> None:
     with atomic_path(path) as tmp:
         if not srgb.write(str(tmp), oiio.UINT8):
             raise DarthandError(f"{path}: could not write PNG: {srgb.geterror()}")
-
-
-def write_gesture_sheet(model, out_png: str | Path, names: list[str] | None = None,
-                        views=("three_quarter", "radial", "palmar"), size: int = 256, cols: int | None = None,
-                        highlight: bool = True) -> list[str]:
-    """Render every named gesture of `model` from `views` into one contact sheet PNG; return the gesture names.
-
-    cols: tiles per row (default: two gestures per row).
-    highlight: paint in red the faces that intersect another part of the hand (see `gesture_checks`).
-    """
-    from darthand.model.forward import forward
-    from darthand.model.poses import gesture_poses
-    from darthand.template.gesture_checks import face_parts, intersections_within_parts
-
-    names, poses = gesture_poses(model, names)
-    vertices = forward(model, poses).vertices
-    parts = face_parts(model)
-    images, labels = [], []
-    for name, v in zip(names, vertices):
-        colors = np.tile(SKIN, (model.num_faces, 1))
-        if highlight:
-            everywhere, within = intersections_within_parts(v, model.faces, parts)
-            colors[everywhere & ~within] = HIGHLIGHT
-        for view in views:
-            images.append(render_mesh(v, model.faces, view=view, size=size, face_colors=colors, side=model.side))
-            labels.append(name if len(views) == 1 else f"{name} ({view})")
-    if cols is None:
-        cols = 2 * len(views)
-    write_png(out_png, contact_sheet(images, labels, cols))
-    return names
-
