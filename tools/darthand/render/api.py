@@ -253,8 +253,8 @@ def write_frame(frame: Frame, out_dir: str | Path, *, depth: bool = False, names
 
 
 class FrameWriter:
-    """Writes frames on a background thread while the next ones render (OpenImageIO's PNG encoding releases the
-    GIL). At most `pending` frames wait; `close()` (or leaving the `with` block) waits for all and re-raises the
+    """Writes frames on a background thread while the next ones render (image.write_png's zlib compression releases
+    the GIL). At most `pending` frames wait; `close()` (or leaving the `with` block) waits for all and re-raises the
     first error."""
 
     def __init__(self, pending: int = 2):

@@ -13,9 +13,9 @@ hand) and lights (a lights document or None for the default rig). Frame i's job 
 sharding, resuming or `start` never change a frame.
 
 Why the frames are grouped by texture: decoding a 2048^2 skin texture and building its mip pyramid costs 0.1 to
-0.2 s (render/texture.py caches 32; a skin-tone offset is only a decode table on the cached pyramid, about 0.5 ms),
-three to five 512^2 frames. So the frames are handed to the workers in chunks of one texture, sorted by accessory
-inside (an accessory change costs about 20 ms).
+0.2 s, three to five 512^2 frames (render/texture.py caches 512 MB of pyramids; a skin-tone offset is only a decode
+table on a cached pyramid, about 0.5 ms). So the frames are handed to the workers in chunks of one texture, sorted
+by accessory inside (an accessory change costs 5-17 ms).
 
 Workers are started with 'spawn' (a fresh interpreter: nothing inherited from a parent that may hold an Embree
 device or thread pools); each opens the source once and renders single-threaded. Frames go back to the parent only
@@ -157,7 +157,8 @@ def pose_pool(source, poses=None, jitter_deg: float | None = None) -> PosePool:
         return PosePool([{"gesture": n, "pose": n, "angles": None} for n in names])
 
     from darthand.model.anatomy import axis_angle_to_angles
-    from darthand.model.poses import gesture_angles, list_gestures, load_pose_file
+    from darthand.model.poses import gesture_angles, list_gestures
+    from darthand.render.poses import pose_file_vectors
 
     jitter = DEFAULT_JITTER_DEG if jitter_deg is None else float(jitter_deg)
     if not 0 <= jitter <= 45:
@@ -170,12 +171,7 @@ def pose_pool(source, poses=None, jitter_deg: float | None = None) -> PosePool:
             continue
         if not Path(item).is_file():
             raise InputError(f"poses: {item!r} is neither a gesture ({', '.join(list_gestures())}) nor a pose file")
-        vectors, betas, flat_hand_mean = load_pose_file(item)
-        if betas is not None:
-            raise InputError(f"{item}: field 'betas' is not supported by the renderer (shape the model instead)")
-        if not flat_hand_mean:
-            vectors = vectors.copy()
-            vectors[:, 3:] += model.hands_mean
+        vectors = pose_file_vectors(model, item)
         angles = axis_angle_to_angles(model, vectors)
         entries += [{"gesture": None, "pose": v.tolist(), "angles": a} for v, a in zip(vectors, angles)]
     if not entries:

@@ -18,7 +18,7 @@ def resolve_pose(model: HandModel, pose, index: int = 0, cache: dict | None = No
         a pose file path (schemas/pose.schema.json; pose number `index` of it); or 48 numbers.
     cache: a dict the caller keeps per model, gesture name -> pose (reading and converting a gesture costs ms).
     """
-    from darthand.model.poses import list_gestures, load_gesture, load_pose_file
+    from darthand.model.poses import list_gestures, load_gesture
 
     if pose is None:
         return np.zeros(3 * NUM_JOINTS), None
@@ -34,15 +34,10 @@ def resolve_pose(model: HandModel, pose, index: int = 0, cache: dict | None = No
         path = Path(name)
         if not path.is_file():
             raise InputError(f"pose: {name!r} is neither a gesture ({', '.join(list_gestures())}) nor a pose file")
-        poses, betas, flat_hand_mean = load_pose_file(path)
-        if betas is not None:
-            raise InputError(f"{path}: field 'betas' is not supported by the renderer (shape the model instead)")
+        poses = pose_file_vectors(model, path)
         if not 0 <= index < len(poses):
             raise InputError(f"{path}: has {len(poses)} poses, no pose number {index}")
-        vec = poses[index].copy()
-        if not flat_hand_mean:
-            vec[3:] += model.hands_mean
-        return vec, None
+        return poses[index], None
     vec = np.asarray(pose, dtype=np.float64).reshape(-1)
     if vec.shape != (3 * NUM_JOINTS,):
         raise InputError(f"pose: a MANO pose has {3 * NUM_JOINTS} numbers, got {vec.size}")
@@ -50,3 +45,18 @@ def resolve_pose(model: HandModel, pose, index: int = 0, cache: dict | None = No
         raise InputError(f"pose: value {vec[~np.isfinite(vec)][0]} at index {int(np.argmax(~np.isfinite(vec)))} "
                          "is not finite")
     return vec, None
+
+
+def pose_file_vectors(model: HandModel, path) -> np.ndarray:
+    """(N, 48) float64 the poses of a pose file (schemas/pose.schema.json) relative to the flat hand (the model's
+    hands_mean added where the file is relative to it); a file with betas is refused (the renderer poses the
+    model as built)."""
+    from darthand.model.poses import load_pose_file
+
+    poses, betas, flat_hand_mean = load_pose_file(path)
+    if betas is not None:
+        raise InputError(f"{path}: field 'betas' is not supported by the renderer (shape the model instead)")
+    poses = np.array(poses, np.float64)
+    if not flat_hand_mean:
+        poses[:, 3:] += model.hands_mean
+    return poses
