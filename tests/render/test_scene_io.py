@@ -7,7 +7,7 @@ import numpy as np
 import OpenImageIO as oiio
 import trimesh
 
-from darthand.render.image import write_png
+from darthand.render.image import write_exr, write_png
 from darthand.render.scene import Scene
 from darthand.render.subject import Material, Subject, Surface
 
@@ -73,6 +73,17 @@ def test_png_round_trip_is_lossless(tmp_path):
         first = path.read_bytes()
         write_png(path, img, srgb=len(shape) == 3)
         assert path.read_bytes() == first
+
+
+def test_exr_bytes_do_not_depend_on_the_clock(tmp_path, monkeypatch):
+    """OpenImageIO stamps the write time into EXR headers (capDate) unless told not to; the same depth map written
+    at two different times must give the same bytes, and read back exactly."""
+    depth = np.linspace(0.0, 2.0, 48, dtype=np.float32).reshape(6, 8)
+    write_exr(tmp_path / "a.exr", depth)
+    data = (tmp_path / "a.exr").read_bytes()
+    assert b"capDate" not in data
+    back = oiio.ImageBuf(str(tmp_path / "a.exr")).get_pixels(oiio.FLOAT)[..., 0]
+    np.testing.assert_array_equal(back, depth)
 
 
 def test_sphere_culling_keeps_every_ray_that_passes_near():

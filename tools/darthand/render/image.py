@@ -128,6 +128,7 @@ def write_exr(path: str | os.PathLike, values: np.ndarray, channel: str = "Z") -
     spec = oiio.ImageSpec(img.shape[1], img.shape[0], 1, oiio.FLOAT)
     spec.channelnames = (channel,)
     spec.attribute("compression", "zip")
+    spec.attribute("DateTime", "")  # else OpenImageIO stamps the write time (EXR capDate): same frame, other bytes
     buf = oiio.ImageBuf(spec)
     buf.set_pixels(oiio.ROI(), img)
     with atomic_path(path) as tmp:
