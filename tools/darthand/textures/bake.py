@@ -25,7 +25,7 @@ from darthand.model.hand_model import HandModel
 from darthand.model.topology import vertex_normals
 from darthand.textures import anatomy, noise
 from darthand.textures.raster import rasterize
-from darthand.textures.regions import ensure_face_labels, face_geometry, skeleton
+from darthand.model.regions import ensure_face_labels, face_geometry, skeleton
 
 BAKE_VERSION = 5
 # The modules whose code decides what a bake holds: their source is part of the cache key, so editing them
