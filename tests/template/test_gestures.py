@@ -16,8 +16,8 @@ from darthand.model.npz_io import load_npz
 from darthand.model.poses import POSES_DIR, gesture_angles, list_gestures, load_gesture, load_pose_file
 from darthand.model.preview import render_mesh
 from darthand.schemas import load_schema
-from darthand.template.gesture_checks import (face_parts, gesture_problems, gesture_report, inverted_faces,
-                                              part_intersections, self_intersecting, write_gesture_checks,
+from darthand.model.intersections import face_parts, part_intersections, self_intersecting
+from darthand.template.gesture_checks import (gesture_problems, gesture_report, inverted_faces, write_gesture_checks,
                                               write_gesture_sheet)
 from synthetic import tube_hand, tube_mesh
 
@@ -161,9 +161,13 @@ def test_gesture_report_on_the_tube_hand():
                                                                     between={"thumb-index": 11}),
            "c": dict(report["flat"], finite=False)}
     assert gesture_problems({"flat": report["flat"]}) == []
-    assert gesture_problems(bad) == ["gesture 'a': 3 inverted triangles",
-                                     "gesture 'b': 11 faces where digits intersect (thumb-index 11), more than 10",
+    remedy = ("the gestures are not fitted to this model: build it with `darthand model build` (make assets) or "
+              "change assets_src/poses/{}.json")
+    assert gesture_problems(bad) == ["gesture 'a': 3 inverted triangles; " + remedy.format("a"),
+                                     "gesture 'b': 11 faces where digits intersect (thumb-index 11), more than 0; "
+                                     + remedy.format("b"),
                                      "gesture 'c': non-finite vertices"]
+    assert gesture_problems(bad, max_between_fingers=11)[1:] == ["gesture 'c': non-finite vertices"]
 
 
 def test_preview_render_sees_the_mesh(tmp_path):

@@ -112,8 +112,8 @@ def _add_template_commands(sub) -> None:
     p.add_argument("model", metavar="MODEL", nargs="?", default="open",
                    help="a MANO pkl, a darthand .npz or a built-in name (default: open)")
     p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for gestures.json and gestures.png")
-    p.add_argument("--max-between-fingers", type=int, default=10,
-                   help="faces where two digits may intersect before a gesture fails (default 10)")
+    p.add_argument("--max-between-fingers", type=int, default=0,
+                   help="faces where two digits may intersect before a gesture fails (default 0)")
     p.set_defaults(run=commands.gestures_command)
 
 

@@ -134,9 +134,10 @@ def _poses(source, args) -> list[str] | None:
             return None
         if args.gestures is None:
             return files
-        from darthand.model.poses import list_gestures
+        from darthand.model.gestures import model_gestures
 
-        return (list_gestures() if hasattr(source, "model") else list(source.gestures)) + files
+        names = model_gestures(source.model).names if hasattr(source, "model") else source.gestures
+        return list(names) + files
     return _names(args.gestures) + files
 
 

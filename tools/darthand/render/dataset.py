@@ -157,20 +157,20 @@ def pose_pool(source, poses=None, jitter_deg: float | None = None) -> PosePool:
         return PosePool([{"gesture": n, "pose": n, "angles": None} for n in names])
 
     from darthand.model.anatomy import axis_angle_to_angles
-    from darthand.model.poses import gesture_angles, list_gestures
+    from darthand.model.gestures import model_gestures
     from darthand.render.poses import pose_file_vectors
 
     jitter = DEFAULT_JITTER_DEG if jitter_deg is None else float(jitter_deg)
     if not 0 <= jitter <= 45:
         raise InputError(f"pose jitter: {jitter} degrees is outside 0..45")
-    entries = []
-    for item in (list_gestures() if poses is None else list(poses)):
+    entries, gestures = [], model_gestures(model)
+    for item in (gestures.names if poses is None else list(poses)):
         item = str(item)
-        if item in list_gestures():
-            entries.append({"gesture": item, "pose": item, "angles": gesture_angles(item)})
+        if item in gestures.names:
+            entries.append({"gesture": item, "pose": item, "angles": gestures.angles_of(item)})
             continue
         if not Path(item).is_file():
-            raise InputError(f"poses: {item!r} is neither a gesture ({', '.join(list_gestures())}) nor a pose file")
+            raise InputError(f"poses: {item!r} is neither a gesture ({', '.join(gestures.names)}) nor a pose file")
         vectors = pose_file_vectors(model, item)
         angles = axis_angle_to_angles(model, vectors)
         entries += [{"gesture": None, "pose": v.tolist(), "angles": a} for v, a in zip(vectors, angles)]
@@ -321,9 +321,9 @@ def validate_jobs(source, jobs: list[dict], where: str = "jobs") -> None:
     textures, accessories = set(source.texture_ids()), set(source.accessory_ids()) | {"none"}
     model = getattr(source, "model", None)
     if model is not None:
-        from darthand.model.poses import list_gestures
+        from darthand.model.gestures import model_gestures
 
-        gestures = set(list_gestures())
+        gestures = set(model_gestures(model).names)
     else:
         gestures = set(source.gestures)
     lights_seen = set()
