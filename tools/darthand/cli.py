@@ -412,12 +412,17 @@ def _add_manifest_command(sub) -> None:
                        description="write build/manifest.json: outputs with sha256, step seconds, checks")
     p.add_argument("--build", default="build", help="build folder (default: build)")
     p.add_argument("--out", default=None, help="manifest path (default: BUILD/manifest.json)")
+    p.add_argument("--check", action="store_true",
+                   help="write nothing: print the checks the manifest records as failed, exit 1 if there are any")
 
     def run(args):
-        from darthand.manifest import write_manifest
+        from darthand.manifest import check_manifest, write_manifest
+        if args.check:
+            return check_manifest(args.out or f"{args.build}/manifest.json")
         m = write_manifest(args.build, args.out)
         total = sum(e["bytes"] for e in m["outputs"])
-        print(f"manifest: {len(m['outputs'])} outputs, {total / 1e6:.1f} MB, checks: {sorted(m['checks'])}")
+        print(f"manifest: {len(m['outputs'])} outputs, {total / 1e6:.1f} MB, checks: {sorted(m['checks'])}"
+              + (f", {len(m['failed_checks'])} failed" if m["failed_checks"] else ""))
         return 0
 
     p.set_defaults(run=run)

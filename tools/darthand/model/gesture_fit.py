@@ -15,11 +15,11 @@ d_i are signed distances (m, negative inside) between samples of one part and th
 (model/proximity), over the samples near the other part; s = PENALTY_SCALE. sigma_k (`freedom`) holds the
 gesture's intent: hinge joints (PIP, DIP, thumb MCP and IP) never twist or spread, a finger that is straight in the
 gesture keeps every bend (the point's index stays straight), and the thumb moves more freely than the fingers, so
-a fist stays closed and the fingers make room only as much as they must. The Jacobian is analytic: an angle k of
-joint j turns the points it moves about the posed joint with angular velocity w_k, so
-d(d_i)/d(angle_k) = n_i . (m_k(x_i) w_k x (x_i - J_j) - m_k(y_i) w_k x (y_i - J_j)), x_i the sample, y_i its
-nearest point on the other part, n_i the normal there, m_k the skin weight of the joints below j (LBS without the
-correctives' small share).
+a fist stays closed and the fingers make room only as much as they must. The Jacobian is analytic: an angle k
+of joint j turns every joint transform G_m at or below j about the posed joint J_j with angular velocity w_k, so
+an LBS point x = sum_m w_m G_m x0 moves by sum_{m below j} w_m w_k x (G_m x0 - J_j), and d(d_i)/d(angle_k) is
+the signed offset direction (x_i - y_i)/|x_i - y_i| against the sample's motion less that of its nearest point
+y_i on the other part (the correctives' small share left out).
 
 The guard is MeshLab's face intersection test (model/intersections), which the gesture step checks again: when
 faces of two digits still cross after a fit, clearance and contact gap grow by STEP and the gesture is fitted again,
@@ -172,7 +172,7 @@ class GestureProblem:
             grad = np.zeros((len(ids), len(self.free)))
             at = np.searchsorted(ids, h.sample)
             d[at] = h.distance
-            grad[at] = self.distance_gradient(v, h, velocity)
+            grad[at] = self.distance_gradient(v, h, velocity, posed.transforms[0])
             key = tuple(sorted((p, q)))
             margin = 0.0 if key in self.contacts else self.clearance
             short = d < margin
@@ -213,24 +213,34 @@ class GestureProblem:
             omega[i] = W[parent] @ self.frames[j] @ local
         return omega, posed.joints[0, joints]
 
-    def distance_gradient(self, v: np.ndarray, h, velocity) -> np.ndarray:
-        """(K, n) derivative of each hit's signed distance with respect to the free angles."""
-        omega, pivot = velocity
-        joints = self.free // 3
-        w = self.model.weights
-        x = self.surfaces.samples(v, h.sample)
-        wx = np.einsum("sk,skj->sj", self.surfaces.sample_bary[h.sample], w[self.surfaces.sample_corners[h.sample]])
-        wy = np.einsum("sk,skj->sj", h.bary, w[h.corners])
-        mx, my = wx @ self.subtree[:, joints], wy @ self.subtree[:, joints]          # (K, n)
-        vx = np.cross(omega[None], x[:, None] - pivot[None])                           # (K, n, 3)
-        vy = np.cross(omega[None], h.point[:, None] - pivot[None])
-        rel = mx[..., None] * vx - my[..., None] * vy
+    def distance_gradient(self, v: np.ndarray, h, velocity, transforms: np.ndarray) -> np.ndarray:
+        """(K, n) derivative of each hit's signed distance with respect to the free angles (transforms: the
+        pose's skinning transforms (16, 4, 4))."""
+        ids = h.sample
+        x = self.surfaces.samples(v, ids)
+        ux = self.point_velocities(self.surfaces.sample_corners[ids], self.surfaces.sample_bary[ids], transforms,
+                                   velocity)
+        uy = self.point_velocities(h.corners, h.bary, transforms, velocity)
         # d = sign |x - y|: it changes along the unit offset (x - y) sign, or along the normal when touching.
         offset = x - h.point
         length = np.linalg.norm(offset, axis=1, keepdims=True)
         direction = np.where(length > 1e-7, offset / np.maximum(length, 1e-300) * np.sign(h.distance)[:, None],
                              h.normal)
-        return np.einsum("kd,knd->kn", direction, rel)
+        return np.einsum("kd,knd->kn", direction, ux - uy)
+
+    def point_velocities(self, corners: np.ndarray, bary: np.ndarray, transforms: np.ndarray,
+                         velocity) -> np.ndarray:
+        """(K, n, 3) velocity of surface points (corner vertices (K, 3), barycentrics (K, 3)) per unit change of
+        each free angle: LBS x = sum_j w_j G_j x0, and turning angle i (joint k, angular velocity w, posed joint
+        J) moves G_j x0 by w x (G_j x0 - J) for every joint j at or below k."""
+        omega, pivot = velocity
+        weighted = bary[..., None] * self.model.weights[corners]                         # (K, 3, 16)
+        rest = np.concatenate([self.model.v_template[corners], np.ones(corners.shape + (1,))], axis=-1)
+        bound = np.einsum("jab,kcb->kcja", transforms[:, :3, :], rest)                  # (K, 3, 16, 3) G_j x0
+        below = self.subtree[:, self.free // 3]                                          # (16, n)
+        moved = np.einsum("kcj,kcja,jn->kna", weighted, bound, below)                  # (K, n, 3)
+        share = np.einsum("kcj,jn->kn", weighted, below)                                # (K, n)
+        return np.cross(omega[None], moved - share[..., None] * pivot[None])
 
     # ---------------------------------------------------------------- solve
     def solve(self) -> np.ndarray:
