@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
+from threadpoolctl import threadpool_limits
 
 from darthand.model.anatomy import AXES, angles_to_axis_angle, joint_frames, limits_radians
 from darthand.model.forward import forward
@@ -298,8 +299,10 @@ def fit_gestures(model: HandModel, names: list[str] | None = None, poses_dir=Non
     surfaces, frames, face_part = PartSurfaces(model), joint_frames(model), face_parts(model)
     out = {}
     for name in names:
-        r = fit_gesture(model, surfaces, frames, name, gesture_angles(name, poses_dir),
-                        gesture_contacts(name, poses_dir), face_part)
+        # One BLAS thread: the fit's products are small, and threaded BLAS spin-waits cost 5-20x on two busy cores.
+        with threadpool_limits(limits=1, user_api="blas"):
+            r = fit_gesture(model, surfaces, frames, name, gesture_angles(name, poses_dir),
+                            gesture_contacts(name, poses_dir), face_part)
         out[name] = {"joints": angles_to_joints(r.angles), "contacts": r.contacts, "status": r.status,
                      "changed_deg": r.changed, "rounds": r.rounds, "clearance_mm": round(r.clearance_mm, 4),
                      "crossing": r.crossing, "at_bound": r.at_bound}
