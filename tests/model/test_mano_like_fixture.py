@@ -78,3 +78,26 @@ def test_model_step_labels_both_sides_alike(pickles):
     counts = np.bincount(r, minlength=6)
     assert (counts > 0).all() and (r >= 0).all()       # nail, palm, dorsum, finger sides, wrist all present
     assert (r[1538:] == 5).all()                       # the wrist rings are wrist
+
+
+def test_model_step_builds_the_same_hand_from_either_file(pickles, tmp_path):
+    """`darthand model build` from MANO_LEFT.pkl (x-mirrored, shapedirs bug included) writes the same right and left
+    models as from MANO_RIGHT.pkl: geometry, rig, shape space, labels and fitted gestures."""
+    from darthand.cli import main
+    from darthand.model.gestures import model_gestures
+    from darthand.model.npz_io import load_npz
+
+    built = {}
+    for pkl in pickles:
+        out = tmp_path / pkl.stem
+        assert main(["model", "build", str(pkl), "--out-dir", str(out), "--atlas-res", "256"]) == 0
+        built[pkl.stem] = {side: load_npz(out / f"{side}.npz") for side in ("right", "left")}
+    for side in ("right", "left"):
+        a, b = built["MANO_RIGHT"][side], built["MANO_LEFT"][side]
+        assert a.side == b.side == side and (a.num_vertices, a.num_faces) == (842, 1666)
+        for name in ("v_template", "weights", "posedirs", "shapedirs"):
+            np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=1e-15, err_msg=name)
+        assert (a.face_labels != b.face_labels).sum() <= 2 and a.has_uvs and b.has_uvs
+        ga, gb = model_gestures(a), model_gestures(b)
+        assert ga.fitted and ga.names == gb.names
+        np.testing.assert_allclose(ga.angles, gb.angles, atol=np.deg2rad(0.05))
