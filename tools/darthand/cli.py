@@ -274,7 +274,7 @@ def _add_render_arguments(p) -> None:
     p.add_argument("package", metavar="PACKAGE", help=RENDER_PACKAGE_HELP)
     p.add_argument("--out", required=True, metavar="DIR", help="output folder for image.png, mask.png, labels.json")
     p.add_argument("--pose", default=None, metavar="POSE",
-                   help="a gesture name (assets_src/poses), a pose file (schemas/pose.schema.json) or 48 "
+                   help="a gesture name (as fitted to the model), a pose file (schemas/pose.schema.json) or 48 "
                         "comma-separated MANO axis-angle numbers relative to the flat hand; USD packages take a "
                         "gesture name or a time code (default: the flat hand)")
     p.add_argument("--pose-index", type=int, default=0, metavar="N", help="which pose of a pose file (default 0)")

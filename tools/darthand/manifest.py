@@ -80,7 +80,9 @@ def write_manifest(build: str | Path = "build", out: str | Path | None = None) -
     build = Path(build)
     out = Path(out) if out else build / "manifest.json"
     previous = json.loads(out.read_text()) if out.is_file() else {}
-    steps = {p.stem: json.loads(p.read_text())["seconds"] for p in sorted((build / "steps").glob("*.json"))}
+    records = {p.stem: json.loads(p.read_text()) for p in sorted((build / "steps").glob("*.json"))}
+    steps = {name: r["seconds"] for name, r in records.items()}
+    cpu = {name: r["cpu_seconds"] for name, r in records.items() if "cpu_seconds" in r}
     checks = {name: json.loads((build / rel).read_text()) for name, rel in CHECK_REPORTS.items()
               if (build / rel).is_file()}
     checks.update(catalogue_checks(build))
@@ -88,6 +90,7 @@ def write_manifest(build: str | Path = "build", out: str | Path | None = None) -
         "darthand_version": __version__,
         "model": model_used(build),
         "steps_seconds": steps,
+        "steps_cpu_seconds": cpu,
         "checks": checks,
         "failed_checks": failed_checks(checks),
         "outputs": file_entries(build, out, previous),
