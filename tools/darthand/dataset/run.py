@@ -101,7 +101,8 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
         _render_shards(shards, runner, settings, resume, processes, chunk_size, stats, total, report)
     finally:
         runner.close()
-    return _write_dataset(out, package, jobs_source, planner, total, settings, stats, processes)
+    models = {side: model_info(src) for side, src in (sources or {}).items()}
+    return _write_dataset(out, package, jobs_source, planner, total, settings, stats, processes, models)
 
 
 def _render_shards(shards, runner, settings, resume, processes, chunk_size, stats, total, report) -> None:
@@ -358,7 +359,19 @@ def _progress_printer(every_s: float = 5.0):
     return report
 
 
-def _write_dataset(out: Path, package, jobs_source, planner, total, settings, stats: RunStats, processes) -> dict:
+def model_info(source) -> dict:
+    """What the writers need of a side's model without opening it: hands_mean (45,), betas, vertex counts."""
+    model = getattr(source, "model", None)
+    if model is None or hasattr(source, "gestures"):
+        return {"source": str(getattr(source, "source", "usd"))}
+    wrist = model.meta.get("wrist") or {}
+    return {"source": str(getattr(source, "source", "model")), "hands_mean": np.asarray(model.hands_mean).tolist(),
+            "num_betas": model.num_betas, "vertices": model.num_vertices,
+            "base_vertices": int(wrist.get("base_vertices", model.num_vertices))}
+
+
+def _write_dataset(out: Path, package, jobs_source, planner, total, settings, stats: RunStats, processes,
+                   models) -> dict:
     """dataset.json: the run's inputs, counts and timings (no per-frame list: those are in the shard records)."""
     doc = {"format": DATASET_FORMAT, "version": DATASET_VERSION, "package": str(package),
            "jobs": jobs_source or ({"plan": planner.spec} if planner is not None else {"given": "list"}),
@@ -366,7 +379,7 @@ def _write_dataset(out: Path, package, jobs_source, planner, total, settings, st
            "count": total, "size": settings["size"], "samples": settings["samples"],
            "aa_shading": settings["aa_shading"],
            "files": {kind: name.replace("000000", "<index>") for kind, name in frame_names(0).items()},
-           "rendered": stats.rendered, "skipped": stats.skipped,
+           "models": models, "rendered": stats.rendered, "skipped": stats.skipped,
            "summary": stats.summary(), "timings": stats.timings(processes)}
     write_json(out / "dataset.json", doc)
     return doc
