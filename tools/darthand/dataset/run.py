@@ -116,9 +116,8 @@ def _render_shards(shards, runner, settings, resume, processes, chunk_size, stat
     pending_shards = []
 
     def collect(block: bool) -> None:
-        if not inflight:
-            return
-        finished, _ = wait(list(inflight), timeout=None if block else 0, return_when=FIRST_COMPLETED)
+        finished = wait(list(inflight), timeout=None if block else 0, return_when=FIRST_COMPLETED)[0] \
+            if inflight else ()
         for f in finished:
             state = inflight.pop(f)
             result = f.result()
@@ -126,7 +125,7 @@ def _render_shards(shards, runner, settings, resume, processes, chunk_size, stat
             state["summaries"] += [{k: v for k, v in fr.items() if k not in ("ms", "cpu_ms", "end")}
                                    for fr in result["frames"]]
             state["left"] -= 1
-        while pending_shards and pending_shards[0]["left"] == 0:
+        while pending_shards and pending_shards[0]["left"] == 0 and not pending_shards[0]["submitting"]:
             state = pending_shards.pop(0)
             _write_shard_record(out, state)
             stats.add_shard(state)
@@ -139,13 +138,15 @@ def _render_shards(shards, runner, settings, resume, processes, chunk_size, stat
             stats.skipped += len(state["summaries"])
             stats.done += len(state["summaries"])
             pending_shards.append(state)
+            state["submitting"] = True
             for chunk in make_chunks(state["todo"], processes, chunk_size):
                 while len(inflight) >= limit:
                     collect(block=True)
-                inflight[runner.submit(chunk)] = state
                 state["left"] += 1
+                inflight[runner.submit(chunk)] = state
+            state["submitting"] = False
             collect(block=False)
-        while inflight or (pending_shards and pending_shards[0]["left"] == 0):
+        while inflight or pending_shards:
             collect(block=True)
     except BaseException:
         runner.stop()
