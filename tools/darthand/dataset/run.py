@@ -400,3 +400,27 @@ def _bounded_int(value, what: str, lo: int, hi: int, unit: str = "", hint: str =
                          + (f" {hint}" if hint else ""))
     return int(value)
 
+
+
+def render_package(package, out_dir, jobs=None, *, count: int = 100, start: int = 0, plan: dict | None = None,
+                   sides=None, textures=None, accessories=None, model=None, **options) -> dict:
+    """The Python entry of `darthand render-dataset`: open PACKAGE (render.api.open_source, with the catalogue paths
+    textures/accessories and the USD path's `model`) for the sides asked (default: the plan's, both), then render
+    `jobs` (a list or a jobs file) or frames start .. start + count - 1 of the plan `plan` (dataset/plan.plan_spec
+    options) into out_dir. `options` are render_dataset's. Worker processes are spawned: a script calling this needs
+    the usual `if __name__ == "__main__":` guard."""
+    from darthand.dataset.plan import Planner, plan_spec
+    from darthand.dataset.sources import parse_sides, source_specs
+
+    spec = plan_spec(**(plan or {}))
+    if jobs is not None:
+        from darthand.dataset.jobs import load_jobs
+
+        jobs = load_jobs(jobs) if isinstance(jobs, (str, Path)) else list(jobs)
+        sides = sides or tuple(dict.fromkeys(j.get("side") or "right" for j in jobs)) or ("right",)
+    specs = source_specs(package, parse_sides(sides or spec["sides"]), textures=textures, accessories=accessories,
+                         model=model)
+    sources = {side: s.open() for side, s in specs.items()}
+    planner = None if jobs is not None else Planner({**spec, "sides": list(sources)}, sources)
+    return render_dataset(package, out_dir, jobs, planner=planner, start=start, count=count, specs=specs,
+                          sources=sources, **options)
