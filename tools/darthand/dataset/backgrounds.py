@@ -190,9 +190,12 @@ def crop(image: np.ndarray, spec: dict, width: int, height: int) -> np.ndarray:
     x_lo, y_lo = np.floor(xs).astype(np.int64), np.floor(ys).astype(np.int64)
     x_hi, y_hi = np.minimum(x_lo + 1, sw - 1), np.minimum(y_lo + 1, sh - 1)
     fx, fy = (xs - x_lo).astype(np.float32)[None, :, None], (ys - y_lo).astype(np.float32)[:, None, None]
-    top = image[y_lo][:, x_lo] * (1 - fx) + image[y_lo][:, x_hi] * fx
-    bottom = image[y_hi][:, x_lo] * (1 - fx) + image[y_hi][:, x_hi] * fx
-    return np.ascontiguousarray(top * (1 - fy) + bottom * fy, np.float32)
+    c0, c1 = max(0, int(x_lo.min())), int(x_hi.max()) + 1          # separable: rows of the window's columns first
+    rows = image[y_lo, c0:c1]
+    rows += (image[y_hi, c0:c1] - rows) * fy
+    out = np.take(rows, x_lo - c0, axis=1)
+    out += (np.take(rows, x_hi - c0, axis=1) - out) * fx
+    return np.ascontiguousarray(out, np.float32)
 
 
 # ------------------------------------------------------------------------------------------------ built-in set
