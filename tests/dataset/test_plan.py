@@ -5,7 +5,6 @@ sets (FreiHAND's training_mano.json), splits, backgrounds (a truncated image is 
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 import pytest

@@ -272,8 +272,3 @@ class GestureNames:
         return self.names[k], {"mode": "gestures", "reference": {"set": "package", "index": k,
                                                                  "name": self.names[k]}}
 
-
-def digit_cells(levels: int = DEFAULT_LEVELS) -> dict:
-    """{digit: number of grid cells} for `levels` values per axis (the grid has their product of base poses)."""
-    return {f: levels ** sum(len(a) for a in GRID_AXES["thumb" if f == "thumb" else "finger"]) for f in FINGERS}
-

@@ -81,7 +81,7 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
         shards = [jobs[k:k + shard_size] for k in range(0, total, shard_size)]
     else:
         count = _bounded_int(count, "count", 0, max_frames, "frames",
-                             f"(the frame budget; --max-frames raises it, a frame takes ~80 kB of disk)")
+                             "(the frame budget; --max-frames raises it, a frame takes ~80 kB of disk)")
         start = _bounded_int(start, "start", 0, 10**12 - count)
         total = count
         shards = (planner.jobs(a, min(a + shard_size, start + count)) for a in range(start, start + count, shard_size))
