@@ -4,8 +4,6 @@ and the one loader every stage poses gestures through."""
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -128,10 +126,11 @@ def record_with(model: HandModel, name: str, angles: np.ndarray) -> HandModel:
 
 def test_every_stage_poses_the_models_own_gestures(tmp_path):
     """A model carrying fitted gestures is posed in them -- not in the authored angles -- by export, the
-    accessories' sweep, the renderer and the dataset planner; the record survives the npz format."""
+    accessories' sweep, the renderer and the datasets' reference poses; the record survives the npz format."""
     from darthand.accessories.build import sweep_poses
+    from darthand.dataset.poses import load_reference
     from darthand.export.common import gesture_poses
-    from darthand.render.dataset import pose_pool
+    from darthand.model.rotations import axis_angle_to_quaternion
     from darthand.render.poses import resolve_pose
 
     tube = tube_hand(0)
@@ -150,8 +149,11 @@ def test_every_stage_poses_the_models_own_gestures(tmp_path):
     names, poses = sweep_poses(model, seed=0, n_sampled=0)
     np.testing.assert_allclose(poses[names.index("fist")], expected, atol=1e-12)
     np.testing.assert_allclose(resolve_pose(model, "fist")[0], expected, atol=1e-12)
-    pool = pose_pool(SimpleNamespace(model=model), None, 0.0)
-    np.testing.assert_allclose(pool.entries[0]["angles"], fitted, atol=1e-12)
+    reference = load_reference("gestures", model)                        # what datasets draw poses from
+    quats = axis_angle_to_quaternion(expected.reshape(16, 3)[1:])
+    quats *= np.sign(quats[:, :1]) * np.sign(reference.quats[0, :, :1])  # q and -q are one rotation
+    assert reference.names == ("fist",)
+    np.testing.assert_allclose(reference.quats[0], quats, atol=1e-6)     # (stored as float32)
     with pytest.raises(InputError, match=r"pose: 'ok' is neither a gesture \(fist\) nor a pose file"):
         resolve_pose(model, "ok")
 
