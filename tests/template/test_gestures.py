@@ -200,3 +200,18 @@ def test_open_hand_gestures_are_clean(tmp_path):
     assert (tmp_path / "gestures.png").is_file() and (tmp_path / "gestures.json").is_file()
     left = gesture_report(mirror_model(model), ["fist", "ok"])
     assert gesture_problems(report) == [] and gesture_problems(left) == []
+
+
+def test_failures_of_fitted_gestures_name_what_to_change():
+    entry = {"finite": True, "inverted_faces": 0, "between_fingers_faces": 7, "between": {"thumb-index": 7},
+             "fit": {"status": "unresolved", "changed_deg": {}, "at_bound": ["thumb1.bend"], "clearance_mm": 1.0}}
+    assert gesture_problems({"ok": entry}) == [
+        "gesture 'ok': 7 faces where digits intersect (thumb-index 7), more than 0; after fitting to this model "
+        "(unresolved, stopped at the bound of thumb1.bend): change the index and thumb angles or the contacts in "
+        "assets_src/poses/ok.json"]
+    mirror = {"finite": True, "inverted_faces": 2, "between_fingers_faces": 0, "finger_palm_faces": 0,
+              "between": {}}
+    clean = dict(entry, between_fingers_faces=0, between={}, finger_palm_faces=0)
+    assert gesture_problems({"ok": dict(clean, mirror=mirror)}) == [
+        "gesture 'ok' (mirror): 2 inverted triangles; after fitting to this model (unresolved, stopped at the bound "
+        "of thumb1.bend): change the digit angles or the contacts in assets_src/poses/ok.json"]

@@ -34,7 +34,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
-from darthand.model.anatomy import AXES, angles_to_axis_angle, joint_frames, limits_radians
+from darthand.model.anatomy import AXES, angles_to_axis_angle, angles_to_matrix, joint_frames, limits_radians
 from darthand.model.forward import forward
 from darthand.model.gestures import GESTURES_FORMAT, GESTURES_VERSION, angles_to_joints
 from darthand.model.hand_model import HandModel
@@ -208,10 +208,9 @@ class GestureProblem:
         W = posed.world_rotations[0]
         omega = np.empty((len(self.free), 3))
         for i, (j, a) in enumerate(zip(joints, axes)):
-            parent = self.model.parents[j]
-            t, s, b = angles[j]
-            local = [_rz(b) @ _ry(s) @ [1.0, 0, 0], _rz(b) @ [0, 1.0, 0], np.array([0, 0, 1.0])][a]
-            omega[i] = W[parent] @ self.frames[j] @ local
+            _, s, b = angles[j]
+            before = angles_to_matrix([0.0, s, b] if a == 0 else [0.0, 0.0, b if a == 1 else 0.0])  # Rz Ry, Rz, I
+            omega[i] = W[self.model.parents[j]] @ self.frames[j] @ before[:, a]
         return omega, posed.joints[0, joints]
 
     def distance_gradient(self, v: np.ndarray, h, velocity, transforms: np.ndarray) -> np.ndarray:
@@ -347,13 +346,3 @@ def changed_angles(authored: np.ndarray, fitted: np.ndarray, tol_deg: float = 1e
     delta = np.rad2deg(fitted - authored)
     return {f"{JOINT_NAMES[j]}.{AXES[a]}": round(float(delta[j, a]), 3)
             for j, a in zip(*np.nonzero(np.abs(delta) > tol_deg))}
-
-
-def _rz(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _ry(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])

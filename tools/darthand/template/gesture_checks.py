@@ -176,9 +176,9 @@ def what_to_change(name: str, r: dict) -> str:
         return ("the gestures are not fitted to this model: build it with `darthand model build` (make assets) "
                 "or change " + f"assets_src/poses/{name}.json")
     digits = sorted({p for k in r.get("between", {}) for p in k.split("-") if p != "palm"})
-    bound = f", the fit stopped at the bound of {', '.join(fit['at_bound'])}" if fit.get("at_bound") else ""
-    return (f"fitted ({fit['status']}{bound}); change the {' and '.join(digits) or 'digit'} angles or the contacts "
-            f"in assets_src/poses/{name}.json")
+    bound = f", stopped at the bound of {', '.join(fit['at_bound'])}" if fit.get("at_bound") else ""
+    return (f"after fitting to this model ({fit['status']}{bound}): change the {' and '.join(digits) or 'digit'} "
+            f"angles or the contacts in assets_src/poses/{name}.json")
 
 
 def write_gesture_checks(model: HandModel, out_dir: str | Path, names: list[str] | None = None) -> dict:
