@@ -17,7 +17,7 @@ sqrt(mean((d - r1) (d - r2))) (r1, r2 the halves), which the reference's noise d
 
 Speed: ms per 512^2 image with both cores (two worker processes rendering and writing frames, as render-dataset
 does; the render benchmark's scene) for today's settings and the new defaults, alternated in the same run; and
-single-threaded ms per frame for every option.
+single-threaded ms per 512^2 frame (rendering only) for every option, the options alternated frame by frame.
 
 References are cached under build/bench/reference/ by a digest of everything they depend on (a first run renders
 them: about 25 s per frame on two quiet cores). Side-by-side images (before | after | reference | 4x |after -
@@ -169,6 +169,31 @@ def both_cores_ms(sources, configs: dict, frames: int, rounds: int, tmp: Path) -
             for name, v in times.items()}
 
 
+def frame_ms(renderer, texture_id: str, rounds: int = 2) -> dict:
+    """Median single-threaded ms per 512^2 frame (rendering only) of each config on the render benchmark's scene
+    (the ring, every gesture), the configs alternated frame by frame; and the median ms of the indirect light's
+    steps (vertex lighting, rays) and the rays it cast."""
+    from darthand.model.poses import list_gestures
+
+    renderer.threads = 1
+    ms = {name: [] for name in CONFIGS}
+    indirect = {name: [] for name in CONFIGS}
+    rays = {name: [] for name in CONFIGS}
+    for r in range(rounds):
+        for pose in list_gestures():
+            for name, shading in CONFIGS.items():
+                t0 = time.perf_counter()
+                f = renderer.render(pose, texture=texture_id, accessory=ACCESSORY, camera="three_quarter",
+                                    lights=LIGHTS, shading=shading)
+                if r or pose != list_gestures()[0]:
+                    ms[name].append(1000 * (time.perf_counter() - t0))
+                    indirect[name].append(1000 * (f.stats.get("indirect", 0) + f.timings.get("indirect_setup", 0)))
+                    rays[name].append(f.stats.get("indirect_rays", 0))
+    return {name: {"ms_512_one_thread": round(float(np.median(ms[name])), 1),
+                   "indirect_ms": round(float(np.median(indirect[name])), 1),
+                   "indirect_rays": int(np.median(rays[name]))} for name in CONFIGS}
+
+
 # ------------------------------------------------------------------------------------------------ run
 
 
@@ -187,7 +212,7 @@ def _frames(source, texture_ids):
 
 def surface_table(renderer, lighting, frames, tmp: Path) -> dict:
     """Errors of every config (and of the indirect-ray curve against its many-ray truth) over the frames."""
-    rows = {name: {"img": [], "ms": []} for name in list(CONFIGS) + ["truth"]}
+    rows = {name: {"img": []} for name in list(CONFIGS) + ["truth"]}
     refs, masks, noise, ious = [], [], [], []
     for name, pose, view, texture, acc in frames:
         opts = dict(texture=texture, accessory=acc, camera=view, lights=lighting, width=REF_SIZE,
@@ -202,9 +227,7 @@ def surface_table(renderer, lighting, frames, tmp: Path) -> dict:
         refs.append(ref)
         masks.append(mask)
         for config, shading in list(CONFIGS.items()) + [("truth", CURVE_TRUTH)]:
-            t0 = time.perf_counter()
             f = renderer.render(pose, shading=shading, **opts)
-            rows[config]["ms"].append(1000 * (time.perf_counter() - t0))
             rows[config]["img"].append(over_grey(f.colour, f.alpha))
         if acc is not None or pose == "fist":
             side_by_side(OUT / f"side_by_side_{name}.png", rows["before: wrap skin, ambient unblocked"]["img"][-1],
@@ -212,15 +235,10 @@ def surface_table(renderer, lighting, frames, tmp: Path) -> dict:
     if min(ious) < 0.99:
         raise RuntimeError(f"reference: silhouettes disagree with darthand's (mask IoU {min(ious):.4f}): the scene "
                            "conversion is wrong")
-    table = {}
-    for config in CONFIGS:
-        table[config] = {**errors(rows[config]["img"], refs, masks),
-                         "ms_256_one_thread_median": round(float(np.median(rows[config]["ms"])), 1)}
-    curve = {}
-    for config in [c for c in CONFIGS if c.startswith("lambert skin, indirect")]:
-        curve[config] = {"against_512_rays": errors(rows[config]["img"], rows["truth"]["img"], masks),
-                         "against_path_tracer_mean_linear": table[config]["mean_linear"],
-                         "ms_256_one_thread_median": table[config]["ms_256_one_thread_median"]}
+    table = {config: errors(rows[config]["img"], refs, masks) for config in CONFIGS}
+    curve = {config: {"against_512_rays": errors(rows[config]["img"], rows["truth"]["img"], masks),
+                      "against_path_tracer_mean_linear": table[config]["mean_linear"]}
+             for config in CONFIGS if config.startswith("lambert skin, indirect")}
     n = np.concatenate(noise)
     return {"table": table, "indirect_rays_curve": curve,
             "reference_noise": {"mean_linear": round(float(n.mean()), 5),
@@ -285,6 +303,8 @@ def run() -> dict:
         frames = _frames(source, texture_ids)
         surface = surface_table(renderer, lighting, frames, tmp)
         subsurface = subsurface_table(renderer, lighting, tmp)
+        for name, figures in frame_ms(renderer, texture_id).items():
+            surface["table"][name].update(figures)
         speed = both_cores_ms((model, tex, acc, texture_id), {"before": BEFORE, "after": AFTER}, frames=12,
                               rounds=4, tmp=tmp)
     table = surface["table"]
@@ -307,3 +327,50 @@ def run() -> dict:
 
 if __name__ == "__main__":
     print(json.dumps(run(), indent=2))
+
+
+def summary(res: dict) -> str:
+    """The markdown section of `make bench`'s README: the headline, the options' table, the indirect-ray curve, the
+    skin models against the scattering volume, the two-core timings."""
+    if "skipped" in res:
+        return f"Skipped: {res['skipped']}"
+    h = res["headline"]
+    s = res["surface"]
+    lines = [f"**Mean |error| against the path tracer (linear): {h['mean_error_linear_before']:.4f} before, "
+             f"{h['mean_error_linear_after']:.4f} after ({h['error_ratio']:.2f}x); ms per 512² image with both cores: "
+             f"{h['ms_per_image_before']:.1f} before, {h['ms_per_image_after']:.1f} after ({h['time_ratio']:.2f}x).** "
+             f"Goal: {h['goal']}.", "",
+             f"{res['frames']} frames of {res['size']}² (gestures × views × textures, without and with an "
+             f"accessory), Mitsuba {res['mitsuba']} path tracer at {res['reference_spp']} spp, opaque skin; "
+             f"reference noise {s['reference_noise']['mean_linear']:.4f} mean, "
+             f"{s['reference_noise']['p99_linear']:.3f} p99 (linear); mask IoU ≥ {s['mask_iou_min']:.4f}.", "",
+             "| shading | mean lin | p99 lin | mean sRGB | p99 sRGB | bias lin (R, G, B) | ms/frame 512² 1 thread "
+             "| of which indirect | indirect rays |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for name, r in s["table"].items():
+        bias = ", ".join(f"{b:+.4f}" for b in r["bias_linear_rgb"])
+        lines.append(f"| {name} | {r['mean_linear']:.4f} | {r['p99_linear']:.3f} | {r['mean_srgb_codes']:.2f} | "
+                     f"{r['p99_srgb_codes']:.0f} | {bias} | {r.get('ms_512_one_thread', '')} | "
+                     f"{r.get('indirect_ms', '')} | {r.get('indirect_rays', '')} |")
+    lines += ["", "Indirect light: rays per vertex against the same estimate with 512 rays (the many-ray truth of "
+              "the estimator) and against the path tracer (lambert skin):", "",
+              "| rays | mean lin vs 512 | p99 lin vs 512 | mean sRGB vs 512 | mean lin vs path tracer |",
+              "|---|---|---|---|---|"]
+    for name, r in s["indirect_rays_curve"].items():
+        a = r["against_512_rays"]
+        lines.append(f"| {name.rsplit(' ', 1)[-1]} | {a['mean_linear']:.4f} | {a['p99_linear']:.3f} | "
+                     f"{a['mean_srgb_codes']:.2f} | {r['against_path_tracer_mean_linear']:.4f} |")
+    sss = res["subsurface"]
+    lines += ["", f"Skin models against a path-traced scattering volume ({'; '.join(sss['frames'])}; "
+              f"{sss['size']}², {sss['spp']} spp, reference noise {sss['reference_noise_mean_linear']:.4f} mean; "
+              "RMSE corrected for that noise), indirect light on:", "",
+              "| skin | RMSE lin | mean lin (with noise) | bias lin (R, G, B) |", "|---|---|---|---|"]
+    for name in SSS_CONFIGS:
+        r = sss[name]
+        bias = ", ".join(f"{b:+.4f}" for b in r["bias_linear_rgb"])
+        lines.append(f"| {name} | {r['rmse_noise_corrected_linear']:.4f} | {r['mean_linear']:.4f} | {bias} |")
+    speed = res["both_cores_512"]
+    lines += ["", "Both cores, ms per 512² image (runs alternated): "
+              + "; ".join(f"{k} {v['ms_per_image']} ({', '.join(map(str, v['runs']))})" for k, v in speed.items()),
+              "", f"Side-by-side images (before | after | reference | 4×|after − reference|): `{res['images']}/`."]
+    return "\n".join(lines)
