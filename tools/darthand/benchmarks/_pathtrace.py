@@ -139,14 +139,15 @@ def bitmap(mi, image) -> dict:
             "filter_type": "bilinear"}
 
 
-def _channel(material, maps, channel, value) -> np.ndarray:
+def _channel(maps, channel, value) -> np.ndarray:
+    """(H, W) a data channel of a material's maps, or its constant."""
     return maps[..., channel] if channel is not None else np.full(maps.shape[:2], value, np.float32)
 
 
 def opaque_skin_bsdf(mi, material) -> dict:
     """Lambert (texture albedo) + GGX with skin's Fresnel and the texture's roughness, summed."""
     maps = material.maps.levels[0]
-    rough = np.maximum(_channel(material, maps, material.roughness_channel, material.roughness_value), 0.045)
+    rough = np.maximum(_channel(maps, material.roughness_channel, material.roughness_value), 0.045)
     return {"type": "blendbsdf", "weight": 0.5,
             "diffuse": {"type": "diffuse", "reflectance": bitmap(mi, 2 * maps[..., :3])},
             "specular": {"type": "roughconductor", "distribution": "ggx", "alpha": bitmap(mi, (rough ** 2)[..., None]),
@@ -157,8 +158,8 @@ def opaque_skin_bsdf(mi, material) -> dict:
 def accessory_bsdf(mi, material) -> dict:
     """Mitsuba's principled BSDF with the metallic-roughness maps (dielectric F0 0.04)."""
     maps = material.maps.levels[0]
-    rough = _channel(material, maps, material.roughness_channel, material.roughness_value)
-    metal = _channel(material, maps, material.metallic_channel, material.metallic_value)
+    rough = _channel(maps, material.roughness_channel, material.roughness_value)
+    metal = _channel(maps, material.metallic_channel, material.metallic_value)
     return {"type": "principled", "base_color": bitmap(mi, maps[..., :3]), "roughness": bitmap(mi, rough[..., None]),
             "metallic": bitmap(mi, metal[..., None]), "specular": 0.5, "spec_tint": 0.0}
 
@@ -171,7 +172,7 @@ def volume_skin(mi, material, inversion):
     albedo = maps[..., :3].reshape(-1, 3)
     if np.ptp(albedo, axis=0).max() > 1e-4:
         raise ValueError("reference: volume skin needs a constant-colour skin (a medium has no uv texture)")
-    rough = float(np.median(_channel(material, maps, material.roughness_channel, material.roughness_value)))
+    rough = float(np.median(_channel(maps, material.roughness_channel, material.roughness_value)))
     boundary = {"type": "mask", "opacity": float(SKIN_F0 * material.specular),
                 "nested": {"type": "roughconductor", "distribution": "ggx", "alpha": max(rough, 0.045) ** 2,
                            "material": "none"}}

@@ -2,8 +2,9 @@
 loaded package, textures and the last scene); `write_frame` writes image.png, mask.png, labels.json (+ depth.exr).
 
 A frame: pose the subject (internal forward pass or UsdSkel), frame the camera, build (or reuse) the Embree scene,
-trace one sample per pixel inside the scene's projected bounds, shade with shadows, supersample the edge pixels,
-composite over the background, label.
+trace one sample per pixel inside the scene's projected bounds, light the vertices those samples need with indirect
+light (indirect.py), shade with shadows (skin: skin.py), supersample the edge pixels, composite over the
+background, label.
 """
 
 from __future__ import annotations
@@ -22,9 +23,9 @@ from darthand.render import aa
 from darthand.render.camera import Camera, load_camera
 from darthand.render.image import (composite, encode_mask8, encode_rgba8, load_background,
                                    straight_colour, write_exr, write_png)
+from darthand.render.indirect import VertexLight
 from darthand.render.labels import frame_labels
 from darthand.render.lights import Lighting, load_lighting, world_lights
-from darthand.render.indirect import VertexLight
 from darthand.render.scene import Scene, scene_for
 from darthand.render.shade import ShadingOptions
 from darthand.render.subject import Subject

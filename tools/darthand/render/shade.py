@@ -222,9 +222,9 @@ def ambient_light(p: SurfaceParams, ambient: np.ndarray, spec, nv: np.ndarray, h
 def diffuse_model(material: Material, p: SurfaceParams, hits: Hits, skin_model: str):
     """(response(ndl (M,)) -> (3, M) or (M,), reach): a surface's diffuse response per unit irradiance at the
     light's cosine, and the cosine above which a light can reach it (shadow rays are cast there)."""
-    if material.kind != "skin" or skin_model == "lambert":
+    if material.kind != "skin" or skin_model == "lambert" or (skin_model == "subsurface" and hits.radius is None):
         return (lambda ndl: np.maximum(ndl, 0)), 0.0
-    if skin_model == "subsurface" and hits.radius is not None:
+    if skin_model == "subsurface":
         width = skin_width(material)
         nails = None if hits.skin is None or hits.skin.all() else np.flatnonzero(~hits.skin)
 

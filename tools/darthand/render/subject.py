@@ -13,9 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from darthand.render.texture import MipTexture, checker_texture, constant_texture
-
 from darthand.render.skin import SKIN_MFP_MM
+from darthand.render.texture import MipTexture, checker_texture, constant_texture
 
 SKIN_F0 = 0.028                      # normal-incidence reflectance of skin (refractive index about 1.4)
 SKIN_WRAP = (0.32, 0.16, 0.10)       # per-channel wrap: red light reaches furthest past the terminator (scattering)
@@ -68,8 +67,7 @@ class Surface:
     material, `role` 'hand' or 'accessory', and face_joints (F,) the joint that moves each face most (skinned
     surfaces; None for rigid ones), for keypoint visibility; face_labels (F,) int8 the model's surface labels
     (model.layout.FACE_LABELS, -1 unlabelled) or None: the skin model leaves nails out. A rigid surface also carries
-    `local` (N, 3) float32,
-    its vertices in its joint's frame (the same array every frame, so its ray-tracing structure is built once), and
+    `local` (N, 3) float32, its vertices in its joint's frame (the same array every frame, so its ray-tracing structure is built once), and
     `transform` (4, 4) float64, the rigid transform G with vertices = G @ [local, 1]."""
 
     name: str
