@@ -146,20 +146,30 @@ def sphere_bounce(visible: np.ndarray, albedo: np.ndarray) -> np.ndarray:
     return 1 / (1 - rho * (1 - np.asarray(visible)[..., None]))
 
 
+_UVS: dict = {}
+
+
 def vertex_uvs(surface) -> np.ndarray | None:
-    """(N, 2) float32 one uv per vertex (a seam vertex takes one of its corners' uvs), or None without UVs."""
+    """(N, 2) float32 one uv per vertex (a seam vertex takes one of its corners' uvs), or None without UVs; made once
+    per (uvs, faces) arrays (the same every frame)."""
     if surface.uvs is None:
         return None
-    uv = np.zeros((len(surface.vertices), 2), np.float32)
-    uv[surface.faces.ravel()] = surface.uvs[surface.faces_uv.ravel()]
-    return uv
+    key = (id(surface.uvs), id(surface.faces_uv), id(surface.faces), len(surface.vertices))
+    entry = _UVS.get(key)
+    if entry is None or entry[0] is not surface.uvs or entry[1] is not surface.faces:
+        if len(_UVS) > 64:
+            _UVS.clear()
+        uv = np.zeros((len(surface.vertices), 2), np.float32)
+        uv[surface.faces.ravel()] = surface.uvs[surface.faces_uv.ravel()]
+        entry = _UVS[key] = (surface.uvs, surface.faces, uv)
+    return entry[2]
 
 
 class VertexLight:
     """One frame's indirect light at the vertices of every surface of a committed scene.Scene.
 
-    On construction: each surface's diffuse albedo rho (N, 3) and direct irradiance (N, 3) at its vertices (all
-    lights, cos-weighted, one shadow ray per vertex and shadowed light). `ensure(g, prim)` computes E and V (above)
+    On construction: each surface's diffuse albedo rho (N, 3) at its vertices, and the direct light they reflect,
+    rho x irradiance (N, 3) (all lights, cos-weighted, one shadow ray per vertex and shadowed light). `ensure(g, prim)` computes E and V (above)
     for the vertices of faces `prim` of surface g that have none yet; `at(g, prim, bu, bv)` interpolates them at
     hits: (E (3, M), V (M,)). Not thread-safe: `ensure` runs before a batch is shaded in parallel."""
 
@@ -172,7 +182,9 @@ class VertexLight:
         self.lift = LIFT * max(scene.extent, 1e-3)
         self.counters = counters if counters is not None else {}
         self.albedo = [vertex_albedo(s.material, vertex_uvs(s), len(s.vertices)) for s in scene.surfaces]
-        self.direct = [self._direct(s, lights) for s in scene.surfaces] if interreflection else None
+        # diffusely reflected direct light per vertex (albedo x irradiance): what a ray that hits there brings back
+        self.reflected = ([a * self._direct(s, lights) for a, s in zip(self.albedo, scene.surfaces)]
+                          if interreflection else None)
         self.values = [np.zeros((len(s.vertices), 4), np.float32) for s in scene.surfaces]
         self.done = [np.zeros(len(s.vertices), bool) for s in scene.surfaces]
 
@@ -238,8 +250,7 @@ class VertexLight:
                 facing = np.einsum("ij,ji->i", dirs[at], self.scene.faces[h].table[GEOMETRIC:GEOMETRIC + 3, prim]) < 0
                 at, prim = at[facing], prim[facing]
                 bu, bv = hit["u"][at], hit["v"][at]
-                bounce[at] = (interpolate(self.albedo[h], surface.faces, prim, bu, bv)
-                              * interpolate(self.direct[h], surface.faces, prim, bu, bv))
+                bounce[at] = interpolate(self.reflected[h], surface.faces, prim, bu, bv)
         visible = (geom < 0).reshape(-1, k).mean(axis=1, dtype=np.float32)
         gathered = bounce.reshape(-1, k, 3).mean(axis=1)
         out[:, 3] = visible

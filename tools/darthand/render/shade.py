@@ -42,7 +42,6 @@ MIN_ROUGHNESS = 0.045       # GGX is singular at alpha = 0
 DEFAULT_AO_RAYS = 16        # ambient-occlusion rays per vertex (benchmarks/render_reference.py: speed against error)
 SKIN_MODELS = ("subsurface", "wrap", "lambert")
 DEFAULT_SKIN = "subsurface"
-SUBSURFACE_REACH = -0.6     # n.l below which the pre-integrated response is negligible at the hand's curvatures
 
 
 @dataclass(frozen=True)
@@ -221,7 +220,8 @@ def ambient_light(p: SurfaceParams, ambient: np.ndarray, spec, nv: np.ndarray, h
 
 def diffuse_model(material: Material, p: SurfaceParams, hits: Hits, skin_model: str):
     """(response(ndl (M,)) -> (3, M) or (M,), reach): a surface's diffuse response per unit irradiance at the
-    light's cosine, and the cosine above which a light can reach it (shadow rays are cast there)."""
+    light's cosine, and the lowest cosine at which it can be lit (below 0: past the terminator; shadow rays are cast
+    where the response is not nil)."""
     if material.kind != "skin" or skin_model == "lambert" or (skin_model == "subsurface" and hits.radius is None):
         return (lambda ndl: np.maximum(ndl, 0)), 0.0
     if skin_model == "subsurface":
@@ -233,7 +233,7 @@ def diffuse_model(material: Material, p: SurfaceParams, hits: Hits, skin_model: 
             if nails is not None:
                 out[:, nails] = np.maximum(ndl[nails], 0)
             return out
-        return subsurface, SUBSURFACE_REACH
+        return subsurface, -1.0
     wrap = np.asarray(material.wrap, np.float32)
     if not wrap.any():
         return (lambda ndl: np.maximum(ndl, 0)), 0.0
@@ -267,7 +267,9 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
             l = l / np.maximum(dist, 1e-9)
             scale = light["radiance"][:, None] / np.maximum(dist * dist, 1e-12)
         ndl = _dot(n, l)
-        reached = ndl > reach
+        diffuse = response(ndl)
+        # Where the diffuse response is nil (and so is the specular, n.l <= 0) no shadow ray is needed.
+        reached = ndl > 0 if reach >= 0 else (diffuse.max(axis=0) if diffuse.ndim == 2 else diffuse) > 1e-4
         if light["shadows"]:
             idx = np.flatnonzero(reached)
             if len(idx):
@@ -277,7 +279,7 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
                 reached[idx[occluded(np.ascontiguousarray(origin), np.ascontiguousarray(dirs), tfar)]] = False
                 if counters is not None:
                     counters["shadow_rays"] = counters.get("shadow_rays", 0) + len(idx)
-        colour = p.albedo * response(ndl)
+        colour = p.albedo * diffuse
         if spec:
             h = _normalize(v + l)
             colour += spec * ggx_specular(np.clip(ndl, 0, 1), nv, np.clip(_dot(n, h), 0, 1),
