@@ -185,8 +185,8 @@ def test_integrating_sphere():
         light = indirect.VertexLight(scene, [], np.full(3, ambient, np.float32), 512, interreflection=inter)
         light.ensure(0, prim)
         done = np.flatnonzero(light.done[0])
-        assert abs(light.values[0][done, 3].mean() - f) < 0.01
-        assert abs(light.values[0][done, 0].mean() - want) < 0.01 * want + 0.003
+        assert abs(light.values[0][3, done].mean() - f) < 0.01
+        assert abs(light.values[0][0, done].mean() - want) < 0.01 * want + 0.003
 
 
 # ------------------------------------------------------------------------------------------------ rendering

@@ -168,32 +168,47 @@ def vertex_uvs(surface) -> np.ndarray | None:
 class VertexLight:
     """One frame's indirect light at the vertices of every surface of a committed scene.Scene.
 
-    On construction: each surface's diffuse albedo rho (N, 3) at its vertices, and the direct light they reflect,
-    rho x irradiance (N, 3) (all lights, cos-weighted, one shadow ray per vertex and shadowed light). `ensure(g, prim)` computes E and V (above)
-    for the vertices of faces `prim` of surface g that have none yet; `at(g, prim, bu, bv)` interpolates them at
-    hits: (E (3, M), V (M,)). Not thread-safe: `ensure` runs before a batch is shaded in parallel."""
+    Per vertex, made when first needed: the diffuse albedo rho (3) and the direct light the vertex reflects,
+    rho x irradiance (3) (all lights, cos-weighted, one shadow ray per shadowed light) -- only at the vertices of
+    faces the indirect rays hit, so that the cost follows what a frame sees, not the accessory's vertex count.
+    `ensure(g, prim)` computes E and V (above) for the vertices of faces `prim` of surface g that have none yet;
+    `at(g, prim, bu, bv)` interpolates them at hits: (E (3, M), V (M,)). Not thread-safe: `ensure` runs before a
+    batch is shaded in parallel."""
 
     def __init__(self, scene, lights: list[dict], ambient: np.ndarray, rays: int, interreflection: bool = True,
                  counters: dict | None = None):
-        from darthand.render.shade import vertex_albedo
-
-        self.scene, self.rays, self.interreflection = scene, int(rays), bool(interreflection)
+        self.scene, self.lights, self.rays = scene, lights, int(rays)
+        self.interreflection = bool(interreflection)
         self.ambient = np.asarray(ambient, np.float32)
         self.lift = LIFT * max(scene.extent, 1e-3)
         self.counters = counters if counters is not None else {}
-        self.albedo = [vertex_albedo(s.material, vertex_uvs(s), len(s.vertices)) for s in scene.surfaces]
-        # diffusely reflected direct light per vertex (albedo x irradiance): what a ray that hits there brings back
-        self.reflected = ([a * self._direct(s, lights) for a, s in zip(self.albedo, scene.surfaces)]
-                          if interreflection else None)
-        self.values = [np.zeros((len(s.vertices), 4), np.float32) for s in scene.surfaces]
-        self.done = [np.zeros(len(s.vertices), bool) for s in scene.surfaces]
+        sizes = [len(s.vertices) for s in scene.surfaces]
+        self.albedo = [np.zeros((n, 3), np.float32) for n in sizes]
+        self.reflected = [np.zeros((n, 3), np.float32) for n in sizes]     # albedo x direct irradiance
+        self.lit = [np.zeros(n, bool) for n in sizes]                      # albedo and reflected made
+        self.values = [np.zeros((4, n), np.float32) for n in sizes]        # E (3), V; by row
+        self.done = [np.zeros(n, bool) for n in sizes]
 
-    def _direct(self, surface, lights: list[dict]) -> np.ndarray:
-        """(N, 3) float32 irradiance (pi folded) of the lights at a surface's vertices, shadowed."""
-        v = np.asarray(surface.vertices, np.float32)
-        n = np.asarray(surface.normals, np.float32)
+    def _light_vertices(self, g: int, ids: np.ndarray) -> None:
+        """Make albedo and reflected light of surface g's vertices `ids` that have none yet."""
+        from darthand.render.shade import vertex_albedo
+
+        ids = ids[~self.lit[g][ids]]
+        if not len(ids):
+            return
+        s = self.scene.surfaces[g]
+        uvs = vertex_uvs(s)
+        self.albedo[g][ids] = vertex_albedo(s.material, None if uvs is None else uvs[ids], len(ids))
+        if self.interreflection:
+            self.reflected[g][ids] = self.albedo[g][ids] * self._direct(s.vertices[ids], s.normals[ids])
+        self.lit[g][ids] = True
+
+    def _direct(self, vertices: np.ndarray, normals: np.ndarray) -> np.ndarray:
+        """(N, 3) float32 irradiance (pi folded) of the lights at vertices (N, 3) with normals (N, 3), shadowed."""
+        v = np.asarray(vertices, np.float32)
+        n = np.asarray(normals, np.float32)
         out = np.zeros((len(v), 3), np.float32)
-        for light in lights:
+        for light in self.lights:
             if light["type"] == "directional":
                 l = np.broadcast_to((-light["direction"]).astype(np.float32), v.shape)
                 scale = np.broadcast_to(light["radiance"], v.shape)
@@ -223,12 +238,13 @@ class VertexLight:
         needed[faces[hit].ravel()] = True
         todo = np.flatnonzero(needed & ~self.done[g])
         if len(todo):
-            self.values[g][todo] = self._compute(g, todo)
+            self.values[g][:, todo] = self._compute(g, todo).T
             self.done[g][todo] = True
 
     def _compute(self, g: int, ids: np.ndarray) -> np.ndarray:
         """(len(ids), 4) float32: E (3) and V of surface g's vertices `ids`."""
         s, k = self.scene.surfaces[g], self.rays
+        self._light_vertices(g, ids)
         origins, dirs = vertex_rays(s.vertices[ids], s.normals[ids], ids, k, self.lift, salt=977 * g + 1,
                                     mirrored=self.scene.subject.side == "left", count=len(s.vertices))
         self.counters["indirect_rays"] = self.counters.get("indirect_rays", 0) + len(origins)
@@ -249,6 +265,7 @@ class VertexLight:
                 # or went through a gap in it: it brings nothing back.
                 facing = np.einsum("ij,ji->i", dirs[at], self.scene.faces[h].table[GEOMETRIC:GEOMETRIC + 3, prim]) < 0
                 at, prim = at[facing], prim[facing]
+                self._light_vertices(h, np.unique(surface.faces[prim]))
                 bu, bv = hit["u"][at], hit["v"][at]
                 bounce[at] = interpolate(self.reflected[h], surface.faces, prim, bu, bv)
         visible = (geom < 0).reshape(-1, k).mean(axis=1, dtype=np.float32)
@@ -259,5 +276,8 @@ class VertexLight:
 
     def at(self, g: int, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(E (3, M) float32 indirect irradiance, V (M,) open fraction) at hits on surface g (faces ensured)."""
-        v = interpolate(self.values[g], self.scene.surfaces[g].faces, prim, bu, bv)
-        return np.ascontiguousarray(v[:, :3].T), v[:, 3]
+        f = self.scene.surfaces[g].faces[prim]
+        values = self.values[g]
+        a = np.take(values, f[:, 0], axis=1)
+        v = a + bu * (np.take(values, f[:, 1], axis=1) - a) + bv * (np.take(values, f[:, 2], axis=1) - a)
+        return v[:3], v[3]

@@ -82,28 +82,41 @@ def subsurface_diffuse(ndl: np.ndarray, radius: np.ndarray, width: np.ndarray) -
     """(3, M) float32 diffuse response per unit irradiance (D above) at cosines ndl (M,) on spheres of radius
     `radius` (M,) metres, with profile widths `width` (3,) metres per channel: linear in cos theta, nearest row in
     log2(r / d) (rows a quarter octave apart)."""
-    table = sphere_table()
+    flat_table = sphere_table().ravel()
     cu = (np.clip(ndl, -1, 1) + 1) * np.float32((COS_STEPS - 1) / 2)
     c0 = np.minimum(cu.astype(np.int32), COS_STEPS - 2)
     fc = cu - c0
-    log_r = np.log2(radius)
+    step = (RATIO_STEPS - 1) / (LOG_HI - LOG_LO)
+    # rows in units of the table's step: log2(r) once, each channel's log2(d) as a shift of it
+    row_r = np.log2(radius) * np.float32(step)
     out = np.empty((3, len(ndl)), np.float32)
-    step = np.float32((RATIO_STEPS - 1) / (LOG_HI - LOG_LO))
     for c in range(3):
-        row = np.clip(np.rint((log_r - np.float32(np.log2(width[c]) + LOG_LO)) * step), 0, RATIO_STEPS - 1)
-        flat = row.astype(np.int32) * COS_STEPS + c0
-        lo = np.take(table.ravel(), flat)
-        out[c] = lo + fc * (np.take(table.ravel(), flat + 1) - lo)
+        shift = np.float32(-(np.log2(width[c]) + LOG_LO) * step)
+        row = np.clip(np.rint(row_r + shift), 0, RATIO_STEPS - 1).astype(np.int32)
+        flat = row * np.int32(COS_STEPS) + c0
+        lo = flat_table[flat]
+        out[c] = lo + fc * (flat_table[flat + 1] - lo)
     return out
+
+
+_WIDTHS: dict = {}
 
 
 def skin_width(material) -> np.ndarray:
     """(3,) float32 profile width d (metres) of a skin material: `profile_width` at the median albedo of its texture
-    (a coarse mip level: the skin tone, moles and tattoos aside) and its mean free paths."""
-    levels = material.maps.levels
-    level = levels[max(0, len(levels) - 5)][..., :3].reshape(-1, 3)
-    tone = np.median(level, axis=0)[:, None]
-    return profile_width(tone, np.asarray(material.mfp_mm, np.float32) * np.float32(1e-3))[:, 0]
+    (a coarse mip level: the skin tone, moles and tattoos aside) and its mean free paths. Remembered per texture
+    storage, decode table (skin-tone offset) and mean free paths."""
+    maps = material.maps
+    key = (id(maps.flat), None if maps.decode is None else maps.decode.tobytes(), tuple(material.mfp_mm))
+    entry = _WIDTHS.get(key)
+    if entry is None or entry[0] is not maps.flat:
+        levels = maps.levels
+        level = levels[max(0, len(levels) - 5)][..., :3].reshape(-1, 3)
+        tone = np.median(level, axis=0)[:, None]
+        if len(_WIDTHS) > 256:
+            _WIDTHS.clear()
+        entry = _WIDTHS[key] = (maps.flat, profile_width(tone, np.asarray(material.mfp_mm, np.float32) * 1e-3)[:, 0])
+    return entry[1]
 
 
 def curvature_radius(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
