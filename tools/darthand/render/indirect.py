@@ -23,7 +23,8 @@ interreflection (`ShadingOptions.interreflection` False) E = ambient V: plain am
 
 Per vertex rather than per pixel because its cost does not grow with the image (1,769 hand vertices at K = 16 are
 28k rays, a fifth of a 512^2 frame's), it is free of pixel noise, and indirect light varies slowly across a surface;
-only the vertices of faces a frame's rays hit are computed (VertexLight.ensure). What it loses is indirect light
+only the vertices of faces a frame's rays hit are computed (VertexLight.ensure), and an accessory's vertices, far
+denser than the hand's, get K / 4 rays (at least 4). What it loses is indirect light
 that changes inside one triangle (sharp contact shadows), measured by `make bench` against the reference.
 
 Directions: one stratified set of K cosine-weighted directions (a Fibonacci spiral on the unit disk lifted to the
@@ -44,6 +45,9 @@ GEOMETRIC = FaceData.GEOMETRIC
 GOLDEN = (np.sqrt(5.0) - 1) / 2      # Fibonacci spiral angle step, in turns
 LIFT = 2e-3                          # ray origins lifted off the surface by this x the scene's diagonal (shade.SHADOW_LIFT)
 MAX_BOUNCE_ALBEDO = 0.95             # keeps the sphere series finite where an albedo texel is white and V is 0
+# Accessory meshes are far denser than the hand (a ring's 3,216 vertices on 2 cm, a chain's 9,408): their vertices
+# get a quarter of the rays (at least 4), so that a chain does not cost several hands.
+ACCESSORY_RAY_SHARE, ACCESSORY_MIN_RAYS = 4, 4
 
 
 def disk_set(rays: int) -> tuple[np.ndarray, np.ndarray]:
@@ -243,7 +247,8 @@ class VertexLight:
 
     def _compute(self, g: int, ids: np.ndarray) -> np.ndarray:
         """(len(ids), 4) float32: E (3) and V of surface g's vertices `ids`."""
-        s, k = self.scene.surfaces[g], self.rays
+        s = self.scene.surfaces[g]
+        k = self.rays if s.role == "hand" else max(ACCESSORY_MIN_RAYS, self.rays // ACCESSORY_RAY_SHARE)
         self._light_vertices(g, ids)
         origins, dirs = vertex_rays(s.vertices[ids], s.normals[ids], ids, k, self.lift, salt=977 * g + 1,
                                     mirrored=self.scene.subject.side == "left", count=len(s.vertices))
