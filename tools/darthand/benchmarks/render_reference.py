@@ -360,7 +360,7 @@ def summary(res: dict) -> str:
         lines.append(f"| {name} | {r['mean_linear']:.4f} | {r['p99_linear']:.3f} | {r['mean_srgb_codes']:.2f} | "
                      f"{r['p99_srgb_codes']:.0f} | {bias} | {r.get('ms_512_one_thread', '')} | "
                      f"{r.get('indirect_ms', '')} | {r.get('indirect_rays', '')} |")
-    lines += ["", "Indirect light: rays per vertex against the same estimate with 512 rays (the many-ray truth of "
+    lines += ["", "Indirect light: rays per hand vertex (accessory vertices a quarter, at least 4) against the same estimate with 512 rays (the many-ray truth of "
               "the estimator) and against the path tracer (lambert skin):", "",
               "| rays | mean lin vs 512 | p99 lin vs 512 | mean sRGB vs 512 | mean lin vs path tracer |",
               "|---|---|---|---|---|"]
