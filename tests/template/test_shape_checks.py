@@ -1,0 +1,72 @@
+"""The shape checks (darthand template shapes): extreme shapes of the open hand at rest and through every named
+gesture, their figures, and the command's errors."""
+
+import json
+
+import numpy as np
+import pytest
+
+from darthand.cli import main
+from darthand.model.load import load_model
+from darthand.template import charts, shape_checks
+
+
+@pytest.fixture(scope="module")
+def model():
+    return load_model("open")
+
+
+def test_folded_faces_sees_a_face_turned_over(model):
+    v = model.v_template.copy()
+    assert not shape_checks.folded_faces(model, v).any()
+    a, b, c = model.faces[100]
+    v[a] = v[b] + v[c] - v[a]        # reflect one corner through the opposite edge's midpoint: the face flips
+    assert shape_checks.folded_faces(model, v)[100]
+
+
+def test_joint_depths_inside_and_outside(model):
+    depth, inside = shape_checks.joint_depths(model, model.v_template)
+    assert inside.all() and (depth > 2e-3).all()
+    moved = model.v_template + np.array([0.0, 0.3, 0.0])     # the joints come along: still inside
+    assert shape_checks.joint_depths(model, moved)[1].all()
+
+
+def test_extreme_shape_list(model):
+    shapes = shape_checks.extreme_shapes(model, 2.5)
+    assert shapes[0][0] == "mean" and len(shapes) == 1 + 2 * model.num_betas
+    label, betas = shapes[4]
+    assert label == "beta2=+2.5" and betas[1] == 2.5 and np.count_nonzero(betas) == 1
+
+
+def test_size_chart_draws_bars_and_curves(tmp_path, model):
+    sizes = shape_checks.hand_size_sample(model, 300)
+    path = tmp_path / "sizes.png"
+    shape_checks.write_size_chart(sizes, path)
+    import OpenImageIO as oiio
+    img = oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT)
+    linear = np.asarray(charts.COLORS["samples"])
+    srgb = np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
+    bar = np.isclose(img, srgb, atol=2 / 255).all(-1)
+    assert img.shape[:2] == (480, 1200) and bar.sum() > 2000
+
+
+def test_bad_magnitude_is_a_one_line_error(tmp_path, capsys):
+    assert main(["template", "shapes", "open", "--out-dir", str(tmp_path), "--magnitude", "-1"]) == 2
+    err = capsys.readouterr().err
+    assert "--magnitude" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_extreme_shapes_pass_every_check(tmp_path, model):
+    """|beta_i| = 3 on each direction of the open hand: no fold at rest, joints inside and deep, and every named
+    gesture finite, without inverted faces or digits through each other (the gesture checks)."""
+    report = shape_checks.write_shape_checks(model, tmp_path)
+    for label, r in report["shapes"].items():
+        assert r["folded_faces"] == 0 and not r["joints_outside"] and r["min_joint_depth_ratio"] > 0.5, label
+        for name, g in r["gestures"].items():
+            assert g["finite"] and g["inverted_faces"] == 0, (label, name)
+    assert report["problems"] == [], report["problems"]
+    saved = json.loads((tmp_path / "shapes.json").read_text())
+    assert saved["shape_dims"] == model.num_betas
+    for name in ("shapes.png", "hand_sizes.png", "shape_variance.png"):
+        assert (tmp_path / name).stat().st_size > 10_000
