@@ -55,6 +55,10 @@ build/model/right.npz build/model/left.npz &: build/model/source.txt $(SOURCE_DE
 build/template/gestures.json build/template/gestures.png &: build/model/right.npz $(POSES) $(call src,template)
 	@$(STEP) gestures -- $(DH) template gestures build/model/right.npz --out-dir build/template
 
+# The shape space: extreme shapes at rest and through every gesture, hand sizes against ANSUR II.
+build/template/shapes.json build/template/shapes.png &: build/model/right.npz $(POSES) $(call src,template)
+	@$(STEP) shapes -- $(DH) template shapes build/model/right.npz --out-dir build/template
+
 build/textures/res.txt: FORCE | $(STAMP)
 	@mkdir -p build/textures
 	@echo '$(RES)' | cmp -s - $@ || echo '$(RES)' > $@
@@ -93,7 +97,7 @@ build/validate/report.json: $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/
 	@$(STEP) validate -- $(DH) validate $(foreach s,$(SIDES),build/usd/$(s) build/gltf/$(s).glb build/gltf/$(s)) \
 	    --out $@
 
-ASSETS := build/model/right.npz build/template/gestures.json build/textures/catalog.json \
+ASSETS := build/model/right.npz build/template/gestures.json build/template/shapes.json build/textures/catalog.json \
           build/accessories/catalog.json \
           $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb build/gltf/$(s)/$(s).gltf) \
           build/checks/report.json build/validate/report.json

@@ -106,6 +106,14 @@ def test_bad_betas_are_one_line_errors(right, betas, words):
         right.shaped(betas)
 
 
+def test_a_model_without_shape_directions_poses_and_refuses_betas(right):
+    bare = right.replace(shapedirs=np.zeros((right.num_vertices, 3, 0)))
+    pose = np.random.default_rng(10).normal(0, 0.3, 48)
+    np.testing.assert_allclose(forward(bare, pose).vertices, forward(right, pose).vertices, atol=1e-15)
+    with pytest.raises(InputError, match="0 shape directions"):
+        forward(bare, pose, np.zeros(1))
+
+
 # ------------------------------------------------------------------ the skeleton follows the surface
 def test_joints_are_regressed_from_the_shaped_surface(right):
     betas = np.random.default_rng(3).standard_normal((4, S)) * 1.5

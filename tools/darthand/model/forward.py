@@ -234,6 +234,6 @@ def _prepared(model: HandModel, dtype) -> dict:
             "shapedirs_T": np.ascontiguousarray(model.shapedirs.transpose(2, 1, 0).reshape(-1, 3 * V), dtype=dtype),
             # (S, 16 * 3): the joints' shape directions, J_regressor applied to each of the surface's.
             "shape_joints": np.einsum("jv,vcs->sjc", model.J_regressor.toarray(), model.shapedirs).reshape(
-                model.num_betas, -1).astype(dtype),
+                model.num_betas, 3 * model.J_regressor.shape[0]).astype(dtype),
         }
     return per_model[key]

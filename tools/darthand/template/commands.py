@@ -56,9 +56,6 @@ def shapes_command(args) -> int:
     if not 0 < args.magnitude < 100:
         raise InputError(f"--magnitude: must lie in (0, 100) standard deviations, got {args.magnitude}")
     model = load_model(args.model)
-    if model.num_betas == 0:
-        print(f"{args.model}: no shape directions, nothing to check")
-        return 0
     report = write_shape_checks(model, args.out_dir, magnitude=args.magnitude,
                                 max_between_fingers=args.max_between_fingers)
     for line in report["problems"]:

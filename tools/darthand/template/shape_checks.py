@@ -26,6 +26,7 @@ from darthand.template.decimate import closest_surface_points
 from darthand.template.gesture_checks import face_normals, gesture_problems, gesture_report
 
 MIN_DEPTH_RATIO = 0.5
+GESTURE_FIGURES = ("finite", "inverted_faces", "degenerate_faces", "between_fingers_faces", "finger_palm_faces")
 SHEET_VIEWS = ("dorsal", "radial")
 
 
@@ -83,6 +84,7 @@ def check_shape(model: HandModel, template_depth: np.ndarray, betas: np.ndarray,
     v = shaped.v_template
     depth, inside = joint_depths(model, v)
     gestures = gesture_report(shaped)
+    summary = {name: {k: g.get(k) for k in GESTURE_FIGURES} for name, g in gestures.items()}
     sizes = anthropometry.hand_sizes(model, v[None])
     return {
         "betas": [float(b) for b in betas],
@@ -91,7 +93,7 @@ def check_shape(model: HandModel, template_depth: np.ndarray, betas: np.ndarray,
         "folded_faces": int(folded_faces(model, v).sum()),
         "joints_outside": [int(j) for j in np.flatnonzero(~inside)],
         "min_joint_depth_ratio": round(float((depth / template_depth).min()), 4),
-        "gestures": gestures,
+        "gestures": summary,
         "gesture_problems": gesture_problems(gestures, max_between_fingers),
     }
 
