@@ -127,7 +127,7 @@ def calibrate(src: ShapeSource, model: HandModel, draws: population.Draws,
     calibration = population.Calibration(*(float(v) for v in fit.x))
     got = moments(fit.x)
     names = [f"{m}_{k}" for m in measures for k in ("sex_difference", "within_sex_sd")]
-    report = {"calibration": calibration.as_dict(), "people": draws.size, "survey": survey["source"],
+    report = {"calibration": calibration.as_dict(), "calibration_people": draws.size, "survey": survey["source"],
               "moments": {n: {"survey": float(w), "population": round(float(g), 4), "fitted": k in fitted}
                           for k, (n, w, g) in enumerate(zip(names, want, got))}}
     return calibration, report
