@@ -19,7 +19,7 @@ import numpy as np
 
 from darthand.fileio import write_json
 from darthand.model.hand_model import HandModel
-from darthand.model.preview import contact_sheet, render_mesh, write_png
+from darthand.model.preview import BACKGROUND, contact_sheet, render_mesh, write_png
 from darthand.model.topology import boundary_loops
 from darthand.template import anthropometry, charts
 from darthand.template.decimate import closest_surface_points
@@ -168,7 +168,7 @@ def write_shape_sheet(model: HandModel, shapes: list[tuple[str, np.ndarray]], ou
     first, then one row per direction, -magnitude and +magnitude from each of SHEET_VIEWS."""
     surfaces = {label: model.shaped(b).v_template for label, b in shapes}
     everything = np.concatenate(list(surfaces.values()))            # one framing for all tiles
-    blank = np.zeros((size, size, 3), np.float32)
+    blank = np.tile(np.asarray(BACKGROUND, np.float32), (size, size, 1))
     images, labels = [], []
     rows = [[shapes[0][0]]] + [[shapes[k][0], shapes[k + 1][0]] for k in range(1, len(shapes), 2)]
     for row in rows:
