@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from darthand.fileio import write_json
+from darthand.fileio import atomic_path, write_json
 from darthand.model.hand_model import HandModel
 from darthand.model.preview import BACKGROUND, contact_sheet, render_mesh, write_png
 from darthand.model.topology import boundary_loops
-from darthand.template import anthropometry, charts
+from darthand.template import anthropometry
 from darthand.template.decimate import closest_surface_points
 from darthand.template.gesture_checks import face_normals, gesture_problems, gesture_report
 
@@ -183,48 +183,67 @@ def write_shape_sheet(model: HandModel, shapes: list[tuple[str, np.ndarray]], ou
     write_png(out_png, contact_sheet(images, labels, cols=2 * len(SHEET_VIEWS)))
 
 
+SAMPLES_COLOUR = "#8c9ec0"
+SEX_COLOURS = {"female": "#cc1a1a", "male": "#0d40bf"}
+
+
 def write_size_chart(sizes: dict, out_png: str | Path, survey: dict = anthropometry.ANSUR_II) -> None:
-    """Histograms of sampled hand length and breadth (density) with the survey's normal curves for women, men and
-    their 50/50 mixture."""
-    buf = charts.canvas(1200, 480)
-    panels = (("hand_length_mm", "hand length (mm)", (140.0, 235.0), 10.0),
-              ("hand_breadth_mm", "hand breadth (mm)", (60.0, 110.0), 5.0))
-    for k, (measure, label, (lo, hi), step) in enumerate(panels):
+    """Histograms of sampled hand length and breadth (density) with the survey's normal curves for women and men
+    (each weighted 1/2) and their 50/50 mixture."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(13, 4.8), dpi=100)
+    panels = (("hand_length_mm", "hand length (mm)", (140.0, 235.0)), ("hand_breadth_mm", "hand breadth (mm)", (60.0, 110.0)))
+    for ax, (measure, label, (lo, hi)) in zip(axes, panels):
         values = sizes[measure]
-        edges = np.linspace(lo, hi, 39)
-        density, _ = np.histogram(values, bins=edges, density=True)
-        x = np.linspace(lo, hi, 300)
-        curves = {sex: charts.normal_pdf(x, *survey[measure][sex]) for sex in ("female", "male")}
-        pooled = 0.5 * (curves["female"] + curves["male"])
-        top = 1.15 * max(density.max(), max(c.max() for c in curves.values()))
-        left = 80 + k * 600
-        panel = charts.Panel(buf, (left, 60, left + 480, 400), (lo, hi), (0.0, top))
-        panel.frame(f"{label}: {len(values)} shapes, beta ~ N(0, I) (probability density)", label, "",
-                    charts.ticks(lo, hi, step), charts.ticks(0, top, _nice(top / 4)), fmt="{:g}")
-        panel.bars(edges, density, charts.COLORS["samples"])
-        for sex, color in (("female", "female"), ("male", "male")):
-            panel.curve(x, 0.5 * curves[sex], charts.COLORS[color])
-        panel.curve(x, pooled, charts.COLORS["pooled"])
-        panel.legend([("shape space", charts.COLORS["samples"]), ("ANSUR II women (x 1/2)", charts.COLORS["female"]),
-                      ("ANSUR II men (x 1/2)", charts.COLORS["male"]), ("ANSUR II 50/50 mix", charts.COLORS["pooled"])])
-    write_png(out_png, charts.pixels(buf))
+        ax.hist(values, bins=np.linspace(lo, hi, 39), density=True, color=SAMPLES_COLOUR,
+                label=f"shape space, {len(values)} shapes, beta ~ N(0, I)")
+        x = np.linspace(lo, hi, 400)
+        curves = {sex: _normal_pdf(x, *survey[measure][sex]) for sex in ("female", "male")}
+        for sex, colour in SEX_COLOURS.items():
+            ax.plot(x, 0.5 * curves[sex], color=colour, lw=1.8, label=f"ANSUR II {'women' if sex == 'female' else 'men'} (x 1/2)")
+        ax.plot(x, 0.5 * (curves["female"] + curves["male"]), color="black", lw=1.8, label="ANSUR II, 50/50 mix")
+        ax.set_xlabel(label)
+        ax.set_ylabel("probability density")
+        ax.set_xlim(lo, hi)
+        ax.set_ylim(0, 1.4 * ax.get_ylim()[1])          # room for the legend above the histogram
+        ax.legend(fontsize=8, loc="upper left")
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"hand sizes of the shape space against {survey['source']}", fontsize=10)
+    _save(fig, out_png)
 
 
 def write_variance_chart(explained: list[float], components: int, out_png: str | Path) -> None:
-    """Cumulative explained variance of the first shape directions (bars), those kept marked."""
-    n = len(explained)
-    buf = charts.canvas(900, 420)
-    lo = float(np.floor(100 * explained[0] / 5) * 5)
-    panel = charts.Panel(buf, (80, 60, 860, 360), (0.5, n + 0.5), (lo, 100.0))
-    panel.frame(f"cumulative explained variance (%) of the population's hand shapes ({components} kept)",
-                "shape directions", "", np.arange(1, n + 1), charts.ticks(lo, 100, 2.5), fmt="{:g}")
-    for i, value in enumerate(explained):
-        color = charts.COLORS["bar"] if i < components else charts.GRID
-        panel.bars(np.array([i + 0.6, i + 1.4]), np.array([100 * value]), color)
-    write_png(out_png, charts.pixels(buf))
+    """Cumulative explained variance of the first shape directions (bars), those kept in colour."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(9, 4.2), dpi=100)
+    k = np.arange(1, len(explained) + 1)
+    values = 100 * np.asarray(explained)
+    ax.bar(k, values, color=[SAMPLES_COLOUR if i <= components else "#dddddd" for i in k])
+    for i, v in zip(k[:components], values[:components]):
+        ax.annotate(f"{v:.2f}", (i, v), ha="center", va="bottom", fontsize=7)
+    ax.set_ylim(np.floor(values[0] / 5) * 5, 100.5)
+    ax.set_xticks(k)
+    ax.set_xlabel("shape directions")
+    ax.set_ylabel("cumulative explained variance (%)")
+    ax.set_title(f"the population's hand shapes ({components} directions kept)")
+    ax.grid(axis="y", alpha=0.3)
+    _save(fig, out_png)
 
 
-def _nice(step: float) -> float:
-    """A round tick step near `step`."""
-    exponent = 10.0 ** np.floor(np.log10(step))
-    return float(min((1, 2, 5, 10), key=lambda m: abs(m * exponent - step)) * exponent)
+def _normal_pdf(x: np.ndarray, mean: float, sd: float) -> np.ndarray:
+    return np.exp(-0.5 * ((x - mean) / sd) ** 2) / (sd * np.sqrt(2 * np.pi))
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _save(fig, out_png: str | Path) -> None:
+    """Save a matplotlib figure as PNG atomically, and close it."""
+    with atomic_path(out_png) as tmp:
+        fig.savefig(tmp, format="png", bbox_inches="tight")
+    _pyplot().close(fig)
