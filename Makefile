@@ -12,6 +12,7 @@ PY     := $(VENV)/bin/python
 DH     := $(VENV)/bin/darthand
 STEP    = $(PY) -m darthand.step
 STAMP  := $(VENV)/.installed-stamp
+BENCH_STAMP := $(VENV)/.bench-stamp
 NODE_STAMP := node_modules/.installed-stamp
 MANO   ?=
 RES    ?= 2048
@@ -27,7 +28,7 @@ POSES        := $(wildcard assets_src/poses/*.json)
 # A stage's outputs depend on its own code too, so editing a generator rebuilds what it made.
 src = $(wildcard tools/darthand/$(1)/*.py tools/darthand/$(1)/*/*.py)
 
-.PHONY: assets test test-all bench usdz clean venv node FORCE
+.PHONY: assets shapes test test-all bench usdz clean venv node FORCE
 .DEFAULT_GOAL := assets
 # A step that fails leaves no output make would take as up to date next time (grouped targets: all of them), so a
 # failed step fails again on every run until its cause is fixed.
@@ -58,6 +59,14 @@ build/model/right.npz build/model/left.npz &: build/model/source.txt $(SOURCE_DE
 
 build/template/gestures.json build/template/gestures.png &: build/model/right.npz $(POSES) $(call src,template)
 	@$(STEP) gestures -- $(DH) template gestures build/model/right.npz --out-dir build/template
+
+# The shape space: extreme shapes at rest and through every gesture, hand sizes against ANSUR II (`make shapes`; not
+# part of `make assets` while the named gestures are authored for the mean hand only: on the largest and broadest
+# shapes the thumb passes through the index and middle fingers until gestures are fitted per shape).
+shapes: build/template/shapes.json
+
+build/template/shapes.json build/template/shapes.png &: build/model/right.npz $(POSES) $(call src,template)
+	@$(STEP) shapes -- $(DH) template shapes build/model/right.npz --out-dir build/template
 
 build/textures/res.txt: FORCE | $(STAMP)
 	@mkdir -p build/textures
@@ -124,7 +133,13 @@ test: $(STAMP) $(NODE_STAMP)
 test-all: $(STAMP) $(NODE_STAMP)
 	@$(TEST_ENV) $(PY) -m pytest -q -n 2 $(PYTEST_ARGS)
 
-bench: $(STAMP) $(NODE_STAMP) build/model/right.npz
+# The benchmarks' own dependencies (the bench extra: Mitsuba, the path-traced reference); without them the
+# render_reference benchmark reports itself skipped.
+$(BENCH_STAMP): pyproject.toml | $(STAMP)
+	@$(PY) -m pip install -q --disable-pip-version-check -e '.[test,bench]' && touch $@ \
+	 || echo "bench extra not installed: the render_reference benchmark will be skipped"
+
+bench: $(STAMP) $(BENCH_STAMP) $(NODE_STAMP) build/model/right.npz
 	@$(PY) -m darthand.bench --out build/bench
 
 clean:

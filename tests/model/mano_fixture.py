@@ -315,9 +315,8 @@ def mano_like_model(thicken_mm: float = 0.0) -> HandModel:
 
     The mesh is the open hand's with 4 wrist-loop vertices merged into their neighbours and then MeshLab's quadric
     edge collapse down to 778 vertices (boundary kept, no optimal placement, so every vertex is a source vertex and
-    its skin weights and correctives carry over exactly); the joint regressor is fitted anew to the source joints
-    (template.regressor); ten shape directions (beta 0 grows the hand about its centroid, as MANO's first does; the
-    others are smooth fields of a few millimetres); the PCA pose basis and mean of 2000 anatomical samples.
+    its skin weights, correctives and ten shape directions carry over exactly); the joint regressor is fitted anew
+    to the source joints (template.regressor); the PCA pose basis and mean of 2000 anatomical samples.
     thicken_mm: push every vertex out along its normal first (a hand thicker than the one the gestures were
     authored on). Cached: about half a second.
     """
@@ -342,7 +341,7 @@ def mano_like_model(thicken_mm: float = 0.0) -> HandModel:
     joints = np.asarray(source.J_regressor @ source.v_template)
     regressor, _ = fit_regressor(v, weights, joints, v[MANO_TIP_IDS])
     model = HandModel.create(v_template=v, faces=faces, weights=weights, posedirs=source.posedirs[keep],
-                             J_regressor=regressor, parents=source.parents, shapedirs=_shape_directions(v),
+                             J_regressor=regressor, parents=source.parents, shapedirs=source.shapedirs[keep],
                              tip_ids=MANO_TIP_IDS, side="right", meta={"source": "mano-like fixture"})
     poses = sample_poses(model, 2000, np.random.default_rng(7))[:, 3:]
     mean = poses.mean(0)
@@ -377,9 +376,9 @@ def _decimate(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> 
     """(source vertex of each kept vertex (V',), faces over the kept vertices (F', 3)) after MeshLab's quadric
     edge collapse to `target_vertices`, keeping the boundary and vertex positions."""
     import pymeshlab
-    from scipy.spatial import cKDTree
 
     from darthand.model.topology import boundary_loops
+    from darthand.template.decimate import source_vertices
 
     loop = sum(len(lp) for lp in boundary_loops(faces))
     ms = pymeshlab.MeshSet()
@@ -390,8 +389,8 @@ def _decimate(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> 
                                                 preservenormal=True, preservetopology=True, planarquadric=True)
     ms.meshing_remove_unreferenced_vertices()
     out = ms.current_mesh()
-    dist, keep = cKDTree(vertices).query(out.vertex_matrix())
-    assert dist.max() == 0.0 and len(keep) == target_vertices, (dist.max(), len(keep))
+    keep = source_vertices(vertices, out.vertex_matrix(), tolerance=0.0)
+    assert len(keep) == target_vertices, len(keep)
     return keep, out.face_matrix().astype(np.int64)
 
 
@@ -401,20 +400,6 @@ def _mano_order(n: int, fixed: dict) -> np.ndarray:
     order[list(fixed.values())] = list(fixed)
     order[order < 0] = [k for k in range(n) if k not in fixed]
     return order
-
-
-def _shape_directions(v: np.ndarray, count: int = 10, seed: int = 3) -> np.ndarray:
-    """(V, 3, count) shape directions: beta 0 scales the hand by 5 % about its centroid; the others are random
-    quadratic fields of the rest position scaled to 2 mm RMS."""
-    rng = np.random.default_rng(seed)
-    c = v - v.mean(0)
-    u = c / np.abs(c).max(0)
-    basis = np.concatenate([u, u ** 2, u[:, [0, 1, 2]] * u[:, [1, 2, 0]]], axis=1)   # (V, 9)
-    dirs = [0.05 * c]
-    for _ in range(count - 1):
-        field = basis @ rng.standard_normal((basis.shape[1], 3))
-        dirs.append(2e-3 * field / np.sqrt((field ** 2).sum(1).mean()))
-    return np.stack(dirs, axis=2)
 
 
 if __name__ == "__main__":

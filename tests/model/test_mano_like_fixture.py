@@ -44,6 +44,7 @@ def test_rig_is_the_source_hands_rig():
     assert dist.min(1).max() == 0.0
     np.testing.assert_array_equal(m.weights, src.weights[match])
     np.testing.assert_array_equal(m.posedirs, src.posedirs[match])
+    np.testing.assert_array_equal(m.shapedirs, src.shapedirs[match])
     joints = np.asarray(m.J_regressor @ m.v_template)
     np.testing.assert_allclose(joints, src.J_regressor @ src.v_template, atol=0.1e-3)
     assert (m.J_regressor.data > 0).all()
@@ -58,6 +59,7 @@ def test_pickles_are_laid_out_like_manos(pickles):
     assert (r.side, lf.side) == ("right", "left")
     assert not r.has_uvs and r.face_labels is None
     assert r.meta["fixes"] == [] and lf.meta["fixes"] == [LEFT_SHAPEDIRS_FIX]
+    assert lf.meta["shapedirs_check"].startswith("x sign disagreed")       # found by the size test, not assumed
     np.testing.assert_array_equal(r.v_template, mano_like_model().v_template)
     back = mirror_model(lf)
     for name in ("v_template", "weights", "posedirs", "shapedirs", "hands_mean", "hands_components", "tip_ids"):

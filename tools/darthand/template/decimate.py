@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pymeshlab
+from scipy.spatial import cKDTree
+
 from darthand.model import topology
 from darthand.model.proximity import closest_surface_points
 
@@ -68,3 +70,12 @@ def transfer_vertex_attributes(src_vertices: np.ndarray, src_faces: np.ndarray, 
     interpolated barycentrically at each point's nearest point on the source surface."""
     tri, bary, _ = closest_surface_points(src_vertices, src_faces, points)
     return np.einsum("pk,pk...->p...", bary, src_values[src_faces[tri]])
+
+
+def source_vertices(src_vertices: np.ndarray, points: np.ndarray, tolerance: float = 1e-9) -> np.ndarray:
+    """(P,) index of the source vertex each of `points` (P, 3) sits on: the decimation keeps source positions, so
+    every surviving vertex is one of them (raises if one is not, within `tolerance`)."""
+    dist, idx = cKDTree(src_vertices).query(points)
+    if dist.max() > tolerance:
+        raise ValueError(f"decimated vertex {int(np.argmax(dist))} is {dist.max():.3g} from every source vertex")
+    return idx
