@@ -61,15 +61,16 @@ def run_script(script: str, spec: dict, timeout: float = 900.0) -> None:
         raise DarthandError(f"{spec.get('file') or spec.get('out')}: Blender failed ({script}): {tail[:600]}")
 
 
-def blender_evaluate(path: str | Path, *, frames=(), actions: bool = False, bone_poses: dict | None = None,
-                     timeout: float = 900.0) -> BlenderResult:
+def blender_evaluate(path: str | Path, *, frames=(), actions: bool = False, action_frame: str = "first",
+                     bone_poses: dict | None = None, timeout: float = 900.0) -> BlenderResult:
     """Import `path` (.usda/.usdc, .glb/.gltf, or open a .blend) with default options and return the evaluated
     vertices of every skinned mesh: at import ('import'), at scene `frames` ('frame_<f>'), at the first frame of
-    every action (`actions`: 'action_<name>'), and with bone rotations set ({label: {bone: (w, x, y, z)}})."""
+    every action (`actions`: 'action_<name>'; its last frame with action_frame='last'), and with bone rotations set
+    ({label: {bone: (w, x, y, z)}})."""
     with tempfile.TemporaryDirectory(prefix="darthand-blender-") as tmp:
         out = Path(tmp) / "result.npz"
         spec = {"file": str(Path(path).resolve()), "out": str(out), "frames": [int(f) for f in frames],
-                "actions": bool(actions), "bone_poses": bone_poses or {}}
+                "actions": bool(actions), "action_frame": action_frame, "bone_poses": bone_poses or {}}
         run_script("evaluate.py", spec, timeout)
         with np.load(out) as z:
             info = json.loads(str(z["info"]))

@@ -18,7 +18,8 @@ from urllib.parse import quote
 
 import pygltflib as gl
 
-from darthand.export.common import SKIN_COLOR, SKIN_ROUGHNESS, TextureSet, place_texture, texture_bytes
+from darthand.export.texture_files import place_texture, texture_bytes
+from darthand.textures.loader import SKIN_COLOR, SKIN_ROUGHNESS, TextureSet
 from darthand.export.gltf_document import GltfDocument
 
 VARIANTS_EXT = "KHR_materials_variants"

@@ -65,7 +65,7 @@ def main(spec_path):
                 ad.action = action
                 if slot is not None:
                     ad.action_slot = slot
-            scene.frame_set(int(action.frame_range[0]))
+            scene.frame_set(int(action.frame_range[1 if spec.get("action_frame") == "last" else 0]))
             grab(f"action_{action.name}")
     for label, pose in (spec.get("bone_poses") or {}).items():
         for name, q in pose.items():
