@@ -23,7 +23,8 @@ import numpy as np
 
 from darthand.benchmarks._common import bench_model
 from darthand.benchmarks.export_usd import CORRECTIVES, RANDOM_POSES, error_poses, resampling_error
-from darthand.export.common import TextureSet, export_correctives, option_errors
+from darthand.export.correctives import export_correctives, option_errors
+from darthand.textures.loader import TextureSet
 from darthand.export.gltf_export import GltfOptions, export_gltf
 from darthand.model.forward import forward
 
@@ -55,7 +56,7 @@ def _best(fn, repeats: int) -> float:
 
 def albedo_source(tmp: Path) -> tuple[Path, str]:
     """The default catalogue albedo, or a generated 2048 px noise PNG when the textures stage has not run."""
-    from darthand.export.common import load_texture_catalog
+    from darthand.textures.loader import load_texture_catalog
 
     if TEXTURE_CATALOG.is_file():
         default = load_texture_catalog(TEXTURE_CATALOG)[0]
@@ -80,7 +81,7 @@ def albedo_source(tmp: Path) -> tuple[Path, str]:
 
 def texture_error(src: Path, size: int) -> dict:
     """What embedding the albedo downsized to `size` loses (`export_usd.resampling_error`)."""
-    from darthand.export.common import texture_bytes
+    from darthand.export.texture_files import texture_bytes
 
     with tempfile.TemporaryDirectory() as tmp:
         small = Path(tmp) / "small.png"

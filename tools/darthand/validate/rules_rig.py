@@ -174,7 +174,7 @@ def check_correctives(mesh: Mesh) -> list[Finding]:
     names = {s.name for s in mesh.blend_shapes}
     if not (mesh.claims_correctives or any(CORRECTIVE_NAME.match(n) for n in names)):
         return []
-    from darthand.export.common import corrective_names   # imports the forward pass: only when needed
+    from darthand.export.correctives import corrective_names   # imports the forward pass: only when needed
 
     missing = [n for n in corrective_names() if n not in names]
     if not missing:
