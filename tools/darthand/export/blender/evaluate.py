@@ -67,6 +67,8 @@ def main(spec_path):
                     ad.action_slot = slot
             scene.frame_set(int(action.frame_range[1 if spec.get("action_frame") == "last" else 0]))
             grab(f"action_{action.name}")
+    if spec.get("bone_poses") and arma.animation_data is not None:
+        arma.animation_data.action = None          # posing by hand: no action overriding the bones
     for label, pose in (spec.get("bone_poses") or {}).items():
         for name, q in pose.items():
             pb = arma.pose.bones[name]
