@@ -122,13 +122,16 @@ def bind_skin(prim: Usd.Prim, weights: np.ndarray | None, influences: int | None
 
     weights (N, J): skinned, the `influences` strongest per point sorted descending and renormalised, but never more
     than the point with the most non-zero weights has (None: that many, which loses nothing). joint: rigid binding
-    instead, every point follows that one joint (constant interpolation, one influence).
+    instead, every point follows that one joint with weight 1, written per point (one influence): Blender's USD
+    importer ignores constant-interpolation joint influences, so a constant binding would leave the accessory
+    behind.
     """
     binding = UsdSkel.BindingAPI.Apply(prim)
     binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1.0))
     if joint is not None:
-        binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([int(joint)]))
-        binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
+        n = len(UsdGeom.Mesh(prim).GetPointsAttr().Get())
+        binding.CreateJointIndicesPrimvar(False, 1).Set(Vt.IntArray.FromNumpy(np.full(n, int(joint), np.int32)))
+        binding.CreateJointWeightsPrimvar(False, 1).Set(Vt.FloatArray.FromNumpy(np.ones(n, np.float32)))
         return 1
     needed = influences_needed(weights)
     k = needed if influences is None else min(influences, needed)

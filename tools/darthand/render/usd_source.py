@@ -222,7 +222,7 @@ def _dense_weights(prim: Usd.Prim, n: int) -> np.ndarray | None:
     """(N, 16) skin weights of a per-point skinned prim; None for a rigid (constant) binding."""
     binding = UsdSkel.BindingAPI(prim)
     idx_pv, w_pv = binding.GetJointIndicesPrimvar(), binding.GetJointWeightsPrimvar()
-    if not idx_pv or idx_pv.GetInterpolation() == UsdGeom.Tokens.constant:
+    if not idx_pv or _rigid_joint(prim) is not None:
         return None
     k = idx_pv.GetElementSize()
     return dense_weights(np.asarray(idx_pv.Get(), np.int64).reshape(n, k),
@@ -230,9 +230,14 @@ def _dense_weights(prim: Usd.Prim, n: int) -> np.ndarray | None:
 
 
 def _rigid_joint(prim: Usd.Prim) -> int | None:
+    """The one joint a rigidly bound prim follows (a constant binding, or every point on one joint), else None."""
     pv = UsdSkel.BindingAPI(prim).GetJointIndicesPrimvar()
-    if pv and pv.GetInterpolation() == UsdGeom.Tokens.constant:
-        return int(pv.Get()[0])
+    if not pv:
+        return None
+    idx = np.asarray(pv.Get())
+    if pv.GetInterpolation() == UsdGeom.Tokens.constant or (pv.GetElementSize() == 1 and len(idx) and
+                                                             (idx == idx[0]).all()):
+        return int(idx[0])
     return None
 
 

@@ -206,6 +206,10 @@ def read_skin(prim: Usd.Prim, num_points: int, where: str, limits: Limits) -> tu
         return broken, [finding("rig.skin-layout", where, f"joint indices ({ji.GetInterpolation()}, elementSize {k}, "
                               f"{idx.size} values) and weights ({jw.GetInterpolation()}, elementSize {kw}, "
                               f"{w.size} values) do not match")]
+    if not rigid and k == 1 and idx.size and (idx == idx[0]).all() and (w == 1).all():
+        # every point on one joint with weight 1 (how darthand writes rigid accessories: per point, which
+        # Blender's importer reads, rather than constant): the same binding as a constant one
+        return Skin(idx[:1].reshape(1, 1), w[:1].reshape(1, 1), True, joint_count(binding)), []
     return Skin(idx.reshape(-1, k), w.reshape(-1, kw), rigid, joint_count(binding)), []
 
 

@@ -34,7 +34,9 @@ def main(spec_path):
         bpy.ops.wm.usd_import(filepath=path)
     seconds = time.perf_counter() - t0
     scene = bpy.context.scene
-    meshes = [o for o in scene.objects if o.type == "MESH" and any(m.type == "ARMATURE" for m in o.modifiers)]
+    # Skinned meshes and meshes parented to the armature or its bones (rigid accessories)
+    meshes = [o for o in scene.objects if o.type == "MESH" and (any(m.type == "ARMATURE" for m in o.modifiers)
+                                                                or (o.parent is not None and o.parent.type == "ARMATURE"))]
     arma = next((o for o in scene.objects if o.type == "ARMATURE"), None)
     out = {}
 
