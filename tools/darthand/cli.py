@@ -237,6 +237,14 @@ def _add_export_commands(sub) -> None:
                    help="run the Khronos glTF validator on the result (exit 1 on errors)")
     p.set_defaults(run=commands_gltf.gltf)
 
+    p = g.add_parser("blend", help="write the Blender-native rig (.blend, through bpy in .venv-blender): bones along "
+                     "the fingers, correctives driven by the bones, gestures as pose assets")
+    p.add_argument("model", metavar="MODEL", help=model_help)
+    p.add_argument("--out", required=True, metavar="FILE.blend", help="the .blend to write")
+    p.add_argument("--textures", metavar="CATALOG", help="texture catalogue: its default albedo is packed into the "
+                   "file (default: a plain skin colour)")
+    p.set_defaults(run=commands_gltf.blend)
+
     p = g.add_parser("gltf-validate", help="run the Khronos glTF validator on .glb / .gltf files (exit 1 on errors)")
     p.add_argument("paths", nargs="+", metavar="FILE", help=".glb or .gltf files")
     p.add_argument("--json", action="store_true", help="print the validator's reports as JSON")

@@ -1,5 +1,5 @@
-"""The `darthand export gltf | gltf-validate` commands: each takes parsed arguments (cli.py defines them), calls the
-stage, prints a short report."""
+"""The `darthand export gltf | gltf-validate | blend` commands: each takes parsed arguments (cli.py defines them),
+calls the stage, prints a short report."""
 
 from __future__ import annotations
 
@@ -42,6 +42,19 @@ def gltf(args) -> int:
     report = _validate(Path(args.out))
     print(f"Khronos glTF validator: {report.summary()}")
     return 1 if report.errors else 0
+
+
+def blend(args) -> int:
+    """`darthand export blend MODEL --out FILE.blend [--textures T]`: the Blender-native rig."""
+    from darthand.export.blender_rig import export_blend
+    from darthand.model.load import load_model
+
+    model = load_model(args.model)
+    texture = load_texture_catalog(args.textures)[0].albedo if args.textures else None
+    info = export_blend(model, args.out, texture=texture)
+    print(f"{args.out}: {model.side} hand, {info['shape_keys']} bone-driven corrective shape keys, "
+          f"{len(info['gestures'])} gesture actions, {info['bytes'] / 1e6:.1f} MB")
+    return 0
 
 
 def validate(args) -> int:

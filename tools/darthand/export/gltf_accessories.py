@@ -36,13 +36,15 @@ def add_accessory(doc: GltfDocument, acc: Accessory, *, materials: MaterialBuild
         surface = split_surface(name, acc.vertices, acc.faces, acc.uvs, acc.faces_uv, acc.weights, offsets)
         mesh = add_surface_mesh(doc, surface, influences=influences, material=material,
                                 target_names=correctives.names if offsets.shape[2] else (), vertex_ids=vertex_ids)
-        return add_skinned_node(doc, name, mesh, skin), offsets.shape[2] > 0
+        node = add_skinned_node(doc, name, mesh, skin)
+        doc.gltf.nodes[node].extras = {"darthand": {"accessory": acc.id}}
+        return node, offsets.shape[2] > 0
     j = acc.parent_joint
     local = (acc.vertices - skeleton.joints[j]) @ skeleton.frames[j]
     surface = split_surface(name, local, acc.faces, acc.uvs, acc.faces_uv, np.zeros((len(local), 0)),
                             np.zeros((len(local), 3, 0)))
     mesh = add_surface_mesh(doc, surface, influences=None, material=material, vertex_ids=False, skinned=False)
-    node = doc.add("nodes", gl.Node(name=name, mesh=mesh))
+    node = doc.add("nodes", gl.Node(name=name, mesh=mesh, extras={"darthand": {"accessory": acc.id}}))
     doc.gltf.nodes[joint_nodes[acc.parent_joint]].children.append(node)
     return node, False
 

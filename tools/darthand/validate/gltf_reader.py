@@ -383,12 +383,16 @@ class GltfReader:
             skinned = node.get("skin") is not None
             role = "hand" if skinned and not hand_found else "accessory"
             hand_found = hand_found or role == "hand"
-            name = str(node.get("name") or f"node{n}")
+            # an accessory's catalogue id: the node's extras (darthand writes it there; its name has the side
+            # prefix), else its name
+            name = str(_dict(_dict(node, "extras"), "darthand").get("accessory") or node.get("name") or f"node{n}")
             if role == "accessory":
                 self.pkg.accessory_ids.append((name, f"/nodes/{n}"))
             for p, prim in enumerate(_list(meshes[m], "primitives")):
                 where = f"/meshes/{m}/primitives/{p}"
-                mesh = self.guard(where, self.read_primitive, n, node, meshes[m], prim, where, role, name)
+                # the hand node's further primitives are the forearm cap (darthand writes it as primitive 1)
+                kind = "cap" if role == "hand" and p > 0 else role
+                mesh = self.guard(where, self.read_primitive, n, node, meshes[m], prim, where, kind, name)
                 if isinstance(mesh, Mesh):
                     self.pkg.meshes.append(mesh)
 

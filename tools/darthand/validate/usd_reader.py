@@ -109,7 +109,8 @@ def read_meshes(stage: Usd.Stage, pkg: Package, label: Label, limits: Limits, un
     for prim in Usd.PrimRange(start):
         if not prim.IsA(UsdGeom.Mesh):
             continue
-        role = "accessory" if is_accessory(prim) else "hand"
+        role = "accessory" if is_accessory(prim) else \
+            "cap" if prim.GetCustomDataByKey("darthand:role") == "forearm_cap" else "hand"
         mesh, found = read_mesh(prim, role, label, limits, xf_cache)
         out += found
         if mesh is not None:
