@@ -3,7 +3,7 @@
 
 For each option the asset is written as .glb and measured: file size, write time, load time (pygltflib, trimesh)
 and the error it costs, a max vertex distance in metres over the gesture set plus random anatomical poses (the USD
-benchmark's `error_poses`, `common.option_errors`):
+benchmark's `error_poses`, `correctives.option_errors`):
     influences k   forward pass with weights pruned to k (renormalised) against the full weights;
     correctives    forward pass with the exported correctives (rank-K reconstruction, or none) against the model's;
     texture size   RMS and max difference (linear RGB) of the downsized albedo, scaled back up, against the source

@@ -92,3 +92,18 @@ def to_blender(points: np.ndarray) -> np.ndarray:
     """The package's Y-up points (..., 3) in Blender's Z-up world: (x, y, z) -> (x, -z, y)."""
     p = np.asarray(points, dtype=np.float64)
     return np.stack([p[..., 0], -p[..., 2], p[..., 1]], axis=-1)
+
+
+def blender_render(path: str | Path, out: str | Path, *, engine: str = "CYCLES", size=(640, 480), samples: int = 32,
+                   gesture: str | None = None, texture: str | Path | None = None, camera: dict | None = None,
+                   lens: float = 85.0, timeout: float = 900.0) -> Path:
+    """Render `path` (.blend, glTF or USD) in Blender to the PNG `out` (see blender/render.py); camera {location,
+    target} in the package's Y-up frame (default: looking at the back of a right hand from above)."""
+    camera = camera or {"location": [0.0, 0.45, 0.05], "target": [-0.02, 0.0, 0.0]}
+    spec = {"file": str(Path(path).resolve()), "out": str(Path(out).resolve()), "engine": engine,
+            "size": list(size), "samples": int(samples), "gesture": gesture, "lens": lens,
+            "texture": str(Path(texture).resolve()) if texture else None,
+            "camera": {k: to_blender(np.asarray(v, dtype=np.float64)).tolist() for k, v in camera.items()}}
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    run_script("render.py", spec, timeout)
+    return Path(out)

@@ -52,8 +52,8 @@ PLAIN_TEXTURE = "plain"  # the texture variant used when no texture catalogue is
 @dataclass(frozen=True)
 class ExportOptions:
     """influences: joints per vertex, at most (None: as many as any vertex has non-zero weights, lossless);
-    correctives: 'full' | 'pca:K' | 'pose-pca:K' | 'none' (common.export_correctives); texture_size: downsize
-    every texture so its longer side is at most this many pixels (common.place_texture; None: link the files
+    correctives: 'full' | 'pca:K' | 'pose-pca:K' | 'none' (correctives.export_correctives); texture_size: downsize
+    every texture so its longer side is at most this many pixels (texture_files.place_texture; None: link the files
     unchanged); sparse_tol: blend-shape offsets shorter than this (metres) are left out."""
 
     influences: int | None = None

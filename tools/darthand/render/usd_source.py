@@ -127,7 +127,7 @@ class UsdPackage:
 
     def joints(self, t: int) -> np.ndarray:
         """(16, 3) posed joint centres: the translations of the skeleton-space joint transforms (the package's
-        joint frames are world-aligned at rest, so these are MANO's posed joints)."""
+        joints' origins are the joint centres whatever their orientation, so these are MANO's posed joints)."""
         cache = UsdSkel.Cache()
         root = UsdSkel.Root(self.root)
         cache.Populate(root, Usd.PrimDefaultPredicate)

@@ -13,7 +13,7 @@ How darthand's glTF maps onto the neutral form (gltf_export's layout, and what a
         moved by the node's global rest transform into the hand's frame;
     morph targets -> dense BlendShapes named by mesh.extras.targetNames; images -> TextureRefs (colour: base
         colour and emissive textures; data: metallic-roughness, normal, occlusion);
-    ids: KHR_materials_variants names (or the single skin material's `skin_<id>` name) are texture ids, accessory
+    ids: KHR_materials_variants names (or the single skin material's extras `darthand.texture`) are texture ids, accessory
         node names are accessory ids.
 """
 
@@ -486,9 +486,12 @@ class GltfReader:
         material = _list(_list(self.doc, "meshes")[mesh_index], "primitives")[prim_index].get("material")
         materials = _list(self.doc, "materials")
         if isinstance(material, int) and 0 <= material < len(materials):
+            texture = _dict(_dict(materials[material], "extras"), "darthand").get("texture")
             name = str(materials[material].get("name") or "")
-            if name.startswith("skin_"):
-                self.pkg.texture_ids.append((name[len("skin_"):], f"/materials/{material}"))
+            if texture is None and name.startswith("skin_"):
+                texture = name[len("skin_"):]        # packages written before the texture id moved to extras
+            if texture is not None:
+                self.pkg.texture_ids.append((str(texture), f"/materials/{material}"))
 
 
 def node_parents(nodes: list[dict]) -> list[int]:
