@@ -14,24 +14,21 @@ bones (head, tail, roll matrix in armature space) and each mesh's shape-key slid
 """
 
 import json
+import os
 import sys
 import time
 
 import bpy
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from scene import assign_action, open_package  # noqa: E402
+
 
 def main(spec_path):
     spec = json.load(open(spec_path))
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    path = spec["file"]
     t0 = time.perf_counter()
-    if path.endswith(".blend"):
-        bpy.ops.wm.open_mainfile(filepath=path)
-    elif path.endswith((".glb", ".gltf")):
-        bpy.ops.import_scene.gltf(filepath=path)
-    else:
-        bpy.ops.wm.usd_import(filepath=path)
+    open_package(spec["file"])
     seconds = time.perf_counter() - t0
     scene = bpy.context.scene
     # Skinned meshes and meshes parented to the armature or its bones (rigid accessories)
@@ -58,15 +55,7 @@ def main(spec_path):
         grab(f"frame_{f}")
     if spec.get("actions"):
         for action in bpy.data.actions:
-            for owner in [arma] + [o.data.shape_keys for o in meshes if o.data.shape_keys]:
-                ad = owner.animation_data if owner is not None else None
-                if ad is None:
-                    continue
-                slot = next((s for s in action.slots if s.target_id_type == ("OBJECT" if owner is arma else "KEY")),
-                            None)
-                ad.action = action
-                if slot is not None:
-                    ad.action_slot = slot
+            assign_action(action, arma, meshes)
             scene.frame_set(int(action.frame_range[1 if spec.get("action_frame") == "last" else 0]))
             grab(f"action_{action.name}")
     if spec.get("bone_poses") and arma.animation_data is not None:

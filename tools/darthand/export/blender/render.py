@@ -8,34 +8,24 @@ A sun and a soft world light the hand; the background is transparent.
 """
 
 import json
+import os
 import sys
 
 import bpy
 from mathutils import Vector
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from scene import assign_action, open_package  # noqa: E402
+
 
 def main(spec_path):
     spec = json.load(open(spec_path))
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    path = spec["file"]
-    if path.endswith(".blend"):
-        bpy.ops.wm.open_mainfile(filepath=path)
-    elif path.endswith((".glb", ".gltf")):
-        bpy.ops.import_scene.gltf(filepath=path)
-    else:
-        bpy.ops.wm.usd_import(filepath=path)
+    open_package(spec["file"])
     scene = bpy.context.scene
     arma = next(o for o in scene.objects if o.type == "ARMATURE")
     if spec.get("gesture"):
         action = next(a for a in bpy.data.actions if a.name.endswith(spec["gesture"]))
-        for owner in [arma] + [o.data.shape_keys for o in scene.objects if o.type == "MESH" and o.data.shape_keys]:
-            if owner.animation_data is None:
-                continue
-            slot = next((s for s in action.slots
-                         if s.target_id_type == ("OBJECT" if owner is arma else "KEY")), None)
-            owner.animation_data.action = action
-            if slot is not None:
-                owner.animation_data.action_slot = slot
+        assign_action(action, arma, [o for o in scene.objects if o.type == "MESH"])
         scene.frame_set(int(action.frame_range[0]))
     if spec.get("texture"):
         for image in bpy.data.images:
@@ -44,6 +34,7 @@ def main(spec_path):
                     image.unpack(method="REMOVE")
                 image.filepath = spec["texture"]
                 image.reload()
+                image.colorspace_settings.name = "sRGB"      # an albedo, whatever the file's metadata says
     for obj in [o for o in scene.objects if o.type == "MESH" and o.name == "Icosphere"]:
         obj.hide_render = True                    # the glTF importer's bone shape
     cam_data = bpy.data.cameras.new("Camera")
