@@ -6,8 +6,9 @@ The cap is a fan over the model's longest boundary loop (the forearm cut): one c
 centre. A loop copy carries its hand vertex's rest position, skin weights, pose correctives and shape directions, so
 in every pose and shape it lands exactly on the hand vertex it copies (the seam stays closed); the centre carries
 the mean of the loop's, so it moves with the wrist like the loop around it. Faces run against the hand's boundary
-edges, so the cap's normals face out of the arm. Per-corner UVs: a loop copy takes the UV its hand vertex has in the
-face along that boundary edge, the centre the mean of those, so the cap shows the skin colour of the rim.
+edges, so the cap's normals face out of the arm. Per-corner UVs: the two rim corners of a cap triangle take the UVs
+their hand vertices have in the hand face along that boundary edge (so each triangle's rim is continuous in UV even
+where the loop crosses a UV seam), the centre the mean of the rim's, so the cap shows the skin colour of the rim.
 
 Shapes: L loop vertices, C = L + 1 cap vertices, S shape directions.
 """
@@ -29,8 +30,8 @@ CAP_NAME = "forearm_cap"
 @dataclass(frozen=True)
 class ForearmCap:
     """vertices (C, 3) rest positions (metres), faces (L, 3) into them, weights (C, 16), posedirs (C, 3, 135),
-    shapedirs (C, 3, S), uvs (L + 1, 2) and faces_uv (L, 3) or None (the model's convention, v up), loop (L,) the
-    hand vertex each of the first L cap vertices copies."""
+    shapedirs (C, 3, S), uvs (2 L + 1, 2) and faces_uv (L, 3) per corner or None (the model's convention, v up),
+    loop (L,) the hand vertex each of the first L cap vertices copies."""
 
     vertices: np.ndarray
     faces: np.ndarray
@@ -74,19 +75,19 @@ def forearm_cap(model: HandModel) -> ForearmCap:
     weights /= weights.sum(axis=1, keepdims=True)
     uvs = faces_uv = None
     if model.has_uvs:
-        corner_uv = _rim_uvs(model, loop)
-        uvs = np.concatenate([corner_uv, corner_uv.mean(0, keepdims=True)])
-        faces_uv = faces.copy()
+        rim = _rim_uvs(model, loop)                                    # (L, 2, 2): edge i's start and end UVs
+        uvs = np.concatenate([rim.reshape(-1, 2), rim[:, 0].mean(0, keepdims=True)])
+        faces_uv = np.stack([2 * np.arange(L) + 1, 2 * np.arange(L), np.full(L, 2 * L)], axis=1)
     return ForearmCap(with_centre(model.v_template), faces, weights, with_centre(model.posedirs),
                       with_centre(model.shapedirs), uvs, faces_uv, loop)
 
 
 def _rim_uvs(model: HandModel, loop: np.ndarray) -> np.ndarray:
-    """(L, 2) the UV of each loop vertex in the hand face along the boundary edge that leaves it."""
+    """(L, 2, 2) for each boundary edge loop[i] -> loop[i + 1], the UVs of its two ends in the hand face along it."""
     edges = directed_edges(model.faces).reshape(-1, 3, 2)          # (F, 3, 2): corner k's edge (k -> k + 1)
     starts = {(int(a), int(b)): (f, k) for f, tri in enumerate(edges) for k, (a, b) in enumerate(tri)}
-    out = np.empty((len(loop), 2))
+    out = np.empty((len(loop), 2, 2))
     for i, v in enumerate(loop):
         f, k = starts[(int(v), int(loop[(i + 1) % len(loop)]))]
-        out[i] = model.uvs[model.faces_uv[f, k]]
+        out[i] = model.uvs[model.faces_uv[f, [k, (k + 1) % 3]]]
     return out
