@@ -123,7 +123,8 @@ def read_meshes(stage: Usd.Stage, pkg: Package, label: Label, limits: Limits, un
 def is_accessory(prim: Usd.Prim) -> bool:
     p = prim
     while p and not p.IsPseudoRoot():
-        if p.GetName() == ACCESSORY_PRIM or p.GetCustomDataByKey(KIND_KEY):
+        if p.GetName() == ACCESSORY_PRIM or p.GetCustomDataByKey(KIND_KEY) or \
+                p.GetCustomDataByKey("darthand:role") == "accessory":
             return True
         p = p.GetParent()
     return False
