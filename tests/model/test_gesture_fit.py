@@ -129,7 +129,7 @@ def test_every_stage_poses_the_models_own_gestures(tmp_path):
     accessories' sweep, the renderer and the datasets' reference poses; the record survives the npz format."""
     from darthand.accessories.build import sweep_poses
     from darthand.dataset.poses import load_reference
-    from darthand.export.common import gesture_poses
+    from darthand.export.gestures import gesture_poses
     from darthand.model.rotations import axis_angle_to_quaternion
     from darthand.render.poses import resolve_pose
 

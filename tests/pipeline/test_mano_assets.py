@@ -2,7 +2,7 @@
 
 The pickle is tests/model/mano_fixture's realistic MANO-format model (778 vertices, 1538 faces, 16-vertex wrist
 loop, protocol 2, chumpy-style shapedirs, CSC regressor, no UVs, no face labels). The build runs in a copy of the
-tree (Makefile, pyproject, tools, assets_src, schemas; .venv and node_modules linked, PYTHONPATH on the copy's
+tree (Makefile, pyproject, tools, assets_src, schemas; .venv, .venv-blender and node_modules linked, PYTHONPATH on the copy's
 tools), so the developer's own build/ is never touched, at RES=64.
 
 Besides the finished build -- manifest, gesture report, validation of every package -- it checks the two failure
@@ -32,11 +32,11 @@ from mano_fixture import write_mano_like  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 COPIED = ("Makefile", "pyproject.toml", "package.json", "package-lock.json", "tools", "assets_src", "schemas")
-LINKED = (".venv", "node_modules")
+LINKED = (".venv", ".venv-blender", "node_modules")
 # The copy's set-up inputs and the stamps of the linked folders they would refresh: the copy's inputs are dated
 # before the stamps, so make in the copy never reinstalls the developer's .venv (from the copy, which goes away).
 STAMPED = {"pyproject.toml": ".venv/.installed-stamp", "package.json": "node_modules/.installed-stamp",
-           "package-lock.json": "node_modules/.installed-stamp"}
+           "package-lock.json": "node_modules/.installed-stamp", "Makefile": ".venv-blender/.installed-stamp"}
 RES = 64
 
 pytestmark = pytest.mark.skipif(shutil.which("make") is None or not (REPO / ".venv" / "bin" / "darthand").exists(),
@@ -120,7 +120,7 @@ def test_make_assets_from_a_mano_pickle(tree):
     assert manifest["failed_checks"] == []
     steps = set(manifest["steps_seconds"])
     assert {"model", "gestures", "textures", "accessories", "checks", "validate"} <= steps
-    assert {f"{kind}-{side}" for kind in ("usd", "gltf", "gltf-variants") for side in ("right", "left")} <= steps
+    assert {f"{kind}-{side}" for kind in ("usd", "gltf", "gltf-variants", "blend") for side in ("right", "left")} <= steps
 
     # The gestures: fitted to this model, no digit through another on either side, the contacts touching.
     report = manifest["checks"]["gestures"]

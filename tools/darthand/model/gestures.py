@@ -52,7 +52,10 @@ class Gestures:
 def model_gestures(model: HandModel, names: list[str] | None = None,
                    poses_dir: str | Path | None = None) -> Gestures:
     """The named gestures of `model` (all, or `names` in that order): those fitted to it (`meta["gestures"]`),
-    else the authored ones of assets_src/poses. poses_dir: read the authored gestures there instead (no fit)."""
+    else the authored ones of assets_src/poses. poses_dir: read the authored gestures there instead (no fit).
+
+    A fit belongs to one geometry: `model.shaped(betas)` keeps its base's record, so fit a shaped hand anew with
+    `gesture_fit.with_fitted_gestures(model.shaped(betas))` before asking it for its gestures."""
     record = fitted_record(model) if poses_dir is None else None
     if record is not None:
         available = sorted(record["gestures"])
