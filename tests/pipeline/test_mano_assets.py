@@ -67,7 +67,7 @@ def make(tree: Path, *targets: str, **variables) -> subprocess.CompletedProcess:
     for key in ("MAKEFLAGS", "MFLAGS", "MAKELEVEL"):
         env.pop(key, None)
     args = ["make", "--no-print-directory", *targets, *(f"{k}={v}" for k, v in variables.items())]
-    return subprocess.run(args, cwd=tree, env=env, capture_output=True, text=True, timeout=1800)
+    return subprocess.run(args, cwd=tree, env=env, capture_output=True, text=True, timeout=3600)
 
 
 @pytest.fixture(scope="module")
