@@ -3,7 +3,7 @@
 
 Layout of `out_dir` (build/textures/):
     <id>.png                 sRGB albedo, 8-bit
-    <id>.tx                  the same, tiled and mip-mapped (OpenImageIO make_texture)
+    <id>.tx                  the same, tiled and mip-mapped (imageio.write_tx)
     roughness_<hash>.png     roughness (raw, 8-bit); variants with identical roughness share one file
     labels_<res>.png         semantic label per texel (layout.FACE_LABELS index, 255 = no surface)
     coverage_<res>.png       255 where a texel centre lies on the surface
@@ -38,7 +38,7 @@ from darthand.textures import sheet as sheet_mod
 from darthand.model.atlas import ensure_uvs
 from darthand.textures.bake import Bake, cached_bake, load_bake, source_digest
 from darthand.textures.catalog import Entry, expand_catalog, select
-from darthand.textures.imageio import image_buffer, read_small, write_png, write_tx
+from darthand.textures.imageio import read_small, write_png, write_tx
 from darthand.textures.variant import render_variant
 
 CATALOG_FORMAT = "darthand-texture-catalog"
@@ -196,8 +196,7 @@ def _render_one(job) -> tuple[dict, np.ndarray]:
     out_dir = Path(out_dir)
     v = render_variant(_WORKER_BAKE, entry)
     files = {"albedo": f"{entry.id}.png", "roughness": None, "tx": None}
-    albedo = image_buffer(v.albedo, srgb=True)  # one buffer for the PNG and the .tx
-    write_png(out_dir / files["albedo"], albedo)
+    write_png(out_dir / files["albedo"], v.albedo)
     record = {k: entry_json[k] for k in ("id", "category", "kind", "tone", "mst", "tone_srgb", "offset", "seed",
                                          "index")}
     if roughness:
@@ -208,7 +207,7 @@ def _render_one(job) -> tuple[dict, np.ndarray]:
         record["roughness_sha256"] = sha256_file(out_dir / files["roughness"])
     if tx:
         files["tx"] = f"{entry.id}.tx"
-        write_tx(out_dir / files["tx"], albedo)
+        write_tx(out_dir / files["tx"], v.albedo)
     record.update(resolution=res, sha256=sha256_file(out_dir / files["albedo"]), files=files,
                   params=entry_json["params"], fingerprint=fingerprint(entry, res, bake_key, tx, roughness))
     return record, sheet_mod.small_copy(v.albedo, THUMB_SOURCE)
