@@ -9,14 +9,15 @@ from darthand.model.npz_io import load_npz
 
 def build(args) -> int:
     """`darthand accessories build MODEL --out DIR [--spec catalog.json] [--ids ...] [--type ...]
-    [--poses N] [--tolerance MM] [--no-refit] [--no-sheet]`: build the catalogue on a darthand model .npz."""
+    [--poses N] [--tolerance MM] [--no-refit] [--no-sheet] [--jobs N]`: build the catalogue on a darthand model .npz."""
     model = load_npz(args.model)
     spec = load_spec(getattr(args, "spec", None) or DEFAULT_SPEC)
     catalog = build_accessories(model, spec, args.out, ids=getattr(args, "ids", None) or None,
                                 types=getattr(args, "type", None) or None,
                                 n_sampled=int(getattr(args, "poses", 300)),
                                 tolerance_mm=float(getattr(args, "tolerance", 1.0)),
-                                refit=not getattr(args, "no_refit", False), sheet=not getattr(args, "no_sheet", False))
+                                refit=not getattr(args, "no_refit", False), sheet=not getattr(args, "no_sheet", False),
+                                workers=int(getattr(args, "jobs", 1) or 1))
     worst = max((a["max_penetration_mm"]["poses"] or 0.0 for a in catalog["accessories"]), default=0.0)
     print(f"[accessories] {len(catalog['accessories'])} built into {args.out} "
           f"(largest penetration across poses {worst:.2f} mm)")

@@ -126,15 +126,22 @@ def mip_levels(path: str | os.PathLike) -> list[tuple[int, int]]:
 
 
 def read_small(path: str | os.PathLike, size: int = 256) -> np.ndarray:
-    """A copy of a square image about `size` pixels wide: the matching MIP level of a .tx, else the PNG
-    resized by OpenImageIO."""
+    """A copy of a square image about `size` pixels wide: the matching MIP level of a .tx, else the image's
+    `block_mean`."""
     path = Path(path)
     if path.suffix == ".tx":
         levels = mip_levels(path)
         level = max((i for i, (w, _) in enumerate(levels) if w >= size), default=0)
         return read_image(path, level)
-    buf = oiio.ImageBuf(str(path))
-    if buf.spec().width <= size:
-        return buf.get_pixels(oiio.UINT8)
-    small = oiio.ImageBufAlgo.resize(buf, roi=oiio.ROI(0, size, 0, size, 0, 1, 0, buf.nchannels))
-    return small.get_pixels(oiio.UINT8)
+    return block_mean(read_image(path), size)
+
+
+def block_mean(img: np.ndarray, size: int = 256) -> np.ndarray:
+    """Block-mean downsample of a square (res, res, C) uint8 image to (size, size, C) uint8 (unchanged when
+    res <= size)."""
+    res = img.shape[0]
+    if res <= size:
+        return img
+    k = res // size
+    c = img.shape[2]
+    return img[:size * k, :size * k].reshape(size, k, size, k, c).mean(axis=(1, 3)).round().astype(np.uint8)
