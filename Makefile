@@ -65,7 +65,7 @@ build/textures/catalog.json: build/model/right.npz build/textures/res.txt $(wild
 
 build/accessories/catalog.json: build/model/right.npz $(wildcard assets_src/accessories/*.json) \
                                 $(call src,accessories)
-	@$(STEP) accessories -- $(DH) accessories build build/model/right.npz --out build/accessories
+	@$(STEP) accessories -- $(DH) accessories build build/model/right.npz --out build/accessories --jobs 2
 
 # One USD package and one glTF file per side.
 define side_rules

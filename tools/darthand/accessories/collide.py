@@ -83,7 +83,9 @@ class Solid:
     DIRECTION = np.array([0.5774, 0.5772, 0.5776]) / np.linalg.norm([0.5774, 0.5772, 0.5776])  # off every axis
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray):
-        self.vertices, self.faces = np.asarray(vertices, float), np.asarray(faces)
+        faces = np.asarray(faces)
+        used, compact = np.unique(faces, return_inverse=True)   # only surface vertices bound distances
+        self.vertices, self.faces = np.asarray(vertices, float)[used], compact.reshape(faces.shape)
         tri = self.vertices[self.faces]
         self.face_normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         self.scene = rtcore_scene.EmbreeScene(_device())

@@ -11,8 +11,9 @@ Figures per accessory and pose (metres):
   through gloves: how far the hand reaches beyond the glove's outer surface;
   drift   rigid items: the largest change of the distance from the accessory's centre to its bone axis.
 
-The sweep is split over poses: each worker process measures every accessory on its share of the poses, and a
-pose's figures depend only on that pose, so the result is the same for any number of workers.
+The sweep is split over poses: each worker process measures every accessory on its share of the poses (whole
+batches of `CHUNK` poses), and a pose's figures depend only on its batch, so the result is the same, bit for bit,
+for any number of workers.
 """
 
 from __future__ import annotations
@@ -109,7 +110,9 @@ def measure(model: HandModel, built, poses: np.ndarray, workers: int = 1) -> dic
     workers = max(1, min(int(workers), len(poses) // MIN_POSES_PER_WORKER))
     if workers == 1:
         return measure_probes(model, items, poses)
-    bounds = np.linspace(0, len(poses), workers + 1).astype(int)
+    # Shares in whole chunks: each pose is posed in the same batch as in one process, so figures agree to the bit.
+    chunks = -(-len(poses) // CHUNK)
+    bounds = np.minimum(np.linspace(0, chunks, workers + 1).astype(int) * CHUNK, len(poses))
     ctx = multiprocessing.get_context("spawn")
     with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_single_thread) as pool:
         parts = list(pool.map(measure_probes, [model] * workers, [items] * workers,
