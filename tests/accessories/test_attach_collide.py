@@ -52,7 +52,7 @@ def test_surface_distance_matches_closed_form():
 
 def test_closed_hand_caps_the_open_end():
     hand = add_wrist(tube_hand(0), rings=4, length=0.05)
-    closed = ClosedHand(hand.faces, hand.num_vertices)
+    closed = ClosedHand(hand.faces)
     v = closed.vertices(hand.v_template)
     tm = trimesh.Trimesh(v, closed.faces, process=False)
     assert tm.is_watertight and tm.volume > 0

@@ -83,9 +83,7 @@ class Solid:
     DIRECTION = np.array([0.5774, 0.5772, 0.5776]) / np.linalg.norm([0.5774, 0.5772, 0.5776])  # off every axis
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray):
-        faces = np.asarray(faces)
-        used, compact = np.unique(faces, return_inverse=True)   # only surface vertices bound distances
-        self.vertices, self.faces = np.asarray(vertices, float)[used], compact.reshape(faces.shape)
+        self.vertices, self.faces = np.asarray(vertices, float), np.asarray(faces)
         tri = self.vertices[self.faces]
         self.face_normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         self.scene = rtcore_scene.EmbreeScene(_device())
@@ -175,19 +173,24 @@ class Solid:
 
 
 class ClosedHand:
-    """The hand mesh with its boundary loops capped by fans around their centroids, re-posable per pose."""
+    """The hand mesh (or a part of it: a subset of its faces) with its boundary loops capped by fans around their
+    centroids, re-posable per pose. Only the vertices its faces use are kept: the depth bounds come from the
+    nearest vertex, which must lie on this surface."""
 
-    def __init__(self, faces: np.ndarray, num_vertices: int):
+    def __init__(self, faces: np.ndarray):
+        self.used, compact = np.unique(faces, return_inverse=True)
+        faces = compact.reshape(faces.shape)
         self.loops = boundary_loops(faces)
-        caps, n = [faces], num_vertices
+        caps, n = [faces], len(self.used)
         for loop in self.loops:
             caps.append(np.stack([np.roll(loop, -1), loop, np.full(len(loop), n)], 1))
             n += 1
         self.faces = np.concatenate(caps)
 
     def vertices(self, posed: np.ndarray) -> np.ndarray:
-        """(V + loops, 3) posed vertices with the cap centres appended."""
-        return np.concatenate([posed] + [posed[lp].mean(0, keepdims=True) for lp in self.loops])
+        """(used + loops, 3) the posed vertices (V, 3) it uses, with the cap centres appended."""
+        mine = posed[self.used]
+        return np.concatenate([mine] + [mine[lp].mean(0, keepdims=True) for lp in self.loops])
 
     def solid(self, posed: np.ndarray) -> Solid:
         return Solid(self.vertices(posed), self.faces)

@@ -168,7 +168,7 @@ class HandParts:
 
     def __init__(self, model: HandModel):
         self.model = model
-        self.whole = ClosedHand(model.faces, model.num_vertices)
+        self.whole = ClosedHand(model.faces)
         joint_digit = np.array([digit_of(j) for j in range(len(model.parents))])
         self.face_digit = joint_digit[face_joints(model.faces, model.weights)]
         self._digits: dict[int, ClosedHand | None] = {}
@@ -178,7 +178,7 @@ class HandParts:
         """The capped surface of digit k (None when its faces do not bound a simple tube)."""
         if k not in self._digits:
             try:
-                self._digits[k] = ClosedHand(self.model.faces[self.face_digit == k], self.model.num_vertices)
+                self._digits[k] = ClosedHand(self.model.faces[self.face_digit == k])
             except ValueError:      # a pinched boundary: measure against the whole hand instead
                 self._digits[k] = None
         return self._digits[k]

@@ -38,7 +38,7 @@ from darthand.textures import sheet as sheet_mod
 from darthand.model.atlas import ensure_uvs
 from darthand.textures.bake import Bake, cached_bake, load_bake, source_digest
 from darthand.textures.catalog import Entry, expand_catalog, select
-from darthand.textures.imageio import block_mean, read_small, write_png, write_tx
+from darthand.textures.imageio import block_mean, mip_pyramid, read_small, write_png, write_tx
 from darthand.textures.variant import render_variant
 
 CATALOG_FORMAT = "darthand-texture-catalog"
@@ -205,12 +205,16 @@ def _render_one(job) -> tuple[dict, np.ndarray]:
         if not (out_dir / files["roughness"]).is_file():  # shared by every variant with the same roughness
             write_png(out_dir / files["roughness"], v.roughness, srgb=False)
         record["roughness_sha256"] = sha256_file(out_dir / files["roughness"])
+    levels = mip_pyramid(v.albedo) if tx else None          # the .tx's levels; one of them is the thumbnail's
     if tx:
         files["tx"] = f"{entry.id}.tx"
-        write_tx(out_dir / files["tx"], v.albedo)
+        write_tx(out_dir / files["tx"], v.albedo, levels=levels)
+    else:
+        (out_dir / f"{entry.id}.tx").unlink(missing_ok=True)  # an earlier build's, now out of date
     record.update(resolution=res, sha256=sha256_file(out_dir / files["albedo"]), files=files,
                   params=entry_json["params"], fingerprint=fingerprint(entry, res, bake_key, tx, roughness))
-    return record, block_mean(v.albedo, THUMB_SOURCE)
+    thumb = next((lv for lv in levels if lv.shape[1] <= THUMB_SOURCE), None) if levels else None
+    return record, block_mean(v.albedo, THUMB_SOURCE) if thumb is None else thumb
 
 
 # ------------------------------------------------------------------------------------------ contact sheet

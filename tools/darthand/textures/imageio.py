@@ -35,11 +35,11 @@ def write_png(path: str | os.PathLike, img, srgb: bool = True) -> None:
         _write_levels(tmp, [(spec, img)], "PNG")
 
 
-def write_tx(path: str | os.PathLike, img, srgb: bool = True) -> None:
+def write_tx(path: str | os.PathLike, img, srgb: bool = True, levels: list[np.ndarray] | None = None) -> None:
     """Write a (H, W, C) uint8 image as a tiled (64^2), mip-mapped, zip-compressed .tx texture: what
     `maketx --filter box --wrap clamp` writes (the same tags: textureformat, wrapmodes, fovcot, reduced-image
-    levels), without its time stamps. The MIP levels are `mip_pyramid`'s."""
-    levels = mip_pyramid(_pixels(img))
+    levels), without its time stamps. The MIP levels are `mip_pyramid`'s (`levels` when already computed)."""
+    levels = mip_pyramid(_pixels(img)) if levels is None else levels
     specs = []
     for k, level in enumerate(levels):
         spec = oiio.ImageSpec(level.shape[1], level.shape[0], level.shape[2], oiio.UINT8)
@@ -59,17 +59,17 @@ def write_tx(path: str | os.PathLike, img, srgb: bool = True) -> None:
         _write_levels(tmp, specs, ".tx")
 
 
-def mip_pyramid(img: np.ndarray) -> list[np.ndarray]:
-    """MIP levels of a (H, W, C) uint8 image with power-of-two sides, finest first, down to 1x1: level k is the
-    mean of each 2^k x 2^k block of level 0 (exact integer sums, rounded half up; a box filter on the stored
-    codes, as maketx's `box` filter does -- it agrees but for exact halves, where its float sums round either
-    way)."""
+def mip_pyramid(img: np.ndarray, smallest: int = 1) -> list[np.ndarray]:
+    """MIP levels of a (H, W, C) uint8 image with power-of-two sides, finest first, down to 1x1 (or until the
+    larger side is `smallest`): level k is the mean of each 2^k x 2^k block of level 0 (exact integer sums,
+    rounded half up; a box filter on the stored codes, as maketx's `box` filter does -- it agrees but for exact
+    halves, where its float sums round either way)."""
     h, w = img.shape[:2]
     if h & (h - 1) or w & (w - 1):
         raise ValueError(f"mip_pyramid: {w}x{h} is not a power of two on both sides")
     sums = img.astype(np.uint32 if h * w * 255 < 2 ** 32 else np.uint64)
     levels, rows, cols = [img], 1, 1
-    while sums.shape[0] > 1 or sums.shape[1] > 1:
+    while max(sums.shape[:2]) > smallest:
         if sums.shape[0] > 1:
             sums, rows = sums[0::2] + sums[1::2], 2 * rows
         if sums.shape[1] > 1:
@@ -137,11 +137,7 @@ def read_small(path: str | os.PathLike, size: int = 256) -> np.ndarray:
 
 
 def block_mean(img: np.ndarray, size: int = 256) -> np.ndarray:
-    """Block-mean downsample of a square (res, res, C) uint8 image to (size, size, C) uint8 (unchanged when
-    res <= size)."""
-    res = img.shape[0]
-    if res <= size:
-        return img
-    k = res // size
-    c = img.shape[2]
-    return img[:size * k, :size * k].reshape(size, k, size, k, c).mean(axis=(1, 3)).round().astype(np.uint8)
+    """A square power-of-two (res, res, C) uint8 image reduced to (size, size, C) by block means: its MIP level
+    of that size (unchanged when res <= size)."""
+    levels = mip_pyramid(img, smallest=size)
+    return levels[-1]
