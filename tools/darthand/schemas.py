@@ -20,9 +20,16 @@ def load_schema(name: str) -> dict:
     return json.loads((SCHEMA_DIR / name).read_text())
 
 
+@functools.cache
+def _validator(name: str) -> jsonschema.protocols.Validator:
+    return jsonschema.Draft202012Validator(load_schema(name))
+
+
 def check_schema(doc, name: str, source: str) -> None:
     """Raise InputError '<source>: field '<path>' <message>' for the most relevant violation of schemas/<name>."""
-    validator = jsonschema.Draft202012Validator(load_schema(name))
+    validator = _validator(name)
+    if validator.is_valid(doc):       # the common case, without collecting errors
+        return
     error = jsonschema.exceptions.best_match(validator.iter_errors(doc))
     if error is None:
         return
