@@ -319,6 +319,7 @@ def _add_render_arguments(p) -> None:
     p.add_argument("--width", type=int, default=None, metavar="W", help="image width (overrides --size)")
     p.add_argument("--height", type=int, default=None, metavar="H", help="image height (overrides --size)")
     _add_antialiasing_options(p)
+    _add_shading_options(p)
     p.add_argument("--depth", action="store_true", help="also write depth.exr (camera z in metres, 0 = background)")
     p.add_argument("--keypoint-order", default="openpose", choices=("openpose", "mano"),
                    help="order of the 21 keypoints in labels.json (default openpose)")
@@ -453,6 +454,19 @@ def _add_antialiasing_options(p) -> None:
     p.add_argument("--aa-shading", default="triangle", choices=SHADING,
                    help="shade the sub-samples once per pixel per triangle, as GPU multisampling does (triangle, "
                         "default), or each one (sample: slower, exact supersampling)")
+
+
+def _add_shading_options(p) -> None:
+    from darthand.render.shade import DEFAULT_AO_RAYS, DEFAULT_SKIN, SKIN_MODELS
+
+    p.add_argument("--ao-rays", type=int, default=DEFAULT_AO_RAYS, metavar="N",
+                   help="rays per vertex for the ambient light's occlusion and light reflected between surfaces; "
+                        f"0: ambient light reaches everything, nothing is interreflected (default {DEFAULT_AO_RAYS})")
+    p.add_argument("--no-interreflection", dest="interreflection", action="store_false",
+                   help="ambient occlusion only, without light reflected between surfaces")
+    p.add_argument("--skin", default=DEFAULT_SKIN, choices=SKIN_MODELS,
+                   help="the skin's diffuse model: subsurface scattering pre-integrated over curvature (default), "
+                        "wrap lighting (the earlier look) or lambert")
 
 
 def _add_source_options(p) -> None:

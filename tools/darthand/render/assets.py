@@ -103,7 +103,7 @@ class HandAssets:
             self._face_joints["hand"] = face_joints(m.faces, m.weights)
         faces, uvs, faces_uv = self._static_arrays("hand", m)
         hand = Surface("hand", hand_v, faces, hand_n, self.skin(texture, skin_tone_offset), uvs, faces_uv,
-                       m.v_template, "hand", self._face_joints["hand"])
+                       m.v_template, "hand", self._face_joints["hand"], face_labels=m.face_labels)
         surfaces = [hand]
         if accessory != NONE:
             if self._last_accessory is None or self._last_accessory[0] != (key, accessory):
