@@ -196,7 +196,7 @@ def _add_accessories_commands(sub) -> None:
 # ---------------------------------------------------------------- export
 def _add_export_commands(sub) -> None:
     from darthand.export import commands_gltf, commands_usd
-    from darthand.export.common import INFLUENCE_CHOICES
+    from darthand.export.influences import INFLUENCE_CHOICES
 
     g = _group(sub, "export", "skinned USD, usdz and glTF assets of a hand with texture and accessory variants")
     model_help = ("wrist-enhanced model: build/model/<side>.npz, a darthand .npz, a MANO pkl or a built-in name "
@@ -252,11 +252,17 @@ def _add_export_commands(sub) -> None:
     p.add_argument("--influences", default="4", choices=INFLUENCE_CHOICES,
                    help="skin influences per vertex (default 4: what real-time engines skin with)")
     p.add_argument("--correctives", default="full", metavar="MODE", help=correctives_help)
-    p.add_argument("--clip-keys", type=int, default=5, metavar="N",
-                   help="keyframes per gesture animation, from rest to the gesture (default 5)")
     p.add_argument("--validate", action="store_true",
                    help="run the Khronos glTF validator on the result (exit 1 on errors)")
     p.set_defaults(run=commands_gltf.gltf)
+
+    p = g.add_parser("blend", help="write the Blender-native rig (.blend, through bpy in .venv-blender): bones along "
+                     "the fingers, correctives driven by the bones, gestures as pose assets")
+    p.add_argument("model", metavar="MODEL", help=model_help)
+    p.add_argument("--out", required=True, metavar="FILE.blend", help="the .blend to write")
+    p.add_argument("--textures", metavar="CATALOG", help="texture catalogue: its default albedo is packed into the "
+                   "file (default: a plain skin colour)")
+    p.set_defaults(run=commands_gltf.blend)
 
     p = g.add_parser("gltf-validate", help="run the Khronos glTF validator on .glb / .gltf files (exit 1 on errors)")
     p.add_argument("paths", nargs="+", metavar="FILE", help=".glb or .gltf files")

@@ -64,10 +64,11 @@ def skin_material(maps: MipTexture | None = None, roughness_channel: int | None 
 class Surface:
     """One posed triangle mesh: vertices (N, 3) float32 world, faces (F, 3) int32, vertex normals (N, 3) float32,
     per-corner uvs (T, 2) float32 + faces_uv (F, 3) int32 (or None), rest-pose vertices (N, 3) (for checks), its
-    material, `role` 'hand' or 'accessory', and face_joints (F,) the joint that moves each face most (skinned
-    surfaces; None for rigid ones), for keypoint visibility; face_labels (F,) int8 the model's surface labels
-    (model.layout.FACE_LABELS, -1 unlabelled) or None: the skin model leaves nails out. A rigid surface also carries
-    `local` (N, 3) float32, its vertices in its joint's frame (the same array every frame, so its ray-tracing structure is built once), and
+    material, `role` 'hand', 'accessory' or 'cap' (the forearm cap), and face_joints (F,) the joint that moves each
+    face most (skinned surfaces; None for rigid ones), for keypoint visibility; face_labels (F,) int8 the model's
+    surface labels (model.layout.FACE_LABELS, -1 unlabelled) or None: the skin model leaves nails out. A rigid surface
+    also carries `local` (N, 3) float32, its vertices in its joint's frame (the same array every frame, so its
+    ray-tracing structure is built once), and
     `transform` (4, 4) float64, the rigid transform G with vertices = G @ [local, 1]."""
 
     name: str
