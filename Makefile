@@ -8,6 +8,10 @@
 # texture and no accessory).
 
 PYTHON ?= python3
+# Steps whose inputs are ready run JOBS at a time: on two cores the single-threaded steps (gestures, the USD and
+# glTF writers, validation) overlap the two-process ones (textures, accessories) instead of leaving a core idle.
+JOBS   ?= 2
+MAKEFLAGS += -j$(JOBS)
 VENV   := .venv
 # Blender as a Python module (bpy from PyPI) in its own environment: bpy 5.0 pins numpy < 2, the project uses
 # numpy 2. Tests import packages with it; `make assets` writes the .blend rigs with it.
