@@ -9,7 +9,7 @@
 //   click {selector}            click the element, then wait for the page's pending requests
 //   eval {expr}                 the value of an expression evaluated in the page (awaited)
 //   screenshot {path, selector?}  a PNG of the page or of one element
-//   redraws {selector, n}       n slider key presses, one frame apart, with the page's redraw timer on; {redraw_ms}
+//   redraws {selector, n}       n slider key presses, one frame apart, with the page's redraw timer on; {redraw_ms, draw_ms}
 import puppeteer from "puppeteer-core";
 import { readFileSync } from "node:fs";
 import { mkdtempSync, rmSync } from "node:fs";
@@ -55,13 +55,16 @@ try {
       const target = step.selector ? await page.$(step.selector) : page;
       await target.screenshot({ path: step.path });
     } else if (step.do === "redraws") {
-      await page.evaluate(() => { window.studio.measure = true; window.studio.metrics.redraw_ms = []; });
+      await page.evaluate(() => { Object.assign(window.studio, { measure: true }); Object.assign(window.studio.metrics, { redraw_ms: [], draw_ms: [] }); });
       await page.focus(step.selector);
       for (let i = 0; i < step.n; i++) {
         await page.keyboard.press(i % 2 ? "ArrowLeft" : "ArrowRight");
         await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
       }
-      result = { redraw_ms: await page.evaluate(() => { window.studio.measure = false; return window.studio.metrics.redraw_ms; }) };
+      result = await page.evaluate(() => {
+        window.studio.measure = false;
+        return { redraw_ms: window.studio.metrics.redraw_ms, draw_ms: window.studio.metrics.draw_ms };
+      });
     } else {
       throw new Error(`unknown step ${JSON.stringify(step)}`);
     }

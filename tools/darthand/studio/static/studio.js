@@ -20,7 +20,7 @@ const state = {
 };
 const history = { undo: [], redo: [], committed: null };
 const anim = { playing: false, phase: 0, from: null, to: null, speed: 0.5, last: 0 };
-const metrics = { usable_ms: null, redraw_ms: [], texture_ms: [] };
+const metrics = { usable_ms: null, redraw_ms: [], draw_ms: [], texture_ms: [], render_ms: [] };
 const pending = new Set();
 let catalogue, renderer, scene, camera, controls, ambient, key;
 let hand = null;                     // the shown side: {side, root, meshes, bones, rig, table, morph, variants, ...}
@@ -319,6 +319,7 @@ async function renderReference() {
   const t0 = performance.now();
   const result = await postJSON("/api/render", sceneDoc());
   await showRender(result);
+  metrics.render_ms.push(performance.now() - t0);
   setStatus(`rendered ${result.size} px in ${result.seconds.toFixed(2)} s (round trip ${((performance.now() - t0) / 1000).toFixed(2)} s)`);
   return result;
 }
@@ -441,12 +442,15 @@ function requestDraw() { drawRequested = true; }
 
 function draw() {
   drawRequested = false;
+  const t0 = performance.now();
   updateLights();
   renderer.render(scene, camera);
   if (inputTime !== null && window.studio.measure) {
     const gl = renderer.getContext();
     gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));   // wait for the frame to be drawn
-    metrics.redraw_ms.push(performance.now() - inputTime);
+    const now = performance.now();
+    metrics.redraw_ms.push(now - inputTime);      // input event to finished frame (includes waiting for the frame)
+    metrics.draw_ms.push(now - t0);               // the draw itself
   }
   inputTime = null;
 }
@@ -555,10 +559,9 @@ function figure(src, id, onClick) {
   const fig = document.createElement("figure");
   fig.dataset.id = id;
   fig.title = id;
-  const img = document.createElement("img");
-  img.loading = "lazy";
-  img.alt = id;
-  if (src) img.src = src;
+  const img = document.createElement(src ? "img" : "div");
+  img.className = "thumb";
+  if (src) Object.assign(img, { loading: "lazy", alt: id, src });
   fig.append(img, Object.assign(document.createElement("figcaption"), { textContent: id }));
   fig.addEventListener("click", onClick);
   return fig;
