@@ -30,7 +30,8 @@ class RequestError(InputError):
 @dataclass
 class SideAssets:
     """One side of the build: its glTF package (`gltf` the .gltf path, `files` the relative URIs it references),
-    the render source (render/assets.HandAssets: model, catalogues) and the texture variants both carry."""
+    the render source (render/assets.HandAssets: model, catalogues) and the texture variants both carry; `lock`
+    guards the side's lazily made `renderer` (render/api.Renderer) and `preview` maps (thumbnails)."""
 
     side: str
     gltf: Path
@@ -38,6 +39,8 @@ class SideAssets:
     source: object
     variants: list
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    renderer: object = field(default=None, repr=False)
+    preview: object = field(default=None, repr=False)
 
     @property
     def model(self):

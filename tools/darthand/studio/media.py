@@ -47,12 +47,12 @@ def _preview_maps(side):
     from darthand.model.topology import vertex_normals
     from darthand.textures import sheet
 
-    if getattr(side, "_preview", None) is None:
+    if side.preview is None:
         m = side.model
         mesh = {"vertices": m.v_template, "faces": m.faces, "uvs": m.uvs, "faces_uv": m.faces_uv,
                 "vertex_normals": vertex_normals(m.v_template, m.faces)}
-        side._preview = sheet.preview_maps(mesh, THUMB_SIZE)
-    return side._preview
+        side.preview = sheet.preview_maps(mesh, THUMB_SIZE)
+    return side.preview
 
 
 def accessory_thumbnail(side, accessory_id: str, path: Path) -> None:

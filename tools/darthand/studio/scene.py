@@ -108,10 +108,10 @@ def render_scene(build: StudioBuild, scene: dict) -> dict:
     size = int(scene["camera"]["width"]) if scene.get("camera") else 512
     t = time.perf_counter()
     with side.lock:
-        renderer = getattr(side, "_renderer", None) or Renderer(side.source)
-        side._renderer = renderer
+        if side.renderer is None:
+            side.renderer = Renderer(side.source)
         try:
-            frame, background = render_job(renderer, job, {"size": size, "samples": SAMPLES,
+            frame, background = render_job(side.renderer, job, {"size": size, "samples": SAMPLES,
                                                            "aa_shading": AA_SHADING})
         except InputError as e:
             raise RequestError(400, f"render: {e}") from None
