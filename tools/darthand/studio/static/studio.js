@@ -24,7 +24,7 @@ const metrics = { usable_ms: null, redraw_ms: [], draw_ms: [], texture_ms: [], r
 const pending = new Set();
 let catalogue, renderer, scene, camera, controls, ambient, key;
 let hand = null;                     // the shown side: {side, root, meshes, bones, rig, table, morph, variants, ...}
-const hands = {};                    // loaded sides
+const hands = {};                    // side -> promise of its loaded hand
 let accessory = null;                // {id, object, skinned}
 let drawRequested = false, inputTime = null;
 const skinTone = { value: 0 };
@@ -34,10 +34,16 @@ const loader = new GLTFLoader();
 
 async function start() {
   catalogue = await getJSON("/api/catalogue");
+  const side = catalogue.sides[0];
+  // the package, the rig and the first camera load while the panels are built
+  const loading = loadHand(side);
+  const framing = postJSON("/api/camera", { side, angles_deg: state.angles, view: "three_quarter", size: state.renderSize });
+  loading.catch(() => {});
+  framing.catch(() => {});
   setupThree();
   buildPanels();
-  await showSide(catalogue.sides[0]);
-  await setView("three_quarter");
+  await showSide(side);
+  setCamera(await framing);
   if (catalogue.default_texture) await selectTexture(catalogue.default_texture);
   commit();
   draw();
@@ -62,8 +68,13 @@ function setupThree() {
 
 // -------------------------------------------------------------------------------------------------- the hand
 
-async function loadHand(side) {
-  if (hands[side]) return hands[side];
+/** The side's package, rig and corrective table, loaded once (the promise is kept, so concurrent callers share it). */
+function loadHand(side) {
+  if (!hands[side]) hands[side] = fetchHand(side);
+  return hands[side];
+}
+
+async function fetchHand(side) {
   const [gltf, rig] = await Promise.all([loader.loadAsync(`/gltf/${side}/${side}.gltf`), getJSON(`/api/rig/${side}`)]);
   const extras = gltf.parser.json.asset?.extras?.darthand || {};
   const meshes = [], bones = {};
@@ -76,7 +87,6 @@ async function loadHand(side) {
   const h = { side, gltf, root: gltf.scene, meshes, bones, rig, table, variants, materials: new Map(),
     unparsed: table.filter((s) => !/^pose_[a-z]+[0-9]_r[0-2][0-2]$/.test(s.channel)).length };
   for (const m of meshes) prepareSkin(m.material);
-  hands[side] = h;
   return h;
 }
 
