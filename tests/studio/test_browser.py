@@ -73,6 +73,11 @@ STEPS = [
     {"do": "eval", "expr": "({t: +document.getElementById('anim-t').value, angles: window.studio.state.angles,"
                            " errors: window.studio.errors})"},                                 # 35
     {"do": "screenshot", "path": "{shots}/page_left.png"},
+    {"do": "keys", "selector": "#skin-tone", "key": "ArrowRight", "n": 10},                   # 37: +0.10
+    {"do": "keys", "selector": "#key-palette", "key": "ArrowDown", "n": 1},                   # the palette's first
+    {"do": "click", "selector": "input[name=bg][value=color]"},                                # 39
+    {"do": "eval", "expr": "window.studio.sceneDoc()"},
+    {"do": "screenshot", "selector": "#view", "path": "{shots}/lights.png"},                   # 41
 ]
 
 
@@ -267,3 +272,19 @@ def test_animation_plays_and_pauses_between_gestures(session):
 def test_server_stops_cleanly_on_ctrl_c(session):
     code, stderr = session["server"]
     assert code == 0 and "Traceback" not in stderr and "stopped" in stderr
+
+
+def test_skin_tone_lights_and_background_reach_the_scene(session):
+    """The panels' values are the scene's: skin-tone offset, the key light's palette colour, the background colour
+    (#4a5a6a, the page's default) also shown behind the live view."""
+    from darthand.dataset.lighting import PALETTE
+
+    doc = session["results"][40]
+    assert doc["skin_tone_offset"] == pytest.approx(0.10)
+    key = doc["lights"]["lights"][0]
+    np.testing.assert_allclose(key["color"], next(iter(PALETTE.values())), atol=1e-5)
+    srgb = np.array([0x4A, 0x5A, 0x6A]) / 255
+    linear = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    np.testing.assert_allclose(doc["background"]["color"], linear, atol=1e-4)
+    corner = _read_image(session["shots"] / "lights.png")[:8, :8].reshape(-1, 3)
+    np.testing.assert_allclose(corner, np.broadcast_to([0x4A, 0x5A, 0x6A], corner.shape), atol=2)

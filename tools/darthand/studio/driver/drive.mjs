@@ -41,6 +41,7 @@ try {
       await idle();
       result = { usable_ms: await page.evaluate(() => window.studio.metrics.usable_ms) };
     } else if (step.do === "keys") {
+      await page.$eval(step.selector, (el) => { el.closest("details")?.setAttribute("open", ""); el.scrollIntoView(); });
       await page.focus(step.selector);
       for (let i = 0; i < (step.n ?? 1); i++) await page.keyboard.press(step.key);
       await idle();
