@@ -78,6 +78,10 @@ STEPS = [
     {"do": "click", "selector": "input[name=bg][value=color]"},                                # 39
     {"do": "eval", "expr": "window.studio.sceneDoc()"},
     {"do": "screenshot", "selector": "#view", "path": "{shots}/lights.png"},                   # 41
+    {"do": "click", "selector": "#render"},
+    {"do": "click", "selector": "#export-scene"},                                               # 43
+    {"do": "eval", "expr": "({file: document.querySelector('#export-result a').download,"
+                           " image: window.studio.state.lastRender.image})"},
 ]
 
 
@@ -200,20 +204,25 @@ def test_render_mask_matches_the_live_silhouette(session):
 
 
 def test_exported_scene_renders_identically_in_batch(session, tmp_path):
+    """The last scene (left hand, skinned glove, palette key light, skin-tone offset, colour background) exported as a
+    jobs file renders through `darthand render-dataset` to the studio's own Render, pixel for pixel (+-1)."""
     from darthand.render.image import read_png
 
     build = session["build"]
-    jobs = build / "studio" / "scenes" / session["results"][17]
+    last = session["results"][44]
+    jobs = build / "studio" / "scenes" / last["file"]
     doc = json.loads(jobs.read_text())
-    assert len(doc["frames"]) == 1 and doc["frames"][0]["accessory"] == RING
-    assert doc["frames"][0]["texture"] == "dark_tattoos_00"
+    frame = doc["frames"][0]
+    assert len(doc["frames"]) == 1 and frame["side"] == "left" and frame["accessory"] == GLOVE
+    assert frame["texture"] == "dark_tattoos_00" and "color" in frame["background"]
+    assert frame["skin_tone_offset"] == pytest.approx(0.10)
     out = tmp_path / "out"
-    proc = subprocess.run([sys.executable, "-m", "darthand.cli", "render-dataset", str(build / "model" / "right.npz"),
+    proc = subprocess.run([sys.executable, "-m", "darthand.cli", "render-dataset", str(build / "model" / "left.npz"),
                            "--jobs", str(jobs), "--size", str(doc["studio"]["size"]), "--out", str(out),
                            "--processes", "1"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     batch = read_png(next((out / "images").glob("*.png"))).astype(np.int64)
-    studio = _png(session["results"][15]["image"]).astype(np.int64)
+    studio = _png(last["image"]).astype(np.int64)
     assert batch.shape == studio.shape
     assert np.abs(batch - studio).max() <= 1
 
