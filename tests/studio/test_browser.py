@@ -82,6 +82,9 @@ STEPS = [
     {"do": "click", "selector": "#export-scene"},                                               # 43
     {"do": "eval", "expr": "({file: document.querySelector('#export-result a').download,"
                            " image: window.studio.state.lastRender.image})"},
+    {"do": "keys", "selector": "#slider-2-2", "key": "End"},                                   # 45
+    {"do": "keys", "selector": "#slider-2-1", "key": "Home"},
+    {"do": "eval", "expr": "window.studio.state.angles[2]"},                                    # 47
 ]
 
 
@@ -297,3 +300,12 @@ def test_skin_tone_lights_and_background_reach_the_scene(session):
     np.testing.assert_allclose(doc["background"]["color"], linear, atol=1e-4)
     corner = _read_image(session["shots"] / "lights.png")[:8, :8].reshape(-1, 3)
     np.testing.assert_allclose(corner, np.broadcast_to([0x4A, 0x5A, 0x6A], corner.shape), atol=2)
+
+
+def test_sliders_stop_at_the_anatomical_limits(session):
+    """index2's bend slider pushed to its end and its spread slider to its start give model/anatomy.py's limits."""
+    from darthand.model.anatomy import limits_radians
+
+    twist, spread, bend = session["results"][47]
+    limits = np.rad2deg(limits_radians())[2]
+    assert bend == pytest.approx(limits[2][1], abs=0.5) and spread == pytest.approx(limits[1][0], abs=0.5)
