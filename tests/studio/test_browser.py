@@ -16,6 +16,7 @@ independent truth:
 from __future__ import annotations
 
 import base64
+import fcntl
 import json
 import subprocess
 import sys
@@ -88,21 +89,38 @@ STEPS = [
 ]
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def session(tmp_path_factory):
-    """(build folder, screenshots folder, the driver's report, the server's return code and stderr)."""
+    """{build folder, screenshots folder, the driver's report, its results, the server's (return code, stderr)}.
+
+    One browser session for the whole run: the first pytest worker to get here runs it under a file lock and leaves
+    its report in the run's shared temporary folder; the other worker reads it."""
     try:
         chromium()
     except BrowserUnavailable as e:
         pytest.skip(str(e))
-    build = make_build(tmp_path_factory.mktemp("studio_build"))
-    shots = tmp_path_factory.mktemp("shots")
+    shared = tmp_path_factory.getbasetemp().parent / "studio_browser"
+    shared.mkdir(exist_ok=True)
+    with open(shared / "lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        done = shared / "session.json"
+        if not done.is_file():
+            done.write_text(json.dumps(_run_session(shared)))
+        doc = json.loads(done.read_text())
+    assert "error" not in doc["report"], doc["report"].get("error")
+    return {"build": Path(doc["build"]), "shots": Path(doc["shots"]), "report": doc["report"],
+            "results": doc["report"]["results"], "server": tuple(doc["server"])}
+
+
+def _run_session(folder: Path) -> dict:
+    build = make_build(folder / "build")
+    shots = folder / "shots"
+    shots.mkdir()
     steps = json.loads(json.dumps(STEPS).replace("{shots}", str(shots)))
     with StudioProcess(build) as server:
         report = drive(server.url, steps)
-    assert "error" not in report, report.get("error")
-    return {"build": build, "shots": shots, "report": report, "results": report["results"],
-            "server": (server.returncode, server.stderr)}
+    return {"build": str(build), "shots": str(shots), "report": report,
+            "server": [server.returncode, server.stderr]}
 
 
 def _png(b64: str) -> np.ndarray:
