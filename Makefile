@@ -39,7 +39,7 @@ POSES        := $(wildcard assets_src/poses/*.json)
 # A stage's outputs depend on its own code too, so editing a generator rebuilds what it made.
 src = $(wildcard tools/darthand/$(1)/*.py tools/darthand/$(1)/*/*.py)
 
-.PHONY: assets shapes test test-all bench usdz clean venv node blender FORCE
+.PHONY: assets shapes test test-all bench usdz clean venv node blender chromium FORCE
 .DEFAULT_GOAL := assets
 # A step that fails leaves no output make would take as up to date next time (grouped targets: all of them), so a
 # failed step fails again on every run until its cause is fixed.
@@ -63,6 +63,16 @@ node: $(NODE_STAMP)
 $(NODE_STAMP): package.json package-lock.json
 	@if command -v npm >/dev/null 2>&1; then npm ci --no-audit --no-fund --loglevel=error && touch $@; \
 	 else echo "npm not found: glTF validator tests will be skipped"; fi
+
+# Debian's chromium drives the studio's browser tests (through puppeteer-core, which never downloads a browser): apt
+# installs it where it can (root, as on CI); otherwise those tests skip and say why.
+chromium:
+	@command -v chromium >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing Debian's chromium for the studio's browser tests"; \
+	    { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+	      chromium >/dev/null; } || echo "chromium could not be installed: the studio's browser tests will skip"; \
+	  else echo "chromium is not installed (needs root and apt): the studio's browser tests will skip"; fi; }
 
 # ------------------------------------------------------------------ assets
 # The source model is recorded so that switching MANO=... rebuilds everything that depends on it.
@@ -150,10 +160,10 @@ usdz: build/usd/right/right.usda
 # Two pytest workers, each with single-threaded BLAS: threaded BLAS in both workers oversubscribes two cores.
 TEST_ENV := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
-test: $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP)
+test: $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP) chromium
 	@$(TEST_ENV) $(PY) -m pytest -q -m "not slow" -n 2 $(PYTEST_ARGS)
 
-test-all: $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP)
+test-all: $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP) chromium
 	@$(TEST_ENV) $(PY) -m pytest -q -n 2 $(PYTEST_ARGS)
 
 # The benchmarks' own dependencies (the bench extra: Mitsuba, the path-traced reference); without them the

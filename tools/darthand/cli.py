@@ -40,6 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_dataset_commands(sub)
     _add_validate_command(sub)
     _add_manifest_command(sub)
+    _add_studio_command(sub)
     return parser
 
 
@@ -532,6 +533,24 @@ def _add_manifest_command(sub) -> None:
         return 0
 
     p.set_defaults(run=run)
+
+
+# ---------------------------------------------------------------- studio
+def _add_studio_command(sub) -> None:
+    from darthand.studio import commands
+
+    text = ("serve the authoring page over a build's glTF packages: textures, accessories, lights, background, camera, "
+            "pose sliders, gestures, animation, exports (pose, pose list, one-frame jobs) and reference renders")
+    p = sub.add_parser("studio", help=text, description=text)
+    p.add_argument("build", metavar="BUILD", nargs="?", default="build", help="build folder (default: build)")
+    p.add_argument("--port", type=int, default=None, help="port to listen on (default: a free one, printed)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
+    p.add_argument("--allow-remote", action="store_true",
+                   help="allow a --host other than this machine's loopback (anyone reaching it sees the build)")
+    p.add_argument("--backgrounds", metavar="DIR", default=None,
+                   help="a folder of background images the page may use (besides colours and the built-in set)")
+    p.add_argument("--verbose", action="store_true", help="log every request")
+    p.set_defaults(run=commands.studio)
 
 
 if __name__ == "__main__":
