@@ -110,13 +110,14 @@ usdz: build/usd/right/right.usda
 
 # ------------------------------------------------------------------ tests and benchmarks
 # Two pytest workers, each with single-threaded BLAS: threaded BLAS in both workers oversubscribes two cores.
+# --dist loadgroup keeps the tests marked xdist_group (the Ray cluster's) on one worker, with one cluster.
 TEST_ENV := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
 test: $(STAMP) $(NODE_STAMP)
-	@$(TEST_ENV) $(PY) -m pytest -q -m "not slow" -n 2 $(PYTEST_ARGS)
+	@$(TEST_ENV) $(PY) -m pytest -q -m "not slow" -n 2 --dist loadgroup $(PYTEST_ARGS)
 
 test-all: $(STAMP) $(NODE_STAMP)
-	@$(TEST_ENV) $(PY) -m pytest -q -n 2 $(PYTEST_ARGS)
+	@$(TEST_ENV) $(PY) -m pytest -q -n 2 --dist loadgroup $(PYTEST_ARGS)
 
 bench: $(STAMP) $(NODE_STAMP) build/model/right.npz
 	@$(PY) -m darthand.bench --out build/bench

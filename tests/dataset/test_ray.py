@@ -31,6 +31,7 @@ ray = pytest.importorskip("ray", reason="Ray is not installed (make test install
 from darthand.dataset.ray_local import LocalRayCluster, can_hide_folders, free_port  # noqa: E402
 
 RUN_TIMEOUT_S = 240
+pytestmark = pytest.mark.xdist_group("ray")          # one pytest worker, one cluster (make test: --dist loadgroup)
 
 
 @pytest.fixture(scope="module")

@@ -106,7 +106,7 @@ class LocalRayCluster:
         env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
         env.pop("RAY_ADDRESS", None)
         with open(log, "w") as out:
-            proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True, env=env,
+            proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, process_group=0, env=env,
                                     cwd=self.root)
         self.procs.append(proc)
         deadline = time.monotonic() + START_TIMEOUT_S

@@ -60,7 +60,7 @@ CACHE = "darthand-ray"            # node-local folder (in the temp dir) of shipp
 
 
 def connect(address: str | None):
-    """The `ray` module, connected to the cluster at `address` ('host:port' of its head, 'auto', or None: RAY_ADDRESS,
+    """(the `ray` module, whether this call connected it), connected to the cluster at `address` ('host:port' of its head, 'auto', or None: RAY_ADDRESS,
     else the cluster started on this machine, else a new local one). InputError when Ray is not installed or no
     cluster answers."""
     try:
@@ -69,7 +69,7 @@ def connect(address: str | None):
         raise InputError("--ray: Ray is not installed (pip install 'darthand[cluster]', or `make venv` in a "
                          "checkout)") from None
     if ray.is_initialized():
-        return ray
+        return ray, False
     _check_reachable(address)
     import logging
 
@@ -80,7 +80,7 @@ def connect(address: str | None):
         first = (str(e).strip().splitlines() or [type(e).__name__])[0]
         raise InputError(f"--ray {address or ''}: cannot connect to a Ray cluster ({first})".replace("  ", " ")) \
             from None
-    return ray
+    return ray, True
 
 
 def _check_reachable(address: str | None) -> None:
@@ -140,6 +140,7 @@ class InputFiles:
         self.sources = sources
         self.specs, self.open_files, self.labels = {}, {}, {}
         self._catalogue_files: dict = {}
+        self._fingerprints: dict = {}
         for side, spec in specs.items():
             package = Path("build") / "model" / f"{spec.package}.npz" if spec.package in ("right", "left") \
                 else Path(spec.package)
@@ -188,9 +189,11 @@ class InputFiles:
         out: dict = {}
 
         def add(path, group):
-            fp = fingerprint(Path(path))
-            if fp is not None:
-                out[_absolute(path)] = [group, *fp]
+            path = _absolute(path)
+            if path not in self._fingerprints:            # inputs do not change during a run: stat each once
+                self._fingerprints[path] = fingerprint(Path(path))
+            if self._fingerprints[path] is not None:
+                out[path] = [group, *self._fingerprints[path]]
 
         for side in sides:
             for path, group in self.open_files.get(side, ()):
@@ -238,29 +241,16 @@ class RayRunner:
 
     def __init__(self, specs: dict, settings: dict, sources: dict | None = None, address: str | None = None,
                  files: str = "auto", workers: int | None = None):
+        self.specs_given = specs
         if files not in FILES_MODES:
             raise InputError(f"--ray-files: {files!r} is not one of {', '.join(FILES_MODES)}")
-        self.ray = ray = connect(address)
-        self._owns_connection = True
         self.address, self.files_mode = address or "auto", files
         self.out = Path(settings["out_dir"]).resolve()
-        self.inputs = InputFiles(specs, sources or {})
+        self.settings = {**settings, "out_dir": str(self.out)}
         self.token = hashlib.sha256(str(self.out).encode()).hexdigest()[:12]
         self._probe = self.out / "shards" / f".ray-probe.{self.token}"
-        nonce = os.urandom(8).hex()
-        self._probe.write_text(nonce)
-        self.settings = {**settings, "out_dir": str(self.out)}
-        self.digest = code_digest()
-        cpus = int(ray.cluster_resources().get("CPU", 0))
-        if cpus < 1 and not workers:
-            self.close()
-            raise InputError(f"--ray {self.address}: the cluster has no CPUs to render on")
-        self.workers = int(workers or cpus)
-        self._actor_class = ray.remote(num_cpus=1, max_restarts=0,
-                                       concurrency_groups={"control": 1})(NodeWorker)
-        self._config = (self.inputs.specs, self.settings, self.inputs.labels, self.token, nonce, str(self._probe),
-                        files, {side: self.inputs.needed([], {side}) for side in self.inputs.specs})
         self.actors: dict = {}                 # actor handle -> {"info", "inflight": set of refs}
+        self._greeted: list = []               # every actor that started (close() cleans their caches)
         self._pending: dict = {}               # hello ref -> actor handle
         self._inflight: dict = {}              # ref -> (actor, entry)
         self._queue: list = []                 # entries waiting for an actor
@@ -270,18 +260,35 @@ class RayRunner:
         self._lost = 0
         self._stopping = threading.Event()
         self._closed = False
-        self.nodes: dict = {}                  # node key -> {"ip", "inputs", "outputs", "actors"}
+        self._thread: threading.Thread | None = None
+        self._error: BaseException | None = None
+        self.nodes: dict = {}                  # node key -> {"ip", "host", "actors", "inputs", "outputs"}
+        self.ray, self._owns_connection = connect(address)
         try:
-            for _ in range(self.workers):
-                self._new_actor()
-            self._await_first_actor()
+            self._start(sources, workers)
         except BaseException:
             self.close()
             raise
-        self.processes = self.workers
-        self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._loop, daemon=True, name="darthand-ray-dispatch")
         self._thread.start()
+
+    def _start(self, sources, workers) -> None:
+        """The probe file, the actors (one per cluster CPU unless `workers`), their hellos."""
+        self.inputs = InputFiles(self.specs_given, sources or {})
+        nonce = os.urandom(8).hex()
+        self._probe.write_text(nonce)
+        self.digest = code_digest()
+        cpus = int(self.ray.cluster_resources().get("CPU", 0))
+        if cpus < 1 and not workers:
+            raise InputError(f"--ray {self.address}: the cluster has no CPUs to render on")
+        self.processes = int(workers or cpus)
+        self._actor_class = self.ray.remote(num_cpus=1, max_restarts=0,
+                                            concurrency_groups={"control": 1})(NodeWorker)
+        self._config = (self.inputs.specs, self.settings, self.inputs.labels, self.token, nonce, str(self._probe),
+                        self.files_mode, {side: self.inputs.needed([], {side}) for side in self.inputs.specs})
+        for _ in range(self.processes):
+            self._new_actor()
+        self._await_actors()
 
     # -------------------------------------------------------------------------------------------- actors
 
@@ -289,7 +296,7 @@ class RayRunner:
         actor = self._actor_class.options(scheduling_strategy="SPREAD").remote(*self._config)
         self._pending[actor.hello.remote()] = actor
 
-    def _await_first_actor(self) -> None:
+    def _await_actors(self) -> None:
         """Wait until every actor has said hello (or, past START_TIMEOUT_S, at least one); errors of the files check
         (files='shared') and of mismatched code stop here, before anything renders."""
         deadline = time.monotonic() + START_TIMEOUT_S
@@ -312,13 +319,14 @@ class RayRunner:
         except self.ray.exceptions.RayActorError:
             self._lost += 1
             return
+        self._greeted.append(actor)
         if "error" in info:
             raise InputError(info["error"])
         if info["code"] != self.digest:
             raise InputError(f"--ray: node {info['ip']} ({info['node'][:8]}) runs another darthand or other "
                              f"libraries (code {info['code']}, here {self.digest}): install the same version on "
                              "every node")
-        self.actors[actor] = {"info": info, "inflight": set(), "offset": 0.0}
+        self.actors[actor] = {"info": info, "inflight": set(), "opened": set()}
         node = self.nodes.setdefault(info["node"][:8], {"ip": info["ip"], "host": info["host"], "actors": 0,
                                                         "inputs": info["inputs"], "outputs": info["outputs"]})
         node["actors"] += 1
@@ -345,7 +353,7 @@ class RayRunner:
         self._stopping.set()
         for actor in list(self.actors):
             try:
-                actor.stop.remote()
+                actor.stop.options(concurrency_group="control").remote()      # beside the running chunk
             except Exception:              # an actor already gone
                 pass
 
@@ -356,21 +364,22 @@ class RayRunner:
             return
         self._closed = True
         self._stopping.set()
-        thread = getattr(self, "_thread", None)
-        if thread is not None:
-            thread.join(timeout=STOP_GRACE_S + 5)
-        ray = self.ray
+        if self._thread is not None:
+            self._thread.join(timeout=STOP_GRACE_S + 5)
+        ray = getattr(self, "ray", None)
+        if ray is None:
+            return
         if self._inflight:
             ray.wait(list(self._inflight), num_returns=len(self._inflight), timeout=STOP_GRACE_S)
         cleanups = []
-        for actor in list(self.actors):
+        for actor in self._greeted:
             try:
-                cleanups.append(actor.cleanup.remote())
+                cleanups.append(actor.cleanup.options(concurrency_group="control").remote())
             except Exception:
                 pass
         if cleanups:
             ray.wait(cleanups, num_returns=len(cleanups), timeout=STOP_GRACE_S)
-        for actor in list(self.actors) + list(self._pending.values()):
+        for actor in self._greeted + list(self._pending.values()):
             try:
                 ray.kill(actor)
             except Exception:
@@ -430,7 +439,7 @@ class RayRunner:
             entry = self._queue.pop(0)
             items = entry["items"]
             sides = {job.get("side") or next(iter(self.inputs.specs)) for job, _ in items}
-            needed = self.inputs.needed(items, sides)
+            needed = self.inputs.needed(items, sides - self.actors[actor]["opened"])
             refs = {path: self._ref(path) for path in entry["ship"]}
             ref = actor.render.remote(items, needed, refs)
             self.actors[actor]["inflight"].add(ref)
@@ -460,6 +469,9 @@ class RayRunner:
             return
         if "error" in result:
             raise InputError(result["error"])
+        opened = result.pop("opened", ())
+        if state is not None:
+            state["opened"] |= set(opened)
         self._write_returned(result.pop("files", None) or [])
         offset = time.monotonic() - result.pop("now")
         for frame in result["frames"]:
@@ -529,9 +541,10 @@ class NodeWorker:
         self.out_dir = settings["out_dir"]
         root = Path(tempfile.gettempdir()) / CACHE / token
         self.cache = root / "files"
-        root.mkdir(parents=True, exist_ok=True)
-        self.staging = Path(tempfile.mkdtemp(prefix="out-", dir=root))
         self.sees_output = files != "ship" and _read(probe) == nonce
+        if not self.sees_output:
+            root.mkdir(parents=True, exist_ok=True)
+            self.staging = Path(tempfile.mkdtemp(prefix="out-", dir=root))
         self.groups: dict = {}                 # group -> "seen" | "shipped"
         self.where: dict = {}                  # driver path -> the path this node reads
         self.opened: set = set()
@@ -583,7 +596,7 @@ class NodeWorker:
             return {"error": str(e)}
         except Exception as e:                     # a broken cache, a full disk: one line naming the node
             return {"error": f"--ray: node {self.node['ip']} ({self.node['node'][:8]}): {type(e).__name__}: {e}"}
-        result.update(node=self.node["node"][:8], ip=self.node["ip"], now=time.monotonic())
+        result.update(node=self.node["node"][:8], ip=self.node["ip"], opened=sorted(self.opened), now=time.monotonic())
         return result
 
     def stop(self) -> None:
