@@ -54,6 +54,7 @@ FILES_MODES = ("auto", "shared", "ship")
 PER_ACTOR = 2                     # chunks in flight per actor
 MAX_ATTEMPTS = 3                  # actors lost on one chunk before the run stops
 START_TIMEOUT_S = 300.0           # for the first actor to be up (imports, a busy cluster)
+GATHER_S = 30.0                   # then for the others, before rendering starts without them
 STOP_GRACE_S = 10.0               # close(): how long running chunks get to finish their frame
 CONNECT_TIMEOUT_S = 10.0
 CACHE = "darthand-ray"            # node-local folder (in the temp dir) of shipped inputs and staged outputs
@@ -297,10 +298,13 @@ class RayRunner:
         self._pending[actor.hello.remote()] = actor
 
     def _await_actors(self) -> None:
-        """Wait until every actor has said hello (or, past START_TIMEOUT_S, at least one); errors of the files check
-        (files='shared') and of mismatched code stop here, before anything renders."""
+        """Wait for the actors' hellos: up to START_TIMEOUT_S for the first, then GATHER_S more for the others (those
+        still waiting for a CPU join later). Errors of the files check (files='shared') and of mismatched code stop
+        the run here, before anything renders."""
         deadline = time.monotonic() + START_TIMEOUT_S
         while self._pending:
+            if self.actors:
+                deadline = min(deadline, self._first_hello + GATHER_S)
             left = deadline - time.monotonic()
             if left <= 0 and self.actors:
                 break
@@ -326,6 +330,8 @@ class RayRunner:
             raise InputError(f"--ray: node {info['ip']} ({info['node'][:8]}) runs another darthand or other "
                              f"libraries (code {info['code']}, here {self.digest}): install the same version on "
                              "every node")
+        if not self.actors:
+            self._first_hello = time.monotonic()
         self.actors[actor] = {"info": info, "inflight": set(), "opened": set()}
         node = self.nodes.setdefault(info["node"][:8], {"ip": info["ip"], "host": info["host"], "actors": 0,
                                                         "inputs": info["inputs"], "outputs": info["outputs"]})
