@@ -99,6 +99,11 @@ class HandModel:
         fields.update(changes)
         return HandModel.create(source=self.meta.get("source", "model"), **fields)
 
+    def shaped(self, betas) -> "HandModel":
+        """The model of one shape, betas (S,): see `model.shape.shaped_model`."""
+        from darthand.model.shape import shaped_model
+        return shaped_model(self, betas)
+
 
 def _float(a) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(a, dtype=np.float64))
