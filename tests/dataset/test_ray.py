@@ -117,7 +117,8 @@ def test_a_two_node_cluster_without_a_shared_filesystem_writes_a_local_runs_byte
     strict = _cli([*args, "--ray", head.address, "--ray-files", "shared", "--out", str(tmp_path / "strict")])
     err = strict.stderr.strip().splitlines()
     assert strict.returncode == 2 and len(err) == 1, strict.stderr
-    assert re.search(r"--ray-files shared: node \S+ \([0-9a-f]{8}\) does not see (the output folder )?/tmp/", err[0]), err
+    assert re.search(r"--ray-files shared: node \S+ \([0-9a-f]{8}\) does not see (the output folder )?/tmp/",
+                     err[0]), err
     assert not list((tmp_path / "strict" / "labels").glob("*"))
 
 

@@ -7,6 +7,9 @@ each rendering the plan from scratch into a fresh folder; images_per_second is e
 workers started (dataset/run.RunStats), overall_images_per_second includes start-up (for Ray: connecting,
 starting the actors, opening the package on each). One more Ray run with files='ship' measures the no-shared-
 filesystem path: inputs through the object store, every frame returned to the driver and written there.
+On a loaded machine images/s measure the share of the CPU each run got as much as the engine; ratio_cpu (local over
+Ray, of cpu_ms_per_image_all: the CPU time of every process of a run per frame, driver, workers, raylets, GCS) is
+what the engine costs in CPU, which the load does not change.
 
 Also measured, for the README's scaling note: per frame (ms of one core, kB on disk), per texture (decoding one of
 the catalogue's textures, the first time a worker meets it), per shard (planning and digesting its 8,192 jobs on
@@ -49,9 +52,9 @@ def run(frames: int | None = None) -> dict:
             runs: dict = {"local": [], "ray": []}
             for k, kind in enumerate(order):
                 runs[kind].append(_render(model, textures, accessories, plan, frames, tmp / f"{kind}{k}",
-                                          None if kind == "local" else {"address": cluster.address}))
+                                          None if kind == "local" else {"address": cluster.address}, cluster))
             ship = _render(model, textures, accessories, plan, frames, tmp / "ship",
-                           {"address": cluster.address, "files": "ship"})
+                           {"address": cluster.address, "files": "ship"}, cluster)
         costs = _unit_costs(model, textures, accessories, plan, tmp)
     local, ray = _mean(runs["local"]), _mean(runs["ray"])
     return {
@@ -59,6 +62,7 @@ def run(frames: int | None = None) -> dict:
         "goal_ratio": GOAL_RATIO,
         "local_images_per_second": local["images_per_second"], "ray_images_per_second": ray["images_per_second"],
         "ratio_overall": round(ray["overall_images_per_second"] / local["overall_images_per_second"], 3),
+        "ratio_cpu": round(local["cpu_ms_per_image_all"] / ray["cpu_ms_per_image_all"], 3),
         "local": local, "ray": ray, "ray_ship": ship,
         "runs": {kind: [r["images_per_second"] for r in rs] for kind, rs in runs.items()},
         "cluster_start_s": round(cluster_start, 1), "frames": frames, "size": SIZE, "inputs": where,
@@ -70,7 +74,10 @@ def run(frames: int | None = None) -> dict:
     }
 
 
-def _render(model, textures, accessories, plan, frames, out, cluster) -> dict:
+def _render(model, textures, accessories, plan, frames, out, cluster, nodes) -> dict:
+    """One run; its timings, and cpu_ms_per_image_all: the CPU time of every process of the run (this driver, and
+    the local workers or the Ray nodes' processes: raylets, GCS, actors) per frame, which a shared machine's load
+    does not change."""
     from darthand.dataset.run import render_package
 
     label = "local" if cluster is None else f"ray ({cluster.get('files', 'auto')})"
@@ -81,13 +88,16 @@ def _render(model, textures, accessories, plan, frames, out, cluster) -> dict:
             print(f"[bench] render_dataset_ray {label}: {done}/{total} frames, {seconds:.0f} s", file=sys.stderr,
                   flush=True)
 
+    cpu = _cpu_seconds(nodes if cluster is not None else None)
     doc = render_package(str(model), out, count=frames, plan=plan, textures=str(textures),
                          accessories=str(accessories), resume=False, progress=progress, size=SIZE, cluster=cluster)
+    cpu = _cpu_seconds(nodes if cluster is not None else None) - cpu
     t = doc["timings"]
     disk = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
     result = {k: t.get(k) for k in ("images_per_second", "overall_images_per_second", "startup_s", "wall_s",
                                     "cpu_ms_per_image", "processes")}
     result["kb_per_frame"] = round(disk / max(1, frames) / 1024, 1)
+    result["cpu_ms_per_image_all"] = round(1000 * cpu / max(1, frames), 1)
     if cluster is not None:
         result["nodes"] = t.get("nodes")
         result["shipped_mb"] = doc["runner"]["shipped"]["mb"]
@@ -96,8 +106,27 @@ def _render(model, textures, accessories, plan, frames, out, cluster) -> dict:
 
 def _mean(runs: list[dict]) -> dict:
     keys = ("images_per_second", "overall_images_per_second", "startup_s", "wall_s", "cpu_ms_per_image",
-            "kb_per_frame")
+            "cpu_ms_per_image_all", "kb_per_frame")
     return {k: round(sum(r[k] for r in runs) / len(runs), 2) for k in keys} | {"processes": runs[0]["processes"]}
+
+
+def _cpu_seconds(cluster) -> float:
+    """CPU seconds so far of this process and its reaped children (the local workers), and with a cluster of
+    its nodes' process trees (their reaped children, the actors, included)."""
+    from darthand.dataset.ray_local import process_tree
+
+    t = os.times()
+    total = t.user + t.system + t.children_user + t.children_system
+    if cluster is not None:
+        tick = os.sysconf("SC_CLK_TCK")
+        for proc in cluster.procs:
+            for pid in process_tree(proc.pid) if proc is not None else ():
+                try:
+                    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+                except OSError:
+                    continue
+                total += sum(int(f) for f in fields[11:15]) / tick      # utime stime cutime cstime
+    return total
 
 
 def _unit_costs(model, textures, accessories, plan, tmp: Path) -> dict:

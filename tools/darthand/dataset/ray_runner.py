@@ -61,9 +61,9 @@ CACHE = "darthand-ray"            # node-local folder (in the temp dir) of shipp
 
 
 def connect(address: str | None):
-    """(the `ray` module, whether this call connected it), connected to the cluster at `address` ('host:port' of its head, 'auto', or None: RAY_ADDRESS,
-    else the cluster started on this machine, else a new local one). InputError when Ray is not installed or no
-    cluster answers."""
+    """(the `ray` module, whether this call connected it), connected to the cluster at `address` ('host:port' of
+    its head, 'auto', or None: RAY_ADDRESS, else the cluster started on this machine, else a new local one).
+    InputError when Ray is not installed or no cluster answers."""
     try:
         import ray
     except ImportError:
@@ -219,7 +219,7 @@ class InputFiles:
                         add(path, group)
             for key in ("pose", "lights", "camera"):
                 value = job.get(key)
-                if isinstance(value, str) and os.path.isabs(value) and Path(value).is_file():
+                if isinstance(value, str) and os.path.isabs(value):     # a file (names are gestures, views)
                     add(value, f"file:{value}")
             bg = job.get("background")
             if isinstance(bg, dict) and bg.get("folder"):

@@ -69,9 +69,10 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
     t_start = time.monotonic()
     aa.check_options(samples, aa_shading)
     size = _bounded_int(size, "size", 8, MAX_SIZE, "pixels")
+    if cluster is None:
+        processes = _bounded_int(len(os.sched_getaffinity(0)) if processes is None else processes, "processes", 1,
+                                 256)
     workers = None if processes is None else _bounded_int(processes, "processes", 1, 100_000)
-    processes = _bounded_int(len(os.sched_getaffinity(0)) if processes is None else processes, "processes", 1, 256) \
-        if cluster is None else workers
     threads = None if threads is None else _bounded_int(threads, "threads", 1, 256)
     shard_size = _bounded_int(shard_size, "shard size", 1, 10_000_000)
     if planner is None:
