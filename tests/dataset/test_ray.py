@@ -31,14 +31,29 @@ ray = pytest.importorskip("ray", reason="Ray is not installed (make test install
 from darthand.dataset.ray_local import LocalRayCluster, can_hide_folders, free_port  # noqa: E402
 
 RUN_TIMEOUT_S = 240
+HIDE = can_hide_folders()
+NO_HIDE = "needs root and `unshare` to start a node without the shared filesystem"
 pytestmark = pytest.mark.xdist_group("ray")          # one pytest worker, one cluster (make test: --dist loadgroup)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def head():
-    """A one-node cluster (the head, one CPU); tests add worker nodes and kill them."""
+    """A one-node cluster (the head, one CPU); tests add worker nodes and kill them. Session-wide: xdist may
+    interleave other modules' tests with these, which would restart a module-wide cluster."""
     with LocalRayCluster(nodes=1, cpus=1) as cluster:
         yield cluster
+
+
+@pytest.fixture(scope="session")
+def hidden_node(head, tmp_path_factory):
+    """A worker node that sees none of the tests' folders (an empty tmpfs over pytest's temporary root, in a mount
+    namespace of its own), or None where that needs what this machine lacks (root, `unshare`)."""
+    if not HIDE:
+        yield None
+        return
+    k = head.add_node(hide=[tmp_path_factory.getbasetemp()])
+    yield k
+    head.kill_node(k)
 
 
 @pytest.fixture
@@ -89,17 +104,18 @@ def _three_texture_catalogue(package, folder: Path) -> str:
     return str(folder)
 
 
-@pytest.mark.skipif(not can_hide_folders(), reason="needs root and `unshare` to start a node without the shared "
-                                                   "filesystem")
-def test_a_two_node_cluster_without_a_shared_filesystem_writes_a_local_runs_bytes(package, head, worker_node,
-                                                                                  tmp_path_factory, tmp_path):
+def test_a_two_node_cluster_without_a_shared_filesystem_writes_a_local_runs_bytes(package, head, hidden_node,
+                                                                                  worker_node, tmp_path):
     """Head (sees everything) + a node that sees none of the test's folders: the node gets the inputs through Ray
-    (only the textures the plan uses) and returns its frames; every byte equals a local run's."""
-    worker_node(hide=[tmp_path_factory.getbasetemp()])
+    (only the textures the plan uses) and returns its frames; every byte equals a local run's. Where no node can be
+    started without the filesystem, a shared node with --ray-files ship takes the same paths through Ray."""
+    if hidden_node is None:
+        worker_node()
     textures = _three_texture_catalogue(package, tmp_path / "textures")
     args = _args((package[0], textures, package[2]), "--count", "12", "--seed", "5", "--shard-size", "4",
                  "--texture-ids", "light_moles_00,dark_moles_01", "--accessory-share", "0.5")
-    done = _cli([*args, "--ray", head.address, "--out", str(tmp_path / "ray")])
+    ship = [] if HIDE else ["--ray-files", "ship"]
+    done = _cli([*args, "--ray", head.address, *ship, "--out", str(tmp_path / "ray")])
     assert done.returncode == 0, done.stderr
     assert "Ray workers on 2 nodes" in done.stdout and "node " in done.stdout
     assert files_of(tmp_path / "ray") == _local(args, tmp_path / "local")
@@ -107,14 +123,19 @@ def test_a_two_node_cluster_without_a_shared_filesystem_writes_a_local_runs_byte
     runner = doc["runner"]
     assert runner["kind"] == "ray" and runner["actors"] == 2 and runner["actors_lost"] == 0
     modes = sorted((n["inputs"], n["outputs"]) for n in runner["nodes"].values())
-    assert modes == [("shared", "direct"), ("shipped", "returned")]
+    assert modes == ([("shared", "direct")] if HIDE else [("shipped", "returned")]) + [("shipped", "returned")]
     assert all(n["frames"] > 0 for n in doc["timings"]["nodes"].values())         # both nodes rendered
     shipped = {Path(p).name for p in runner["shipped"]["paths"]}
     assert {"right.npz", "catalog.json", "light_moles_00.png", "dark_moles_01.png", "rough.png"} <= shipped
     assert "light_scars_02.png" not in shipped                                        # not used by the plan
     assert not [p for p in (tmp_path / "ray").rglob(".*") if p.is_file()]            # no probe or temporary left
 
-    strict = _cli([*args, "--ray", head.address, "--ray-files", "shared", "--out", str(tmp_path / "strict")])
+
+@pytest.mark.skipif(not HIDE, reason=NO_HIDE)
+def test_a_node_without_the_files_is_a_one_line_error_when_files_must_be_shared(package, head, hidden_node,
+                                                                                tmp_path):
+    args = _args(package, "--count", "4", "--ray", head.address, "--ray-files", "shared")
+    strict = _cli([*args, "--out", str(tmp_path / "strict")])
     err = strict.stderr.strip().splitlines()
     assert strict.returncode == 2 and len(err) == 1, strict.stderr
     assert re.search(r"--ray-files shared: node \S+ \([0-9a-f]{8}\) does not see (the output folder )?/tmp/",
@@ -160,7 +181,7 @@ class RenameWatch:
 def test_a_node_lost_mid_run_the_run_finishes_with_nothing_lost_or_written_twice(package, head, worker_node,
                                                                                  tmp_path):
     node = worker_node()
-    args = _args(package, "--count", "40", "--seed", "8", "--shard-size", "8", "--size", "96")
+    args = _args(package, "--count", "32", "--seed", "8", "--shard-size", "8", "--size", "64")
     out = tmp_path / "ray"
     watch = RenameWatch([out / k for k in ("images", "masks", "labels", "meshes", "shards")])
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
@@ -187,10 +208,11 @@ def test_a_node_lost_mid_run_the_run_finishes_with_nothing_lost_or_written_twice
     twice = [k for k in frames if counts[k] != 1]
     assert len(twice) <= 3 and all(counts[k] == 2 for k in twice), twice      # the frame being written, at most
     doc = json.loads((out / "dataset.json").read_text())
-    assert doc["runner"]["actors_lost"] >= 1 and doc["rendered"] == 40
+    assert doc["runner"]["actors_lost"] >= 1 and doc["rendered"] == 32
     assert any(n.get("lost") for n in doc["runner"]["nodes"].values())
 
 
+@pytest.mark.slow
 def test_an_interrupted_cluster_run_resumes_by_shards_to_a_local_runs_bytes(package, head, tmp_path):
     """The driver killed mid-run: a rerun renders only the shards and frames missing, and the whole equals a local
     run byte for byte."""

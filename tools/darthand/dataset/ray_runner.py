@@ -555,9 +555,7 @@ class NodeWorker:
         self.where: dict = {}                  # driver path -> the path this node reads
         self.opened: set = set()
         out_dir = settings["out_dir"] if self.sees_output else str(self.staging)
-        local._STATE.clear()
-        local._STATE.update(specs=dict(specs), settings={**settings, "out_dir": out_dir}, threads=1,
-                            stop=threading.Event(), renderers={}, open_s=0.0)
+        self.state = local.set_worker_state(specs, {**settings, "out_dir": out_dir}, 1, threading.Event())
 
     def hello(self) -> dict:
         """Who this actor is, and whether its node sees the inputs and the output folder (an 'error' when files is
@@ -606,9 +604,7 @@ class NodeWorker:
         return result
 
     def stop(self) -> None:
-        from darthand.dataset import local
-
-        local._STATE["stop"].set()
+        self.state["stop"].set()
 
     def cleanup(self) -> None:
         """Remove this run's node-local cache and staging (the run is over)."""
@@ -674,11 +670,11 @@ class NodeWorker:
         spec = self.specs[side]
         package = self._node_path(spec.package, f"dir:{spec.package}" if f"dir:{spec.package}" in self.groups
                                   else f"file:{spec.package}")
-        local._STATE["specs"][side] = replace(
+        self.state["specs"][side] = replace(
             spec, package=package, textures=self._node_path(spec.textures, f"catalog:{spec.textures}"),
             accessories=self._node_path(spec.accessories, f"catalog:{spec.accessories}"),
             model=self._node_path(spec.model, f"file:{spec.model}"))
-        source = local._renderer(side).source
+        source = local.worker_renderer(side).source
         label = self.labels.get(side)
         if label is not None:
             if hasattr(source, "interface"):
