@@ -23,6 +23,7 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -88,16 +89,16 @@ def _render(model, textures, accessories, plan, frames, out, cluster, nodes) -> 
             print(f"[bench] render_dataset_ray {label}: {done}/{total} frames, {seconds:.0f} s", file=sys.stderr,
                   flush=True)
 
-    cpu = _cpu_seconds(nodes if cluster is not None else None)
-    doc = render_package(str(model), out, count=frames, plan=plan, textures=str(textures),
-                         accessories=str(accessories), resume=False, progress=progress, size=SIZE, cluster=cluster)
-    cpu = _cpu_seconds(nodes if cluster is not None else None) - cpu
+    with CpuMeter(nodes if cluster is not None else None) as cpu:
+        doc = render_package(str(model), out, count=frames, plan=plan, textures=str(textures),
+                             accessories=str(accessories), resume=False, progress=progress, size=SIZE,
+                             cluster=cluster)
     t = doc["timings"]
     disk = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
     result = {k: t.get(k) for k in ("images_per_second", "overall_images_per_second", "startup_s", "wall_s",
                                     "cpu_ms_per_image", "processes")}
     result["kb_per_frame"] = round(disk / max(1, frames) / 1024, 1)
-    result["cpu_ms_per_image_all"] = round(1000 * cpu / max(1, frames), 1)
+    result["cpu_ms_per_image_all"] = round(1000 * cpu.seconds / max(1, frames), 1)
     if cluster is not None:
         result["nodes"] = t.get("nodes")
         result["shipped_mb"] = doc["runner"]["shipped"]["mb"]
@@ -110,23 +111,54 @@ def _mean(runs: list[dict]) -> dict:
     return {k: round(sum(r[k] for r in runs) / len(runs), 2) for k in keys} | {"processes": runs[0]["processes"]}
 
 
-def _cpu_seconds(cluster) -> float:
-    """CPU seconds so far of this process and its reaped children (the local workers), and with a cluster of
-    its nodes' process trees (their reaped children, the actors, included)."""
-    from darthand.dataset.ray_local import process_tree
+class CpuMeter:
+    """CPU seconds of a run's processes: this one and its reaped children (the local workers: os.times), and with a
+    cluster every process of its nodes' trees (raylets, GCS, agents, actors), sampled from /proc every SAMPLE_S
+    while the run lasts, since the actors are gone (killed, their time not added to a parent) when it ends."""
 
-    t = os.times()
-    total = t.user + t.system + t.children_user + t.children_system
-    if cluster is not None:
+    SAMPLE_S = 0.2
+
+    def __init__(self, cluster):
+        self.cluster, self.seconds, self._seen = cluster, 0.0, {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._sample_loop, daemon=True)
+
+    def __enter__(self) -> "CpuMeter":
+        self._start = self._own()
+        if self.cluster is not None:
+            self._sample()
+            self._before = dict(self._seen)
+            self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.seconds = self._own() - self._start
+        if self.cluster is not None:
+            self._stop.set()
+            self._thread.join()
+            self.seconds += sum(v - self._before.get(pid, 0.0) for pid, v in self._seen.items())
+
+    @staticmethod
+    def _own() -> float:
+        t = os.times()
+        return t.user + t.system + t.children_user + t.children_system
+
+    def _sample_loop(self) -> None:
+        while not self._stop.wait(self.SAMPLE_S):
+            self._sample()
+
+    def _sample(self) -> None:
+        from darthand.dataset.ray_local import process_tree
+
         tick = os.sysconf("SC_CLK_TCK")
-        for proc in cluster.procs:
+        for proc in self.cluster.procs:
             for pid in process_tree(proc.pid) if proc is not None else ():
                 try:
                     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
                 except OSError:
                     continue
-                total += sum(int(f) for f in fields[11:15]) / tick      # utime stime cutime cstime
-    return total
+                cpu = sum(int(f) for f in fields[11:15]) / tick       # utime stime cutime cstime
+                self._seen[pid] = max(self._seen.get(pid, 0.0), cpu)
 
 
 def _unit_costs(model, textures, accessories, plan, tmp: Path) -> dict:
