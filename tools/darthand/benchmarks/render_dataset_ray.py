@@ -75,6 +75,30 @@ def run(frames: int | None = None) -> dict:
     }
 
 
+def summary(res: dict) -> str:
+    """The markdown section of `make bench`'s README: the headline (images/s of each and their ratio, the CPU
+    ratio), then each run's figures and the unit costs."""
+    if "skipped" in res:
+        return f"Skipped: {res['skipped']}"
+    local, ray, ship, u = res["local"], res["ray"], res["ray_ship"], res["unit_costs"]
+    lines = [f"**Ray / local images/s: {res['ratio_ray_to_local']:.2f} ({res['ray_images_per_second']:.2f} against "
+             f"{res['local_images_per_second']:.2f}; goal >= {res['goal_ratio']}); CPU of every process per frame, "
+             f"local / Ray: {res['ratio_cpu']:.2f} ({local['cpu_ms_per_image_all']:.0f} against "
+             f"{ray['cpu_ms_per_image_all']:.0f} ms).** {res['frames']} frames of {res['size']}², machine load "
+             f"{res['machine_load_1min']} at the end (images/s on a loaded machine measure the CPU share each run got).",
+             "", "| run | images/s | with start-up | start-up s | CPU ms/frame (workers) | CPU ms/frame (all) |",
+             "|---|---|---|---|---|---|"]
+    for name, r in (("local processes", local), ("Ray, files auto", ray), ("Ray, files ship", ship)):
+        lines.append(f"| {name} | {r['images_per_second']} | {r['overall_images_per_second']} | {r['startup_s']} | "
+                     f"{r['cpu_ms_per_image']} | {r['cpu_ms_per_image_all']} |")
+    lines += ["", f"Runs (ABBA): local {res['runs']['local']}, Ray {res['runs']['ray']} images/s; "
+              f"{ship['shipped_mb']} MB shipped with files=ship; {local['kb_per_frame']} kB per frame on disk; "
+              f"a shard of {u['shard_frames']} jobs planned and digested in {u['shard_plan_ms'] / 1000:.1f} s "
+              f"({u['driver_plan_frames_per_second']} frames/s per driver); a {u['texture_resolution']}² texture "
+              f"decoded in {u['texture_decode_ms']} ms."]
+    return "\n".join(lines)
+
+
 def _render(model, textures, accessories, plan, frames, out, cluster, nodes) -> dict:
     """One run; its timings, and cpu_ms_per_image_all: the CPU time of every process of the run (this driver, and
     the local workers or the Ray nodes' processes: raylets, GCS, actors) per frame, which a shared machine's load
@@ -157,7 +181,9 @@ class CpuMeter:
                     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
                 except OSError:
                     continue
-                cpu = sum(int(f) for f in fields[11:15]) / tick       # utime stime cutime cstime
+                # utime + stime only: a reaped child's time also lands in its parent's cutime (an actor killed
+                # and reaped by its raylet), and every process of the trees is sampled on its own
+                cpu = sum(int(f) for f in fields[11:13]) / tick
                 self._seen[pid] = max(self._seen.get(pid, 0.0), cpu)
 
 
