@@ -607,8 +607,12 @@ class NodeWorker:
         self.state["stop"].set()
 
     def cleanup(self) -> None:
-        """Remove this run's node-local cache and staging (the run is over)."""
+        """Remove this run's node-local cache and staging (the run is over), and CACHE itself once no run uses it."""
         shutil.rmtree(self.cache.parent, ignore_errors=True)
+        try:
+            self.cache.parent.parent.rmdir()
+        except OSError:                            # another run's cache is there, or already removed
+            pass
 
     # -------------------------------------------------------------------------------------------- files
 
