@@ -50,7 +50,7 @@ venv: $(STAMP)
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	@$(PY) -m pip install -q --disable-pip-version-check --upgrade pip
-	@$(PY) -m pip install -q --disable-pip-version-check -e '.[test]'
+	@$(PY) -m pip install -q --disable-pip-version-check -e '.[test,cluster]'
 	@touch $@
 
 blender: $(BLENDER_STAMP)
@@ -158,13 +158,14 @@ usdz: build/usd/right/right.usda
 
 # ------------------------------------------------------------------ tests and benchmarks
 # Two pytest workers, each with single-threaded BLAS: threaded BLAS in both workers oversubscribes two cores.
+# --dist loadgroup keeps the tests marked xdist_group (the Ray cluster's) on one worker, with one cluster.
 TEST_ENV := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
 test: $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP) chromium
-	@$(TEST_ENV) $(PY) -m pytest -q -m "not slow" -n 2 $(PYTEST_ARGS)
+	@$(TEST_ENV) $(PY) -m pytest -q -m "not slow" -n 2 --dist loadgroup $(PYTEST_ARGS)
 
 test-all: $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP) chromium
-	@$(TEST_ENV) $(PY) -m pytest -q -n 2 $(PYTEST_ARGS)
+	@$(TEST_ENV) $(PY) -m pytest -q -n 2 --dist loadgroup $(PYTEST_ARGS)
 
 # The benchmarks' own dependencies (the bench extra: Mitsuba, the path-traced reference); without them the
 # render_reference benchmark reports itself skipped.

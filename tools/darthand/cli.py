@@ -415,6 +415,14 @@ def _add_dataset_arguments(p) -> None:
                         "in this process)")
     p.add_argument("--threads", type=int, default=None, metavar="N",
                    help="render threads per process (default 1 with workers, all cores with --processes 1)")
+    p.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
+                   help="render on a Ray cluster: the head node's HOST:PORT, 'auto', or nothing (RAY_ADDRESS, else "
+                        "the cluster started on this machine, else a new local one); --processes is then the "
+                        "number of Ray workers (default: the cluster's CPUs). Needs `pip install darthand[cluster]`")
+    p.add_argument("--ray-files", default="auto", choices=("auto", "shared", "ship"),
+                   help="how inputs reach the Ray nodes and frames the output folder: auto (a shared filesystem "
+                        "where a node sees it, else through Ray, only the files its frames use), shared (every "
+                        "node must see them), ship (always through Ray) (default auto)")
     p.add_argument("--shard-size", type=int, default=run.DEFAULT_SHARD_SIZE, metavar="N",
                    help=f"frames per shard, the unit of planning and resume records (default {run.DEFAULT_SHARD_SIZE})")
     p.add_argument("--max-frames", type=int, default=run.DEFAULT_MAX_FRAMES, metavar="N",

@@ -25,12 +25,20 @@ WATCHDOG_S = 0.5
 _STATE: dict = {}
 
 
+def set_worker_state(specs: dict, settings: dict, threads: int | None, stop=None) -> dict:
+    """Make this process a worker that render_chunk renders with: {side: SourceSpec} opened on use, run.py's
+    settings, render threads, a stop event (or None); returns the state (a spawned worker, the in-process runner and
+    a Ray actor, dataset/ray_runner.py, each set it)."""
+    _STATE.clear()
+    _STATE.update(specs=dict(specs), settings=settings, threads=threads, stop=stop, renderers={}, open_s=0.0)
+    return _STATE
+
+
 def _init_worker(specs: dict, settings: dict, threads: int, stop, parent: int) -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)      # the parent handles Ctrl-C and stops the workers
-    _STATE.clear()
-    _STATE.update(specs=specs, settings=settings, threads=threads, stop=stop, renderers={}, open_s=0.0)
+    set_worker_state(specs, settings, threads, stop)
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="darthand-watchdog").start()
 
 
@@ -41,7 +49,8 @@ def _watch_parent(parent: int) -> None:
     os._exit(3)
 
 
-def _renderer(side: str):
+def worker_renderer(side: str):
+    """This worker's renderer of a side, its source opened on first use."""
     from darthand.render.api import Renderer
 
     renderers = _STATE["renderers"]
@@ -67,7 +76,7 @@ def render_chunk(items: list) -> dict:
             break
         t, c = time.monotonic(), time.process_time()
         try:
-            renderer = _renderer(job.get("side") or default_side)
+            renderer = worker_renderer(job.get("side") or default_side)
             frame, background = render_job(renderer, job, settings)
             t_w = time.perf_counter()
             summary = write_dataset_frame(frame, job, digest, settings["out_dir"], renderer.source, background)
@@ -90,8 +99,7 @@ class LocalRunner:
         self.processes = processes
         self._pool = None
         if processes == 1:
-            _STATE.clear()
-            _STATE.update(specs=specs, settings=settings, threads=threads, stop=None, renderers={}, open_s=0.0)
+            set_worker_state(specs, settings, threads)
             if opened:
                 from darthand.render.api import Renderer
 
