@@ -44,7 +44,11 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     try:
         yield tmp
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp creates 0600; outputs get the usual permissions
-        os.replace(tmp, path)
+        try:
+            os.replace(tmp, path)
+        except IsADirectoryError:
+            from darthand.errors import InputError
+            raise InputError(f"{path}: cannot write this file: a folder is in the way") from None
         # rename() is a no-op when both names are hard links to one file (re-placing a linked texture).
         tmp.unlink(missing_ok=True)
     except BaseException:
@@ -258,12 +262,25 @@ def temporary_prefix(name: str) -> str:
     return f".{name}.tmp-{os.getpid()}."
 
 
+def staging_folder(out: str | os.PathLike) -> Path:
+    """A new, private folder beside `out` to build a whole output folder in before it replaces `out` (named with
+    `temporary_prefix`); the staging folders of `out` that dead processes left (a SIGKILL mid-write) are removed
+    first."""
+    out = Path(out)
+    make_folder(out.parent)
+    remove_stale_temporaries(out.parent, recursive=False)
+    try:
+        return Path(tempfile.mkdtemp(prefix=temporary_prefix(out.name), dir=out.parent))
+    except OSError as e:
+        raise _write_error(out, e) from None
+
+
 _TEMPORARY = re.compile(r"^\..+\.tmp-(\d+)\.")
 
 
-def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
-    """Remove, under `folder`, the temporary files and staging folders (`temporary_prefix` names) of processes
-    that are no longer running: what an interrupted or killed run left. Returns what was removed."""
+def remove_stale_temporaries(folder: str | os.PathLike, recursive: bool = True) -> list[Path]:
+    """Remove, under `folder` (or in it only), the temporary files and staging folders (`temporary_prefix` names)
+    of processes that are no longer running: what an interrupted or killed run left. Returns what was removed."""
     removed = []
     for root, dirs, files in os.walk(folder):
         for name in dirs + files:
@@ -275,7 +292,7 @@ def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
                 else:
                     path.unlink(missing_ok=True)
                 removed.append(path)
-        dirs[:] = [d for d in dirs if not _TEMPORARY.match(d)]
+        dirs[:] = [d for d in dirs if recursive and not _TEMPORARY.match(d)]
     return removed
 
 

@@ -21,7 +21,13 @@ def load_schema(name: str) -> dict:
 
 
 def check_schema(doc, name: str, source: str) -> None:
-    """Raise InputError '<source>: field '<path>' <message>' for the most relevant violation of schemas/<name>."""
+    """Raise InputError '<source>: field '<path>' <message>' for the most relevant violation of schemas/<name>, or
+    for a NaN or infinite number anywhere in `doc` (a dict given through the API may hold them)."""
+    from darthand.fileio import first_non_finite
+
+    bad = first_non_finite(doc)
+    if bad:     # JSON has no NaN or Infinity, and a schema's bounds do not catch NaN (every comparison is false)
+        raise InputError(f"{source}: field '{bad}' is not a finite number")
     validator = jsonschema.Draft202012Validator(load_schema(name))
     error = jsonschema.exceptions.best_match(validator.iter_errors(doc))
     if error is None:

@@ -90,11 +90,17 @@ def _short(x, n: int = 40) -> str:
 
 
 def _check_finite(path: Path, field: str, arr: np.ndarray) -> None:
-    bad = ~np.isfinite(arr)
+    """Every value finite and within the forward pass's bound for the field (radians for poses)."""
+    from darthand.model.forward import MAX_MAGNITUDE
+
+    limit = MAX_MAGNITUDE[field]
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(arr) <= limit)
     if bad.any():
         idx = np.unravel_index(int(np.argmax(bad)), arr.shape)
         where = "".join(f"[{int(i)}]" for i in idx)
-        raise InputError(f"{path}: field '{field}{where}' is {arr[idx]}, expected a finite number")
+        raise InputError(f"{path}: field '{field}{where}' is {arr[idx]}, expected a finite number within "
+                         f"+-{limit:g}")
 
 
 # ------------------------------------------------------------------------------------------------ pose files
