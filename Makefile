@@ -27,7 +27,7 @@ POSES        := $(wildcard assets_src/poses/*.json)
 # A stage's outputs depend on its own code too, so editing a generator rebuilds what it made.
 src = $(wildcard tools/darthand/$(1)/*.py tools/darthand/$(1)/*/*.py)
 
-.PHONY: assets test test-all bench usdz clean venv node FORCE
+.PHONY: assets verify-build test test-all bench usdz clean venv node FORCE
 .DEFAULT_GOAL := assets
 
 # ------------------------------------------------------------------ set-up
@@ -101,7 +101,13 @@ ASSETS := build/model/right.npz build/template/gestures.json build/textures/cata
 build/manifest.json: $(ASSETS)
 	@$(DH) manifest --build build
 
-assets: build/manifest.json
+# Outputs damaged since the manifest was written (a truncated texture, a deleted file) are removed and their steps
+# dated back, so the rules above rebuild them (no-op without a manifest). Listed first: make runs it before it looks
+# at the other targets' times.
+verify-build: | $(STAMP)
+	@$(DH) verify --build build --repair
+
+assets: verify-build build/manifest.json
 
 # One variant combination as a .usdz: make usdz TEXTURE=light_tattoos_07 ACCESSORY=watch_03_round_metal
 usdz: build/usd/right/right.usda

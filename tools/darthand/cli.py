@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
+from pathlib import Path
 
 from darthand.errors import DarthandError
 
@@ -29,7 +31,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"darthand: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("darthand: interrupted", file=sys.stderr)
+        if not os.environ.get("DARTHAND_STEP"):        # under `make assets` the step runner says it, once
+            print("darthand: interrupted", file=sys.stderr)
         return INTERRUPTED
     except MemoryError:
         print("darthand: error: out of memory: the request is larger than this machine can hold; lower the sizes "
@@ -504,6 +507,38 @@ def _add_manifest_command(sub) -> None:
         return 0
 
     p.set_defaults(run=run)
+
+    text = ("check every output of build/manifest.json against its size and sha256 (exit 1 when one is missing or "
+            "differs)")
+    p = sub.add_parser("verify", help=text, description=text)
+    p.add_argument("--build", default="build", help="build folder (default: build)")
+    p.add_argument("--full", action="store_true",
+                   help="hash every file (default: only those whose size or modification time changed)")
+    p.add_argument("--repair", action="store_true",
+                   help="remove the damaged files and mark their steps out of date, so `make assets` rebuilds "
+                        "them (exit 0); without a manifest, do nothing")
+
+    def verify(args):
+        from darthand.manifest import invalidate, verify_outputs
+
+        if args.repair and not (Path(args.build) / "manifest.json").is_file():
+            return 0
+        damaged = verify_outputs(args.build, full=args.full)
+        for rel, why in damaged[:20]:
+            print(f"damaged: {Path(args.build) / rel}: {why}")
+        if len(damaged) > 20:
+            print(f"damaged: ... and {len(damaged) - 20} more")
+        if not damaged:
+            if not args.repair:        # make assets runs --repair each time: silent when nothing is wrong
+                print(f"{Path(args.build) / 'manifest.json'}: every output matches")
+            return 0
+        if args.repair:
+            steps = invalidate(args.build, damaged)
+            print(f"{len(damaged)} damaged outputs removed; rebuilding with the steps writing {', '.join(steps)}")
+            return 0
+        return 1
+
+    p.set_defaults(run=verify)
 
 
 if __name__ == "__main__":

@@ -86,16 +86,22 @@ def write_json(path: str | os.PathLike, obj, indent: int = 2) -> None:
 
 def first_non_finite(obj) -> str:
     """Path ('a.b[3]') of the first NaN or infinite float in a JSON-like document ('' when there is none)."""
+    found = _non_finite(obj)
+    return found[0] if found else ""
+
+
+def _non_finite(obj) -> tuple[str, float] | None:
+    """(path, value) of the first NaN or infinite float in a JSON-like document, or None."""
     todo = [("", obj)]
     while todo:
         where, x = todo.pop()
         if isinstance(x, float) and not math.isfinite(x):
-            return where or "(top level)"
+            return where or "(top level)", x
         if isinstance(x, dict):
             todo += [(f"{where}.{k}" if where else str(k), v) for k, v in reversed(list(x.items()))]
         elif isinstance(x, (list, tuple)):
             todo += [(f"{where}[{i}]", v) for i, v in reversed(list(enumerate(x)))]
-    return ""
+    return None
 
 
 # ------------------------------------------------------------------------------------------------ reading
@@ -184,15 +190,6 @@ def _parse_int(text: str) -> int:
     return int(text)
 
 
-def _parse_float(text: str) -> float:
-    value = float(text)
-    if not math.isfinite(value):
-        raise _Refused(f"the number {text[:40]} is too large for a 64-bit float")
-    return value
-
-
-def _parse_constant(name: str):
-    raise _Refused(f"{name} is not a JSON number")
 
 
 _STRINGS = re.compile(rb'"(?:[^"\\]|\\.)*"')
@@ -209,7 +206,8 @@ def json_depth(data: bytes) -> int:
 
 def parse_json(data: bytes | str, source, what: str = "JSON file", max_depth: int = MAX_JSON_DEPTH):
     """Strict JSON from bytes or text: UTF-8, nested at most `max_depth` deep, no NaN or Infinity, no number too
-    large for a float64, no integer of more than MAX_JSON_INT_DIGITS digits. InputError naming `source` otherwise."""
+    large for a float64, no integer of more than MAX_JSON_INT_DIGITS digits. InputError naming `source` (and the
+    field) otherwise."""
     from darthand.errors import InputError
 
     raw = data.encode("utf-8", "surrogatepass") if isinstance(data, str) else bytes(data)
@@ -223,13 +221,35 @@ def parse_json(data: bytes | str, source, what: str = "JSON file", max_depth: in
     if depth > max_depth:
         raise InputError(f"{source}: not a {what}: its JSON nests {depth} levels deep (at most {max_depth} are read)")
     try:
-        return json.loads(text, parse_int=_parse_int, parse_float=_parse_float, parse_constant=_parse_constant)
+        doc = json.loads(text, parse_int=_parse_int)
+        bad = _non_finite(doc)      # NaN, Infinity (not JSON) or a number beyond float64 (1e999): named by field
+        if bad:
+            raise InputError(f"{source}: field '{bad[0]}' is {bad[1]}, expected a finite number (JSON has no NaN "
+                             "or Infinity)")
+        return doc
     except _Refused as e:
         raise InputError(f"{source}: not valid JSON for a {what}: {e}") from None
     except json.JSONDecodeError as e:
         raise InputError(f"{source}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from None
     except (ValueError, RecursionError) as e:      # a surrogate, a number Python refuses to convert
         raise InputError(f"{source}: not valid JSON for a {what} ({str(e)[:120]})") from None
+
+
+def file_in(folder: str | os.PathLike, name: str, what: str = "file", must_exist: bool = True) -> Path:
+    """folder/name after checking that `name` is relative, stays inside `folder` (symlinks resolved) and is a
+    regular file (or, without `must_exist`, nothing yet): for file names read from a document (a catalogue's
+    entries), which must not lead anywhere else."""
+    from darthand.errors import InputError
+
+    folder = Path(folder)
+    path = Path(os.path.normpath(folder / name))
+    real, real_folder = os.path.realpath(path), os.path.realpath(folder)
+    if os.path.isabs(name) or not str(path).startswith(str(Path(os.path.normpath(folder))) + os.sep) \
+            or not real.startswith(real_folder + os.sep):
+        raise InputError(f"{folder}: {what} {name!r} leads outside the folder; not opened")
+    if must_exist or os.path.lexists(path):
+        regular_file(path, what)
+    return path
 
 
 # ------------------------------------------------------------------------------------------------ folders

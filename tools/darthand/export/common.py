@@ -31,13 +31,14 @@ import dataclasses
 import os
 import shutil
 import tempfile
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from darthand.errors import InputError
-from darthand.fileio import atomic_path, read_json
+from darthand.fileio import atomic_path, file_in, open_regular, read_json
 from darthand.model.forward import forward, pose_feature
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import NUM_JOINTS, NUM_POSE_FEATURES
@@ -436,8 +437,9 @@ def load_texture_catalog(path: str | Path) -> list[TextureSet]:
     if not data["entries"]:
         raise InputError(f"{path}: field 'entries' is empty (build textures with the textures stage)")
     entries = sorted(data["entries"], key=lambda e: e["id"] != data.get("default"))     # stable: default first
-    return [TextureSet(e["id"], path.parent / e["files"]["albedo"],
-                       path.parent / e["files"]["roughness"] if e["files"]["roughness"] else None)
+    return [TextureSet(e["id"], file_in(path.parent, e["files"]["albedo"], "texture", must_exist=False),
+                       file_in(path.parent, e["files"]["roughness"], "texture", must_exist=False)
+                       if e["files"]["roughness"] else None)
             for e in entries]
 
 
@@ -554,11 +556,13 @@ def _read_catalog(path: Path, what: str, schema: str) -> dict:
 
 def _entry_accessory(path: Path, entry: dict) -> Accessory:
     files = entry["files"]
-    mesh_path = path.parent / files["npz"]
+    mesh_path = file_in(path.parent, files["npz"], "accessory mesh", must_exist=False)
     try:
-        with np.load(mesh_path) as z:
+        with open_regular(mesh_path, "accessory mesh") as f, np.load(f, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as e:
+    except InputError as e:
+        raise InputError(f"{mesh_path}: unreadable accessory mesh ({str(e).split(': ', 1)[-1]})") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
         raise InputError(f"{mesh_path}: unreadable accessory mesh ({e})") from None
     for key in ("vertices", "faces"):
         if key not in arrays:
@@ -571,7 +575,7 @@ def _entry_accessory(path: Path, entry: dict) -> Accessory:
         id=entry["id"], vertices=np.asarray(arrays["vertices"], np.float64),
         faces=np.asarray(arrays["faces"], np.int64), uvs=opt("uvs", np.float64), faces_uv=opt("faces_uv", np.int64),
         parent_joint=entry["parent_joint"], weights=opt("weights", np.float64), posedirs=opt("posedirs", np.float64),
-        material=dict(entry["material"]), base_color_png=path.parent / files["base_color"],
-        metallic_roughness_png=path.parent / files["metallic_roughness"], kind=entry["type"])
+        material=dict(entry["material"]), base_color_png=file_in(path.parent, files["base_color"], "texture", False),
+        metallic_roughness_png=file_in(path.parent, files["metallic_roughness"], "texture", False), kind=entry["type"])
     check_accessory(acc, str(path))
     return acc

@@ -298,7 +298,7 @@ def open_source(package, *, textures=None, accessories=None, model=None):
     from darthand.render.assets import HandAssets, default_catalogues
 
     path = Path(str(package))
-    if path.is_dir() and (path / "asset.json").is_file() or path.suffix in (".usda", ".usd", ".usdc"):
+    if path.is_dir() and os.path.lexists(path / "asset.json") or path.suffix in (".usda", ".usd", ".usdc"):
         from darthand.render.usd_source import UsdPackage
 
         return UsdPackage.open(path, model=model)

@@ -34,6 +34,7 @@ import numpy as np
 from darthand.errors import InputError
 from darthand.fileio import sha256_file, write_json
 from darthand.model.hand_model import HandModel
+from darthand.processes import init_worker
 from darthand.textures import sheet as sheet_mod
 from darthand.model.atlas import ensure_uvs
 from darthand.textures.bake import Bake, cached_bake, load_bake, source_digest
@@ -150,6 +151,7 @@ _WORKER_BAKE: Bake | None = None
 
 def _init_worker(bake_path: str) -> None:
     global _WORKER_BAKE
+    init_worker()         # Ctrl-C is the parent's to handle; the worker ends with its parent
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import OpenImageIO as oiio
 
@@ -182,9 +184,8 @@ def _render_all(todo, bake, bake_path, out_dir, res, tx, roughness, workers, pro
                 result = fut.result()
                 bar.step(result[0]["id"])
                 yield result
-        except BaseException:
-            for f in futures:
-                f.cancel()
+        except BaseException:         # Ctrl-C or a failed variant: running ones finish (atomic files), none start
+            pool.shutdown(wait=True, cancel_futures=True)
             raise
     bar.done()
 

@@ -1,0 +1,35 @@
+"""Worker processes that behave on interruption: Ctrl-C is their parent's to handle (the parent stops them cleanly,
+so no worker prints a KeyboardInterrupt traceback or leaks a semaphore), and a worker never outlives its parent (a
+SIGKILL of the parent ends its workers at once instead of leaving them to finish, or to wait, alone).
+
+    ProcessPoolExecutor(..., initializer=init_worker)       # or call init_worker() first in your own initializer
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+
+PR_SET_PDEATHSIG = 1     # linux/prctl.h
+
+
+def init_worker() -> None:
+    """In a worker process: ignore SIGINT and be killed when the parent process dies (Linux; elsewhere the worker
+    notices its closed pipe at its next task)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = os.getppid()
+    die_with_parent()
+    if os.getppid() != parent:        # the parent died before the request took effect
+        os._exit(1)
+
+
+def die_with_parent(sig: int = signal.SIGKILL) -> bool:
+    """Ask the kernel to send `sig` to this process when its parent exits; False where prctl is not available.
+    The worker's partial outputs are temporaries (fileio.atomic_path), which the next run removes."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
