@@ -669,8 +669,22 @@ LIGHT_FILES = {
     "lights not a list": json.dumps({"lights": {"a": 1}}),
     "empty file": "",
 }
+def labels_are_strict_json(t: Path, fx: Path) -> str | None:
+    """After a render that succeeded: labels.json is JSON (no NaN or Infinity) and the image was written."""
+    labels = t / "out" / "labels.json"
+    if not labels.is_file() or not (t / "out" / "image.png").is_file():
+        return "no labels.json or image.png written"
+    try:
+        json.loads(labels.read_text(), parse_constant=lambda name: (_ for _ in ()).throw(ValueError(name)))
+    except ValueError as e:
+        return f"labels.json is not strict JSON ({e})"
+    return None
+
+
 for name, content in LIGHT_FILES.items():
-    case("lights files", name, RENDER + ["--lights", "{t}/lights.json"], setup=writer("lights.json", content))
+    legal = name == "point at the hand centre"     # odd but valid: it must render, with valid labels
+    case("lights files", name, RENDER + ["--lights", "{t}/lights.json"], setup=writer("lights.json", content),
+         expect=(0,) if legal else (2,), check=labels_are_strict_json if legal else None)
 case("lights files", "lights file is a FIFO", RENDER + ["--lights", "{t}/lights.json"], setup=fifo_at("lights.json"),
      timeout=30)
 
@@ -1015,7 +1029,7 @@ NUMERIC = [
     (RENDER, "--skin-tone-offset", ["nan", "inf", "-inf", "1e300", "5"]),
     (RENDER, "--size", ["0", "-1", "100000", BIG]),
     (RENDER, "--width", ["0", "-7"]),
-    (RENDER, "--height", ["100000"]),
+    (RENDER, "--height", ["1000000"]),
     (RENDER, "--threads", ["-3", "0", "100000"]),
     (["render-checks", "--build", "{fx}", "--sides", "right", "--out", "{t}/checks"], "--size", ["0", "-1", "100000"]),
     (WRIST, "--rings", ["0", "-1", "1000000", BIG]),

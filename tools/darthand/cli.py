@@ -38,6 +38,14 @@ def main(argv: list[str] | None = None) -> int:
         print("darthand: error: out of memory: the request is larger than this machine can hold; lower the sizes "
               "asked for (--max-memory bounds what a command may plan to use)", file=sys.stderr)
         return 2
+    except BrokenPipeError:             # `darthand ... | head`: the reader left, nothing more to say
+        sys.stderr.close()
+        return 141
+    except OSError as e:                # the file system refused: a file where a folder must be, /proc, no space
+        from darthand.fileio import describe_os_error
+
+        print(f"darthand: error: {describe_os_error(e)}", file=sys.stderr)
+        return 2
 
 
 class _Parser(argparse.ArgumentParser):

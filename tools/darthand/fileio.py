@@ -197,11 +197,27 @@ _STRINGS = re.compile(rb'"(?:[^"\\]|\\.)*"')
 
 def json_depth(data: bytes) -> int:
     """How deeply the arrays and objects of a JSON text nest, without parsing it (strings ignored)."""
+    return _depth(_STRINGS.sub(b'""', data))
+
+
+def _depth(stripped: bytes) -> int:
     import numpy as np
 
-    code = np.frombuffer(_STRINGS.sub(b'""', data), np.uint8)
-    step = np.isin(code, (91, 123)).astype(np.int32) - np.isin(code, (93, 125)).astype(np.int32)
-    return int(np.cumsum(step).max(initial=0))
+    low = np.frombuffer(stripped, np.uint8) & 0xDF           # '{' -> '[', '}' -> ']' (clears the 0x20 bit)
+    brackets = low[(low == 0x5B) | (low == 0x5D)]
+    return int(np.cumsum(np.where(brackets == 0x5B, 1, -1)).max(initial=0))
+
+
+# Outside strings, these mark numbers a JSON document must not hold: NaN and Infinity (not JSON), exponents that
+# overflow a float64 (1e999), integers of more than MAX_JSON_INT_DIGITS digits. Only a document that has one is
+# walked to name the field.
+_BIG_EXPONENT = re.compile(rb"[eE][+]?0*(?:[3-9][0-9]{2}|[0-9]{4})")
+_LONG_INTEGER = re.compile(rb"[0-9]{%d}" % (MAX_JSON_INT_DIGITS + 1))
+
+
+def _suspect(stripped: bytes) -> bool:
+    return (b"NaN" in stripped or b"Infinity" in stripped or _LONG_INTEGER.search(stripped) is not None
+            or ((b"e" in stripped or b"E" in stripped) and _BIG_EXPONENT.search(stripped) is not None))
 
 
 def parse_json(data: bytes | str, source, what: str = "JSON file", max_depth: int = MAX_JSON_DEPTH):
@@ -217,10 +233,13 @@ def parse_json(data: bytes | str, source, what: str = "JSON file", max_depth: in
         text = raw.decode("utf-8")
     except UnicodeDecodeError:
         raise InputError(f"{source}: not a UTF-8 text file, so not a {what}") from None
-    depth = json_depth(raw)
+    stripped = _STRINGS.sub(b'""', raw)
+    depth = _depth(stripped)
     if depth > max_depth:
         raise InputError(f"{source}: not a {what}: its JSON nests {depth} levels deep (at most {max_depth} are read)")
     try:
+        if not _suspect(stripped):
+            return json.loads(text)
         doc = json.loads(text, parse_int=_parse_int)
         bad = _non_finite(doc)      # NaN, Infinity (not JSON) or a number beyond float64 (1e999): named by field
         if bad:
@@ -272,9 +291,17 @@ def make_folder(folder: str | os.PathLike) -> Path:
 def _write_error(path: Path, e: OSError):
     from darthand.errors import InputError
 
-    if isinstance(e, NotADirectoryError) or e.errno == 20:
-        return InputError(f"{path}: cannot write here: a part of the path is a file, not a folder")
-    return InputError(f"{path}: cannot write here ({e.strerror or type(e).__name__})")
+    return InputError(describe_os_error(e, path))
+
+
+def describe_os_error(e: OSError, path=None) -> str:
+    """One line for a file-system error: '<path>: <what went wrong>', in words for the usual output mistakes."""
+    path = path if path is not None else (e.filename or "")
+    if isinstance(e, NotADirectoryError):
+        return f"{path}: cannot write here: a part of the path is a file, not a folder"
+    if isinstance(e, FileExistsError):
+        return f"{path}: cannot make this folder: a file is in the way"
+    return f"{path}: {e.strerror or type(e).__name__}" if path else f"{e.strerror or e}"
 
 
 def temporary_prefix(name: str) -> str:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 from pathlib import Path
 
 from pxr import Sdf, Usd, UsdUtils
@@ -19,7 +18,7 @@ from pxr import Sdf, Usd, UsdUtils
 from darthand.errors import InputError
 from darthand.export.package_files import ASSET_INFO, check_usd_package, read_asset_info
 from darthand.export.usd_validate import select_variants
-from darthand.fileio import atomic_path
+from darthand.fileio import atomic_path, staging_folder
 
 
 def export_usdz(package: str | os.PathLike, out: str | os.PathLike, texture: str | None = None,
@@ -35,7 +34,7 @@ def export_usdz(package: str | os.PathLike, out: str | os.PathLike, texture: str
     stage = Usd.Stage.Open(str(interface), Usd.Stage.LoadAll)
     select_variants(stage, {k: v for k, v in (("texture", texture), ("accessory", accessory)) if v is not None})
     flat = stage.Flatten()
-    staging = Path(tempfile.mkdtemp(prefix=".usdz.", dir=out.parent if out.parent.exists() else None))
+    staging = staging_folder(out)
     try:
         root_name = f"{interface.stem}.usdc"
 
