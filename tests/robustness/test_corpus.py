@@ -39,7 +39,7 @@ DEFAULT = [
     "pose files / model pose: 1,000 nested brackets",
     "pose files / model pose: values 1e300",
     "pose files / model pose: int of 5000 digits",
-    "pose files / model pose: 200,000 poses",
+    "pose files / model pose: betas NaN",
     "pose files / render --pose 48 x 1e300",
     "lights files / intensity NaN",
     "lights files / intensity 1e39 (float32 overflow)",

@@ -18,8 +18,11 @@ INTERRUPTED = 130         # exit code after Ctrl-C, as shells report a process e
 
 def main(argv: list[str] | None = None) -> int:
     try:
-        parser = build_parser()
-        args = parser.parse_args(argv)
+        from darthand.processes import deaf_to_ctrl_c
+
+        with deaf_to_ctrl_c():     # a Ctrl-C during the imports is taken after them (OpenUSD's module loader would
+            parser = build_parser()     # print it as a warning with a traceback and go on)
+            args = parser.parse_args(argv)
         if not getattr(args, "run", None):
             parser.print_help()
             return 2

@@ -2,11 +2,14 @@
 so no worker prints a KeyboardInterrupt traceback or leaks a semaphore), and a worker never outlives its parent (a
 SIGKILL of the parent ends its workers at once instead of leaving them to finish, or to wait, alone).
 
-    ProcessPoolExecutor(..., initializer=init_worker)       # or call init_worker() first in your own initializer
+    with deaf_to_ctrl_c():                      # workers start while they import: Ctrl-C must not reach them then
+        pool = ProcessPoolExecutor(..., initializer=init_worker)    # or call init_worker() in your initializer
+        futures = [pool.submit(...) ...]        # (spawned workers are started by submit)
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 
@@ -33,3 +36,15 @@ def die_with_parent(sig: int = signal.SIGKILL) -> bool:
         return libc.prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
     except (OSError, AttributeError):
         return False
+
+
+@contextlib.contextmanager
+def deaf_to_ctrl_c():
+    """Block SIGINT in this thread while worker processes are started: they inherit the blocked signal, so a Ctrl-C
+    arriving while they import (before `init_worker` runs) cannot interrupt them; this process gets it when the
+    block ends."""
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)

@@ -376,12 +376,12 @@ def read_pickle(path: str | Path) -> tuple[object, str]:
     data = read_bytes(path, "file")
     check_memory(f"unpickling {path}", 4 * len(data))
     try:
-        depth = pickle_depth(data)
-    except (ValueError, EOFError) as e:
+        depth = pickle_depth(data, MAX_PICKLE_DEPTH)
+    except Exception as e:  # noqa: BLE001 - pickletools parsing untrusted bytes: any failure is a corrupt file
         raise InputError(f"{path}: not a readable pickle, truncated or corrupt ({_first_line(e)})") from None
     if depth > MAX_PICKLE_DEPTH:
-        raise InputError(f"{path}: not a MANO pickle: its objects nest {depth} levels deep (at most "
-                         f"{MAX_PICKLE_DEPTH} are read); nothing in the file was executed")
+        raise InputError(f"{path}: not a MANO pickle: its objects nest more than {MAX_PICKLE_DEPTH} levels deep; "
+                         "nothing in the file was executed")
     try:
         obj = SafeManoUnpickler(io.BytesIO(data)).load()
     except _Refused as e:
@@ -401,13 +401,13 @@ _MEMO_PUT = {"PUT", "BINPUT", "LONG_BINPUT", "MEMOIZE"}
 _MEMO_GET = {"GET", "BINGET", "LONG_BINGET"}
 
 
-def pickle_depth(data: bytes) -> int:
+def pickle_depth(data: bytes, limit: int | None = None) -> int:
     """How deeply the objects a pickle builds nest, from its opcodes alone (nothing is built or called).
 
     Hashing or comparing a tuple nested a million deep recurses in C and overflows the stack, so such a file must
     be refused before it is unpickled. Each stack entry carries the depth of the object it stands for; an opcode
-    that builds a container from entries pushes one more than the deepest of them. ValueError for bytes that are
-    not a pickle (pickletools' own checks).
+    that builds a container from entries pushes one more than the deepest of them. Stops as soon as the depth
+    passes `limit`. ValueError for bytes that are not a pickle (pickletools' own checks).
     """
     mark = object()
     stack: list = []
@@ -453,6 +453,8 @@ def pickle_depth(data: bytes) -> int:
             depth = 1 + max(taken, default=-1)
             stack += [depth] * len(op.stack_after)
         deepest = max(deepest, depth)
+        if limit is not None and deepest > limit:
+            break
     return deepest
 
 

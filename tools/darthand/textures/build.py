@@ -34,7 +34,7 @@ import numpy as np
 from darthand.errors import InputError
 from darthand.fileio import sha256_file, write_json
 from darthand.model.hand_model import HandModel
-from darthand.processes import init_worker
+from darthand.processes import deaf_to_ctrl_c, init_worker
 from darthand.textures import sheet as sheet_mod
 from darthand.model.atlas import ensure_uvs
 from darthand.textures.bake import Bake, cached_bake, load_bake, source_digest
@@ -178,7 +178,8 @@ def _render_all(todo, bake, bake_path, out_dir, res, tx, roughness, workers, pro
     ctx = multiprocessing.get_context("spawn")  # no forked copies of OpenImageIO's threads
     with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
                                 initargs=(str(bake_path),)) as pool:
-        futures = [pool.submit(_render_one, job) for job in jobs]
+        with deaf_to_ctrl_c():                  # submit starts the workers; Ctrl-C is ours, even while they import
+            futures = [pool.submit(_render_one, job) for job in jobs]
         try:
             for fut in cf.as_completed(futures):
                 result = fut.result()
