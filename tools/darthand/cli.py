@@ -262,7 +262,7 @@ def _add_accessories_commands(sub) -> None:
     p.add_argument("--ids", nargs="+", default=None, metavar="ID", help="build only these accessory ids")
     p.add_argument("--type", nargs="+", default=None, choices=("ring", "watch", "bracelet", "glove"),
                    help="build only these types")
-    p.add_argument("--poses", type=number(int, 0, 10 ** 6), default=300,
+    p.add_argument("--poses", type=number(int, 0, 20000), default=300,
                    help="sampled anatomical poses in the verification sweep (default 300)")
     p.add_argument("--tolerance", type=number(float, 0, 1000), default=1.0,
                    help="penetration (mm) above which a rigid item is refitted (default 1.0)")

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.budget import check_memory
 from darthand.errors import InputError
 from darthand.fileio import sha256_file, write_json
 from darthand.model.hand_model import HandModel
@@ -48,6 +49,8 @@ CATALOG_VERSION = 1
 RENDER_MODULES = ("anatomy", "bake", "canvas", "catalog", "color", "curves", "imageio", "motifs", "noise",
                   "overlays", "raster", "regions", "sampling", "skin", "surface", "variant")
 THUMB_SOURCE = 256  # size of the albedo copy a worker hands back for the contact sheet
+# Peak memory per texel of each process (the bake and one variant's layers; measured about 92 bytes from 1024 to 2048).
+BYTES_PER_TEXEL = 100
 
 
 def build_textures(model: HandModel, spec: dict, out_dir: str | Path, res: int = 2048, ids=None, categories=None,
@@ -58,6 +61,8 @@ def build_textures(model: HandModel, spec: dict, out_dir: str | Path, res: int =
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     res = int(res)
+    check_memory(f"{res}x{res} textures in {max(workers, 1)} worker processes",
+                 BYTES_PER_TEXEL * res * res * (1 + max(workers, 1)))
     entries = expand_catalog(spec)
     chosen = select(entries, ids, categories)
     had_uvs = model.has_uvs
