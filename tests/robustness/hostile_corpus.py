@@ -188,17 +188,14 @@ def with_item(key: str, payload: bytes) -> Callable[[Path, bytes], bytes]:
     return fn
 
 
-def g(module: str, name: str) -> bytes:
-    return pickle.GLOBAL + f"{module}\n{name}\n".encode()
+def _pickle_ops():
+    """mano_fixture's opcode writers: GLOBAL, BINUNICODE, a call (MARK args TUPLE REDUCE)."""
+    from mano_fixture import _call, _global, _text
+
+    return _global, _text, _call
 
 
-def utext(s: str) -> bytes:
-    b = s.encode()
-    return pickle.BINUNICODE + struct.pack("<I", len(b)) + b
-
-
-def call(func: bytes, *args: bytes) -> bytes:
-    return func + pickle.MARK + b"".join(args) + pickle.TUPLE + pickle.REDUCE
+g, utext, call = _pickle_ops()
 
 
 def touch_cmd(t: Path) -> str:

@@ -393,14 +393,19 @@ ARCS = st.lists(st.tuples(st.sampled_from(["sublayer", "reference", "payload", "
                           st.sampled_from(PATH_KINDS)), min_size=1, max_size=5)
 
 
+def package_with(fx: Path, root: Path, arcs) -> tuple[Path, Watch]:
+    """A copy of the fixture package with `arcs` authored, and a watch on the files outside it."""
+    pkg, outside = usd_package(fx, root)
+    add_arcs(pkg, outside, arcs)
+    return pkg, Watch([outside / "secret.usda", outside / "secret.png"])
+
+
 @FUZZ
 @given(arcs=ARCS)
 def test_usd_pre_check_flags_exactly_what_must_not_be_opened(fx, tmp_path_factory, arcs):
     from darthand.export.package_files import usd_problems
 
-    pkg, outside = usd_package(fx, tmp_path_factory.mktemp("u"))
-    add_arcs(pkg, outside, arcs)
-    watch = Watch([outside / "secret.usda", outside / "secret.png"])
+    pkg, watch = package_with(fx, tmp_path_factory.mktemp("u"), arcs)
     problems = usd_problems(pkg / "right.usda")
     assert watch.opened() == []
     flagged = {p.asset for p in problems}
@@ -418,9 +423,7 @@ def test_validate_and_render_never_open_what_leaves_a_usd_package(fx, tmp_path_f
     from darthand.render.api import open_source
     from darthand.validate.run import validate_paths
 
-    pkg, outside = usd_package(fx, tmp_path_factory.mktemp("u"))
-    add_arcs(pkg, outside, arcs)
-    watch = Watch([outside / "secret.usda", outside / "secret.png"])
+    pkg, watch = package_with(fx, tmp_path_factory.mktemp("u"), arcs)
     report = validate_paths([pkg])
     assert report.exit_code in (0, 1, 2)
     if any(kind in UNSAFE for _, kind in arcs):

@@ -115,7 +115,7 @@ def member_headers(z: zipfile.ZipFile, path: Path) -> dict[str, Member]:
                 shape, fortran, dtype = _HEADER_READERS[version](f, max_header_size=4096)
                 offset = f.tell()
         except (ValueError, SyntaxError, TypeError, OverflowError, RecursionError, MemoryError) as e:
-            raise InputError(f"{path}: field '{_printable(name)}' is not a readable .npy array "
+            raise InputError(f"{path}: field '{ascii(name)[1:-1][:80]}' is not a readable .npy array "
                              f"({_first_line(e)})") from None
         members[name] = Member(info, dtype, tuple(int(n) for n in shape), offset)
     return members
@@ -127,8 +127,8 @@ def check_declared(members: dict[str, Member], path: Path) -> None:
     description = {name: {"dtype": m.dtype.str[1:], "shape": list(m.shape)} for name, m in members.items()}
     for name, m in members.items():
         if m.dtype.hasobject or m.dtype.names is not None:
-            raise InputError(f"{path}: field '{_printable(name)}' has dtype {m.dtype.str}, which this loader does "
-                             "not read (object or structured arrays)")
+            raise InputError(f"{path}: field '{ascii(name)[1:-1][:80]}' has dtype {m.dtype.str}, which this "
+                             "loader does not read (object or structured arrays)")
     if "format" not in members or description["format"]["dtype"][:1] != "U":
         raise InputError(f"{path}: field 'format' missing or not '{FORMAT}': not a darthand model file")
     contract = load_schema("model_npz.schema.json")["properties"]
@@ -191,10 +191,6 @@ def checked_regressor(data: dict, V: int, path: Path) -> sp.csr_matrix:
         bad = int(indices.max() if indices.max() >= cols else indices.min())
         fail("indices", f"holds column {bad}, outside 0..{cols - 1}")
     return sp.csr_matrix((values, indices, indptr), shape=(rows, cols))
-
-
-def _printable(text: str, limit: int = 80) -> str:
-    return str(text).encode("unicode_escape").decode("ascii")[:limit]
 
 
 def _first_line(e: BaseException) -> str:
