@@ -70,6 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_accessories_commands(sub)
     _add_export_commands(sub)
     _add_render_commands(sub)
+    _add_dataset_commands(sub)
     _add_validate_command(sub)
     _add_manifest_command(sub)
     for leaf in _leaf_parsers(parser):
@@ -358,11 +359,13 @@ def _add_render_commands(sub) -> None:
     p = sub.add_parser("render-checks", help=text, description=text)
     _add_checks_arguments(p)
     p.set_defaults(run=commands.checks)
-    text = ("render a labelled dataset (OUT/images/, masks/, labels/, dataset.json): frames planned from a seed or "
-            "read from a jobs file, rendered in parallel worker processes")
+    from darthand.dataset import commands as dataset_commands
+
+    text = ("render a labelled dataset (OUT/images/, masks/, labels/, meshes/, dataset.json): frames planned from a "
+            "seed as DART samples them, or read from a jobs file, rendered in parallel worker processes")
     p = sub.add_parser("render-dataset", help=text, description=text)
     _add_dataset_arguments(p)
-    p.set_defaults(run=commands.dataset)
+    p.set_defaults(run=dataset_commands.render_dataset)
 
 
 def _add_render_arguments(p) -> None:
@@ -403,11 +406,14 @@ def _add_render_arguments(p) -> None:
 
 
 def _add_dataset_arguments(p) -> None:
+    from darthand.dataset import plan, poses, run
     from darthand.model.preview import VIEWS
 
+    d = plan.DEFAULTS
     p.add_argument("package", metavar="PACKAGE", help=RENDER_PACKAGE_HELP)
     p.add_argument("--out", required=True, metavar="DIR",
-                   help="output folder: images/NNNNNN.png, masks/NNNNNN.png, labels/NNNNNN.json, dataset.json")
+                   help="output folder: images/, masks/, labels/, meshes/ (NNNNNN.png/.json/.npy), shards/, "
+                        "dataset.json")
     p.add_argument("--count", type=int, default=100, metavar="N", help="frames to plan (default 100)")
     p.add_argument("--seed", type=int, default=0, metavar="S",
                    help="seed of the plan: frame i depends only on (seed, i) (default 0)")
@@ -417,43 +423,105 @@ def _add_dataset_arguments(p) -> None:
                    help="render the frames of a jobs file (schemas/dataset_jobs.schema.json) instead of planning")
     p.add_argument("--plan", default=None, metavar="JOBS.json",
                    help="write the planned jobs to this file (schemas/dataset_jobs.schema.json) and render nothing")
-    p.add_argument("--gestures", default=None, metavar="NAMES|all",
-                   help="comma-separated gesture names, or 'all' (default: all, unless --poses is given)")
-    p.add_argument("--poses", default=None, metavar="POSES.json",
-                   help="a pose file (schemas/pose.schema.json): its poses join the gestures drawn from")
-    p.add_argument("--pose-jitter", type=float, default=None, metavar="DEG",
-                   help="std of a random change to each finger joint's twist, spread and bend, kept within the "
-                        "joint limits (default 5 for a model, 0 for a USD package)")
+    p.add_argument("--sides", default="both", metavar="right|left|both",
+                   help="hands to render, drawn uniformly; the other side renders PACKAGE's twin (build/model/"
+                        "left.npz, build/usd/left) or the model mirrored (default both)")
+    p.add_argument("--pose-mode", default="auto", choices=("auto", "dart", "jitter", "gestures"),
+                   help="dart: DART's base poses from a grid of joint angles, each walked by slerp toward the most "
+                        "different of --reference-draws reference poses; jitter: reference poses perturbed by "
+                        "--pose-jitter; gestures: reference poses as they are (auto: dart for a model, the baked "
+                        "gestures for a USD package)")
+    p.add_argument("--poses", default="gestures", metavar="gestures|POSES.json|training_mano.json",
+                   help="the reference poses: the gesture library (default), a pose file (schemas/pose.schema.json) "
+                        "or FreiHAND's training_mano.json")
+    p.add_argument("--gestures", default=None, metavar="NAMES",
+                   help="comma-separated gesture names: the gesture library restricted to them")
+    p.add_argument("--grid-levels", type=int, default=d["poses"]["levels"], metavar="L",
+                   help=f"dart: values per joint axis of the base-pose grid (default {poses.DEFAULT_LEVELS})")
+    p.add_argument("--reference-draws", type=int, default=d["poses"]["draws"], metavar="K",
+                   help=f"dart: reference poses drawn per base pose, the most different kept "
+                        f"(default {poses.DEFAULT_DRAWS}, DART's)")
+    p.add_argument("--slerp-steps", type=int, default=d["poses"]["steps"], metavar="S",
+                   help=f"dart: frames per slerp path from a base pose to its reference pose "
+                        f"(default {poses.DEFAULT_STEPS}, DART's)")
+    p.add_argument("--pose-jitter", type=float, default=d["poses"]["jitter_deg"], metavar="DEG",
+                   help="jitter: std of a random change to each finger joint's twist, spread and bend, kept within "
+                        f"the joint limits (default {poses.DEFAULT_JITTER_DEG:g})")
+    p.add_argument("--max-reference-mb", type=float, default=d["poses"]["max_reference_mb"], metavar="MB",
+                   help=f"largest reference pose file read (default {poses.DEFAULT_MAX_REFERENCE_MB})")
     p.add_argument("--texture-ids", default="all", metavar="IDS|all",
                    help="comma-separated texture ids to draw from, or 'all' (default: every catalogue texture)")
-    p.add_argument("--skin-tone-range", default="-0.1,0.1", metavar="LO,HI",
+    p.add_argument("--skin-tone-range", default="-0.15,0.15", metavar="LO,HI",
                    help="range of the sRGB skin-tone offset; write --skin-tone-range=-0.2,0.1 when LO is negative "
-                        "(default -0.1,0.1)")
+                        "(default -0.15,0.15, DART's)")
     p.add_argument("--skin-tone-steps", type=int, default=None, metavar="N",
                    help="draw the offset from N evenly spaced levels of the range (default: uniform in the range)")
     p.add_argument("--accessory-ids", default="all", metavar="IDS|all|none",
                    help="comma-separated accessory ids to draw from, 'all' (default) or 'none' (no accessories)")
-    p.add_argument("--no-accessory-share", type=float, default=0.3, metavar="X",
-                   help="share of the frames without an accessory (default 0.3)")
+    p.add_argument("--accessory-share", type=float, default=d["accessory_share"], metavar="X",
+                   help="share of the frames with an accessory (default 0.25, DART's)")
     p.add_argument("--views", default="random", metavar="random|VIEWS",
-                   help=f"'random' (directions all around the hand, not along the forearm) and/or views "
-                        f"({', '.join(VIEWS)}), comma-separated, one drawn per frame (default random)")
-    p.add_argument("--roll-range", default="-30,30", metavar="LO,HI",
-                   help="range of the camera roll about its axis, degrees; write --roll-range=-45,45 when LO is "
-                        "negative (default -30,30)")
-    p.add_argument("--lights", default=None, metavar="LIGHTS.json",
-                   help="lights for every frame (schemas/lights.schema.json) (default: key, fill and ambient moving "
-                        "with the camera)")
-    p.add_argument("--background", default=None, metavar="IMAGE",
-                   help="background image composited under every frame (default: transparent)")
+                   help=f"'random' (directions uniform over the sphere by equal-area cells, not along the forearm) "
+                        f"and/or views ({', '.join(VIEWS)}), comma-separated, one drawn per frame (default random)")
+    p.add_argument("--roll-range", default="-45,45", metavar="LO,HI",
+                   help="camera roll about its axis, degrees; write --roll-range=-90,90 (default -45,45)")
+    p.add_argument("--fov-range", default="30,60", metavar="LO,HI",
+                   help="field of view across the image, degrees (default 30,60)")
+    p.add_argument("--margin-range", default="0.03,0.15", metavar="LO,HI",
+                   help="free border around the hand, fraction of the image: the hand's size (default 0.03,0.15)")
+    p.add_argument("--distance-range", default=None, metavar="LO,HI",
+                   help="camera distance in metres instead of --margin-range (the hand kept in frame)")
+    p.add_argument("--lights", default="random", metavar="random|default|LIGHTS.json",
+                   help="random: ambient, a key light and sometimes a second light, colours from real light "
+                        "sources (default); default: the renderer's rig; or one lights file for every frame")
+    p.add_argument("--backgrounds", default="builtin", metavar="builtin|none|DIR|IMAGE",
+                   help="backgrounds composited under the hand with random crop, zoom and flip: the built-in "
+                        "procedural set (default), none (transparent), a folder of images (e.g. COCO's) or one image")
+    p.add_argument("--split", default="0.8,0.1,0.1", metavar="TRAIN,VAL,TEST",
+                   help="deterministic split fractions (by pose group) (default 0.8,0.1,0.1)")
     p.add_argument("--size", type=int, default=512, metavar="N", help="square image size in pixels (default 512)")
     _add_antialiasing_options(p)
     p.add_argument("--processes", type=int, default=None, metavar="N",
                    help="worker processes, each rendering whole frames (default: the number of cores; 1 renders "
                         "in this process)")
+    p.add_argument("--threads", type=int, default=None, metavar="N",
+                   help="render threads per process (default 1 with workers, all cores with --processes 1)")
+    p.add_argument("--shard-size", type=int, default=run.DEFAULT_SHARD_SIZE, metavar="N",
+                   help=f"frames per shard, the unit of planning and resume records (default {run.DEFAULT_SHARD_SIZE})")
+    p.add_argument("--max-frames", type=int, default=run.DEFAULT_MAX_FRAMES, metavar="N",
+                   help=f"frame budget of one run (default {run.DEFAULT_MAX_FRAMES})")
+    p.add_argument("--formats", default=None, metavar="freihand,webdataset",
+                   help="also write these layouts after rendering (as `darthand dataset export`)")
     p.add_argument("--no-resume", dest="resume", action="store_false",
                    help="render every frame again (default: skip frames whose files exist from the same job)")
     _add_source_options(p)
+
+
+def _add_dataset_commands(sub) -> None:
+    from darthand.dataset import commands
+
+    g = _group(sub, "dataset", "look at and convert rendered datasets")
+    p = g.add_parser("report", help="one page to judge a dataset by: contact sheet with keypoints, counts, "
+                                    "visibility rates, pose coverage against the reference set")
+    p.add_argument("dataset", metavar="DIR", help="a render-dataset output folder")
+    p.add_argument("--out", default=None, metavar="DIR", help="report folder (default DIR/report)")
+    p.add_argument("--sheet", type=int, default=24, metavar="N", help="frames on the contact sheet (default 24)")
+    p.set_defaults(run=commands.report)
+    p = g.add_parser("export", help="write a dataset in another layout: FreiHAND's or WebDataset tar shards")
+    p.add_argument("dataset", metavar="DIR", help="a render-dataset output folder")
+    p.add_argument("--format", required=True, choices=("freihand", "webdataset"))
+    p.add_argument("--out", default=None, metavar="DIR", help="output folder (default DIR/<format>)")
+    p.set_defaults(run=commands.export)
+    text = ("evaluate predictions against ground truth as FreiHAND does: PA-MPJPE, PA-MPVPE (Procrustes with scale), "
+            "F-scores at 5 and 15 mm, AUC of PCK over 0-50 mm")
+    p = sub.add_parser("eval", help=text, description=text)
+    p.add_argument("pred", metavar="PRED", help="predictions: FreiHAND's pred.json ([xyz, verts]), an .npz "
+                                                "(keypoints, vertices) or a dataset folder")
+    p.add_argument("gt", metavar="GT", help="ground truth: a dataset folder, a FreiHAND set (its *_xyz.json, "
+                                            "*_verts.json) or the same forms as PRED")
+    p.add_argument("--json", action="store_true", help="print JSON instead of the markdown table")
+    p.add_argument("--out", default=None, metavar="DIR", help="also write eval.json and eval.md there")
+    p.set_defaults(run=commands.evaluate)
 
 
 def _add_antialiasing_options(p) -> None:

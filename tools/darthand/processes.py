@@ -16,14 +16,28 @@ import signal
 PR_SET_PDEATHSIG = 1     # linux/prctl.h
 
 
-def init_worker() -> None:
-    """In a worker process: ignore SIGINT and be killed when the parent process dies (Linux; elsewhere the worker
-    notices its closed pipe at its next task)."""
+WATCHDOG_S = 0.5        # where the kernel cannot be asked, how often a worker looks for its parent
+
+
+def init_worker(parent: int | None = None) -> None:
+    """In a worker process: ignore SIGINT, and end when the parent process (`parent`, default this process's
+    parent) dies: killed by the kernel on Linux, else by a watchdog thread that notices the re-parenting."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    parent = os.getppid()
-    die_with_parent()
-    if os.getppid() != parent:        # the parent died before the request took effect
+    parent = os.getppid() if parent is None else parent
+    if not die_with_parent():
+        import threading
+
+        threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="darthand-watchdog").start()
+    if os.getppid() != parent:        # the parent died before any of this took effect
         os._exit(1)
+
+
+def _watch_parent(parent: int) -> None:
+    import time
+
+    while os.getppid() == parent:
+        time.sleep(WATCHDOG_S)
+    os._exit(3)
 
 
 def die_with_parent(sig: int = signal.SIGKILL) -> bool:

@@ -20,6 +20,11 @@ def load_schema(name: str) -> dict:
     return json.loads((SCHEMA_DIR / name).read_text())
 
 
+@functools.cache
+def _validator(name: str) -> jsonschema.protocols.Validator:
+    return jsonschema.Draft202012Validator(load_schema(name))
+
+
 def check_schema(doc, name: str, source: str) -> None:
     """Raise InputError '<source>: field '<path>' <message>' for the most relevant violation of schemas/<name>, or
     for a NaN or infinite number anywhere in `doc` (a dict given through the API may hold them)."""
@@ -28,7 +33,9 @@ def check_schema(doc, name: str, source: str) -> None:
     bad = first_non_finite(doc)
     if bad:     # JSON has no NaN or Infinity, and a schema's bounds do not catch NaN (every comparison is false)
         raise InputError(f"{source}: field '{bad}' is not a finite number")
-    validator = jsonschema.Draft202012Validator(load_schema(name))
+    validator = _validator(name)
+    if validator.is_valid(doc):       # the common case, without collecting errors
+        return
     error = jsonschema.exceptions.best_match(validator.iter_errors(doc))
     if error is None:
         return

@@ -130,12 +130,12 @@ def _antialiasing_error(renderer, gestures, texture_id: str) -> dict:
 
 def _processes(model, tex, acc, texture_id: str, gestures, out: Path, count: int, processes: int) -> dict:
     """The same frames rendered by `darthand render-dataset` over `processes` worker processes (each frame
-    single-threaded, written by its worker): steady-state throughput after start-up (render/dataset.timings)."""
-    from darthand.render.dataset import render_dataset
+    single-threaded, written by its worker): steady-state throughput after start-up (dataset/run.RunStats)."""
+    from darthand.dataset.run import render_package
 
     jobs = [{"index": i, "pose": gestures[i % len(gestures)], "texture": texture_id, "accessory": ACCESSORY,
              "camera": "three_quarter", "lights": LIGHTS} for i in range(count)]
-    doc = render_dataset(model, out, jobs, processes=processes, textures=tex, accessories=acc, resume=False,
+    doc = render_package(model, out, jobs, processes=processes, textures=tex, accessories=acc, resume=False,
                          progress=False)
     t = doc["timings"]
     return {k: t[k] for k in ("ms_per_image", "cpu_ms_per_image", "frame_ms_median", "startup_s", "frames")}

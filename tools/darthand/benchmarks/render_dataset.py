@@ -1,65 +1,66 @@
-"""Benchmark of `darthand render-dataset` on planned datasets: 512^2 labelled images, views and poses planned at
-random (gestures perturbed, random views), rendered frame-parallel over worker processes (one per core) and written
-(PNG + mask + labels). 'one_texture': the scene of benchmarks/render.py (the textured hand wearing the ring, one
-shadowed directional light and ambient light); benchmarks/render.py compares processes, threads and one thread.
+"""DART-style dataset benchmark: `darthand render-dataset` end to end as a researcher runs it. 10,000 frames of
+512^2 over every texture of the build's catalogue (325), both hands, an accessory on 25 % of the frames, random
+lights, built-in backgrounds, poses from DART's grid-and-slerp sampler over the gesture library, labels with MANO
+parameters and meshes; worker processes, one per core. DARTHAND_BENCH_DATASET_FRAMES changes the frame count.
 
-Figures per configuration (render/dataset.timings): ms_per_image is the steady-state wall time per image once every
-worker has started (1000 / images per second); startup_s the time until then (spawning, imports, opening the
-source); cpu_ms_per_image the CPU time of the rendering processes per image; tail_idle_s the sharding's imbalance.
-
-'catalogue' renders frames whose textures, skin tones and accessories are drawn from the whole catalogue, as a real
-dataset does, but few: nearly every frame loads a new texture (0.1-0.2 s per 2048^2 texture), the worst case; a
-large dataset's frames share each texture (render-dataset hands a texture's frames to one worker together).
+Figures (dataset/run.RunStats.timings): images_per_second is the steady state after every worker has started
+(1000 / ms_per_image); overall_images_per_second counts the whole wall time, start-up included; steps_ms says where
+a frame's time goes (pose: posing and texture loading; primary, aa: tracing and shading; background: its crop;
+labels; write: PNGs, labels, mesh); worker_peak_rss_mb is each worker's peak resident memory.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 import tempfile
 import time
 from pathlib import Path
 
-from darthand.benchmarks.render import ACCESSORY, LIGHTS, _sources
-
-KEYS = ("ms_per_image", "images_per_second", "cpu_ms_per_image", "frame_ms_median", "startup_s", "open_s",
-        "tail_idle_s", "wall_s", "frames")
+GOAL_IMAGES_PER_SECOND = 25.0
 
 
-def _measure(model, tex, acc, jobs, out: Path, processes: int) -> dict:
-    from darthand.render.dataset import render_dataset
+def run(frames: int | None = None) -> dict:
+    from darthand.benchmarks.render import ROOT, _sources
+    from darthand.dataset.run import render_package
 
-    doc = render_dataset(model, out, jobs, processes=processes, textures=tex, accessories=acc, resume=False,
-                         progress=False)
-    return {k: doc["timings"][k] for k in KEYS if k in doc["timings"]}
-
-
-def run(frames: int = 64, catalogue_frames: int = 24) -> dict:
-    from darthand.render.api import open_source
-    from darthand.render.dataset import plan_frames
-
+    frames = int(os.environ.get("DARTHAND_BENCH_DATASET_FRAMES", frames or 10_000))
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        model, tex, acc, texture_id, where = _sources(tmp)
-        source = open_source(model, textures=tex, accessories=acc)
-        jobs = plan_frames(source, frames, seed=0, textures=[texture_id], accessories=[ACCESSORY],
-                           no_accessory_share=0.0, skin_tone_range=(0.0, 0.0), skin_tone_steps=1, lights=LIGHTS)
+        model = ROOT / "build" / "model" / "right.npz"
+        tex = ROOT / "build" / "textures" / "catalog.json"
+        if model.is_file() and tex.is_file():
+            textures, accessories, where = tex, ROOT / "build" / "accessories", "build/ (the whole catalogue)"
+        else:
+            model, textures, accessories, _, where = _sources(tmp)
+            where += " (one texture: run `make assets` for the DART-style catalogue run)"
+
+        def progress(done: int, total: int, seconds: float, last=[-60.0]) -> None:
+            if seconds - last[0] >= 30 or done == total:
+                last[0] = seconds
+                print(f"[bench] render_dataset {done}/{total} frames, {seconds:.0f} s", file=sys.stderr, flush=True)
+
         t0 = time.perf_counter()
-        processes = len(os.sched_getaffinity(0))
-        result = {
-            "image": "512x512 RGBA + mask + labels.json, textured hand with a ring, 1 shadowed light + ambient, "
-                     "8 sub-samples on edge pixels; random views, gestures perturbed by 5 deg per joint axis",
-            "inputs": where, "texture": texture_id, "accessory": ACCESSORY, "frames": frames,
-            "cores": len(os.sched_getaffinity(0)),
-            "processes": processes,
-            "one_texture": _measure(model, tex, acc, jobs, tmp / "one", processes),
-        }
-        if len(source.texture_ids()) > 3:
-            cat = plan_frames(source, catalogue_frames, seed=0, lights=LIGHTS)
-            result["catalogue"] = {
-                **_measure(model, tex, acc, cat, tmp / "cat", processes),
-                "textures": len({j["texture"] for j in cat}), "frames": catalogue_frames}
-        result["bench_s"] = round(time.perf_counter() - t0, 1)
-    return result
+        doc = render_package(str(model), tmp / "out", count=frames, plan={"seed": 0}, textures=str(textures),
+                             accessories=str(accessories), resume=False, progress=progress)
+        wall = time.perf_counter() - t0
+        disk = sum(p.stat().st_size for p in (tmp / "out").rglob("*") if p.is_file())
+    t = doc["timings"]
+    counts = doc["summary"]["counts"]
+    return {
+        "images_per_second": t.get("images_per_second"),
+        "goal_images_per_second": GOAL_IMAGES_PER_SECOND,
+        "overall_images_per_second": t.get("overall_images_per_second"),
+        "frames": frames, "size": doc["size"], "processes": t.get("processes"), "inputs": where,
+        "ms_per_image": t.get("ms_per_image"), "cpu_ms_per_image": t.get("cpu_ms_per_image"),
+        "startup_s": t.get("startup_s"), "wall_s": round(wall, 1), "tail_idle_s": t.get("tail_idle_s"),
+        "steps_ms": t.get("steps_ms"), "worker_peak_rss_mb": t.get("worker_peak_rss_mb"),
+        "textures_used": len({k for k in counts.get("category", {})}) and doc["plan"]["textures"],
+        "accessory_share": round(1 - counts.get("accessory_type", {}).get("none", 0) / max(1, frames), 4),
+        "sides": counts.get("side"), "kb_per_frame_on_disk": round(disk / max(1, frames) / 1024, 1),
+        "what": "512x512, DART poses (grid + slerp over the gestures), all catalogue textures, 25 % accessories, "
+                "both hands, random lights, built-in backgrounds, labels with MANO parameters and meshes",
+    }
 
 
 if __name__ == "__main__":

@@ -143,11 +143,18 @@ def view_direction(view) -> np.ndarray:
 
 def frame_points(points, view="three_quarter", *, width: int = 512, height: int = 512, fov_deg: float | None = None,
                  margin: float = DEFAULT_MARGIN, distance: float | None = None, side: str = "right",
-                 roll_deg: float = 0.0, K=None) -> Camera:
+                 roll_deg: float = 0.0, K=None, keep_in_frame: bool = False) -> Camera:
     """A camera looking at `points` (N, 3) from `view`, fingers up in the image, placed so that their projection
     fills the frame up to `margin` (fraction of the smaller side) on the tighter axis and is centred (or at
-    `distance` metres from their centre). The view is given for a right hand and mirrored (x -> -x) for a left one
+    `distance` metres from their centre; with keep_in_frame, at least as far as the fitting distance for `margin`,
+    so the points stay inside the frame). The view is given for a right hand and mirrored (x -> -x) for a left one
     (preview.camera_basis), so that both hands are seen alike."""
+    if distance is not None and keep_in_frame:
+        options = dict(width=width, height=height, fov_deg=fov_deg, margin=margin, side=side, roll_deg=roll_deg, K=K)
+        fit = frame_points(points, view, **options)
+        pts = np.asarray(points, np.float64)
+        fit_distance = float(fit.to_camera(0.5 * (pts.min(0) + pts.max(0))[None])[0, 2])
+        return fit if fit_distance >= float(distance) else frame_points(points, view, distance=distance, **options)
     pts = np.asarray(points, dtype=np.float64)
     basis = camera_basis(view_direction(view), side=side)           # rows right, up, forward
     R = np.stack([basis[0], -basis[1], basis[2]])
@@ -190,6 +197,7 @@ def load_camera(spec, points=None, *, width: int | None = None, height: int | No
         {"K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], "R": [[...]], "t": [...]}       explicit world -> camera
         {"fov_deg": 30, "look_at": {"eye": [...], "target": [...], "up": [...]}}    or "focal_px" for the lens
         {"fov_deg": 30, "view": "dorsal" | [x, y, z], "distance": 0.5, "margin": 0.08, "roll_deg": 0}
+    A view with both distance and margin is placed at the distance or farther, keeping the hand inside the margin.
     """
     if isinstance(spec, Camera):
         return spec
@@ -214,7 +222,8 @@ def load_camera(spec, points=None, *, width: int | None = None, height: int | No
     if points is None:
         raise InputError(f"{source}: a 'view' camera needs the posed hand to frame")
     return frame_points(points, spec["view"], width=w, height=h, margin=float(spec.get("margin", DEFAULT_MARGIN)),
-                        distance=spec.get("distance"), side=side, roll_deg=float(spec.get("roll_deg", 0.0)), K=K)
+                        distance=spec.get("distance"), side=side, roll_deg=float(spec.get("roll_deg", 0.0)), K=K,
+                        keep_in_frame="distance" in spec and "margin" in spec)
 
 
 def _validate(spec, source: str) -> None:

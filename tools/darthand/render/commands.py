@@ -1,5 +1,5 @@
-"""The `darthand render`, `render-checks` and `render-dataset` commands: thin functions over render.api,
-render.checks and render.dataset.
+"""The `darthand render` and `render-checks` commands: thin functions over render.api and render.checks
+(`render-dataset` is the dataset stage's: dataset/commands.py).
 
 Their options are defined in cli.py.
 """
@@ -69,80 +69,3 @@ def checks(args) -> int:
               f" ({pkg['seconds']:.1f} s)")
     print(f"[render] {Path(report['report'])}: {'ok' if report['ok'] else 'problems found'}")
     return 0 if report["ok"] else 1
-
-
-def dataset(args) -> int:
-    """Plan the frames of a dataset (or read them from --jobs) and render them into --out with worker processes."""
-    from darthand.render.api import open_source
-    from darthand.render.dataset import plan_frames, render_dataset, write_jobs
-
-    source = open_source(args.package, textures=args.textures, accessories=args.accessories, model=args.model)
-    origin = None
-    jobs = args.jobs
-    if args.jobs and args.plan:
-        raise InputError("--plan: writes planned jobs, so it cannot be given with --jobs")
-    if not args.jobs:
-        origin = {"seed": args.seed, "start": args.start, "count": args.count, "gestures": args.gestures,
-                  "poses": args.poses, "pose_jitter_deg": args.pose_jitter, "texture_ids": args.texture_ids,
-                  "skin_tone_range": _pair("--skin-tone-range", args.skin_tone_range),
-                  "skin_tone_steps": args.skin_tone_steps, "accessory_ids": args.accessory_ids,
-                  "no_accessory_share": args.no_accessory_share, "views": _names(args.views),
-                  "roll_range_deg": _pair("--roll-range", args.roll_range), "lights": args.lights}
-        jobs = plan_frames(source, args.count, seed=args.seed, start=args.start, poses=_poses(source, args),
-                           textures=None if args.texture_ids == "all" else _names(args.texture_ids),
-                           accessories=_accessory_ids(args.accessory_ids), views=origin["views"],
-                           skin_tone_range=origin["skin_tone_range"], skin_tone_steps=args.skin_tone_steps,
-                           no_accessory_share=args.no_accessory_share, pose_jitter_deg=args.pose_jitter,
-                           roll_range_deg=origin["roll_range_deg"], lights=args.lights)
-        if args.plan:
-            write_jobs(args.plan, jobs, {"package": str(args.package), **origin})
-            print(f"[render-dataset] {args.plan}: {len(jobs)} jobs")
-            return 0
-    doc = render_dataset(args.package, args.out, jobs, processes=args.processes, size=args.size,
-                         samples=args.samples, aa_shading=args.aa_shading, background=args.background,
-                         textures=args.textures, accessories=args.accessories, model=args.model, resume=args.resume,
-                         progress=True, source=source, jobs_source=origin)
-    t = doc["timings"]
-    line = f"[render-dataset] {Path(args.out) / 'dataset.json'}: {doc['rendered']} frames rendered"
-    if doc["skipped"]:
-        line += f", {doc['skipped']} already there"
-    if doc["rendered"]:
-        line += (f", {t['images_per_second']:.1f} images/s ({t['ms_per_image']:.0f} ms per image after "
-                 f"{t['startup_s']:.1f} s start-up, {t['processes']} processes)")
-    print(line)
-    return 0
-
-
-def _names(text: str | None) -> list[str] | None:
-    return None if text is None else [t for t in text.replace(" ", ",").split(",") if t]
-
-
-def _pair(option: str, text: str) -> tuple[float, float]:
-    parts = _names(text)
-    try:
-        lo, hi = (float(p) for p in parts)
-    except ValueError:
-        raise InputError(f"{option}: {text!r} is not two comma-separated numbers LO,HI") from None
-    return lo, hi
-
-
-def _poses(source, args) -> list[str] | None:
-    """--gestures and --poses as plan_frames' `poses` (None: every gesture)."""
-    files = [args.poses] if args.poses else []
-    if args.gestures in (None, "all"):
-        if not files:
-            return None
-        if args.gestures is None:
-            return files
-        from darthand.model.poses import list_gestures
-
-        return (list_gestures() if hasattr(source, "model") else list(source.gestures)) + files
-    return _names(args.gestures) + files
-
-
-def _accessory_ids(text: str):
-    if text == "all":
-        return None
-    if text == "none":
-        return []
-    return _names(text)

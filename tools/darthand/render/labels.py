@@ -136,3 +136,25 @@ def frame_labels(subject: Subject, camera: Camera, scene: Scene, alpha: np.ndarr
     if extra:
         labels.update(extra)
     return labels
+
+
+def mano_camera_parameters(model, pose, R, t, betas=None) -> dict:
+    """MANO parameters of a posed hand in the camera frame: {'global_orient' (3,), 'hand_pose' (45,), 'betas' (S,),
+    'trans' (3,)}, axis-angle relative to the flat hand (flat_hand_mean true), metres, such that
+    forward(model, concat(global_orient, hand_pose), betas, trans=trans) gives the camera-frame joints, vertices and
+    keypoints of the world-frame pose `pose` (48,) seen by a camera X_cam = R X + t.
+
+    MANO rotates about the shaped rest root joint J0 (the forward pass puts a point x of the root's part at
+    R0 (x - J0) + J0 + trans), so the camera's rotation composes with the global rotation, R0' = R R0, and the
+    translation absorbs the rest: trans' = R J0 + t - J0 (for the world pose's trans of zero)."""
+    from darthand.model.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+
+    pose = np.asarray(pose, np.float64).reshape(-1)
+    R, t = np.asarray(R, np.float64), np.asarray(t, np.float64)
+    n_betas = model.num_betas
+    b = np.zeros(n_betas) if betas is None else np.asarray(betas, np.float64).reshape(-1)
+    shaped = np.asarray(model.v_template) + (np.asarray(model.shapedirs)[..., :len(b)] @ b if len(b) else 0)
+    j0 = np.asarray(model.J_regressor[0] @ shaped).reshape(3)
+    root = matrix_to_axis_angle(R @ axis_angle_to_matrix(pose[:3]))
+    return {"global_orient": root.tolist(), "hand_pose": pose[3:].tolist(), "betas": b.tolist(),
+            "trans": (R @ j0 + t - j0).tolist(), "frame": "camera", "flat_hand_mean": True}

@@ -1,0 +1,94 @@
+"""Fixtures of the dataset stage's tests: a package on disk (the open hand with the wrist, two texture variants of a
+generated skin, a ring), built here as worker processes open it, and one small rendered dataset shared by the
+writer, report and eval tests."""
+
+from __future__ import annotations
+
+import json
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "render"))
+from helpers_dataset import TEXTURES, render  # noqa: E402
+from render_scenes import RING_JOINT, ring_around, write_image  # noqa: E402
+
+from darthand.model.load import load_model
+from darthand.model.npz_io import save_npz
+from darthand.model.wrist import add_wrist
+
+
+
+@pytest.fixture(scope="session")
+def hand():
+    return add_wrist(load_model("open"))
+
+
+@pytest.fixture(scope="session")
+def package(hand, tmp_path_factory):
+    """(model .npz, texture catalogue, accessory catalogue) on disk."""
+    root = tmp_path_factory.mktemp("package")
+    model = root / "model" / "right.npz"
+    save_npz(hand, model)
+    tex = root / "textures"
+    tex.mkdir()
+    y, x = np.mgrid[0:64, 0:64] / 63.0
+    write_image(tex / "skin.png", np.clip(np.array([224, 172, 140]) * (0.85 + 0.15 * x[..., None]), 0, 255)
+                .astype(np.uint8))
+    write_image(tex / "rough.png", np.full((64, 64), 140, np.uint8))
+    sha = "0" * 64
+    entry = {"category": "moles", "kind": "overlay", "tone": "light", "mst": 2.0, "tone_srgb": [0.8, 0.6, 0.5],
+             "offset": 0.0, "seed": 1, "resolution": 64, "sha256": sha, "fingerprint": sha, "params": {"skin": {}},
+             "files": {"albedo": "skin.png", "roughness": "rough.png", "tx": None}}
+    _write(tex / "catalog.json", {
+        "format": "darthand-texture-catalog", "version": 1, "resolution": 64, "seed": 1, "spec_sha256": sha,
+        "bake": {"key": sha, "uvs": "model", "labels": "labels.png", "coverage": "coverage.png"},
+        "model": {"source": "test", "vertices": len(hand.v_template), "faces": len(hand.faces)},
+        "contact_sheet": None, "entries": [dict(entry, id=t, index=i) for i, t in enumerate(TEXTURES)]})
+    ring = ring_around(hand, RING_JOINT, RING_JOINT + 1)
+    acc = root / "accessories"
+    acc.mkdir()
+    np.savez(acc / "ring_test.npz", vertices=ring.vertices, faces=ring.faces)
+    _write(acc / "catalog.json", {
+        "format": "darthand-accessory-catalog", "format_version": 1, "seed": 1,
+        "model": {"source": "test", "side": "right"},
+        "accessories": [{"id": "ring_test", "type": "ring", "style": "torus", "parent_joint": ring.parent_joint,
+                         "rest_transform": np.eye(4).tolist(), "fitted_size": {}, "vertices": len(ring.vertices),
+                         "triangles": len(ring.faces), "max_penetration_mm": {"rest": 0.0, "poses": None},
+                         "files": {"npz": "ring_test.npz", "obj": "-", "mtl": "-", "base_color": "-",
+                                   "metallic_roughness": "-"},
+                         "material": {**ring.material, "kind": "metal", "base_color_texture": None,
+                                      "metallic_roughness_texture": None}}]})
+    return str(model), str(tex), str(acc)
+
+
+@pytest.fixture(scope="session")
+def sources(package):
+    """{side: opened source} for both hands (the left one is the model mirrored)."""
+    from darthand.dataset.sources import source_specs
+
+    model, tex, acc = package
+    specs = source_specs(model, ("right", "left"), textures=tex, accessories=acc)
+    return {side: spec.open() for side, spec in specs.items()}, specs
+
+
+@pytest.fixture(scope="session")
+def planner(sources):
+    from darthand.dataset.plan import Planner
+
+    return Planner({"seed": 3, "accessory_share": 0.5}, sources[0])
+
+
+@pytest.fixture(scope="session")
+def small_dataset(planner, sources, tmp_path_factory):
+    """A rendered dataset of 16 frames (both hands, backgrounds, random lights, the DART pose sampler)."""
+    out = tmp_path_factory.mktemp("dataset")
+    doc = render(planner, sources, out, 16, shard_size=8)
+    return out, doc
+
+
+def _write(path, doc) -> None:
+    path.write_text(json.dumps(doc))

@@ -1,0 +1,129 @@
+"""One dataset frame in a worker: render a job (render.api) with its background, add the dataset's labels (MANO
+parameters in the camera frame, the posed mesh, the sampling record, the split) and write its files:
+
+    images/<n>.png   RGBA, opaque over a background
+    masks/<n>.png    8-bit coverage of hand and accessory
+    labels/<n>.json  schemas/labels.schema.json; 'files' relative to the labels file
+    meshes/<n>.npy   (V, 3) float32 posed hand vertices in the camera frame, metres (the model's vertex order;
+                     the first labels.mesh.base_vertices are the hand without the wrist rings, MANO's 778 for MANO)
+
+<n> is the frame index zero-padded to MIN_DIGITS digits (more when larger), so names depend on nothing else.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from darthand.errors import InputError
+
+MIN_DIGITS = 6
+KINDS = ("image", "mask", "labels", "vertices")
+
+
+def frame_names(index: int) -> dict:
+    """Names (relative to the dataset folder) of frame `index`'s files, by kind."""
+    n = f"{int(index):0{MIN_DIGITS}d}"
+    return {"image": f"images/{n}.png", "mask": f"masks/{n}.png", "labels": f"labels/{n}.json",
+            "vertices": f"meshes/{n}.npy"}
+
+
+def job_digest(job: dict, settings: dict) -> str:
+    """sha256 (hex, 16 digits) of what a frame's files depend on: the job and the render settings."""
+    key = {"job": job, **{k: settings[k] for k in ("size", "samples", "aa_shading")}}
+    return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def render_job(renderer, job: dict, settings: dict):
+    """(api.Frame, background info or None) of one job."""
+    from darthand.dataset.backgrounds import background_pixels
+
+    pose = job.get("pose")
+    if isinstance(pose, list):
+        pose = np.asarray(pose, np.float64)
+    elif isinstance(pose, str) and "pose_index" in job and hasattr(renderer.source, "model"):
+        from darthand.render.poses import resolve_pose
+
+        pose = resolve_pose(renderer.source.model, pose, int(job["pose_index"]))[0]
+    size = settings["size"]
+    background, info = None, None
+    t = time.perf_counter()
+    if job.get("background"):
+        background, info = background_pixels(job["background"], size, size)
+    t = time.perf_counter() - t
+    frame = renderer.render(pose, texture=job.get("texture"), skin_tone_offset=float(job.get("skin_tone_offset", 0)),
+                            accessory=job.get("accessory"), camera=job.get("camera") or "three_quarter",
+                            lights=job.get("lights"), background=background, width=size, height=size,
+                            samples=settings["samples"], aa_shading=settings["aa_shading"])
+    frame.timings["background"] = t
+    return frame, info
+
+
+def dataset_labels(frame, job: dict, digest: str, source, background: dict | None) -> dict:
+    """The frame's labels with the dataset's fields added (see the module docstring)."""
+    from darthand.render.labels import mano_camera_parameters
+
+    labels = frame.labels
+    names = frame_names(job["index"])
+    render = dict(labels.get("render", {}))
+    render["dataset"] = {"frame": job["index"], "job_sha256": digest}
+    if background is not None:
+        render["background"] = background
+    labels["render"] = render
+    labels["gesture"] = labels.get("gesture") or job.get("gesture")
+    model = getattr(source, "model", None)
+    hand = frame.subject.hand
+    wrist = (getattr(model, "meta", None) or {}).get("wrist") or {}
+    labels["mesh"] = {"vertices": int(len(hand.vertices)), "base_vertices": int(wrist.get("base_vertices",
+                                                                                              len(hand.vertices))),
+                      "faces": "the model's faces (build/model/<side>.npz)", "frame": "camera", "units": "m"}
+    labels["files"] = {**labels.get("files", {}), "vertices": "../" + names["vertices"]}
+    if model is not None and not hasattr(source, "gestures"):
+        labels["mano"] = mano_camera_parameters(model, frame.subject.pose, frame.camera.R, frame.camera.t)
+    labels["split"] = job.get("split", "none")
+    labels["sample"] = {**job.get("sample", {}), "side": labels["side"], "skin_tone_offset":
+                        job.get("skin_tone_offset", 0.0), "texture_id": labels["texture"]["id"],
+                        "accessory_id": labels["accessory"]["id"]}
+    return labels
+
+
+def write_dataset_frame(frame, job: dict, digest: str, out_dir, source, background: dict | None) -> dict:
+    """Write the frame's four files (atomically, the labels last: a frame is whole once its labels exist);
+    returns its summary for the shard record."""
+    from darthand.fileio import atomic_path
+    from darthand.render.api import write_frame
+
+    names = frame_names(job["index"])
+    labels = dataset_labels(frame, job, digest, source, background)
+    vertices = frame.camera.to_camera(frame.subject.hand.vertices).astype(np.float32)
+    path = Path(out_dir) / names["vertices"]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.save(f, vertices)
+    write_frame(frame, out_dir, names={k: names[k] for k in ("image", "mask", "labels")})
+    return summary(job, labels)
+
+
+def summary(job: dict, labels: dict) -> dict:
+    """A frame's line in its shard record: what the report and the writers need without opening the labels."""
+    bg = labels.get("render", {}).get("background") or {}
+    sample = labels.get("sample", {})
+    return {"index": job["index"], "side": labels["side"], "split": labels.get("split", "none"),
+            "texture": labels["texture"]["id"], "tone": sample.get("texture", {}).get("tone"),
+            "category": sample.get("texture", {}).get("category"),
+            "skin_tone_offset": labels["texture"]["skin_tone_offset"], "accessory": labels["accessory"]["id"],
+            "accessory_type": sample.get("accessory", "none"), "coverage": round(float(labels["coverage"]), 5),
+            "visible": [int(v) for v in labels["visibility"]], "in_image": int(sum(labels["in_image"])),
+            "background": bg.get("used"), "skipped_backgrounds": bg.get("skipped", [])}
+
+
+def frame_error(index: int, error: Exception) -> InputError:
+    """The one-line error of a failed frame: 'frame N: cause'."""
+    if isinstance(error, InputError):
+        return InputError(f"frame {index}: {error}")
+    first = (str(error).strip().splitlines() or [""])[0]
+    return InputError(f"frame {index}: {type(error).__name__}: {first}")

@@ -1,0 +1,144 @@
+"""Jobs files: what to render, one job per frame (schemas/dataset_jobs.schema.json): reading, checking against a
+source before anything renders, and writing (`render-dataset --plan`, one job per line, streamed).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from darthand.errors import InputError
+from darthand.fileio import atomic_path, read_json
+
+JOBS_SCHEMA = "dataset_jobs.schema.json"
+MAX_INDEX = 10**12 - 1                 # frame names have at most 12 digits
+
+
+def load_jobs(path) -> list[dict]:
+    """The jobs of a jobs file (a list of job dicts, or {"frames": [...]}), checked (check_jobs). Relative pose-file,
+    lights and background-folder paths in it are taken relative to the file's folder."""
+    path = Path(path)
+    doc = read_json(path, "dataset jobs file")
+    frames = check_jobs(doc, str(path))
+    base = path.resolve().parent
+    out = []
+    for job in frames:
+        for key in ("pose", "lights"):
+            value = job.get(key)
+            if isinstance(value, str) and not Path(value).is_absolute() and (base / value).is_file():
+                job[key] = str(base / value)
+        bg = job.get("background")
+        if isinstance(bg, dict) and "folder" in bg and not Path(bg["folder"]).is_absolute():
+            job["background"] = {**bg, "folder": str(base / bg["folder"])}
+        out.append(job)
+    return out
+
+
+def write_jobs(path, jobs, plan: dict | None = None) -> int:
+    """Write a jobs file {"plan": plan, "frames": [...]} atomically, one job per line, streaming the jobs (an
+    iterable); returns how many were written."""
+    count = 0
+    with atomic_path(path) as tmp, open(tmp, "w") as f:
+        f.write('{"plan": ' + json.dumps(plan, sort_keys=True) + ', "frames": [\n' if plan is not None
+                else '{"frames": [\n')
+        for job in jobs:
+            f.write((",\n" if count else "") + json.dumps(job, sort_keys=True))
+            count += 1
+        f.write("\n]}\n")
+    return count
+
+
+def check_jobs(doc, source: str = "jobs") -> list[dict]:
+    """The frames of a jobs document (list or {"frames": [...]}) checked against the schema, with an 'index' each
+    (its position when not given); InputError naming the field for a non-finite number, an index over MAX_INDEX or a
+    repeated index."""
+    from darthand.schemas import check_schema
+
+    check_schema(doc, JOBS_SCHEMA, source)
+    frames = doc["frames"] if isinstance(doc, dict) else doc
+    prefix = "frames." if isinstance(doc, dict) else ""
+    out, seen = [], {}
+    for k, job in enumerate(frames):
+        job = dict(job)
+        job.setdefault("index", k)
+        where = f"{prefix}{k}"
+        _check_finite(job, f"{source}: field '{where}")
+        if job["index"] > MAX_INDEX:
+            raise InputError(f"{source}: field '{where}.index' {job['index']} is over the largest frame index "
+                             f"{MAX_INDEX}")
+        if job["index"] in seen:
+            raise InputError(f"{source}: field '{where}.index' {job['index']} repeats the index of job "
+                             f"{seen[job['index']]}")
+        seen[job["index"]] = k
+        out.append(job)
+    return out
+
+
+def _check_finite(value, where: str) -> None:
+    """InputError for NaN or Infinity anywhere in a job (JSON readers accept them; they render black frames and
+    write labels that are not JSON)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        raise InputError(f"{where}' is {value}, not a finite number")
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _check_finite(v, f"{where}.{k}")
+    elif isinstance(value, list):
+        for k, v in enumerate(value):
+            _check_finite(v, f"{where}.{k}")
+
+
+def validate_jobs(sources: dict, jobs: list[dict], where: str = "jobs") -> None:
+    """InputError (naming the frame and field) for what the sources ({side: source}) cannot render: a side without a
+    source, unknown texture, accessory or gesture ids, poses a USD package cannot take, bad camera, lights or
+    background documents. Runs before any rendering."""
+    from darthand.model.preview import VIEWS
+    from darthand.render.lights import load_lighting
+    from darthand.schemas import check_schema
+
+    checked_lights, checked_folders = set(), set()
+    known = {}
+    for side, source in sources.items():
+        model = getattr(source, "model", None)
+        if model is not None and not hasattr(source, "gestures"):
+            from darthand.model.poses import list_gestures
+
+            gestures = set(list_gestures())
+        else:
+            model, gestures = None, set(source.gestures)
+        known[side] = (set(source.texture_ids()), set(source.accessory_ids()) | {"none"}, gestures, model)
+    default_side = next(iter(sources))
+    for job in jobs:
+        at = f"{where}: frame {job['index']}"
+        side = job.get("side") or default_side
+        if side not in known:
+            raise InputError(f"{at}: side {side!r} has no source (sides: {', '.join(known)})")
+        textures, accessories, gestures, model = known[side]
+        texture, accessory, pose = job.get("texture"), job.get("accessory"), job.get("pose")
+        if texture is not None and texture not in textures:
+            raise InputError(f"{at}: texture {texture!r} is not in the source's textures")
+        if accessory is not None and accessory not in accessories:
+            raise InputError(f"{at}: accessory {accessory!r} is not in the source's accessories")
+        if isinstance(pose, str) and pose not in gestures and (model is None or not Path(pose).is_file()):
+            raise InputError(f"{at}: pose {pose!r} is not a gesture ({', '.join(sorted(gestures))})"
+                             + (" nor a pose file" if model is not None else " of the package"))
+        if model is None and isinstance(pose, list):
+            raise InputError(f"{at}: pose: a USD package renders its gestures (names or time codes), not vectors")
+        if model is not None and isinstance(pose, int) and not isinstance(pose, bool):
+            raise InputError(f"{at}: pose: a time code needs a USD package")
+        camera = job.get("camera")
+        if isinstance(camera, dict):
+            check_schema(camera, "camera.schema.json", f"{at}: camera")
+        elif isinstance(camera, str) and camera not in VIEWS and not Path(camera).is_file():
+            raise InputError(f"{at}: camera {camera!r} is neither a view ({', '.join(VIEWS)}) nor a camera file")
+        lights = job.get("lights")
+        key = json.dumps(lights, sort_keys=True)
+        if lights is not None and key not in checked_lights:
+            lighting = load_lighting(lights, f"{at}: lights")
+            _check_finite(lighting.to_json(), f"{at}: field 'lights")
+            checked_lights.add(key)
+        background = job.get("background")
+        if isinstance(background, dict) and "folder" in background and background["folder"] not in checked_folders:
+            if not Path(background["folder"]).is_dir():
+                raise InputError(f"{at}: background folder {background['folder']!r} is not a folder")
+            checked_folders.add(background["folder"])

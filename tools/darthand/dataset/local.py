@@ -1,0 +1,120 @@
+"""The local runner: chunks of frames rendered by worker processes on this machine (or in this process).
+
+A runner turns chunks (lists of (job, digest)) into results (`render_chunk`'s dicts); dataset/run.py owns the
+planning, resume, records and progress, so another runner (Ray's, for a cluster) is one module with the same
+`submit(chunk) -> concurrent.futures.Future` and `close()`.
+
+Workers are started with 'spawn' (a fresh interpreter: nothing inherited from a parent that may hold an Embree
+device or thread pools); each opens its sources (dataset/sources.SourceSpec) on first use and renders
+single-threaded. They ignore Ctrl-C (the parent stops them after their current frame) and exit by themselves when
+their parent dies (darthand.processes.init_worker), so a killed run leaves no orphans.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from concurrent.futures import Future
+
+from darthand.errors import InputError
+
+# The worker's state: set by _init_worker (spawned processes) or LocalRunner (in-process); renderers opened on use.
+_STATE: dict = {}
+
+
+def _init_worker(specs: dict, settings: dict, threads: int, stop, parent: int) -> None:
+    from darthand.processes import init_worker
+
+    init_worker(parent)        # the parent handles Ctrl-C and stops the workers; they end when it dies
+    _STATE.clear()
+    _STATE.update(specs=specs, settings=settings, threads=threads, stop=stop, renderers={}, open_s=0.0)
+
+
+def _renderer(side: str):
+    from darthand.render.api import Renderer
+
+    renderers = _STATE["renderers"]
+    if side not in renderers:
+        t = time.monotonic()
+        renderers[side] = Renderer(_STATE["specs"][side].open(), _STATE["threads"])
+        _STATE["open_s"] += time.monotonic() - t
+    return renderers[side]
+
+
+def render_chunk(items: list) -> dict:
+    """Render and write one chunk [(job, digest)] with this process's renderers; per frame its summary, ms, cpu_ms,
+    end (monotonic), and the chunk's per-step seconds and peak memory."""
+    import resource
+
+    from darthand.dataset.frames import frame_error, render_job, write_dataset_frame
+
+    settings, stop = _STATE["settings"], _STATE.get("stop")
+    default_side = next(iter(_STATE["specs"]))
+    frames, steps = [], {}
+    for job, digest in items:
+        if stop is not None and stop.is_set():
+            break
+        t, c = time.monotonic(), time.process_time()
+        try:
+            renderer = _renderer(job.get("side") or default_side)
+            frame, background = render_job(renderer, job, settings)
+            t_w = time.perf_counter()
+            summary = write_dataset_frame(frame, job, digest, settings["out_dir"], renderer.source, background)
+            frame.timings["write"] = time.perf_counter() - t_w
+        except Exception as e:            # a bug or a broken file: one line naming the frame
+            raise frame_error(job["index"], e) from None
+        for k, v in frame.timings.items():
+            steps[k] = steps.get(k, 0.0) + v
+        end = time.monotonic()
+        frames.append({**summary, "ms": round(1000 * (end - t), 2),
+                       "cpu_ms": round(1000 * (time.process_time() - c), 2), "end": end})
+    return {"pid": os.getpid(), "open_s": _STATE["open_s"], "frames": frames, "steps": steps,
+            "maxrss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}
+
+
+class LocalRunner:
+    """Chunks on `processes` spawned workers (1: in this process, in order)."""
+
+    def __init__(self, specs: dict, settings: dict, processes: int, threads: int | None = None, opened=None):
+        self.processes = processes
+        self._pool = None
+        if processes == 1:
+            _STATE.clear()
+            _STATE.update(specs=specs, settings=settings, threads=threads, stop=None, renderers={}, open_s=0.0)
+            if opened:
+                from darthand.render.api import Renderer
+
+                _STATE["renderers"].update({side: Renderer(src, threads) for side, src in opened.items()})
+            return
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        ctx = multiprocessing.get_context("spawn")
+        self._stop = ctx.Event()
+        self._pool = ProcessPoolExecutor(processes, mp_context=ctx, initializer=_init_worker,
+                                         initargs=(specs, settings, 1 if threads is None else threads, self._stop,
+                                                   os.getpid()))
+
+    def submit(self, chunk: list) -> Future:
+        if self._pool is not None:
+            from darthand.processes import deaf_to_ctrl_c
+
+            with deaf_to_ctrl_c():          # submit may start a worker: Ctrl-C must not reach it while it imports
+                return self._pool.submit(render_chunk, chunk)
+        future: Future = Future()
+        try:
+            future.set_result(render_chunk(chunk))
+        except InputError as e:
+            future.set_exception(e)
+        return future
+
+    def stop(self) -> None:
+        """Ask the workers to stop after their current frame (Ctrl-C, a failed frame)."""
+        if self._pool is not None:
+            self._stop.set()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+        else:
+            _STATE.clear()

@@ -1,0 +1,287 @@
+"""Dataset plans: what frame i renders, as a job (schemas/dataset_jobs.schema.json), from (seed, i) and the plan's
+options alone, computed on demand (`Planner.job`, `Planner.jobs(start, stop)`), so a plan of 10^9 frames costs no
+memory and any shard of it can be planned anywhere.
+
+A plan's options are one JSON document (`plan_spec`), recorded in dataset.json and in written jobs files. Per frame:
+
+- pose: DART's grid-and-slerp sampler ('dart', the default for a model), reference poses with jitter ('jitter'),
+  or as they are ('gestures', the only mode of a USD package, which renders its baked gestures) (dataset/poses.py);
+  the mirror image for a left hand;
+- appearance: texture uniform over the catalogue, skin-tone offset uniform in [-0.15, 0.15] (DART's range) or one
+  of `skin_tone_steps` levels, an accessory on `accessory_share` (25 %, DART's rate) of the frames, uniform over the
+  catalogue, the hand's side uniform over `sides`;
+- view: dataset/views.py (equal-area cells, roll, field of view, size or distance);
+- lights: a random rig (dataset/lighting.py), the renderer's default rig, or one lights document for all frames;
+- background: dataset/backgrounds.py (built-in set, a folder, or none);
+- split: train/val/test by `split` fractions, drawn per pose group (the frames of one slerp path share a split, so
+  near-identical poses never straddle train and test).
+
+Frame i's choices use numpy's Generator seeded with [seed, FRAME_STREAM, i] (a fixed number of uniforms, each with
+a fixed role, so that one option never shifts another's draws); poses and views have their own streams.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+
+from darthand.dataset import backgrounds, lighting, poses, views
+from darthand.errors import InputError
+
+PLAN_VERSION = 2
+FRAME_STREAM = 0
+SPLIT_STREAM = 4
+SPLITS = ("train", "val", "test")
+# Which of a frame's uniforms decides what.
+TEXTURE, TONE, BARE, ACCESSORY, SIDE = 0, 1, 2, 3, 4
+VIEW = 5                                     # 6 uniforms
+LIGHTS = VIEW + 6                            # lighting.UNIFORMS
+BACKGROUND = LIGHTS + lighting.UNIFORMS      # backgrounds.UNIFORMS
+UNIFORMS = BACKGROUND + backgrounds.UNIFORMS
+
+DEFAULTS = {
+    "seed": 0,
+    "poses": {"mode": "auto", "reference": "gestures", "gestures": None, "levels": poses.DEFAULT_LEVELS,
+              "draws": poses.DEFAULT_DRAWS, "steps": poses.DEFAULT_STEPS, "jitter_deg": poses.DEFAULT_JITTER_DEG,
+              "max_reference_mb": poses.DEFAULT_MAX_REFERENCE_MB},
+    "textures": None, "skin_tone_range": [-0.15, 0.15], "skin_tone_steps": None,
+    "accessories": None, "accessory_share": 0.25,
+    "sides": ["right", "left"],
+    "views": ["random"], "roll_range_deg": [-45.0, 45.0], "fov_range_deg": [30.0, 60.0],
+    "margin_range": [0.03, 0.15], "distance_range": None,
+    "lights": "random",
+    "backgrounds": "builtin",
+    "split": [0.8, 0.1, 0.1],
+}
+
+
+def plan_spec(**options) -> dict:
+    """DEFAULTS updated with `options` (None leaves a default; 'poses' merges), checked for unknown names."""
+    spec = copy.deepcopy(DEFAULTS)
+    for key, value in options.items():
+        if key not in spec:
+            raise InputError(f"plan: unknown option {key!r} (known: {', '.join(spec)})")
+        if key == "poses":
+            for k, v in (value or {}).items():
+                if k not in spec["poses"]:
+                    raise InputError(f"plan: unknown pose option {k!r} (known: {', '.join(spec['poses'])})")
+                if v is not None:
+                    spec["poses"][k] = v
+        elif value is not None:
+            spec[key] = list(value) if isinstance(value, tuple) else value
+    return spec
+
+
+def split_of(unit: int, seed: int, fractions) -> str:
+    """'train', 'val' or 'test' of a split unit (a pose group) from the cumulative fractions."""
+    u = np.random.default_rng([seed, SPLIT_STREAM, int(unit)]).random()
+    edges = np.cumsum(fractions)
+    for name, edge in zip(SPLITS, edges):
+        if u < edge:
+            return name
+    return SPLITS[-1] if edges[-1] >= 1 - 1e-12 else "none"
+
+
+def check_split(value) -> list[float]:
+    """Three fractions >= 0 summing to at most 1 (frames left over belong to no split)."""
+    try:
+        parts = [float(x) for x in value]
+    except (TypeError, ValueError):
+        raise InputError(f"split: {value!r} is not three numbers train,val,test") from None
+    if len(parts) != 3 or not all(math.isfinite(x) and x >= 0 for x in parts):
+        raise InputError(f"split: {value!r} must be three non-negative numbers train,val,test")
+    if sum(parts) > 1 + 1e-9:
+        raise InputError(f"split: {','.join(f'{x:g}' for x in parts)} sums to {sum(parts):g}, more than 1")
+    return parts
+
+
+def texture_tags(texture_id: str) -> dict:
+    """{'tone', 'category'} of a catalogue texture id ('<tone>_<category>_<nn>', base variations 'base_...'; the
+    textures stage's naming); 'other' for ids that do not follow it."""
+    parts = str(texture_id).split("_")
+    if len(parts) >= 3 and parts[-1].isdigit():
+        return {"tone": parts[0], "category": "_".join(parts[1:-1])}
+    return {"tone": "other", "category": str(texture_id)}
+
+
+class Planner:
+    """The jobs of a plan (`plan_spec`) for its sources ({side: opened source}, dataset/sources.py)."""
+
+    def __init__(self, spec: dict, sources: dict):
+        self.spec = spec = plan_spec(**spec)
+        self.seed = _non_negative(spec["seed"], "seed")
+        self.sides = [s for s in spec["sides"] if s in sources]
+        if not self.sides:
+            raise InputError("sides: no source for the sides asked")
+        first = sources[self.sides[0]]
+        self.textures = _pick_ids("textures", spec["textures"], _default_textures(first), first.texture_ids())
+        known_acc = first.accessory_ids()
+        acc = _pick_ids("accessories", spec["accessories"], [a for a in known_acc if a != "none"], known_acc,
+                        allow_empty=True)
+        self.accessories = [a for a in acc if a != "none"]
+        self.accessory_kinds = {a: _accessory_kind(first, a) for a in self.accessories}
+        share = float(spec["accessory_share"])
+        if not (math.isfinite(share) and 0 <= share <= 1):
+            raise InputError(f"accessory share: {spec['accessory_share']} is outside 0..1")
+        self.accessory_share = share
+        self.tones = views.check_range("skin-tone range", spec["skin_tone_range"], -0.5, 0.5)
+        steps = spec["skin_tone_steps"]
+        if steps is not None and not (isinstance(steps, int) and 1 <= steps <= 1000):
+            raise InputError(f"skin-tone steps: {steps} must be an integer within 1..1000")
+        self.tone_levels = None if steps is None else (
+            [0.5 * sum(self.tones)] if steps == 1 else np.linspace(*self.tones, steps).tolist())
+        self.views = views.ViewSampler(spec["views"], roll_deg=spec["roll_range_deg"], fov_deg=spec["fov_range_deg"],
+                                       margin=spec["margin_range"], distance=spec["distance_range"])
+        self.lights = _lights_mode(spec["lights"])
+        self.backgrounds = backgrounds.BackgroundSampler(spec["backgrounds"])
+        self.split = check_split(spec["split"])
+        self.model = _right_model(sources)
+        self.hand_centre = _hand_centre(self.model)
+        self.poses = _pose_sampler(spec["poses"], self.model, first)
+        self.group_size = self.poses.steps if isinstance(self.poses, poses.GridSlerp) else 1
+
+    def describe(self) -> dict:
+        """What the plan draws from (for dataset.json and the report)."""
+        out = {"textures": len(self.textures), "accessories": len(self.accessories), "sides": self.sides,
+               "backgrounds": self.backgrounds.describe(), "group_size": self.group_size}
+        reference = getattr(self.poses, "reference", None)
+        if reference is not None:
+            out["reference"] = {"source": reference.source, "poses": len(reference)}
+        return out
+
+    def jobs(self, start: int, stop: int):
+        """Jobs of frames start .. stop - 1, one at a time."""
+        for i in range(int(start), int(stop)):
+            yield self.job(i)
+
+    def job(self, index: int) -> dict:
+        """The job of frame `index` (a plain JSON dict)."""
+        i = _non_negative(index, "frame index")
+        u = np.random.default_rng([self.seed, FRAME_STREAM, i]).random(UNIFORMS)
+        side = self.sides[_choose(u[SIDE], len(self.sides))]
+        pose, pose_record = self.poses.sample(self.seed, i)
+        gesture = pose if isinstance(pose, str) else pose_record["reference"].get("name") \
+            if pose_record["mode"] == "jitter" else None
+        if not isinstance(pose, str):
+            if side == "left":
+                from darthand.model.mirror import mirror_pose
+
+                pose = mirror_pose(pose)
+            pose = np.asarray(pose, np.float64).tolist()
+        texture = self.textures[_choose(u[TEXTURE], len(self.textures))]
+        if self.tone_levels is None:
+            tone = round(float(self.tones[0] + (self.tones[1] - self.tones[0]) * u[TONE]), 4)
+        else:
+            tone = round(float(self.tone_levels[_choose(u[TONE], len(self.tone_levels))]), 6)
+        accessory = "none"
+        if self.accessories and u[BARE] < self.accessory_share:
+            accessory = self.accessories[_choose(u[ACCESSORY], len(self.accessories))]
+        camera, view_record = self.views.sample(self.seed, i, u[VIEW:VIEW + 6])
+        lights, lights_record = self._lights(u[LIGHTS:LIGHTS + lighting.UNIFORMS], side)
+        background = self.backgrounds.sample(u[BACKGROUND:BACKGROUND + backgrounds.UNIFORMS])
+        sample = {"pose": pose_record, "view": view_record, "lights": lights_record,
+                  "texture": texture_tags(texture),
+                  "accessory": self.accessory_kinds.get(accessory, "none")}
+        return {"index": i, "side": side, "pose": pose, "gesture": gesture, "texture": texture,
+                "skin_tone_offset": tone, "accessory": accessory, "camera": camera, "lights": lights,
+                "background": background, "split": split_of(i // self.group_size, self.seed, self.split),
+                "sample": sample}
+
+    def _lights(self, u, side: str):
+        if self.lights == "random":
+            centre = self.hand_centre * (np.array([-1.0, 1, 1]) if side == "left" else 1)
+            return lighting.random_rig(u, centre.tolist())
+        if self.lights == "default":
+            return None, {"rig": "default"}
+        return self.lights, {"rig": "given"}
+
+
+# ------------------------------------------------------------------------------------------------ helpers
+
+
+def _pose_sampler(opts: dict, model, first):
+    mode = opts["mode"]
+    if mode not in ("auto", "dart", "jitter", "gestures"):
+        raise InputError(f"pose mode: {mode!r} is not auto, dart, jitter or gestures")
+    if model is None:                                       # a USD package: its gestures, as baked
+        if mode not in ("auto", "gestures"):
+            raise InputError(f"pose mode {mode!r}: a USD package renders its baked gestures only (use a model)")
+        names = list(first.gestures) if not opts["gestures"] else list(opts["gestures"])
+        for name in names:
+            if name not in first.gestures:
+                raise InputError(f"poses: {name!r} is not a gesture of the package ({', '.join(first.gestures)})")
+        return poses.GestureNames(names)
+    reference = poses.load_reference(opts["reference"], model, float(opts["max_reference_mb"]),
+                                     gestures=opts["gestures"])
+    if mode in ("auto", "dart"):
+        return poses.GridSlerp(model, reference, levels=opts["levels"], draws=opts["draws"], steps=opts["steps"])
+    return poses.GestureJitter(model, reference, 0.0 if mode == "gestures" else opts["jitter_deg"])
+
+
+def _right_model(sources: dict):
+    """The right-handed model poses are planned on (a left source's model mirrored); None for USD packages."""
+    for side, source in sources.items():
+        model = getattr(source, "model", None)
+        if model is None or hasattr(source, "gestures"):
+            return None
+        if model.side == "right":
+            return model
+    from darthand.model.mirror import mirror_model
+
+    return mirror_model(next(iter(sources.values())).model)
+
+
+def _hand_centre(model) -> np.ndarray:
+    if model is None:
+        return np.zeros(3)
+    v = np.asarray(model.v_template)
+    return 0.5 * (v.min(0) + v.max(0))
+
+
+def _lights_mode(value):
+    if value in ("random", "default", None):
+        return value or "default"
+    from darthand.fileio import read_json
+    from darthand.render.lights import load_lighting
+
+    doc = read_json(value, "lights file") if isinstance(value, str) else value
+    load_lighting(doc, str(value) if isinstance(value, str) else "lights")
+    return doc
+
+
+def _accessory_kind(source, accessory_id: str) -> str:
+    acc = getattr(source, "accessories", {}).get(accessory_id) if isinstance(getattr(source, "accessories", None),
+                                                                             dict) else None
+    return getattr(acc, "kind", "") or accessory_id.split("_")[0]
+
+
+def _choose(u: float, n: int) -> int:
+    return min(int(u * n), n - 1)
+
+
+def _non_negative(value, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise InputError(f"{what}: {value!r} must be a non-negative integer")
+    return int(value)
+
+
+def _default_textures(source) -> list[str]:
+    """Every texture of the catalogue (or USD variant set), not the UV checker; 'plain' only when there is none."""
+    ids = [t for t in source.texture_ids() if t != "checker"]
+    return [t for t in ids if t != "plain"] or ids
+
+
+def _pick_ids(what: str, wanted, default: list[str], known: list[str], allow_empty: bool = False) -> list[str]:
+    if wanted is None or wanted == "all":
+        ids = list(default)
+    else:
+        ids = [wanted] if isinstance(wanted, str) else list(wanted)
+        for i in ids:
+            if i not in known:
+                shown = ", ".join(known[:6]) + (" ..." if len(known) > 6 else "")
+                raise InputError(f"{what}: {i!r} is not one of the source's ids ({shown})")
+    if not ids and not allow_empty:
+        raise InputError(f"{what}: no ids to choose from")
+    return ids

@@ -1,0 +1,276 @@
+"""`darthand dataset report DIR`: one page (report.png) a person can judge a dataset from, and its figures
+(report.json):
+
+- a contact sheet of frames spread over the dataset, with their 2D keypoints and skeleton drawn (hollow markers:
+  keypoints not visible);
+- counts per texture category, texture tone, accessory type, side and split; the skin-tone offsets;
+- the visibility rate of each keypoint and the share of keypoints inside the image;
+- pose coverage: the dataset's finger poses and the plan's reference set in one 2-D embedding (principal components
+  of the finger joints' quaternions, sign-fixed, both sets together; DART shows a t-SNE), and how far each reference
+  pose is from its nearest dataset pose (mean rotation angle over the 15 finger joints).
+
+Poses are read from up to MAX_POSES frames' labels (evenly spread), so a report of a large dataset stays quick.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from darthand.errors import InputError
+from darthand.fileio import read_json, write_json
+
+MAX_POSES = 3000
+MAX_REFERENCE = 3000
+BONES = [(0, 1), (1, 2), (2, 3), (3, 4), (0, 5), (5, 6), (6, 7), (7, 8), (0, 9), (9, 10), (10, 11), (11, 12),
+         (0, 13), (13, 14), (14, 15), (15, 16), (0, 17), (17, 18), (18, 19), (19, 20)]      # openpose order
+FINGER_COLOURS = ["#e6194b", "#f58231", "#3cb44b", "#4363d8", "#911eb4"]                  # thumb .. pinky
+
+
+def write_report(dataset, out=None, sheet: int = 24) -> Path:
+    """Write report.png and report.json for a rendered dataset folder into `out` (default DATASET/report)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from darthand.dataset.run import read_shard_records
+
+    root = Path(dataset)
+    doc = read_json(root / "dataset.json", "dataset.json")
+    frames = read_shard_records(root)
+    if not frames:
+        raise InputError(f"{root}: no rendered frames (shards/*.json)")
+    out = Path(out) if out is not None else root / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    figures = dataset_figures(frames)
+    poses, reference, ref_name = pose_sets(root, doc, frames)
+    embedding = pose_embedding(poses, reference)
+    figures["pose_coverage"] = coverage_figures(poses, reference)
+    figures["reference"] = ref_name
+
+    shown = min(sheet, len(frames))
+    sheet_height = 4.0 * -(-shown // min(8, shown)) / min(8, shown)
+    fig = plt.figure(figsize=(20, 4 * (sheet_height + 4.9)), dpi=90)
+    grid = fig.add_gridspec(5, 4, height_ratios=[sheet_height, 1, 1, 1, 1.9], hspace=0.45, wspace=0.3)
+    fig.suptitle(f"{root.name}: {len(frames)} frames, {doc.get('size')} px, package {doc.get('package')}",
+                 fontsize=18, y=0.995)
+    _contact_sheet(fig.add_subplot(grid[0, :]), root, frames, sheet)
+    for k, key in enumerate(("category", "accessory_type", "tone", "split")):
+        _bars(fig.add_subplot(grid[1, k]), figures["counts"][key], key)
+    _bars(fig.add_subplot(grid[2, 0]), figures["counts"]["side"], "side")
+    ax = fig.add_subplot(grid[2, 1])
+    ax.hist([f["skin_tone_offset"] for f in frames], bins=20, color="#a0522d")
+    ax.set_title("skin-tone offset (sRGB)")
+    ax = fig.add_subplot(grid[2, 2:])
+    _visibility(ax, figures)
+    ax = fig.add_subplot(grid[3, :2])
+    ax.hist([f["coverage"] for f in frames], bins=30, color="#708090")
+    ax.set_title(f"hand coverage of the image (mean {figures['mean_coverage']:.3f})")
+    ax = fig.add_subplot(grid[3, 2:])
+    ax.axis("off")
+    ax.text(0, 1, _summary_text(doc, figures), va="top", family="monospace", fontsize=11)
+    _embedding(fig.add_subplot(grid[4, :2]), embedding, ref_name)
+    _nearest(fig.add_subplot(grid[4, 2:]), figures["pose_coverage"])
+    page = out / "report.png"
+    fig.savefig(page, bbox_inches="tight")
+    plt.close(fig)
+    write_json(out / "report.json", figures)
+    return page
+
+
+def dataset_figures(frames: list[dict]) -> dict:
+    """Counts, visibility and coverage figures of a dataset's frame summaries."""
+    counts: dict = {}
+    for key in ("category", "tone", "accessory_type", "side", "split"):
+        table: dict = {}
+        for f in frames:
+            table[str(f.get(key))] = table.get(str(f.get(key)), 0) + 1
+        counts[key] = dict(sorted(table.items()))
+    visible = np.array([f["visible"] for f in frames], float)
+    return {"frames": len(frames), "counts": counts, "visibility_rate": visible.mean(0).round(4).tolist(),
+            "visible_keypoints_mean": round(float(visible.sum(1).mean()), 3),
+            "in_image_rate": round(float(np.mean([f["in_image"] for f in frames]) / 21), 4),
+            "mean_coverage": round(float(np.mean([f["coverage"] for f in frames])), 5),
+            "skipped_backgrounds": sorted({n for f in frames for n in f.get("skipped_backgrounds") or ()})[:100]}
+
+
+def pose_sets(root: Path, doc: dict, frames: list[dict]) -> tuple[np.ndarray, np.ndarray, str]:
+    """((n, 15, 4) finger-joint quaternions of up to MAX_POSES frames, right-hand convention; the plan's reference
+    set's (m, 15, 4), up to MAX_REFERENCE; its name)."""
+    from darthand.dataset.frames import frame_names
+    from darthand.model.mirror import mirror_pose
+    from darthand.model.rotations import axis_angle_to_quaternion
+
+    pick = np.unique(np.linspace(0, len(frames) - 1, min(MAX_POSES, len(frames))).round().astype(int))
+    poses = []
+    for k in pick:
+        labels = read_json(root / frame_names(frames[k]["index"])["labels"], "labels")
+        pose = np.asarray(labels["mano_pose"], np.float64)
+        poses.append(mirror_pose(pose) if labels["side"] == "left" else pose)
+    quats = axis_angle_to_quaternion(np.asarray(poses).reshape(-1, 16, 3)[:, 1:])
+    reference, name = _reference(doc)
+    return quats, reference, name
+
+
+def _reference(doc: dict) -> tuple[np.ndarray, str]:
+    from darthand.dataset.poses import load_reference
+    from darthand.dataset.sources import SourceSpec
+
+    plan = (doc.get("jobs") or {}).get("plan") or {}
+    spec = (plan.get("poses") or {}).get("reference", "gestures")
+    try:
+        source = SourceSpec(doc["package"]).open()
+        model = source.model
+        if model.side != "right":
+            from darthand.model.mirror import mirror_model
+
+            model = mirror_model(model)
+        ref = load_reference(spec, model, float((plan.get("poses") or {}).get("max_reference_mb", 256)))
+    except (InputError, AttributeError, KeyError) as e:
+        return np.zeros((0, 15, 4)), f"none ({e})"
+    quats = ref.quats.astype(np.float64)
+    if len(quats) > MAX_REFERENCE:
+        quats = quats[np.unique(np.linspace(0, len(quats) - 1, MAX_REFERENCE).round().astype(int))]
+    return quats, ref.source
+
+
+def _features(quats: np.ndarray) -> np.ndarray:
+    q = np.where(quats[..., :1] < 0, -quats, quats)
+    return q.reshape(len(q), -1)
+
+
+def pose_embedding(poses: np.ndarray, reference: np.ndarray) -> dict:
+    """2-D principal-component coordinates of both sets, fitted on them together."""
+    both = np.concatenate([_features(poses), _features(reference)]) if len(reference) else _features(poses)
+    centre = both.mean(0)
+    _, s, vt = np.linalg.svd(both - centre, full_matrices=False)
+    axes = vt[:2]
+    explained = (s[:2] ** 2 / (s ** 2).sum()).tolist() if s.sum() else [0.0, 0.0]
+    return {"dataset": (_features(poses) - centre) @ axes.T,
+            "reference": (_features(reference) - centre) @ axes.T if len(reference) else np.zeros((0, 2)),
+            "explained": explained}
+
+
+def coverage_figures(poses: np.ndarray, reference: np.ndarray) -> dict:
+    """How well the dataset's poses cover the reference set: per reference pose, the mean rotation angle (degrees)
+    over the 15 finger joints to its nearest dataset pose; and the dataset's own spread (the same to the nearest
+    other dataset pose)."""
+    def nearest(a: np.ndarray, b: np.ndarray, skip_self: bool) -> np.ndarray:
+        out = np.empty(len(a))
+        for k in range(0, len(a), 256):
+            dots = np.abs(np.einsum("ajc,bjc->abj", a[k:k + 256], b))
+            d = np.degrees(2 * np.arccos(np.minimum(dots, 1))).mean(-1)
+            if skip_self:
+                d[np.arange(len(d)), np.arange(k, k + len(d))] = np.inf
+            out[k:k + 256] = d.min(1)
+        return out
+
+    result = {"dataset_poses": int(len(poses)), "reference_poses": int(len(reference))}
+    if len(reference):
+        d = nearest(reference, poses, False)
+        result.update({"reference_to_dataset_deg": d.round(3).tolist(),
+                       "median_deg": round(float(np.median(d)), 3), "within_10deg": round(float((d <= 10).mean()), 4),
+                       "within_20deg": round(float((d <= 20).mean()), 4)})
+    if len(poses) > 1:
+        result["dataset_nearest_median_deg"] = round(float(np.median(nearest(poses, poses, True))), 3)
+    return result
+
+
+# ------------------------------------------------------------------------------------------------ panels
+
+
+def _contact_sheet(ax, root: Path, frames: list[dict], count: int) -> None:
+    from darthand.dataset.frames import frame_names
+    from darthand.render.image import read_png
+
+    pick = np.unique(np.linspace(0, len(frames) - 1, min(count, len(frames))).round().astype(int))
+    cols = min(8, len(pick))
+    rows = -(-len(pick) // cols)
+    tiles = []
+    for k in pick:
+        names = frame_names(frames[k]["index"])
+        image = read_png(root / names["image"]).astype(np.float32) / 255
+        rgb = image[..., :3] * image[..., 3:4] + 0.5 * (1 - image[..., 3:4]) if image.shape[2] == 4 else image
+        labels = read_json(root / names["labels"], "labels")
+        tiles.append((rgb, labels))
+    size = tiles[0][0].shape[0]
+    ax.imshow(np.ones((rows * size, cols * size, 3)) * 0.95, extent=(0, cols * size, rows * size, 0))
+    for n, (rgb, labels) in enumerate(tiles):
+        r, c = divmod(n, cols)
+        ax.imshow(rgb, extent=(c * size, (c + 1) * size, (r + 1) * size, r * size))
+        uv = np.asarray(labels["keypoints_2d"]) * (size / labels["image_size"][0]) + [c * size, r * size]
+        vis = labels["visibility"]
+        for b, (i, j) in enumerate(BONES):
+            ax.plot(uv[[i, j], 0], uv[[i, j], 1], color=FINGER_COLOURS[b // 4], lw=1.2, alpha=0.9)
+        for k, (x, y) in enumerate(uv):
+            colour = "white" if k == 0 else FINGER_COLOURS[(k - 1) // 4]
+            ax.plot(x, y, "o", ms=3.5, mfc=colour if vis[k] else "none", mec=colour, mew=1)
+        tag = f"#{labels['render']['dataset']['frame']} {labels['side'][0]} {labels['split']}"
+        ax.text(c * size + 3, r * size + 12, tag, color="white", fontsize=8,
+                bbox={"facecolor": "black", "alpha": 0.5, "pad": 1, "lw": 0})
+    ax.set_xlim(0, cols * size)
+    ax.set_ylim(rows * size, 0)
+    ax.axis("off")
+    ax.set_title("frames with their 2D keypoints (hollow: not visible)")
+
+
+def _bars(ax, table: dict, title: str) -> None:
+    names, values = list(table), list(table.values())
+    ax.barh(range(len(names)), values, color="#4682b4")
+    ax.set_yticks(range(len(names)), names, fontsize=8)
+    ax.invert_yaxis()
+    ax.set_title(f"{title} ({len(names)})")
+
+
+def _visibility(ax, figures: dict) -> None:
+    from darthand.render.labels import keypoint_names
+
+    rates = figures["visibility_rate"]
+    ax.bar(range(21), rates, color=["#808080"] + [c for c in FINGER_COLOURS for _ in range(4)])
+    ax.set_xticks(range(21), keypoint_names("openpose"), rotation=90, fontsize=8)
+    ax.set_ylim(0, 1)
+    ax.set_title(f"keypoint visibility rate (mean {figures['visible_keypoints_mean']:.1f}/21 visible, "
+                 f"{figures['in_image_rate']:.1%} inside the image)")
+
+
+def _embedding(ax, embedding: dict, ref_name: str) -> None:
+    ref, data = embedding["reference"], embedding["dataset"]
+    if len(ref):
+        ax.scatter(ref[:, 0], ref[:, 1], s=14, c="#bbbbbb", label=f"reference set ({ref_name}, {len(ref)})")
+    ax.scatter(data[:, 0], data[:, 1], s=5, c="#d62728", alpha=0.6, label=f"dataset ({len(data)})")
+    ex = embedding["explained"]
+    ax.set_xlabel(f"PC 1 ({ex[0]:.0%})")
+    ax.set_ylabel(f"PC 2 ({ex[1]:.0%})")
+    ax.legend(loc="best", fontsize=9)
+    ax.set_title("pose coverage: finger poses, first two principal components of both sets")
+
+
+def _nearest(ax, cov: dict) -> None:
+    d = cov.get("reference_to_dataset_deg")
+    if d:
+        ax.hist(d, bins=30, color="#2ca02c")
+        ax.set_title(f"reference pose to nearest dataset pose: median {cov['median_deg']:.1f} deg, "
+                     f"{cov['within_10deg']:.0%} within 10 deg")
+        ax.set_xlabel("mean rotation angle over the 15 finger joints (degrees)")
+    else:
+        ax.axis("off")
+
+
+def _summary_text(doc: dict, figures: dict) -> str:
+    t = doc.get("timings", {})
+    lines = [f"frames            {figures['frames']}",
+             f"rendered/skipped  {doc.get('rendered')} / {doc.get('skipped')} (last run)",
+             f"image size        {doc.get('size')} px, {doc.get('samples')} AA samples",
+             f"mean coverage     {figures['mean_coverage']:.3f}",
+             f"visible keypoints {figures['visible_keypoints_mean']:.1f} / 21",
+             f"in image          {figures['in_image_rate']:.1%}",
+             f"bad backgrounds   {len(figures['skipped_backgrounds'])}"]
+    if t.get("images_per_second"):
+        lines.append(f"speed (last run)  {t['images_per_second']:.1f} images/s, {t.get('processes')} processes")
+    plan = (doc.get("plan") or {})
+    if plan.get("reference"):
+        lines.append(f"reference set     {plan['reference']['source']} ({plan['reference']['poses']} poses)")
+    return "\n".join(lines)
+

@@ -1,0 +1,426 @@
+"""Rendering a dataset: shards of frames planned on demand, resumed, grouped into chunks for a runner
+(dataset/local.py), recorded, summarised in dataset.json.
+
+    OUT/images/, masks/, labels/, meshes/   the frames (dataset/frames.py)
+    OUT/shards/<first>-<last>.json          one record per finished shard: its digest and its frames' summaries
+    OUT/dataset.json                        the run: sources, plan, settings, counts, visibility rates, timings
+
+Shards: consecutive runs of `shard_size` frames, planned when their turn comes (a plan of any length costs no
+memory beyond a shard or two in flight). A shard is the unit of resume bookkeeping: a rerun skips a shard whose
+record carries the same digest (of its jobs and settings) and whose files exist, without opening its labels;
+inside an unfinished shard a frame is skipped when its files exist and its labels carry its job's digest. Frames are
+written atomically, so an interrupted run leaves whole frames (and at most temporary files, removed by the next run),
+and a resumed run writes the same bytes as an uninterrupted one. A shard is also what a cluster runner hands to a
+node (issue 14).
+
+Chunks: a shard's frames to render are grouped by (side, texture), so that a worker decodes a texture once for many
+frames (a 2048^2 texture costs 0.1-0.2 s, three to five frames' rendering), split into chunks of at most
+`chunk_size` frames sorted by accessory (a change costs 5-17 ms), largest first. At most a few chunks per worker are
+in flight; the next shard is planned while the workers finish the last one's chunks.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from darthand.dataset.frames import frame_names, job_digest
+from darthand.errors import InputError
+from darthand.fileio import read_json, write_json
+
+DATASET_FORMAT = "darthand-dataset"
+DATASET_VERSION = 2
+DEFAULT_SHARD_SIZE = 8192
+MAX_CHUNK = 32                    # frames per task: ~1-2 s of work, so progress and Ctrl-C stay responsive
+DEFAULT_MAX_FRAMES = 1_000_000    # a budget: more needs max_frames= (--max-frames)
+MAX_SIZE = 4096
+FOLDERS = ("images", "masks", "labels", "meshes", "shards")
+
+
+def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0, count: int | None = None,
+                   specs: dict | None = None, sources: dict | None = None, processes: int | None = None,
+                   threads: int | None = None, size: int = 512, samples: int = 8, aa_shading: str = "triangle",
+                   resume: bool = True, progress=True, shard_size: int = DEFAULT_SHARD_SIZE,
+                   chunk_size: int | None = None, max_frames: int = DEFAULT_MAX_FRAMES,
+                   jobs_source: dict | None = None) -> dict:
+    """Render frames into out_dir (module docstring); returns the dataset.json document.
+
+    The frames: `jobs` (a list of job dicts or a jobs file), or frames start .. start + count - 1 of `planner`
+        (dataset/plan.Planner). package: what the run is of (recorded); specs: {side: SourceSpec} the workers open;
+        sources: {side: opened source} (used to check jobs, and for processes=1).
+    processes: worker processes (default: the cores available; 1 renders in this process); threads: render threads
+        per process (default 1 with workers, all cores with processes=1).
+    resume: skip what is already rendered from the same jobs (module docstring). samples, aa_shading: edge
+        anti-aliasing (api.Renderer.render). progress: False, True (a line at most every 5 s) or a
+        callable(done, total, seconds).
+    A frame that fails stops the run with an InputError 'frame N: cause'.
+    """
+    from darthand.dataset.jobs import check_jobs, load_jobs, validate_jobs
+    from darthand.render import aa
+
+    t_start = time.monotonic()
+    aa.check_options(samples, aa_shading)
+    size = _bounded_int(size, "size", 8, MAX_SIZE, "pixels")
+    processes = _bounded_int(len(os.sched_getaffinity(0)) if processes is None else processes, "processes", 1, 256)
+    threads = None if threads is None else _bounded_int(threads, "threads", 1, 256)
+    shard_size = _bounded_int(shard_size, "shard size", 1, 10_000_000)
+    if planner is None:
+        if isinstance(jobs, (str, Path)):
+            jobs_source = jobs_source or {"file": str(jobs)}
+            jobs = load_jobs(jobs)
+        else:
+            jobs = check_jobs(list(jobs or []))
+        validate_jobs(sources, jobs)
+        total = len(jobs)
+        shards = [jobs[k:k + shard_size] for k in range(0, total, shard_size)]
+    else:
+        count = _bounded_int(count, "count", 0, max_frames, "frames",
+                             "(the frame budget; --max-frames raises it, a frame takes ~80 kB of disk)")
+        start = _bounded_int(start, "start", 0, 10**12 - count)
+        total = count
+        shards = (planner.jobs(a, min(a + shard_size, start + count)) for a in range(start, start + count, shard_size))
+    if total > max_frames:
+        raise InputError(f"jobs: {total} frames are over the frame budget of {max_frames} (--max-frames raises it)")
+    out = Path(out_dir)
+    _prepare_folders(out)
+    settings = {"out_dir": str(out), "size": size, "samples": int(samples), "aa_shading": aa_shading}
+    processes = max(1, min(processes, total))
+
+    from darthand.dataset.local import LocalRunner
+
+    report = _progress_printer() if progress is True else (progress or None)
+    stats = RunStats(t_start)
+    runner = LocalRunner(specs, settings, processes, threads, opened=sources if processes == 1 else None)
+    try:
+        _render_shards(shards, runner, settings, resume, processes, chunk_size, stats, total, report)
+    finally:
+        runner.close()
+    models = {side: model_info(src) for side, src in (sources or {}).items()}
+    return _write_dataset(out, package, jobs_source, planner, total, settings, stats, processes, models)
+
+
+def _render_shards(shards, runner, settings, resume, processes, chunk_size, stats, total, report) -> None:
+    """Feed the shards' chunks to the runner, at most 2 per worker in flight; write each shard's record when its
+    last chunk is in."""
+    from concurrent.futures import FIRST_COMPLETED, wait
+
+    out = Path(settings["out_dir"])
+    inflight: dict = {}                      # future -> shard state
+    limit = 2 * processes + 1
+    pending_shards = []
+
+    def collect(block: bool) -> None:
+        finished = wait(list(inflight), timeout=None if block else 0, return_when=FIRST_COMPLETED)[0] \
+            if inflight else ()
+        for f in finished:
+            state = inflight.pop(f)
+            result = f.result()
+            stats.add_result(result)
+            state["summaries"] += [{k: v for k, v in fr.items() if k not in ("ms", "cpu_ms", "end")}
+                                   for fr in result["frames"]]
+            state["left"] -= 1
+        while pending_shards and pending_shards[0]["left"] == 0 and not pending_shards[0]["submitting"]:
+            state = pending_shards.pop(0)
+            _write_shard_record(out, state)
+            stats.add_shard(state)
+        if report:
+            report(stats.done, total, time.monotonic() - stats.t_start)
+
+    try:
+        for shard_jobs in shards:
+            state = _open_shard(out, list(shard_jobs), settings, resume)
+            stats.skipped += len(state["summaries"])
+            stats.done += len(state["summaries"])
+            pending_shards.append(state)
+            state["submitting"] = True
+            for chunk in make_chunks(state["todo"], processes, chunk_size):
+                while len(inflight) >= limit:
+                    collect(block=True)
+                state["left"] += 1
+                inflight[runner.submit(chunk)] = state
+            state["submitting"] = False
+            collect(block=False)
+        while inflight or pending_shards:
+            collect(block=True)
+    except BaseException:
+        runner.stop()
+        raise
+
+
+# ------------------------------------------------------------------------------------------------ shards, resume
+
+
+def shard_digest(digests: list[str]) -> str:
+    return hashlib.sha256(" ".join(digests).encode()).hexdigest()[:16]
+
+
+def shard_record_path(out: Path, jobs: list[dict]) -> Path:
+    return out / "shards" / f"{frame_names(jobs[0]['index'])['labels'][7:-5]}-{jobs[-1]['index']}.json"
+
+
+def _open_shard(out: Path, jobs: list[dict], settings: dict, resume: bool) -> dict:
+    """A shard's state: the frames to render (with their digests), the summaries of those already there."""
+    digests = [job_digest(j, settings) for j in jobs]
+    state = {"jobs": len(jobs), "first": jobs[0]["index"] if jobs else 0, "last": jobs[-1]["index"] if jobs else 0,
+             "digest": shard_digest(digests), "summaries": [], "todo": [], "left": 0, "path": None}
+    if not jobs:
+        return state
+    state["path"] = shard_record_path(out, jobs)
+    if resume and _shard_done(state, jobs):
+        state["summaries"] = read_json(state["path"], "shard record")["frames"]
+        return state
+    for job, digest in zip(jobs, digests):
+        summary = existing_frame(out, job, digest) if resume else None
+        if summary is None:
+            state["todo"].append((job, digest))
+        else:
+            state["summaries"].append(summary)
+    return state
+
+
+def _shard_done(state: dict, jobs: list[dict]) -> bool:
+    try:
+        record = json.loads(state["path"].read_text())
+    except (OSError, ValueError):
+        return False
+    if record.get("digest") != state["digest"] or len(record.get("frames", [])) != len(jobs):
+        return False
+    out = state["path"].parent.parent
+    return all((out / name).is_file() for job in jobs for name in frame_names(job["index"]).values())
+
+
+def existing_frame(out: Path, job: dict, digest: str) -> dict | None:
+    """The summary of a frame already rendered from this job (all its files present, its labels carrying the job's
+    digest), or None."""
+    from darthand.dataset.frames import summary
+
+    names = frame_names(job["index"])
+    if not all((out / n).is_file() for n in names.values()):
+        return None
+    try:
+        labels = json.loads((out / names["labels"]).read_text())
+    except (OSError, ValueError):
+        return None
+    if labels.get("render", {}).get("dataset", {}).get("job_sha256") != digest:
+        return None
+    return summary(job, labels)
+
+
+def _write_shard_record(out: Path, state: dict) -> None:
+    if state["path"] is None:
+        return
+    frames = sorted(state["summaries"], key=lambda s: s["index"])
+    write_json(state["path"], {"first": state["first"], "last": state["last"], "digest": state["digest"],
+                               "frames": frames}, indent=None)
+
+
+def read_shard_records(out) -> list[dict]:
+    """Every frame summary of a dataset's shard records, in index order (shards sorted by first index)."""
+    records = sorted(Path(out, "shards").glob("*.json"), key=lambda p: int(p.name.split("-")[0]))
+    frames = []
+    for path in records:
+        frames += read_json(path, "shard record")["frames"]
+    return frames
+
+
+def _prepare_folders(out: Path) -> None:
+    """Make the output folders; remove temporary files an interrupted run left (fileio.atomic_path's '.name.*')."""
+    try:
+        for name in FOLDERS:
+            folder = out / name
+            folder.mkdir(parents=True, exist_ok=True)
+            for entry in os.scandir(folder):
+                if entry.name.startswith(".") and entry.name.count(".") >= 2 and entry.is_file():
+                    os.unlink(entry.path)
+    except OSError as e:
+        raise InputError(f"{out}: cannot write the dataset there ({e.strerror})") from None
+
+
+def make_chunks(items: list, processes: int, chunk_size: int | None = None) -> list[list]:
+    """Items [(job, digest)] in tasks for the workers: grouped by (side, texture), each group split into chunks of at
+    most `chunk_size` frames (default: a quarter of an even share per process, at most MAX_CHUNK), sorted by
+    accessory inside; largest chunks first."""
+    if not items:
+        return []
+    size = chunk_size or min(MAX_CHUNK, max(1, math.ceil(len(items) / (4 * processes))))
+    groups: dict = {}
+    for item in items:
+        job = item[0]
+        groups.setdefault((str(job.get("side")), str(job.get("texture"))), []).append(item)
+    chunks = []
+    for key in sorted(groups):
+        group = sorted(groups[key], key=lambda it: (str(it[0].get("accessory")), it[0]["index"]))
+        chunks += [group[k:k + size] for k in range(0, len(group), size)]
+    return sorted(chunks, key=len, reverse=True)
+
+
+# ------------------------------------------------------------------------------------------------ statistics
+
+
+class RunStats:
+    """Streaming statistics of a run: throughput (monotonic clock times, which the processes share), per-step
+    times, worker memory, and the dataset's counts (per shard as shards complete)."""
+
+    def __init__(self, t_start: float):
+        self.t_start, self.done, self.skipped, self.rendered = t_start, 0, 0, 0
+        self.first_end, self.last_end, self.open_s, self.rss = {}, {}, {}, {}
+        self.frame_ms, self.cpu_ms, self.ends = [], [], []
+        self.steps: dict = {}
+        self.counts: dict = {}
+        self.visible = np.zeros(21)
+        self.frames_counted = 0
+        self.coverage = 0.0
+        self.skipped_backgrounds: dict = {}
+
+    def add_result(self, result: dict) -> None:
+        pid = result["pid"]
+        self.open_s[pid] = result["open_s"]
+        self.rss[pid] = max(self.rss.get(pid, 0), result["maxrss_mb"])
+        for k, v in result["steps"].items():
+            self.steps[k] = self.steps.get(k, 0.0) + v
+        for f in result["frames"]:
+            self.first_end[pid] = min(self.first_end.get(pid, math.inf), f["end"])
+            self.last_end[pid] = max(self.last_end.get(pid, -math.inf), f["end"])
+            self.ends.append(f["end"])
+            if len(self.frame_ms) < 100_000:                  # enough for medians; bounded memory
+                self.frame_ms.append(f["ms"])
+                self.cpu_ms.append((f["end"], f["cpu_ms"]))
+        self.rendered += len(result["frames"])
+        self.done += len(result["frames"])
+        if len(self.ends) > 200_000:
+            self.ends = sorted(self.ends)[-100_000:]
+
+    def add_shard(self, state: dict) -> None:
+        for s in state["summaries"]:
+            for key in ("side", "split", "tone", "category", "accessory_type"):
+                table = self.counts.setdefault(key, {})
+                table[str(s.get(key))] = table.get(str(s.get(key)), 0) + 1
+            self.visible += np.asarray(s["visible"], float)
+            self.coverage += s["coverage"]
+            self.frames_counted += 1
+            for name in s.get("skipped_backgrounds") or ():
+                self.skipped_backgrounds[name] = self.skipped_backgrounds.get(name, 0) + 1
+
+    def timings(self, processes: int) -> dict:
+        """startup_s: from the call until every worker had finished its first frame (spawning, imports, opening
+        the sources, first texture); ms_per_image: steady-state wall time per frame finished after that
+        (1000 / images_per_second); overall_images_per_second: all frames over the whole wall time; cpu_ms_per_image:
+        CPU time of the rendering processes per frame after start-up; frame_ms_median: one frame's render + write
+        in its worker; steps_ms: mean per frame of each step (pose includes texture loading); tail_idle_s: how long
+        the first worker to finish waited for the last; worker_peak_rss_mb: each worker's peak resident memory."""
+        t_end = time.monotonic()
+        n = self.rendered
+        out = {"processes": processes, "wall_s": round(t_end - self.t_start, 3), "frames": n}
+        if not n:
+            return out
+        warm = max(self.first_end.values())
+        after = sum(1 for e in self.ends if e > warm)
+        last = max(self.last_end.values())
+        steady = 1000 * (last - warm) / after if after else 1000 * (t_end - self.t_start) / n
+        steady_cpu = [c for e, c in self.cpu_ms if e > warm] or [c for _, c in self.cpu_ms]
+        out.update({
+            "startup_s": round(warm - self.t_start, 3),
+            "open_s": round(max(self.open_s.values()), 3),
+            "ms_per_image": round(steady, 2),
+            "images_per_second": round(1000 / steady, 2),
+            "overall_images_per_second": round(n / (t_end - self.t_start), 2),
+            "cpu_ms_per_image": round(float(np.mean(steady_cpu)), 2),
+            "frame_ms_median": round(float(np.median(self.frame_ms)), 2),
+            "steps_ms": {k: round(1000 * v / n, 2) for k, v in sorted(self.steps.items())},
+            "tail_idle_s": round(last - min(self.last_end.values()), 3),
+            "worker_peak_rss_mb": sorted(self.rss.values()),
+        })
+        return out
+
+    def summary(self) -> dict:
+        n = max(1, self.frames_counted)
+        return {"frames": self.frames_counted, "counts": {k: dict(sorted(v.items())) for k, v in self.counts.items()},
+                "visibility_rate": [round(float(x) / n, 4) for x in self.visible],
+                "mean_coverage": round(self.coverage / n, 5),
+                "skipped_backgrounds": {"count": sum(self.skipped_backgrounds.values()),
+                                        "files": sorted(self.skipped_backgrounds)[:100]}}
+
+
+def _progress_printer(every_s: float = 5.0):
+    """A progress callback: frames done, images/s, ETA, at most every `every_s` seconds and at the end."""
+    last = [-math.inf]
+
+    def report(done: int, total: int, seconds: float) -> None:
+        if done == total or seconds - last[0] >= every_s:
+            last[0] = seconds
+            rate = done / seconds if seconds > 0 else 0.0
+            eta = f", ETA {(total - done) / rate:.0f} s" if rate and done < total else ""
+            print(f"[render-dataset] {done}/{total} frames, {seconds:.1f} s, {rate:.1f} images/s{eta}", flush=True)
+    return report
+
+
+def model_info(source) -> dict:
+    """What the writers need of a side's model without opening it: hands_mean (45,), betas, vertex counts."""
+    model = getattr(source, "model", None)
+    if model is None or hasattr(source, "gestures"):
+        return {"source": str(getattr(source, "source", "usd"))}
+    wrist = model.meta.get("wrist") or {}
+    return {"source": str(getattr(source, "source", "model")), "hands_mean": np.asarray(model.hands_mean).tolist(),
+            "num_betas": model.num_betas, "vertices": model.num_vertices,
+            "base_vertices": int(wrist.get("base_vertices", model.num_vertices))}
+
+
+def _write_dataset(out: Path, package, jobs_source, planner, total, settings, stats: RunStats, processes,
+                   models) -> dict:
+    """dataset.json: the run's inputs, counts and timings (no per-frame list: those are in the shard records)."""
+    doc = {"format": DATASET_FORMAT, "version": DATASET_VERSION, "package": str(package),
+           "jobs": jobs_source or ({"plan": planner.spec} if planner is not None else {"given": "list"}),
+           "plan": planner.describe() if planner is not None else None,
+           "count": total, "size": settings["size"], "samples": settings["samples"],
+           "aa_shading": settings["aa_shading"],
+           "files": {kind: name.replace("000000", "<index>") for kind, name in frame_names(0).items()},
+           "models": models, "rendered": stats.rendered, "skipped": stats.skipped,
+           "summary": stats.summary(), "timings": stats.timings(processes)}
+    write_json(out / "dataset.json", doc)
+    return doc
+
+
+def _bounded_int(value, what: str, lo: int, hi: int, unit: str = "", hint: str = "") -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        try:
+            ok = float(value).is_integer()
+        except (TypeError, ValueError, OverflowError):
+            ok = False
+        if not ok:
+            raise InputError(f"{what}: {value!r} is not an integer")
+        value = int(float(value))
+    if not lo <= value <= hi:
+        raise InputError(f"{what}: {value} {unit + ' ' if unit else ''}is outside {lo}..{hi}"
+                         + (f" {hint}" if hint else ""))
+    return int(value)
+
+
+
+def render_package(package, out_dir, jobs=None, *, count: int = 100, start: int = 0, plan: dict | None = None,
+                   sides=None, textures=None, accessories=None, model=None, **options) -> dict:
+    """The Python entry of `darthand render-dataset`: open PACKAGE (render.api.open_source, with the catalogue paths
+    textures/accessories and the USD path's `model`) for the sides asked (default: the plan's, both), then render
+    `jobs` (a list or a jobs file) or frames start .. start + count - 1 of the plan `plan` (dataset/plan.plan_spec
+    options) into out_dir. `options` are render_dataset's. Worker processes are spawned: a script calling this needs
+    the usual `if __name__ == "__main__":` guard."""
+    from darthand.dataset.plan import Planner, plan_spec
+    from darthand.dataset.sources import parse_sides, source_specs
+
+    spec = plan_spec(**(plan or {}))
+    if jobs is not None:
+        from darthand.dataset.jobs import load_jobs
+
+        jobs = load_jobs(jobs) if isinstance(jobs, (str, Path)) else list(jobs)
+        sides = sides or tuple(dict.fromkeys(j.get("side") or "right" for j in jobs)) or ("right",)
+    specs = source_specs(package, parse_sides(sides or spec["sides"]), textures=textures, accessories=accessories,
+                         model=model)
+    sources = {side: s.open() for side, s in specs.items()}
+    planner = None if jobs is not None else Planner({**spec, "sides": list(sources)}, sources)
+    return render_dataset(package, out_dir, jobs, planner=planner, start=start, count=count, specs=specs,
+                          sources=sources, **options)

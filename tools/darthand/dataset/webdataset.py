@@ -1,0 +1,58 @@
+"""WebDataset tar shards for streaming training: OUT/{split}-000000.tar, ... with up to SAMPLES_PER_SHARD samples
+each, in frame order. A sample's key is its zero-padded frame index (no dots: WebDataset splits a member name at the
+first dot into key and extension); its members:
+
+    <key>.png        the image (RGBA; opaque over a background)
+    <key>.mask.png   the 8-bit coverage mask
+    <key>.json       the labels (schemas/labels.schema.json)
+    <key>.verts.npy  (V, 3) float32 posed vertices, camera frame, metres
+
+Tar headers carry no time, owner or host (mtime 0, uid/gid 0, empty names, mode 0644), so the same dataset gives
+the same bytes.
+"""
+
+from __future__ import annotations
+
+import io
+import tarfile
+from pathlib import Path
+
+from darthand.errors import InputError
+from darthand.fileio import atomic_path, read_json
+
+SAMPLES_PER_SHARD = 1000
+SPLITS = ("train", "val", "test")
+
+
+def write_webdataset(dataset, out=None, samples_per_shard: int = SAMPLES_PER_SHARD) -> Path:
+    """Write the shards of a rendered dataset folder into `out` (default DATASET/webdataset)."""
+    from darthand.dataset.frames import frame_names
+    from darthand.dataset.run import read_shard_records
+
+    root = Path(dataset)
+    read_json(root / "dataset.json", "dataset.json")
+    out = Path(out) if out is not None else root / "webdataset"
+    out.mkdir(parents=True, exist_ok=True)
+    frames = read_shard_records(root)
+    if not frames:
+        raise InputError(f"{root}: no rendered frames (shards/*.json)")
+    for split in SPLITS:
+        indices = [f["index"] for f in frames if f["split"] == split]
+        for shard, k in enumerate(range(0, len(indices), samples_per_shard)):
+            with atomic_path(out / f"{split}-{shard:06d}.tar") as tmp, tarfile.open(tmp, "w",
+                                                                                 format=tarfile.USTAR_FORMAT) as tar:
+                for index in indices[k:k + samples_per_shard]:
+                    names = frame_names(index)
+                    key = Path(names["labels"]).stem
+                    for member, kind in ((f"{key}.png", "image"), (f"{key}.mask.png", "mask"),
+                                         (f"{key}.json", "labels"), (f"{key}.verts.npy", "vertices")):
+                        _add(tar, member, (root / names[kind]).read_bytes())
+    return out
+
+
+def _add(tar: tarfile.TarFile, name: str, data: bytes) -> None:
+    info = tarfile.TarInfo(name)
+    info.size, info.mtime, info.mode = len(data), 0, 0o644
+    info.uid = info.gid = 0
+    info.uname = info.gname = ""
+    tar.addfile(info, io.BytesIO(data))

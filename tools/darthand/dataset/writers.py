@@ -1,0 +1,18 @@
+"""Dataset layouts other than the native one (dataset/freihand.py, dataset/webdataset.py)."""
+
+from __future__ import annotations
+
+
+def _freihand(dataset, out):
+    from darthand.dataset.freihand import write_freihand
+
+    return write_freihand(dataset, out)
+
+
+def _webdataset(dataset, out):
+    from darthand.dataset.webdataset import write_webdataset
+
+    return write_webdataset(dataset, out)
+
+
+FORMATS = {"freihand": _freihand, "webdataset": _webdataset}
