@@ -85,7 +85,8 @@ def write_json(path: str | os.PathLike, obj, indent: int = 2) -> None:
 
 
 def first_non_finite(obj) -> str:
-    """Path ('a.b[3]') of the first NaN or infinite float in a JSON-like document ('' when there is none)."""
+    """Path ('a.b.3', as schemas.check_schema names fields) of the first NaN or infinite float in a JSON-like
+    document ('' when there is none)."""
     found = _non_finite(obj)
     return found[0] if found else ""
 
@@ -97,10 +98,9 @@ def _non_finite(obj) -> tuple[str, float] | None:
         where, x = todo.pop()
         if isinstance(x, float) and not math.isfinite(x):
             return where or "(top level)", x
-        if isinstance(x, dict):
-            todo += [(f"{where}.{k}" if where else str(k), v) for k, v in reversed(list(x.items()))]
-        elif isinstance(x, (list, tuple)):
-            todo += [(f"{where}[{i}]", v) for i, v in reversed(list(enumerate(x)))]
+        if isinstance(x, (dict, list, tuple)):
+            items = x.items() if isinstance(x, dict) else enumerate(x)
+            todo += [(f"{where}.{k}" if where else str(k), v) for k, v in reversed(list(items))]
     return None
 
 
@@ -243,8 +243,8 @@ def parse_json(data: bytes | str, source, what: str = "JSON file", max_depth: in
         doc = json.loads(text, parse_int=_parse_int)
         bad = _non_finite(doc)      # NaN, Infinity (not JSON) or a number beyond float64 (1e999): named by field
         if bad:
-            raise InputError(f"{source}: field '{bad[0]}' is {bad[1]}, expected a finite number (JSON has no NaN "
-                             "or Infinity)")
+            raise InputError(f"{source}: field '{bad[0]}' is {bad[1]}, not a finite number (JSON has no NaN or "
+                             "Infinity)")
         return doc
     except _Refused as e:
         raise InputError(f"{source}: not valid JSON for a {what}: {e}") from None
