@@ -78,9 +78,3 @@ def check_memory(what: str, nbytes: float) -> None:
         ask = format_size(min(nbytes * 1.2, 1 << 60)).replace(" ", "").replace("B", "").replace("k", "K")
         raise BudgetError(f"{what} needs about {format_size(nbytes)} of memory, above the budget of "
                           f"{format_size(limit)} ({source}); give --max-memory {ask} if you mean it")
-
-
-def check_count(what: str, count: int, limit: int, unit: str = "") -> None:
-    """Raise InputError when a count option is beyond what the command can sensibly do."""
-    if count > limit:
-        raise InputError(f"{what} is {count}{unit}, above the limit of {limit}{unit}")

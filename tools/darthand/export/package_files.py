@@ -149,7 +149,7 @@ class _FolderWalk:
                 target = self.resolve(layer, asset)
                 reason = self.unsafe(target) if target is not None else "is an expression or URI this check " \
                                                                         "cannot resolve"
-                if reason and not (role == "layer" and reason == "does not exist"):   # missing: OpenUSD reports it
+                if reason and reason != "does not exist":      # a missing file is safe: the readers report it
                     self.problems.append(Problem(role, self.label(layer), asset, str(target), reason))
                 elif role == "layer" and not reason and target not in seen:
                     seen.add(target)
