@@ -1026,7 +1026,7 @@ NUMERIC = [
     (RENDER, "--skin-tone-offset", ["nan", "inf", "-inf", "1e300", "5"]),
     (RENDER, "--size", ["0", "-1", "100000", BIG]),
     (RENDER, "--width", ["0", "-7"]),
-    (RENDER, "--height", ["1000000"]),
+    (RENDER, "--height", ["2000000"]),
     (RENDER, "--threads", ["-3", "0", "100000"]),
     (["render-checks", "--build", "{fx}", "--sides", "right", "--out", "{t}/checks"], "--size", ["0", "-1", "100000"]),
     (WRIST, "--rings", ["0", "-1", "1000000", BIG]),
