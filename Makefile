@@ -27,7 +27,11 @@ POSES        := $(wildcard assets_src/poses/*.json)
 # A stage's outputs depend on its own code too, so editing a generator rebuilds what it made.
 src = $(wildcard tools/darthand/$(1)/*.py tools/darthand/$(1)/*/*.py)
 
+<<<<<<< HEAD
 .PHONY: assets verify-build test test-all bench usdz clean venv node FORCE
+=======
+.PHONY: assets shapes test test-all bench usdz clean venv node FORCE
+>>>>>>> main
 .DEFAULT_GOAL := assets
 
 # ------------------------------------------------------------------ set-up
@@ -54,6 +58,14 @@ build/model/right.npz build/model/left.npz &: build/model/source.txt $(SOURCE_DE
 
 build/template/gestures.json build/template/gestures.png &: build/model/right.npz $(POSES) $(call src,template)
 	@$(STEP) gestures -- $(DH) template gestures build/model/right.npz --out-dir build/template
+
+# The shape space: extreme shapes at rest and through every gesture, hand sizes against ANSUR II (`make shapes`; not
+# part of `make assets` while the named gestures are authored for the mean hand only: on the largest and broadest
+# shapes the thumb passes through the index and middle fingers until gestures are fitted per shape).
+shapes: build/template/shapes.json
+
+build/template/shapes.json build/template/shapes.png &: build/model/right.npz $(POSES) $(call src,template)
+	@$(STEP) shapes -- $(DH) template shapes build/model/right.npz --out-dir build/template
 
 build/textures/res.txt: FORCE | $(STAMP)
 	@mkdir -p build/textures

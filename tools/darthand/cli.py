@@ -202,7 +202,16 @@ def _add_template_commands(sub) -> None:
     p.add_argument("--no-correctives", dest="correctives", action="store_false", default=None, help="leave posedirs at zero")
     p.add_argument("--corrective-train", type=number(int, 1, 10 ** 6), help="poses for the corrective fit (default 3000)")
     p.add_argument("--corrective-test", type=number(int, 1, 10 ** 6), help="held-out poses for its report (default 500)")
-    p.add_argument("--seed", type=SEED, help="seed of the corrective fit's pose draws (default 0)")
+    p.add_argument("--corrective-shapes", action="store_true", default=None,
+                   help="fit the correctives over shaped hands (beta ~ N(0, I)) as well as poses")
+    p.add_argument("--shape-components", type=number(int, 0, 300), metavar="S",
+                   help="shape directions, 0 for none (default 10)")
+    p.add_argument("--shape-people", type=number(int, 1, 10 ** 6), metavar="N",
+                   help="people the shape directions are learnt from (default 2000)")
+    p.add_argument("--shape-calibration-people", type=number(int, 1, 10 ** 6), metavar="N",
+                   help="people the population is calibrated on against ANSUR II (default 500)")
+    p.add_argument("--seed", type=SEED, help="seed of the corrective fit's pose draws and of the shape population "
+                                             "(default 0)")
     p.set_defaults(run=commands.import_command)
 
     p = g.add_parser("gestures", help="pose a model through the named gestures: checks (gestures.json) and a "
@@ -213,6 +222,18 @@ def _add_template_commands(sub) -> None:
     p.add_argument("--max-between-fingers", type=COUNT, default=10,
                    help="faces where two digits may intersect before a gesture fails (default 10)")
     p.set_defaults(run=commands.gestures_command)
+
+    p = g.add_parser("shapes", help="check a model's shape space: extreme shapes at rest and through every gesture, "
+                                    "hand sizes against ANSUR II (shapes.json, shapes.png, hand_sizes.png); exit 1 "
+                                    "when a check fails")
+    p.add_argument("model", metavar="MODEL", nargs="?", default="open",
+                   help="a MANO pkl, a darthand .npz or a built-in name (default: open)")
+    p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for the report and figures")
+    p.add_argument("--magnitude", type=number(float, 0, 10, lo_open=True), default=3.0,
+                   help="|beta| of the extreme shapes (default 3)")
+    p.add_argument("--max-between-fingers", type=COUNT, default=10,
+                   help="faces where two digits may intersect before a gesture fails (default 10)")
+    p.set_defaults(run=commands.shapes_command)
 
 
 

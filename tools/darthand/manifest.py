@@ -17,6 +17,7 @@ SKIP_DIRS = {"steps", "bench"}
 # Reports that stages write and the manifest gathers whole as check results: name -> path relative to build/.
 CHECK_REPORTS = {
     "gestures": "template/gestures.json",
+    "shapes": "template/shapes.json",
     "render": "checks/report.json",
     "validate": "validate/report.json",
 }

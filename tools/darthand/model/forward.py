@@ -129,7 +129,8 @@ def shape_blend(model: HandModel, arrays: dict, betas, B: int, dtype) -> tuple[n
     if S > model.num_betas:
         raise InputError(f"betas: {S} given but the model has {model.num_betas} shape directions")
     offsets = (b @ arrays["shapedirs_T"][:S]).reshape(b.shape[0], 3, -1)
-    joints = arrays["joints"][None] + np.einsum("jv,bcv->bjc", arrays["regressor"], offsets)
+    # J = R (v_template + shapedirs beta) = J_template + (R shapedirs) beta: the joints' own small blend.
+    joints = arrays["joints"][None] + (b @ arrays["shape_joints"][:S]).reshape(b.shape[0], -1, 3)
     return arrays["v_template"][None] + offsets, joints
 
 
@@ -246,10 +247,12 @@ def _prepared(model: HandModel, dtype) -> dict:
         per_model[key] = {
             "v_template": np.ascontiguousarray(model.v_template.T, dtype=dtype),       # (3, V)
             "joints": (model.J_regressor @ model.v_template).astype(dtype),          # (16, 3)
-            "regressor": model.J_regressor.toarray().astype(dtype),                  # (16, V)
             "weights_T": np.ascontiguousarray(model.weights.T, dtype=dtype),         # (16, V)
             # (K, 3V) coordinate-major: offsets come out as (B, 3, V).
             "posedirs_T": np.ascontiguousarray(model.posedirs.transpose(2, 1, 0).reshape(-1, 3 * V), dtype=dtype),
             "shapedirs_T": np.ascontiguousarray(model.shapedirs.transpose(2, 1, 0).reshape(-1, 3 * V), dtype=dtype),
+            # (S, 16 * 3): the joints' shape directions, J_regressor applied to each of the surface's.
+            "shape_joints": np.einsum("jv,vcs->sjc", model.J_regressor.toarray(), model.shapedirs).reshape(
+                model.num_betas, 3 * model.J_regressor.shape[0]).astype(dtype),
         }
     return per_model[key]

@@ -99,6 +99,11 @@ class HandModel:
         fields.update(changes)
         return HandModel.create(source=self.meta.get("source", "model"), **fields)
 
+    def shaped(self, betas) -> "HandModel":
+        """The model of one shape, betas (S,): see `model.shape.shaped_model`."""
+        from darthand.model.shape import shaped_model
+        return shaped_model(self, betas)
+
 
 def _converted(convert, value, key: str, source: str) -> np.ndarray:
     """convert(value), with the dtype checked first: numbers (and booleans) only, so strings, objects and complex

@@ -49,10 +49,11 @@ def camera_basis(view, side: str = "right") -> np.ndarray:
 
 def render_mesh(vertices: np.ndarray, faces: np.ndarray, *, view="three_quarter", size: int = 256,
                 face_colors: np.ndarray | None = None, supersample: int = 2, margin: float = 0.06,
-                side: str = "right") -> np.ndarray:
+                side: str = "right", frame: np.ndarray | None = None) -> np.ndarray:
     """(size, size, 3) float32 linear RGB image of a mesh (V, 3), (F, 3) framed to fit, orthographic.
 
     view: a name in VIEWS or a direction (3,) from the hand toward the camera; side: see `camera_basis`.
+    frame: points (P, 3) to frame instead of the mesh (the same points for several meshes draw them at one scale).
 
     face_colors: (F, 3) linear RGB per face (default skin). Shading: ambient + Lambert from a light at the camera,
     two-sided, with interpolated vertex normals.
@@ -60,7 +61,7 @@ def render_mesh(vertices: np.ndarray, faces: np.ndarray, *, view="three_quarter"
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     basis = camera_basis(view, side)
-    cam = vertices @ basis.T                                                # (V, 3): right, up, depth
+    cam = (vertices if frame is None else np.asarray(frame, dtype=np.float64)) @ basis.T   # right, up, depth
     lo, hi = cam.min(0), cam.max(0)
     centre = 0.5 * (lo + hi)
     extent = (hi - lo)[:2].max() * (1 + 2 * margin)

@@ -49,8 +49,7 @@ def add_wrist(model: HandModel, rings: int = 4, length: float | None = None, tap
         weights=np.concatenate([model.weights, ring_weights(model, loop, anchor, rings, smooth)]),
         posedirs=np.concatenate([model.posedirs, np.zeros((rings * L,) + model.posedirs.shape[1:])]),
         J_regressor=sp.hstack([model.J_regressor, sp.csr_matrix((model.J_regressor.shape[0], rings * L))]).tocsr(),
-        # New vertices follow their loop vertex under shape change, so the forearm stays attached.
-        shapedirs=np.concatenate([model.shapedirs, np.tile(model.shapedirs[loop], (rings, 1, 1))]),
+        shapedirs=np.concatenate([model.shapedirs, ring_shapedirs(model.shapedirs[loop], axis, rings, taper)]),
     )
     if model.has_uvs:
         fields["uvs"], fields["faces_uv"] = wrist_uvs(model, ring_ids, length, radius)
@@ -105,6 +104,23 @@ def extrude_rings(loop_pts: np.ndarray, centre: np.ndarray, axis: np.ndarray, ri
         shaped = (1 - t) * rel + t * in_plane
         out.append(centre + (1 + (taper - 1) * t) * shaped + axis * (length * t))
     return np.concatenate(out)
+
+
+def ring_shapedirs(loop_dirs: np.ndarray, axis: np.ndarray, rings: int, taper: float) -> np.ndarray:
+    """(rings * L, 3, S) shape directions of the new vertices from the loop's (L, 3, S).
+
+    With the forearm axis and length held at the template's, `extrude_rings` is linear in the loop's positions
+    (the centre is their mean, the flattening a projection), so extruding the loop's shape directions with the
+    length term dropped gives directions under which a shaped hand's rings are exactly the rings extruded from its
+    shaped loop: a wider wrist widens the forearm, and the forearm stays attached and planar-ended.
+    """
+    d = np.moveaxis(loop_dirs, 2, 0)                                     # (S, L, 3)
+    centre = d.mean(axis=1, keepdims=True)
+    rel = d - centre
+    in_plane = rel - (rel @ axis)[..., None] * axis
+    out = [centre + (1 + (taper - 1) * k / rings) * ((1 - k / rings) * rel + (k / rings) * in_plane)
+           for k in range(1, rings + 1)]
+    return np.moveaxis(np.concatenate(out, axis=1), 0, 2)
 
 
 def ring_faces(ring_ids: np.ndarray) -> np.ndarray:

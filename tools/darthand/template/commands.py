@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from darthand.errors import InputError
 from darthand.template.importer import ImportParams, command_line, import_open_hand
 
 # argparse attribute -> ImportParams field, for the options `template import` accepts.
 IMPORT_OPTIONS = ("cut_distance", "hand_length", "target_vertices", "tip_tilt_deg", "nail_threshold", "weight_smoothing",
-                  "uv_resolution", "uv_padding", "correctives", "corrective_train", "corrective_test", "seed")
+                  "uv_resolution", "uv_padding", "correctives", "corrective_train", "corrective_test",
+                  "corrective_shapes", "shape_components", "shape_people", "shape_calibration_people", "seed")
 
 
 def import_command(args) -> int:
@@ -22,9 +24,12 @@ def import_command(args) -> int:
     corr_text = (f"correctives fitted (LBS->DQS mean {corr.get('lbs_mean_mm', float('nan')):.3f} -> "
                  f"{corr.get('corrected_mean_mm', float('nan')):.3f} mm)" if corr.get("fitted")
                  else f"correctives not fitted: {corr.get('reason')}")
+    shapes = fig["shape_space"]
+    shape_text = (f"{shapes['components']} shape directions ({100 * shapes['explained_variance'][shapes['components'] - 1]:.2f} "
+                  f"% of the population's variance)" if shapes["components"] else "no shape space")
     print(f"{out}/open_right.npz: {fig['vertices']} vertices, {fig['faces']} faces, wrist loop "
           f"{fig['wrist_loop_vertices']}, hand length {fig['hand_length_m'] * 100:.1f} cm, regressor error "
-          f"{fig['regressor']['max_error_mm']:.3f} mm; {corr_text}")
+          f"{fig['regressor']['max_error_mm']:.3f} mm; {shape_text}; {corr_text}")
     return 0
 
 
@@ -41,3 +46,23 @@ def gestures_command(args) -> int:
     print(f"{args.out_dir}/gestures.png: {len(report)} gestures, {len(problems)} problems, "
           f"at most {worst} faces where digits intersect")
     return 1 if problems else 0
+
+
+def shapes_command(args) -> int:
+    """`darthand template shapes [MODEL] --out-dir DIR`: shape-space checks and figures; 1 if a check fails."""
+    from darthand.model.load import load_model
+    from darthand.template.shape_checks import write_shape_checks
+
+    if not 0 < args.magnitude < 100:
+        raise InputError(f"--magnitude: must lie in (0, 100) standard deviations, got {args.magnitude}")
+    model = load_model(args.model)
+    report = write_shape_checks(model, args.out_dir, magnitude=args.magnitude,
+                                max_between_fingers=args.max_between_fingers)
+    for line in report["problems"]:
+        print(line)
+    sizes = report["hand_sizes"]
+    length, breadth = sizes["hand_length_mm"]["shapes"], sizes["hand_breadth_mm"]["shapes"]
+    print(f"{args.out_dir}/shapes.json: {model.num_betas} shape directions at +-{args.magnitude:g}, "
+          f"{len(report['problems'])} problems; beta ~ N(0, I): hand length {length['mean']:.1f} +- {length['sd']:.1f} "
+          f"mm (1-99 %: {length['p1']:.0f}-{length['p99']:.0f}), breadth {breadth['mean']:.1f} +- {breadth['sd']:.1f} mm")
+    return 1 if report["problems"] else 0

