@@ -386,14 +386,18 @@ def damaged_build(c: Case, t: Path, fx: Path, res: Result) -> Result:
 
 
 def make_tree(t: Path) -> Path:
-    """A checkout to run `make` in: the repository's sources and .venv linked, its own build/."""
+    """A checkout to run `make` in: the repository's sources and .venv linked, its own build/. The files the set-up
+    stamps depend on are copies dated 1970, so make never re-installs the shared .venv or node_modules from here."""
     tree = t / "tree"
     tree.mkdir(parents=True)
-    for name in ("Makefile", "pyproject.toml", "tools", "assets_src", "schemas", ".venv", "node_modules",
-                 "package.json", "package-lock.json"):
+    for name in ("Makefile", "tools", "assets_src", "schemas", ".venv", "node_modules"):
         if (SOURCE / name).exists():
             os.symlink((SOURCE / name).resolve() if name in (".venv", "node_modules") else SOURCE / name,
                        tree / name)
+    for name in ("pyproject.toml", "package.json", "package-lock.json"):
+        if (SOURCE / name).exists():
+            shutil.copy(SOURCE / name, tree / name)
+            os.utime(tree / name, (0, 0))
     return tree
 
 
