@@ -33,7 +33,7 @@ import numpy as np
 
 from darthand.budget import check_memory
 from darthand.errors import InputError
-from darthand.fileio import sha256_file, write_json
+from darthand.fileio import file_in, read_json, sha256_file, write_json
 from darthand.model.hand_model import HandModel
 from darthand.processes import deaf_to_ctrl_c, init_worker
 from darthand.textures import sheet as sheet_mod
@@ -135,19 +135,25 @@ def _previous_records(path: Path, res: int) -> dict:
     if not path.is_file():
         return {}
     try:
-        old = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError):
+        old = read_json(path, "texture catalogue")
+    except InputError:              # an unreadable previous catalogue: every entry is rendered again
         return {}
-    if old.get("format") != CATALOG_FORMAT or old.get("resolution") != res:
+    if not isinstance(old, dict) or old.get("format") != CATALOG_FORMAT or old.get("resolution") != res \
+            or not isinstance(old.get("entries"), list):
         return {}
-    return {r["id"]: r for r in old.get("entries", []) if isinstance(r, dict) and "id" in r}
+    return {r["id"]: r for r in old["entries"] if isinstance(r, dict) and isinstance(r.get("id"), str)}
 
 
 def _files_intact(out_dir: Path, record: dict) -> bool:
-    files = record.get("files", {})
-    if not all((out_dir / f).is_file() for f in files.values() if f):
+    """The entry's files are regular files in `out_dir` and its albedo has the recorded sha256."""
+    files = record.get("files")
+    if not isinstance(files, dict) or not isinstance(files.get("albedo"), str):
         return False
-    return sha256_file(out_dir / files["albedo"]) == record.get("sha256")
+    try:
+        paths = [file_in(out_dir, f, "texture") for f in files.values() if f]
+    except (InputError, TypeError):        # missing, or a name leading out of the folder: render it again
+        return False
+    return bool(paths) and sha256_file(out_dir / files["albedo"]) == record.get("sha256")
 
 
 # ------------------------------------------------------------------------------------------ rendering
