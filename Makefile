@@ -8,10 +8,16 @@
 
 PYTHON ?= python3
 VENV   := .venv
+# Blender as a Python module (bpy from PyPI) in its own environment: bpy 5.0 pins numpy < 2, the project uses
+# numpy 2. Tests import packages with it; `make assets` writes the .blend rigs with it.
+BLENDER_VENV  := .venv-blender
+BPY           ?= bpy==5.0.1
+BLENDER_STAMP := $(BLENDER_VENV)/.installed-stamp
 PY     := $(VENV)/bin/python
 DH     := $(VENV)/bin/darthand
 STEP    = $(PY) -m darthand.step
 STAMP  := $(VENV)/.installed-stamp
+BENCH_STAMP := $(VENV)/.bench-stamp
 NODE_STAMP := node_modules/.installed-stamp
 MANO   ?=
 RES    ?= 2048
@@ -27,11 +33,7 @@ POSES        := $(wildcard assets_src/poses/*.json)
 # A stage's outputs depend on its own code too, so editing a generator rebuilds what it made.
 src = $(wildcard tools/darthand/$(1)/*.py tools/darthand/$(1)/*/*.py)
 
-<<<<<<< HEAD
-.PHONY: assets verify-build test test-all bench usdz clean venv node FORCE
-=======
-.PHONY: assets shapes test test-all bench usdz clean venv node FORCE
->>>>>>> main
+.PHONY: assets verify-build shapes test test-all bench usdz clean venv node blender FORCE
 .DEFAULT_GOAL := assets
 
 # ------------------------------------------------------------------ set-up
@@ -40,6 +42,12 @@ $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	@$(PY) -m pip install -q --disable-pip-version-check --upgrade pip
 	@$(PY) -m pip install -q --disable-pip-version-check -e '.[test]'
+	@touch $@
+
+blender: $(BLENDER_STAMP)
+$(BLENDER_STAMP): Makefile
+	@test -x $(BLENDER_VENV)/bin/python || $(PYTHON) -m venv $(BLENDER_VENV)
+	@$(BLENDER_VENV)/bin/python -m pip install -q --disable-pip-version-check '$(BPY)'
 	@touch $@
 
 node: $(NODE_STAMP)
@@ -94,6 +102,10 @@ build/gltf/$(1).glb: build/model/$(1).npz build/textures/catalog.json $(call src
 build/gltf/$(1)/$(1).gltf: build/model/$(1).npz build/textures/catalog.json $(call src,export)
 	@$$(STEP) gltf-variants-$(1) -- $$(DH) export gltf build/model/$(1).npz --out $$@ \
 	    --textures build/textures/catalog.json --all-textures
+
+# Blender-native rig: correctives driven by the bones (USD and glTF keep baked gesture animations).
+build/blender/$(1).blend: build/model/$(1).npz build/textures/catalog.json $(call src,export) $(BLENDER_STAMP)
+	@$$(STEP) blend-$(1) -- $$(DH) export blend build/model/$(1).npz --out $$@ --textures build/textures/catalog.json
 endef
 $(foreach s,right left,$(eval $(call side_rules,$(s))))
 
@@ -107,7 +119,8 @@ build/validate/report.json: $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/
 
 ASSETS := build/model/right.npz build/template/gestures.json build/textures/catalog.json \
           build/accessories/catalog.json \
-          $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb build/gltf/$(s)/$(s).gltf) \
+          $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb build/gltf/$(s)/$(s).gltf \
+                               build/blender/$(s).blend) \
           build/checks/report.json build/validate/report.json
 
 build/manifest.json: $(ASSETS)
@@ -130,13 +143,19 @@ usdz: build/usd/right/right.usda
 # Two pytest workers, each with single-threaded BLAS: threaded BLAS in both workers oversubscribes two cores.
 TEST_ENV := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
-test: $(STAMP) $(NODE_STAMP)
+test: $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP)
 	@$(TEST_ENV) $(PY) -m pytest -q -m "not slow" -n 2 $(PYTEST_ARGS)
 
-test-all: $(STAMP) $(NODE_STAMP)
+test-all: $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP)
 	@$(TEST_ENV) $(PY) -m pytest -q -n 2 $(PYTEST_ARGS)
 
-bench: $(STAMP) $(NODE_STAMP) build/model/right.npz
+# The benchmarks' own dependencies (the bench extra: Mitsuba, the path-traced reference); without them the
+# render_reference benchmark reports itself skipped.
+$(BENCH_STAMP): pyproject.toml | $(STAMP)
+	@$(PY) -m pip install -q --disable-pip-version-check -e '.[test,bench]' && touch $@ \
+	 || echo "bench extra not installed: the render_reference benchmark will be skipped"
+
+bench: $(STAMP) $(BENCH_STAMP) $(NODE_STAMP) build/model/right.npz
 	@$(PY) -m darthand.bench --out build/bench
 
 clean:

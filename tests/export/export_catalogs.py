@@ -16,7 +16,7 @@ import jsonschema
 import numpy as np
 import OpenImageIO as oiio
 
-from darthand.export.common import Accessory
+from darthand.accessories.loader import Accessory
 from darthand.fileio import sha256_file
 
 SCHEMAS = Path(__file__).resolve().parents[2] / "schemas"

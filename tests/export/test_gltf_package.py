@@ -25,7 +25,8 @@ from test_gltf_reference import (GltfFile, global_matrices, posed_mesh, sample_a
 
 from darthand.errors import InputError  # noqa: E402
 from darthand.export import commands_gltf  # noqa: E402
-from darthand.export.common import Accessory, TextureSet, load_accessory_catalog, load_texture_catalog  # noqa: E402
+from darthand.accessories.loader import Accessory, load_accessory_catalog  # noqa: E402
+from darthand.textures.loader import TextureSet, load_texture_catalog  # noqa: E402
 from darthand.export.gltf_export import GltfOptions, export_gltf  # noqa: E402
 from darthand.export.gltf_validator import ValidatorUnavailable, validate  # noqa: E402
 from darthand.model.anatomy import sample_poses  # noqa: E402
@@ -177,7 +178,7 @@ def test_gltf_package_references_images_relatively(model, textures, tmp_path):
     # the geometry is the same as in a .glb of the same hand
     names, poses = gestures(model)
     ids = f.attr(f.doc.meshes[0].primitives[0], "_VERTEX_ID")[:, 0].astype(int)
-    np.testing.assert_allclose(posed_mesh(f, "right_hand", names[1], 1.0), forward(model, poses[1]).vertices[0][ids],
+    np.testing.assert_allclose(posed_mesh(f, "RightHand", names[1], 1.0), forward(model, poses[1]).vertices[0][ids],
                                atol=1e-5)
 
 
@@ -256,7 +257,7 @@ def test_rigid_accessory_follows_its_joint_and_glove_follows_the_skin(model, tmp
     validated(out)
     assert result.accessories == ["ring", "glove"]
     f = GltfFile(out)
-    ring_node = f.node_index("ring")
+    ring_node = f.node_index("Right_ring")
     assert ring_node in f.doc.nodes[f.node_index(JOINT_NAMES[4])].children
     posed = forward(model, poses)
     feature = pose_feature(posed.rotations)
@@ -271,7 +272,7 @@ def test_rigid_accessory_follows_its_joint_and_glove_follows_the_skin(model, tmp
         assert d.max() <= 1e-5 and len(got) >= len(truth)
         # glove: LBS of its own vertices with its weights and its correctives
         if correctives == "full":
-            node = f.node_index("glove")
+            node = f.node_index("Right_glove")
             v = glove.vertices + np.einsum("vck,k->vc", glove.posedirs, feature[i])
             T = np.einsum("vj,jab->vab", glove.weights, posed.transforms[i])
             truth = np.einsum("vab,vb->va", T[:, :3, :3], v) + T[:, :3, 3]
@@ -301,8 +302,9 @@ def test_accessory_catalog_round_trip(model, tmp_path):
     f = GltfFile(out)
     by_name = {m.name: m.pbrMetallicRoughness for m in f.doc.materials}
     # textured channels carry factor 1 (glTF multiplies), untextured ones the material's values
-    assert by_name["ring_a"].baseColorFactor == [1, 1, 1, 1] and by_name["ring_a"].metallicFactor == 1
-    assert by_name["glove_b"].baseColorFactor == [0.1, 0.1, 0.1, 1] and by_name["glove_b"].roughnessFactor == 0.8
+    ring, glove = by_name["Right_ring_a_material"], by_name["Right_glove_b_material"]
+    assert ring.baseColorFactor == [1, 1, 1, 1] and ring.metallicFactor == 1
+    assert glove.baseColorFactor == [0.1, 0.1, 0.1, 1] and glove.roughnessFactor == 0.8
     with pytest.raises(InputError, match="nope"):
         load_accessory_catalog(catalog, ["nope"])
     doc = json.loads(catalog.read_text())
@@ -346,7 +348,7 @@ def gltf_args(**options) -> argparse.Namespace:
     must give model and out)."""
     return argparse.Namespace(**{"textures": None, "texture": None,
                                  "all_textures": False, "texture_size": None, "accessories": None, "accessory": None,
-                                 "influences": "4", "correctives": "full", "clip_keys": 5, "validate": False,
+                                 "influences": "4", "correctives": "full", "validate": False,
                                  **options})
 
 
@@ -360,10 +362,10 @@ def test_command_writes_and_validates(model, textures, tmp_path, capsys):
                                         all_textures=True, correctives="pca:8", influences="8", validate=True))
     printed = capsys.readouterr().out
     assert code == 0 and "0 errors" in printed
-    assert "8 influences" in printed and "8 morph targets (pca:8)" in printed and "3 textures" in printed
+    assert "8 influences" in printed and "16 morph targets (pca:8)" in printed and "3 textures" in printed
     doc = json.loads(out.read_text())
     assert len(doc["extensions"]["KHR_materials_variants"]["variants"]) == 3
-    assert all(len(p["targets"]) == 8 for m in doc["meshes"] for p in m["primitives"] if "targets" in p)
+    assert all(len(p["targets"]) == 16 for m in doc["meshes"] for p in m["primitives"] if "targets" in p)
     assert (out.parent / "right.bin").is_file() and len(list((out.parent / "textures").glob("*.png"))) == 3
 
 

@@ -24,7 +24,7 @@ from darthand.model.forward import forward  # noqa: E402
 from darthand.model.wrist import add_wrist  # noqa: E402
 
 TOL = 1e-5  # metres
-MESH = "right_hand"
+MESH = "RightHand"
 
 
 @pytest.fixture(scope="module")
@@ -76,19 +76,17 @@ def test_all_influences_and_full_correctives_match_the_rig(model, tmp_path):
     assert f.attr(prim, "JOINTS_3") is not None and f.attr(prim, "JOINTS_4") is None
     truth = forward(model, poses).vertices
     assert max_error(engine, ids, truth, names) <= TOL
-    assert report.morph_targets == 135 and report.influence_slots == 16
+    assert report.morph_targets == 225 and report.influence_slots == 16
 
 
-def test_clip_in_between_keys_are_partial_gestures(model, tmp_path):
+def test_clips_hold_their_gesture_at_every_time(model, tmp_path):
+    """Looping playback shows the gesture: the start, the middle and the end of each clip are the gesture."""
     names, poses = gestures(model, n=2)
     out = tmp_path / "clip.glb"
-    export_gltf(model, out, options=GltfOptions(influences=None, clip_keys=5, clip_seconds=2.0),
-                gestures=(names, poses))
-    engine, ids, _ = engine_vertices(out, names, t=1.0)   # key 2 of 5: half the pose
-    assert max_error(engine, ids, forward(model, 0.5 * poses).vertices, names) <= TOL
-    rest, ids, _ = engine_vertices(out, names, t=0.0)
-    assert max_error(rest, ids, np.broadcast_to(model.v_template, (len(names),) + model.v_template.shape),
-                     names) <= TOL
+    export_gltf(model, out, options=GltfOptions(influences=None, clip_seconds=2.0), gestures=(names, poses))
+    for t in (0.0, 0.7, 2.0):
+        engine, ids, _ = engine_vertices(out, names, t=t)
+        assert max_error(engine, ids, forward(model, poses).vertices, names) <= TOL
 
 
 def test_eight_influences_are_exact_when_the_hand_needs_at_most_eight(model, tmp_path):
@@ -118,14 +116,14 @@ def test_pca_correctives_are_the_rank_k_projection(model, tmp_path, k):
     out = tmp_path / f"pca{k}.glb"
     report = export_gltf(model, out, options=GltfOptions(influences=None, correctives=f"pca:{k}"),
                          gestures=(names, poses))
-    assert report.morph_targets == k
+    assert report.morph_targets == 2 * k                 # a positive and a negative shape per direction
     V = model.num_vertices
     A = model.posedirs.reshape(3 * V, 135)
     U = np.linalg.svd(A, full_matrices=False)[0][:, :k]
     compressed = model.replace(posedirs=(U @ (U.T @ A)).reshape(V, 3, 135))
     engine, ids, f = engine_vertices(out, names)
     assert max_error(engine, ids, forward(compressed, poses).vertices, names) <= TOL
-    assert len(f.doc.meshes[0].extras["targetNames"]) == k
+    assert len(f.doc.meshes[0].extras["targetNames"]) == 2 * k
 
 
 def test_pose_pca_correctives_are_the_pose_weighted_rank_k_projection(model, tmp_path):
@@ -135,14 +133,14 @@ def test_pose_pca_correctives_are_the_pose_weighted_rank_k_projection(model, tmp
     F^T F = Q diag(lambda) Q^T. The engine's result is forward with posedirs U U^T A."""
     from scipy.spatial.transform import Rotation
 
-    from darthand.export.common import POSE_PCA_SAMPLES, POSE_PCA_SEED
+    from darthand.export.correctives import POSE_PCA_SAMPLES, POSE_PCA_SEED
 
     k = 8
     names, poses = gestures(model)
     out = tmp_path / "pose_pca.glb"
     report = export_gltf(model, out, options=GltfOptions(influences=None, correctives=f"pose-pca:{k}"),
                          gestures=(names, poses))
-    assert report.morph_targets == k and report.correctives == f"pose-pca:{k}"
+    assert report.morph_targets == 2 * k and report.correctives == f"pose-pca:{k}"
     sample = sample_poses(model, POSE_PCA_SAMPLES, np.random.default_rng(POSE_PCA_SEED))
     R = Rotation.from_rotvec(sample.reshape(-1, 3)).as_matrix().reshape(len(sample), 16, 3, 3)
     F = (R[:, 1:] - np.eye(3)).reshape(len(sample), 135)
@@ -153,7 +151,7 @@ def test_pose_pca_correctives_are_the_pose_weighted_rank_k_projection(model, tmp
     compressed = model.replace(posedirs=(U @ (U.T @ A)).reshape(V, 3, 135))
     engine, ids, f = engine_vertices(out, names)
     assert max_error(engine, ids, forward(compressed, poses).vertices, names) <= TOL
-    assert len(f.doc.meshes[0].extras["targetNames"]) == k
+    assert len(f.doc.meshes[0].extras["targetNames"]) == 2 * k
     # a different subspace from pca:K's, so the comparison above tells them apart
     U_pca = np.linalg.svd(A, full_matrices=False)[0][:, :k]
     pca = model.replace(posedirs=(U_pca @ (U_pca.T @ A)).reshape(V, 3, 135))
@@ -202,7 +200,7 @@ def test_trimesh_reads_the_rest_geometry(model, tmp_path):
     out = tmp_path / "tm.glb"
     export_gltf(model, out, gestures=([], np.zeros((0, 48))))
     scene = trimesh.load(out, process=False)
-    geom = scene.geometry[MESH]
+    geom = scene.geometry[f"{MESH}Mesh"]
     f = GltfFile(out)
     ids = f.attr(f.doc.meshes[0].primitives[0], "_VERTEX_ID")[:, 0].astype(int)
     np.testing.assert_allclose(geom.vertices, model.v_template[ids], atol=1e-7)
@@ -219,7 +217,7 @@ def test_left_hand_matches_its_rig(model, tmp_path):
     out = tmp_path / "left.glb"
     export_gltf(left, out, options=GltfOptions(influences=None), gestures=(names, mirror_pose(poses)))
     f = GltfFile(out)
-    node = "left_hand"
+    node = "LeftHand"
     ids = f.attr(f.doc.meshes[0].primitives[0], "_VERTEX_ID")[:, 0].astype(int)
     truth = forward(left, mirror_pose(poses)).vertices
     end = f.accessor(f.doc.animations[0].samplers[0].input)[-1, 0]
@@ -255,7 +253,10 @@ def test_local_correctives_are_stored_sparse_and_stay_exact(model, tmp_path):
     targets = f.doc.meshes[0].primitives[0].targets
     accessors = [f.doc.accessors[t["POSITION"] if isinstance(t, dict) else t.POSITION] for t in targets]
     assert all(a.bufferView is None for a in accessors)
-    assert accessors[7].sparse is None and all(a.sparse is not None for i, a in enumerate(accessors) if i != 7)
+    names7 = {"pose_index1_r21_pos", "pose_index1_r21_neg"}                      # channel 7's two shapes
+    zero = [i for i, n in enumerate(f.doc.meshes[0].extras["targetNames"]) if n in names7]
+    assert len(zero) == 2 and all(accessors[i].sparse is None for i in zero)
+    assert all(a.sparse is not None for i, a in enumerate(accessors) if i not in zero)
     assert max_error(engine, ids, forward(local, poses).vertices, names) <= TOL
 
 

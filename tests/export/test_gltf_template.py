@@ -16,7 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from test_gltf_reference import GltfFile, posed_mesh  # noqa: E402
 
-from darthand.export.common import gesture_poses  # noqa: E402
+from darthand.export.gestures import gesture_poses  # noqa: E402
 from darthand.export.gltf_export import GltfOptions, export_gltf  # noqa: E402
 from darthand.model.anatomy import sample_poses  # noqa: E402
 from darthand.model.forward import forward  # noqa: E402
@@ -44,7 +44,7 @@ def test_open_hand_all_influences_match_the_rig_for_every_gesture(hand, tmp_path
     ids = f.attr(f.doc.meshes[0].primitives[0], "_VERTEX_ID")[:, 0].astype(int)
     end = f.accessor(f.doc.animations[0].samplers[0].input)[-1, 0]
     truth = forward(hand, poses).vertices
-    errors = [np.linalg.norm(posed_mesh(f, "right_hand", n, end) - truth[i][ids], axis=1).max()
+    errors = [np.linalg.norm(posed_mesh(f, "RightHand", n, end) - truth[i][ids], axis=1).max()
               for i, n in enumerate(names)]
     print(f"open hand, all influences: max engine-vs-rig error {max(errors):.3g} m over {len(names)} poses")
     assert max(errors) <= 1e-5
@@ -65,13 +65,13 @@ def test_open_hand_default_asset_validates(hand, tmp_path):
 def test_open_hand_in_three_js_matches_the_rig_with_four_influences(hand, tmp_path):
     if shutil.which("node") is None:
         pytest.skip("node is not installed on this machine: three.js cannot run")
-    from darthand.export.common import pruned_model
+    from darthand.export.influences import pruned_model
     from darthand.export.gltf_engines import three_poses
 
     names, poses = gesture_poses(hand)
     out = tmp_path / "right.glb"
     report = export_gltf(hand, out, gestures=(names, poses))
-    engine = three_poses(out, "right_hand")
+    engine = three_poses(out, "RightHand")
     truth = forward(pruned_model(hand, 4), poses).vertices
     ids = engine.vertex_ids
     error = max(np.linalg.norm(engine.poses[n] - truth[i][ids], axis=1).max() for i, n in enumerate(names))

@@ -38,7 +38,7 @@ def test_three_js_poses_the_default_asset_like_the_rig(tmp_path, correctives):
     poses = sample_poses(model, 3, np.random.default_rng(2), include_root=True)
     out = tmp_path / "hand.glb"
     export_gltf(model, out, gestures=(names, poses), options=GltfOptions(correctives=correctives))
-    engine = three_poses(out, "right_hand")
+    engine = three_poses(out, "RightHand")
     ids = engine.vertex_ids
     assert ids is not None and set(ids) == set(np.unique(model.faces))
     np.testing.assert_allclose(engine.rest, model.v_template[ids], atol=1e-7)

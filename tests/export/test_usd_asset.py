@@ -15,7 +15,8 @@ from synthetic import tube_hand
 
 from darthand.errors import InputError
 from darthand.export import commands_usd
-from darthand.export.common import Accessory, TextureSet
+from darthand.accessories.loader import Accessory
+from darthand.textures.loader import TextureSet
 from darthand.export.usd_asset import ExportOptions, export_usd
 from darthand.export.usd_evaluate import skinned_points
 from darthand.export.usd_validate import errors, select_variants, validate_file, validate_stage, validate_variants
@@ -92,17 +93,18 @@ def test_interface_layer_follows_the_asset_structure(package):
     out, info = package
     stage = Usd.Stage.Open(str(out / "right.usda"), Usd.Stage.LoadNone)
     prim = stage.GetDefaultPrim()
-    assert prim.GetPath() == Sdf.Path("/Hand") and prim.GetTypeName() == "SkelRoot"
+    assert prim.GetPath() == Sdf.Path("/RightHand") and prim.GetTypeName() == "SkelRoot"
     assert Usd.ModelAPI(prim).GetKind() == Kind.Tokens.component
     asset_info = Usd.ModelAPI(prim).GetAssetInfo()
     assert asset_info["name"] == "darthand_right" and asset_info["identifier"].path == "./right.usda"
     assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0 and UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y
-    assert prim.HasPayload() and not stage.GetPrimAtPath("/Hand/Skel")  # contents only through the payload
+    assert prim.HasPayload() and not stage.GetPrimAtPath("/RightHand/RightHandSkeleton").IsDefined()  # payload only
     layer = stage.GetRootLayer()
-    assert [p.assetPath for p in layer.GetPrimAtPath("/Hand").payloadList.prependedItems] == ["./payload.usdc"]
+    assert [p.assetPath for p in layer.GetPrimAtPath("/RightHand").payloadList.prependedItems] == ["./payload.usdc"]
     assert stage.GetStartTimeCode() == 0 and stage.GetEndTimeCode() == 3
     vsets = prim.GetVariantSets()
-    assert vsets.GetNames() == ["texture", "accessory"]
+    assert vsets.GetNames() == ["texture", "accessory", "gesture"]
+    assert vsets.GetVariantSet("gesture").GetVariantSelection() == "all"
     assert vsets.GetVariantSet("texture").GetVariantNames() == ["skin_000", "skin_001"]
     assert vsets.GetVariantSet("texture").GetVariantSelection() == "skin_001"
     assert vsets.GetVariantSet("accessory").GetVariantNames() == ["glove_01", "none", "ring_01"]
@@ -153,18 +155,20 @@ def used_layers(stage: Usd.Stage) -> set[str]:
 def test_materials_preview_surface_and_colour_spaces(package):
     out, _ = package
     stage = open_with(out, texture="skin_000", accessory="ring_01")
-    mesh = stage.GetPrimAtPath("/Hand/Hand")
+    mesh = stage.GetPrimAtPath("/RightHand/RightHandMesh")
     material, _ = UsdShade.MaterialBindingAPI(mesh).ComputeBoundMaterial()
-    assert material.GetPath() == Sdf.Path("/Hand/Looks/Skin")
+    assert material.GetPath() == Sdf.Path("/RightHand/RightHandSkin")
     surface = material.ComputeSurfaceSource()[0]
     assert surface.GetIdAttr().Get() == "UsdPreviewSurface"
-    albedo = UsdShade.Shader(stage.GetPrimAtPath("/Hand/Looks/Skin/AlbedoTexture"))
-    rough = UsdShade.Shader(stage.GetPrimAtPath("/Hand/Looks/Skin/RoughnessTexture"))
+    albedo = UsdShade.Shader(stage.GetPrimAtPath("/RightHand/RightHandSkin/AlbedoTexture"))
+    rough = UsdShade.Shader(stage.GetPrimAtPath("/RightHand/RightHandSkin/RoughnessTexture"))
     assert albedo.GetInput("sourceColorSpace").Get() == "sRGB" and rough.GetInput("sourceColorSpace").Get() == "raw"
     resolved = Path(albedo.GetInput("file").Get().resolvedPath)
     assert resolved == out / "texture" / "skin_000" / "albedo.png" and resolved.is_file()
     assert surface.GetInput("diffuseColor").GetConnectedSources()[0][0].source.GetPath() == albedo.GetPath()
-    ring_mat, _ = UsdShade.MaterialBindingAPI(stage.GetPrimAtPath("/Hand/Accessory/Geom")).ComputeBoundMaterial()
+    ring_mat, _ = UsdShade.MaterialBindingAPI(
+        stage.GetPrimAtPath("/RightHand/RightHandAccessory/Right_ring_01")).ComputeBoundMaterial()
+    assert ring_mat.GetPath().name == "Right_ring_01_material"
     mr = UsdShade.Shader(stage.GetPrimAtPath(ring_mat.GetPath().AppendChild("MetallicRoughnessTexture")))
     assert mr.GetInput("sourceColorSpace").Get() == "raw"
     st = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st")
@@ -192,10 +196,10 @@ def test_rigid_accessory_follows_its_joint(model, package, sources, gestures):
     out, _ = package
     ring = sources[1][0]
     stage = open_with(out, accessory="ring_01")
-    binding = stage.GetPrimAtPath("/Hand/Accessory/Geom")
+    binding = stage.GetPrimAtPath("/RightHand/RightHandAccessory/Right_ring_01")
     indices = UsdSkel.BindingAPI(binding).GetJointIndicesPrimvar()
-    assert indices.GetInterpolation() == UsdGeom.Tokens.constant and list(indices.Get()) == [5]
-    points = skinned_points(stage)["/Hand/Accessory/Geom"]
+    assert indices.GetInterpolation() == UsdGeom.Tokens.vertex and set(indices.Get()) == {5}  # per point: Blender reads it
+    points = skinned_points(stage)["/RightHand/RightHandAccessory/Right_ring_01"]
     G = forward(model, gestures[1]).transforms[:, 5]                          # (B, 4, 4)
     expected = np.einsum("bij,nj->bni", G[:, :3, :3], ring.vertices) + G[:, None, :3, 3]
     assert np.linalg.norm(points - expected, axis=-1).max() < 1e-6
@@ -209,8 +213,8 @@ def test_glove_is_skinned_like_the_hand_with_its_correctives(model, package, sou
     v = glove.vertices[None] + np.einsum("nck,bk->bnc", glove.posedirs, pose_feature(posed.rotations))
     T = np.einsum("nj,bjxy->bnxy", glove.weights, posed.transforms)
     expected = np.einsum("bnxy,bny->bnx", T[..., :3, :3], v) + T[..., :3, 3]
-    assert np.linalg.norm(points["/Hand/Accessory/Geom"] - expected, axis=-1).max() < 1e-6
-    assert np.linalg.norm(points["/Hand/Hand"] - posed.vertices, axis=-1).max() < 1e-6
+    assert np.linalg.norm(points["/RightHand/RightHandAccessory/Right_glove_01"] - expected, axis=-1).max() < 1e-6
+    assert np.linalg.norm(points["/RightHand/RightHandMesh"] - posed.vertices, axis=-1).max() < 1e-6
 
 
 # ------------------------------------------------------------------------------------------------ usdz
@@ -228,9 +232,10 @@ def test_usdz_of_one_variant_combination(model, package, gestures, tmp_path):
     assert not stage.GetDefaultPrim().GetVariantSets().GetNames()
     points = skinned_points(stage)
     reference = skinned_points(open_with(out, texture="skin_000", accessory="ring_01"))
-    for path in ("/Hand/Hand", "/Hand/Accessory/Geom"):
+    for path in ("/RightHand/RightHandMesh", "/RightHand/RightHandAccessory/Right_ring_01"):
         np.testing.assert_array_equal(points[path], reference[path])
-    assert np.linalg.norm(points["/Hand/Hand"] - forward(model, gestures[1]).vertices, axis=-1).max() < 1e-6
+    err = np.linalg.norm(points["/RightHand/RightHandMesh"] - forward(model, gestures[1]).vertices, axis=-1).max()
+    assert err < 1e-6
 
 
 def test_usdz_rejects_unknown_variants(package, tmp_path):
@@ -282,7 +287,7 @@ def test_commands_export_check_and_usdz(model, tmp_path, capsys):
                               influences="8", correctives="pca:16", texture_size=None, name=None, atlas_res=2048)
     assert commands_usd.usd(args) == 0
     info = json.loads((tmp_path / "usd" / "right" / "asset.json").read_text())
-    assert info["rig"]["influences"] == 8 and info["rig"]["blend_shapes"] == 16
+    assert info["rig"]["influences"] == 8 and info["rig"]["blend_shapes"] == 32
     assert commands_usd.check(argparse.Namespace(package=str(tmp_path / "usd" / "right"), all_variants=True)) == 0
     assert "0 errors" in capsys.readouterr().out
     usdz_args = argparse.Namespace(package=str(tmp_path / "usd" / "right"), out=str(tmp_path / "h.usdz"),
@@ -304,10 +309,10 @@ def test_rewrite_is_seen_by_a_process_that_had_the_old_package_open(model, gestu
     out = tmp_path / "right"
     export_usd(model, out, gestures=gestures)
     held = Usd.Stage.Open(str(out / "right.usda"), Usd.Stage.LoadAll)        # keeps the old layers registered
-    assert len(blend_shape_names(held)) == 135
+    assert len(blend_shape_names(held)) == 225
     export_usd(model, out, gestures=gestures, options=ExportOptions(correctives="pca:8"))
-    assert len(blend_shape_names(Usd.Stage.Open(str(out / "right.usda"), Usd.Stage.LoadAll))) == 8
+    assert len(blend_shape_names(Usd.Stage.Open(str(out / "right.usda"), Usd.Stage.LoadAll))) == 16
 
 
 def blend_shape_names(stage: Usd.Stage) -> list:
-    return list(UsdSkel.BindingAPI(stage.GetPrimAtPath("/Hand/Hand")).GetBlendShapesAttr().Get() or [])
+    return list(UsdSkel.BindingAPI(stage.GetPrimAtPath("/RightHand/RightHandMesh")).GetBlendShapesAttr().Get() or [])

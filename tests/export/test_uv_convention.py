@@ -104,7 +104,7 @@ def test_usd_st_addresses_the_baked_texels(baked, tmp_path):
     model, label_map = baked
     info = export_usd(model, tmp_path / "right", gestures=(["flat"], np.zeros((1, 48))))
     stage = Usd.Stage.Open(str(tmp_path / "right" / info["interface"]), Usd.Stage.LoadAll)
-    st = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/Hand/Hand")).GetPrimvar("st")
+    st = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/RightHand/RightHandMesh")).GetPrimvar("st")
     corner_st = np.asarray(st.ComputeFlattened(), dtype=np.float64).reshape(-1, 3, 2)   # faceVarying, face order
     faces = checked_faces(model)
     got = texel_labels(label_map, corner_st[faces], flip=True)             # USD st: origin bottom-left

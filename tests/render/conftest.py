@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from render_scenes import RING_JOINT, ring_around, write_image
 
-from darthand.export.common import TextureSet
+from darthand.textures.loader import TextureSet
 from darthand.model.load import load_model
 from darthand.model.wrist import add_wrist
 from darthand.render.assets import HandAssets

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import OpenImageIO as oiio
 
-from darthand.export.common import Accessory
+from darthand.accessories.loader import Accessory
 from darthand.render.api import render_subject
 from darthand.render.camera import look_at
 from darthand.render.lights import Light, Lighting

@@ -37,7 +37,7 @@ def test_render_command_writes_image_mask_labels(hand, tmp_path, capsys):
     pose = ",".join(["0"] * 3 + ["0.3"] * 45)
     args = parser("render").parse_args(
         [str(model), "--out", str(tmp_path / "out"), "--pose", pose, "--size", "64", "--camera", "palmar",
-         "--samples", "4", "--depth", "--skin-tone-offset", "0.05"])
+         "--samples", "4", "--depth", "--skin-tone-offset", "0.05", "--ao-rays", "8", "--skin", "wrap"])
     assert commands.render(args) == 0
     assert "64x64" in capsys.readouterr().out
     for name in ("image.png", "mask.png", "labels.json", "depth.exr"):
@@ -45,6 +45,7 @@ def test_render_command_writes_image_mask_labels(hand, tmp_path, capsys):
     labels = json.loads((tmp_path / "out" / "labels.json").read_text())
     assert np.allclose(labels["mano_pose"][3:], 0.3) and labels["texture"]["id"] == "plain"
     assert labels["render"]["samples"] == 4
+    assert labels["render"]["shading"] == {"ao_rays": 8, "interreflection": True, "skin": "wrap"}
 
 
 def test_pose_argument_forms():

@@ -170,7 +170,8 @@ def faceted_frames(samples: int = 8):
     """Two flat-shaded triangles of one surface (no shared vertices: constant normals), tilted differently so a
     directional Lambert light gives each its own constant radiance, the second in front of and overlapping the
     first, plus a third triangle of a second surface (another colour) overlapping both: edge pixels mix background,
-    two triangles of one surface and two surfaces. Rendered with 'triangle' and 'sample' anti-aliasing shading."""
+    two triangles of one surface and two surfaces. Rendered with 'triangle' and 'sample' anti-aliasing shading,
+    without indirect light (interreflection between the triangles would vary across each)."""
     back = [[-0.5, -0.4, 0.0], [0.45, -0.35, 0.1], [-0.1, 0.5, 0.0]]
     front = [[-0.2, -0.5, 0.3], [0.5, 0.1, 0.3], [-0.35, 0.3, 0.5]]
     both = surface(back + front, [[0, 1, 2], [3, 4, 5]], material=flat_material((0.7, 0.5, 0.3)))
@@ -178,8 +179,8 @@ def faceted_frames(samples: int = 8):
                     material=flat_material((0.2, 0.6, 0.8)), role="accessory", name="other")
     cam = top_camera(height=2.5, size=72, fov_deg=35)
     lighting = one_light((0.3, -0.2, -1.0), intensity=1.2, shadows=False)
-    return [render(subject(both, other), cam, lighting, samples=samples, aa_shading=mode, labels=False)
-            for mode in ("triangle", "sample")], (both, other), lighting
+    return [render(subject(both, other), cam, lighting, samples=samples, aa_shading=mode, labels=False,
+                   shading={"ao_rays": 0}) for mode in ("triangle", "sample")], (both, other), lighting
 
 
 @pytest.mark.parametrize("samples", [4, 8, 16])

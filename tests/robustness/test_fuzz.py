@@ -300,7 +300,8 @@ def test_jobs_files(tmp_path_factory, data):
 @FUZZ
 @given(data=st.data(), kind=st.sampled_from(["tex", "acc"]))
 def test_catalogues(fx, tmp_path_factory, data, kind):
-    from darthand.export.common import load_accessory_catalog, load_texture_catalog
+    from darthand.accessories.loader import load_accessory_catalog
+    from darthand.textures.loader import load_texture_catalog
 
     folder = tmp_path_factory.mktemp("c") / kind
     shutil.copytree(fx / kind, folder)

@@ -106,17 +106,56 @@ def test_bake_flat_quad_positions_normals_labels_closed_form():
     assert (b.position[g, 0] >= -1e-9).all() and (b.position[g, 0] <= 0.1 + 1e-9).all()
 
 
-def test_fill_map_points_every_texel_to_its_nearest_stored_texel():
+def test_fill_map_points_every_texel_to_the_smallest_stored_block_around_it():
+    """Brute force: for every texel, the smallest aligned 2^L block (L = 0, 1, ...) holding a stored texel; its
+    row in the pyramid (level 0: the texel itself; level L >= 1: offset by the sizes of the levels below)."""
     res = 32
     rng = np.random.default_rng(0)
     texel = np.sort(rng.choice(res * res, 40, replace=False))
     fill = fill_map(texel, res)
-    rows, cols = np.divmod(np.arange(res * res), res)
-    tr, tc = np.divmod(texel, res)
-    d2 = (rows[:, None] - tr[None]) ** 2 + (cols[:, None] - tc[None]) ** 2
-    got = d2[np.arange(res * res), fill]
-    assert np.array_equal(got, d2.min(1))
-    assert np.array_equal(fill[texel], np.arange(len(texel)))
+    stored = np.zeros((res, res), bool)
+    stored.flat[texel] = True
+    sizes = [res >> L for L in range(6)]
+    for idx in range(res * res):
+        r, c = divmod(idx, res)
+        L = next(L for L in range(6) if stored[(r >> L) << L:((r >> L) + 1) << L,
+                                            (c >> L) << L:((c >> L) + 1) << L].any())
+        offset = sum(s * s for s in sizes[:L])
+        assert fill[idx] == offset + (r >> L) * sizes[L] + (c >> L), idx
+
+
+def test_padding_keeps_every_mip_block_within_its_own_stored_colours():
+    """Push-pull on the pyramid's blocks: a 2 x 2 box mipmap (what engines build from a PNG) of the padded image,
+    at every level, lies within the range of the stored texels of that block; the nearest-texel dilation it
+    replaced (scipy's distance transform here) leaves the range by tens of codes at the same blocks."""
+    from scipy import ndimage
+
+    b = fixture_bake(128)
+    res = b.res
+    colours = (np.abs(np.sin(b.face[:, None] * np.array([0.37, 0.71, 1.13]))) * 255).astype(np.uint8)
+    padded = b.image(colours).astype(float)
+    stored = np.zeros((res, res), bool)
+    stored.flat[b.texel] = True
+    full = np.zeros((res * res, 3))
+    full[b.texel] = colours
+    assert np.array_equal(padded.reshape(-1, 3)[b.texel], colours)
+    _, (r, c) = ndimage.distance_transform_edt(~stored, return_indices=True)
+    nearest = full.reshape(res, res, 3)[r, c]
+
+    def worst_excess(img):
+        lo = np.where(stored[..., None], full.reshape(res, res, 3), np.inf)
+        hi = np.where(stored[..., None], full.reshape(res, res, 3), -np.inf)
+        worst = []
+        for L in range(1, 8):
+            n = res >> L
+            img = img.reshape(n, 2, n, 2, 3).mean((1, 3))
+            lo, hi = lo.reshape(n, 2, n, 2, 3).min((1, 3)), hi.reshape(n, 2, n, 2, 3).max((1, 3))
+            has = np.isfinite(lo[..., 0])
+            worst.append(float(np.maximum(lo - img, img - hi).max(-1)[has].max()))
+        return np.array(worst)
+
+    assert (worst_excess(padded) <= 0.5).all()            # rounding to 8 bits only
+    assert worst_excess(nearest).max() > 20
 
 
 def test_bake_of_fixture_labels_follow_faces_except_refined_nails():

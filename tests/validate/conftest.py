@@ -15,7 +15,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from synthetic import tube_hand  # noqa: E402
 
-from darthand.export.common import Accessory, TextureSet  # noqa: E402
+from darthand.accessories.loader import Accessory  # noqa: E402
+from darthand.textures.loader import TextureSet  # noqa: E402
 from darthand.model.topology import vertex_normals  # noqa: E402
 from darthand.model.wrist import add_wrist  # noqa: E402
 

@@ -15,9 +15,10 @@ from pathlib import Path
 import numpy as np
 from pxr import Sdf, Vt
 
-HAND, SKEL = "/Hand/Hand", "/Hand/Skel"
+ROOT = "/RightHand"
+HAND, SKEL = f"{ROOT}/RightHandMesh", f"{ROOT}/RightHandSkeleton"
 ALBEDO, ROUGH = "/Skin/AlbedoTexture", "/Skin/RoughnessTexture"
-GEOM = "/Accessory/Geom"
+GEOM = "/Accessory/Right_{}"      # an accessory's mesh in its layer, by accessory id
 COMPONENT = {5121: np.uint8, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 
@@ -107,18 +108,18 @@ def rotation_z(deg: float) -> np.ndarray:
     return np.array([[np.cos(t), -np.sin(t), 0], [np.sin(t), np.cos(t), 0], [0, 0, 1.0]])
 
 
-def rotate_matrix(layer: Sdf.Layer, prop: str, joint: int) -> None:
-    """Rotate one GfMatrix4d of an array (row-vector form: the 3x3 block is R^T)."""
+def scale_matrix(layer: Sdf.Layer, prop: str, joint: int) -> None:
+    """Scale the 3x3 block of one GfMatrix4d of an array by 1.1: no longer a rigid transform."""
     def fn(m):
         m = m.copy()
-        m[joint, :3, :3] = rotation_z(10).T @ m[joint, :3, :3]
+        m[joint, :3, :3] *= 1.1
         return m
     change(layer, prop, fn)
 
 
 def add_variant(layer: Sdf.Layer, set_name: str, new: str, like: str) -> None:
-    """A new variant `new` in `set_name` on /Hand, with the same content as variant `like`."""
-    prim = layer.GetPrimAtPath("/Hand")
+    """A new variant `new` in `set_name` on the root prim, with the same content as variant `like`."""
+    prim = layer.GetPrimAtPath(ROOT)
     vset = prim.variantSets[set_name]
     variant = Sdf.VariantSpec(vset, new)
     src = vset.variants[like].primSpec
@@ -190,7 +191,7 @@ def hand_attr(doc: dict, name: str) -> int:
 
 
 def ring_node(doc: dict) -> int:
-    return next(i for i, n in enumerate(doc["nodes"]) if n.get("name", "").startswith("ring_"))
+    return next(i for i, n in enumerate(doc["nodes"]) if n.get("name", "").startswith("Right_ring_"))
 
 
 def node_parent(doc: dict, child: int) -> int:

@@ -59,10 +59,9 @@ def negative(a):
     a[0, 0] = a[0, 0] + 0.05
 
 
-def rotate_ibm(doc, blob):
+def scale_ibm(doc, blob):
     ibm = accessor(doc, blob, doc["skins"][0]["inverseBindMatrices"]).reshape(-1, 4, 4)   # column-major
-    t = np.radians(10)
-    ibm[5, :2, :2] = [[np.cos(t), np.sin(t)], [-np.sin(t), np.cos(t)]]
+    ibm[5, :3, :3] *= 1.1                                                                   # not rigid
 
 
 def node_edit(fn):
@@ -111,18 +110,18 @@ GLB_CASES = {
     "weights-negative": ("rig.weights-negative", patch("WEIGHTS_0", negative)),
     "weights-nan": ("rig.weights-nonfinite", patch("WEIGHTS_0", set_item((0, 0), np.nan))),
     "joint-index": ("rig.joint-index", patch("JOINTS_0", set_item((0, 0), 20))),
-    "rotated-bind": ("rig.bind-transform", rotate_ibm),
-    "rotated-rest": ("rig.rest-transform", node_edit(lambda nodes: nodes[5].update(
-        rotation=[0.0, 0.0, 0.3826834, 0.9238795]))),
+    "scaled-bind": ("rig.bind-transform", scale_ibm),
+    "scaled-rest": ("rig.rest-transform", node_edit(lambda nodes: nodes[6].update(scale=[1.1, 1.1, 1.1]))),
     "bind-rest": ("rig.bind-rest-mismatch", node_edit(lambda nodes: nodes[7].update(
         translation=list(np.add(nodes[7]["translation"], [0.01, 0.0, 0.0]))))),
     "hierarchy": ("rig.hierarchy", middle_under_index),
-    "joint-names": ("rig.joint-names", node_edit(lambda nodes: nodes[0].update(name="root"))),
+    "joint-names": ("rig.joint-names", node_edit(lambda nodes: nodes[1].update(name="root"))),    # node 0: the hand
     "corrective-missing": ("rig.correctives-missing", rename_target),
     "blendshape-nan": ("rig.blendshape-nonfinite", nan_target),
     "ring-unbound": ("acc.binding", ring_to_root),
     "ring-floating": ("acc.distance", float_ring),
-    "accessory-id": ("acc.unknown-id", node_edit(lambda nodes: nodes[17].update(name="mystery_ring"))),
+    "accessory-id": ("acc.unknown-id", node_edit(lambda nodes: nodes[17].update(
+        extras={"darthand": {"accessory": "mystery_ring"}}))),
     "texture-id": ("tex.unknown-id", lambda doc, blob: doc["extensions"]["KHR_materials_variants"]["variants"][1]
                    .update(name="my_own_skin")),
     "accessor-overrun": ("file.malformed", more_positions),
@@ -173,7 +172,7 @@ GLTF_CASES = {
 
 EXPECTED_PATH = {
     "nan-point": "/meshes/0/primitives/0",
-    "rotated-bind": "/skins/0",
+    "scaled-bind": "/skins/0",
     "ring-floating": "/meshes/1/primitives/0",
     "texture-missing": "/images/0",
 }

@@ -107,13 +107,19 @@ def mano_skeleton(joints: np.ndarray) -> Skeleton:
     return Skeleton("/s", list(JOINT_NAMES), MANO_PARENTS.copy(), bind, rest)
 
 
-def test_mano_translation_skeleton_is_clean_and_rotation_is_not():
+def test_rigid_skeleton_is_clean_and_a_scaled_or_inconsistent_one_is_not():
     joints = np.random.default_rng(0).normal(scale=0.05, size=(16, 3))
     assert check_skeleton(mano_skeleton(joints)) == []
-    rotated = mano_skeleton(joints)
+    rotated = mano_skeleton(joints)          # an oriented bind is rigid, but this one no longer matches the rests
     t = np.radians(5)
     rotated.bind[3, :2, :2] = [[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]]
-    assert {f.rule for f in check_skeleton(rotated)} == {"rig.bind-transform", "rig.bind-rest-mismatch"}
+    assert {f.rule for f in check_skeleton(rotated)} == {"rig.bind-rest-mismatch"}
+    scaled = mano_skeleton(joints)
+    scaled.bind[3, :3, :3] *= 1.1
+    assert {f.rule for f in check_skeleton(scaled)} == {"rig.bind-transform", "rig.bind-rest-mismatch"}
+    mirrored = mano_skeleton(joints)         # det -1: a reflection is not a rotation
+    mirrored.bind[3, 0, 0] = -1
+    assert "rig.bind-transform" in {f.rule for f in check_skeleton(mirrored)}
 
 
 def test_weight_sum_tolerance_is_1e6():

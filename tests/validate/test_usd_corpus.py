@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from conftest import RING_ID, TEXTURE_IDS, write_png
 from corpus import (ALBEDO, GEOM, HAND, ROUGH, SKEL, add_fin, add_variant, array, change, copy_package, edit,
-                    edit_faces, remove_property, rotate_matrix, set_array, set_payload)
+                    edit_faces, remove_property, scale_matrix, set_array, set_payload)
 from pxr import Sdf
 
 from darthand.validate.asset import Limits
@@ -109,12 +109,12 @@ def drop_corrective(layer):
     rel.targetPathList.explicitItems = targets[:3] + targets[4:]
 
 
-SHAPE = f"{HAND}/pose_j01_r00"
+SHAPE = f"{HAND}/pose_index1_r00_neg"
 
 
 def no_skeleton(layer):
-    remove_property(layer, "/Hand.skel:skeleton")
-    del layer.GetPrimAtPath("/Hand").nameChildren["Skel"]
+    remove_property(layer, "/RightHand.skel:skeleton")
+    del layer.GetPrimAtPath("/RightHand").nameChildren["RightHandSkeleton"]
 
 
 def truncate(path: Path, keep: float = 0.5):
@@ -144,7 +144,7 @@ def layer_outside(pkg: Path):
     outside = pkg.parent / "elsewhere"
     outside.mkdir()
     shutil.copy(pkg / RING_LAYER, outside / "ring.usdc")
-    edit(pkg / "right.usda", lambda layer: set_payload(layer, f"/Hand{{accessory={RING_ID}}}Accessory",
+    edit(pkg / "right.usda", lambda layer: set_payload(layer, f"/RightHand{{accessory={RING_ID}}}RightHandAccessory",
                                                        str(outside / "ring.usdc")))
 
 
@@ -197,8 +197,8 @@ CASES = {
     "no-skin": ("rig.no-skin", payload(lambda layer: [remove_property(layer, f"{HAND}.primvars:skel:{p}")
                                                       for p in ("jointIndices", "jointWeights")])),
     "no-skeleton": ("rig.no-skeleton", payload(no_skeleton)),
-    "rotated-bind": ("rig.bind-transform", payload(lambda layer: rotate_matrix(layer, f"{SKEL}.bindTransforms", 5))),
-    "rotated-rest": ("rig.rest-transform", payload(lambda layer: rotate_matrix(layer, f"{SKEL}.restTransforms", 5))),
+    "scaled-bind": ("rig.bind-transform", payload(lambda layer: scale_matrix(layer, f"{SKEL}.bindTransforms", 5))),
+    "scaled-rest": ("rig.rest-transform", payload(lambda layer: scale_matrix(layer, f"{SKEL}.restTransforms", 5))),
     "bind-rest": ("rig.bind-rest-mismatch", payload(translate_bind)),
     "hierarchy": ("rig.hierarchy", payload(joints_reparented)),
     "joint-count": ("rig.joint-count", payload(lambda layer: change(layer, f"{SKEL}.joints", lambda j: j[:15]))),
@@ -230,15 +230,15 @@ CASES = {
                                                                           DEFAULT_TEX))),
     # accessories
     "ring-joint-99": ("acc.bad-joint", ring(lambda layer: set_array(
-        layer, f"{GEOM}.primvars:skel:jointIndices", np.array([99], np.int32)))),
+        layer, f"{GEOM.format(RING_ID)}.primvars:skel:jointIndices", np.array([99], np.int32)))),
     "ring-floating": ("acc.distance", ring(lambda layer: change(
-        layer, f"{GEOM}.points", lambda p: (p + [0.0, 0.11, 0.0]).astype(np.float32)))),
-    "ring-unbound": ("acc.binding", ring(lambda layer: [remove_property(layer, f"{GEOM}.primvars:skel:{p}")
+        layer, f"{GEOM.format(RING_ID)}.points", lambda p: (p + [0.0, 0.11, 0.0]).astype(np.float32)))),
+    "ring-unbound": ("acc.binding", ring(lambda layer: [remove_property(layer, f"{GEOM.format(RING_ID)}.primvars:skel:{p}")
                                                         for p in ("jointIndices", "jointWeights")])),
     "accessory-id": ("acc.unknown-id", interface(lambda layer: add_variant(layer, "accessory", "mystery_ring",
                                                                             RING_ID))),
     "glove-weights": ("rig.weights-sum", lambda pkg: edit(pkg / GLOVE_LAYER, lambda layer: change(
-        layer, f"{GEOM}.primvars:skel:jointWeights", lambda w: (w * 0.5).astype(np.float32)))),
+        layer, f"{GEOM.format('glove_01_latex')}.primvars:skel:jointWeights", lambda w: (w * 0.5).astype(np.float32)))),
     # packaging and OpenUSD's validators
     "layer-outside": ("usd.layer-outside-package", layer_outside),
     "no-meters-per-unit": ("usd.usdGeomValidators:StageMetadataChecker", interface(
@@ -246,7 +246,7 @@ CASES = {
     "no-skel-binding-api": ("usd.usdSkelValidators:SkelBindingApiAppliedValidator",
                             payload(drop_api(HAND, "SkelBindingAPI"))),
     "no-material-binding-api": ("usd.usdShadeValidators:MaterialBindingApiAppliedValidator",
-                                ring(drop_api(GEOM, "MaterialBindingAPI"))),
+                                ring(drop_api(GEOM.format(RING_ID), "MaterialBindingAPI"))),
     "texture-layer-missing": ("usd.usdValidation:CompositionErrorTest",
                               lambda pkg: (pkg / "texture" / f"{OTHER_TEX}.usda").unlink()),
     "payload-truncated": ("file.unreadable", lambda pkg: truncate(pkg / "payload.usdc")),
@@ -256,11 +256,11 @@ CASES = {
 # Where the finding must point (a prim path inside the variant it was found under), for some cases.
 EXPECTED_PATH = {
     "nan-point": HAND,
-    "ring-joint-99": f"/Hand{{accessory={RING_ID}}}Accessory/Geom",
-    "glove-weights": "/Hand{accessory=glove_01_latex}Accessory/Geom",
-    "texture-absolute": f"/Hand{{texture={OTHER_TEX}}}Looks/Skin/AlbedoTexture",
-    "albedo-raw": "/Hand/Looks/Skin/AlbedoTexture",
-    "rotated-bind": SKEL,
+    "ring-joint-99": f"/RightHand{{accessory={RING_ID}}}RightHandAccessory/Right_{RING_ID}",
+    "glove-weights": "/RightHand{accessory=glove_01_latex}RightHandAccessory/Right_glove_01_latex",
+    "texture-absolute": f"/RightHand{{texture={OTHER_TEX}}}RightHandSkin/AlbedoTexture",
+    "albedo-raw": "/RightHand/RightHandSkin/AlbedoTexture",
+    "scaled-bind": SKEL,
 }
 
 
@@ -359,5 +359,5 @@ def test_ids_are_checked_against_a_built_catalogue_beside_the_package(good_usd, 
     (build / "accessories" / "right").mkdir(parents=True)
     (build / "accessories" / "right" / "catalog.json").write_text(json.dumps({"accessories": [{"id": RING_ID}]}))
     found = {(f.rule, f.path) for f in validate_paths([pkg]).findings}
-    assert found == {("tex.unknown-id", f"/Hand{{texture={OTHER_TEX}}}"),
-                     ("acc.unknown-id", "/Hand{accessory=glove_01_latex}")}
+    assert found == {("tex.unknown-id", f"/RightHand{{texture={OTHER_TEX}}}"),
+                     ("acc.unknown-id", "/RightHand{accessory=glove_01_latex}")}

@@ -296,7 +296,7 @@ def _add_accessories_commands(sub) -> None:
 # ---------------------------------------------------------------- export
 def _add_export_commands(sub) -> None:
     from darthand.export import commands_gltf, commands_usd
-    from darthand.export.common import INFLUENCE_CHOICES
+    from darthand.export.influences import INFLUENCE_CHOICES
 
     g = _group(sub, "export", "skinned USD, usdz and glTF assets of a hand with texture and accessory variants")
     model_help = ("wrist-enhanced model: build/model/<side>.npz, a darthand .npz, a MANO pkl or a built-in name "
@@ -352,11 +352,17 @@ def _add_export_commands(sub) -> None:
     p.add_argument("--influences", default="4", choices=INFLUENCE_CHOICES,
                    help="skin influences per vertex (default 4: what real-time engines skin with)")
     p.add_argument("--correctives", default="full", metavar="MODE", help=correctives_help)
-    p.add_argument("--clip-keys", type=number(int, 1, 1000), default=5, metavar="N",
-                   help="keyframes per gesture animation, from rest to the gesture (default 5)")
     p.add_argument("--validate", action="store_true",
                    help="run the Khronos glTF validator on the result (exit 1 on errors)")
     p.set_defaults(run=commands_gltf.gltf)
+
+    p = g.add_parser("blend", help="write the Blender-native rig (.blend, through bpy in .venv-blender): bones along "
+                     "the fingers, correctives driven by the bones, gestures as pose assets")
+    p.add_argument("model", metavar="MODEL", help=model_help)
+    p.add_argument("--out", required=True, metavar="FILE.blend", help="the .blend to write")
+    p.add_argument("--textures", metavar="CATALOG", help="texture catalogue: its default albedo is packed into the "
+                   "file (default: a plain skin colour)")
+    p.set_defaults(run=commands_gltf.blend)
 
     p = g.add_parser("gltf-validate", help="run the Khronos glTF validator on .glb / .gltf files (exit 1 on errors)")
     p.add_argument("paths", nargs="+", metavar="FILE", help=".glb or .gltf files")
@@ -419,6 +425,7 @@ def _add_render_arguments(p) -> None:
     p.add_argument("--width", type=PIXELS, default=None, metavar="W", help="image width (overrides --size)")
     p.add_argument("--height", type=PIXELS, default=None, metavar="H", help="image height (overrides --size)")
     _add_antialiasing_options(p)
+    _add_shading_options(p)
     p.add_argument("--depth", action="store_true", help="also write depth.exr (camera z in metres, 0 = background)")
     p.add_argument("--keypoint-order", default="openpose", choices=("openpose", "mano"),
                    help="order of the 21 keypoints in labels.json (default openpose)")
@@ -553,6 +560,19 @@ def _add_antialiasing_options(p) -> None:
     p.add_argument("--aa-shading", default="triangle", choices=SHADING,
                    help="shade the sub-samples once per pixel per triangle, as GPU multisampling does (triangle, "
                         "default), or each one (sample: slower, exact supersampling)")
+
+
+def _add_shading_options(p) -> None:
+    from darthand.render.shade import DEFAULT_AO_RAYS, DEFAULT_SKIN, SKIN_MODELS
+
+    p.add_argument("--ao-rays", type=number(int, 0, 4096), default=DEFAULT_AO_RAYS, metavar="N",
+                   help="rays per vertex for the ambient light's occlusion and light reflected between surfaces; "
+                        f"0: ambient light reaches everything, nothing is interreflected (default {DEFAULT_AO_RAYS})")
+    p.add_argument("--no-interreflection", dest="interreflection", action="store_false",
+                   help="ambient occlusion only, without light reflected between surfaces")
+    p.add_argument("--skin", default=DEFAULT_SKIN, choices=SKIN_MODELS,
+                   help="the skin's diffuse model: subsurface scattering pre-integrated over curvature (default), "
+                        "wrap lighting (the earlier look) or lambert")
 
 
 def _add_source_options(p) -> None:

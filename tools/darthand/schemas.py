@@ -42,3 +42,15 @@ def check_schema(doc, name: str, source: str) -> None:
     where = ".".join(str(p) for p in error.absolute_path) or "(top level)"
     message = error.message if len(error.message) <= 160 else error.message[:157] + "..."
     raise InputError(f"{source}: field '{where}' {message}")
+
+
+def read_catalog(path, what: str, schema: str) -> tuple[Path, dict]:
+    """A stage's catalogue, given as its file or its folder (catalog.json inside): (the file, its contents checked
+    against schemas/<schema>); InputError naming the file and field."""
+    from darthand.fileio import read_json
+
+    path = Path(path)
+    path = path / "catalog.json" if path.is_dir() else path
+    data = read_json(path, f"{what} catalogue (build it with the {what} stage)")
+    check_schema(data, schema, str(path))
+    return path, data

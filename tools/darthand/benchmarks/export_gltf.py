@@ -3,7 +3,7 @@
 
 For each option the asset is written as .glb and measured: file size, write time, load time (pygltflib, trimesh)
 and the error it costs, a max vertex distance in metres over the gesture set plus random anatomical poses (the USD
-benchmark's `error_poses`, `common.option_errors`):
+benchmark's `error_poses`, `correctives.option_errors`):
     influences k   forward pass with weights pruned to k (renormalised) against the full weights;
     correctives    forward pass with the exported correctives (rank-K reconstruction, or none) against the model's;
     texture size   RMS and max difference (linear RGB) of the downsized albedo, scaled back up, against the source
@@ -23,7 +23,8 @@ import numpy as np
 
 from darthand.benchmarks._common import bench_model
 from darthand.benchmarks.export_usd import CORRECTIVES, RANDOM_POSES, error_poses, resampling_error
-from darthand.export.common import TextureSet, export_correctives, option_errors
+from darthand.export.correctives import export_correctives, option_errors
+from darthand.textures.loader import TextureSet
 from darthand.export.gltf_export import GltfOptions, export_gltf
 from darthand.model.forward import forward
 
@@ -55,7 +56,7 @@ def _best(fn, repeats: int) -> float:
 
 def albedo_source(tmp: Path) -> tuple[Path, str]:
     """The default catalogue albedo, or a generated 2048 px noise PNG when the textures stage has not run."""
-    from darthand.export.common import load_texture_catalog
+    from darthand.textures.loader import load_texture_catalog
 
     if TEXTURE_CATALOG.is_file():
         default = load_texture_catalog(TEXTURE_CATALOG)[0]
@@ -80,7 +81,7 @@ def albedo_source(tmp: Path) -> tuple[Path, str]:
 
 def texture_error(src: Path, size: int) -> dict:
     """What embedding the albedo downsized to `size` loses (`export_usd.resampling_error`)."""
-    from darthand.export.common import texture_bytes
+    from darthand.export.texture_files import texture_bytes
 
     with tempfile.TemporaryDirectory() as tmp:
         small = Path(tmp) / "small.png"

@@ -4,7 +4,7 @@
 Options: correctives full | pca:K | pose-pca:K (K = 8, 16, 32, 64) | none, and influences 4 | 8 | all (capped at the
 most non-zero weights any vertex has; `influences_written` is the count written). The error of an option is
 the max vertex distance (m) between `forward` on the model and `forward` on the rig the asset carries
-(`common.exported_model`), over the named gestures and random anatomical poses (`anatomy.sample_poses`, seeded).
+(`correctives.exported_model`), over the named gestures and random anatomical poses (`anatomy.sample_poses`, seeded).
 For every written option the asset is also read back and posed by UsdSkel; `usdskel_vs_rig_m` is UsdSkel's distance
 from that option's rig (the export's exactness, ~1e-7 m from float32 storage) and `usdskel_vs_full_m` its distance
 from the full rig over the gestures. Texture resolution: size and error (RMS and max, linear RGB, after resampling
@@ -24,7 +24,9 @@ import numpy as np
 from pxr import Usd
 
 from darthand.benchmarks._common import bench_model
-from darthand.export.common import export_correctives, exported_model, gesture_poses, parse_influences, rig_error
+from darthand.export.correctives import export_correctives, exported_model, rig_error
+from darthand.export.gestures import gesture_poses
+from darthand.export.influences import parse_influences
 from darthand.export.usd_asset import ExportOptions, export_usd
 from darthand.export.usd_evaluate import skinned_points
 from darthand.model.forward import forward
@@ -60,7 +62,7 @@ def option_row(model, folder: Path, correctives: str, influences: str, gestures,
                           gestures=gestures)
     stage, open_s = timed(Usd.Stage.Open, str(out / info["interface"]), Usd.Stage.LoadAll)
     points, compute_s = timed(skinned_points, stage)
-    usd_pts = points["/Hand/Hand"]
+    usd_pts = points[info["prims"]["hand"]]
     names, g = gestures
     return {
         "correctives": correctives,
@@ -68,6 +70,8 @@ def option_row(model, folder: Path, correctives: str, influences: str, gestures,
         "influences_written": info["rig"]["influences"],
         "max_error_m": rig_error(model, rig, poses),
         "payload_bytes": info["files"]["payload.usdc"],
+        "blend_shapes": info["rig"]["blend_shapes"],
+        "blend_shape_points": info["rig"]["blend_shape_points"],
         "write_s": round(write_s, 4),
         "open_s": round(open_s, 4),
         "usdskel_compute_s": round(compute_s, 4),
@@ -80,7 +84,8 @@ def texture_rows(folder: Path) -> list[dict] | str:
     """Size and resampling error of the default albedo at each TEXTURE_SIZES, or why it was skipped."""
     import OpenImageIO as oiio
 
-    from darthand.export.common import load_texture_catalog, place_texture
+    from darthand.export.texture_files import place_texture
+    from darthand.textures.loader import load_texture_catalog
 
     catalog = Path("build/textures/catalog.json")
     if not catalog.is_file():
@@ -111,8 +116,9 @@ def resampling_error(src: Path, small: Path) -> dict:
 
 def package_row(model, folder: Path) -> dict:
     """The whole package with the built catalogues (if any): write time, sizes, open time of one variant."""
-    from darthand.export.common import load_accessory_catalog, load_texture_catalog
+    from darthand.accessories.loader import load_accessory_catalog
     from darthand.export.usd_validate import select_variants
+    from darthand.textures.loader import load_texture_catalog
 
     textures = load_texture_catalog("build/textures") if Path("build/textures/catalog.json").is_file() else []
     accessories = load_accessory_catalog("build/accessories", side=model.side) \

@@ -56,7 +56,7 @@ def _link(src: Path, dst: Path) -> Path:
 
 
 def _accessories(model, ids_rigid, ids_glove):
-    from darthand.export.common import Accessory
+    from darthand.accessories.loader import Accessory
     from darthand.model.topology import vertex_normals
 
     joint = np.asarray(model.J_regressor @ model.v_template)[5]
@@ -87,7 +87,7 @@ def _timed(paths, repeats: int = REPEATS, **kwargs) -> tuple[float, float, objec
 
 def run() -> dict:
     from darthand.accessories.catalog import load_spec as accessory_spec
-    from darthand.export.common import TextureSet
+    from darthand.textures.loader import TextureSet
     from darthand.export.gltf_export import export_gltf
     from darthand.export.usd_asset import export_usd
     from darthand.textures.catalog import expand_catalog, load_spec as texture_spec

@@ -33,8 +33,12 @@ def frame_names(index: int) -> dict:
 
 
 def job_digest(job: dict, settings: dict) -> str:
-    """sha256 (hex, 16 digits) of what a frame's files depend on: the job and the render settings."""
-    key = {"job": job, **{k: settings[k] for k in ("size", "samples", "aa_shading")}}
+    """sha256 (hex, 16 digits) of what a frame's files depend on: the job and the render settings (with the
+    renderer's shading defaults: frames rendered before they changed are rendered again)."""
+    from darthand.render.shade import ShadingOptions
+
+    key = {"job": job, **{k: settings[k] for k in ("size", "samples", "aa_shading")},
+           "shading": ShadingOptions().to_json()}
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
 
 

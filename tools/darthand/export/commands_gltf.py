@@ -1,5 +1,5 @@
-"""The `darthand export gltf | gltf-validate` commands: each takes parsed arguments (cli.py defines them), calls the
-stage, prints a short report."""
+"""The `darthand export gltf | gltf-validate | blend` commands: each takes parsed arguments (cli.py defines them),
+calls the stage, prints a short report."""
 
 from __future__ import annotations
 
@@ -8,12 +8,14 @@ import sys
 from pathlib import Path
 
 from darthand.errors import InputError
-from darthand.export.common import load_accessory_catalog, load_texture_catalog, parse_influences, select_textures
+from darthand.accessories.loader import load_accessory_catalog
+from darthand.export.influences import parse_influences
+from darthand.textures.loader import load_texture_catalog, select_textures
 
 
 def gltf(args) -> int:
     """`darthand export gltf MODEL --out OUT.glb|OUT.gltf [--textures T [--texture ID ...] [--all-textures]]
-    [--texture-size N] [--accessories A [--accessory ID ...]] [--influences K] [--correctives C] [--clip-keys N]
+    [--texture-size N] [--accessories A [--accessory ID ...]] [--influences K] [--correctives C]
     [--validate]`; prints a one-line summary. Exit 1 if --validate found errors."""
     from darthand.export.gltf_export import GltfOptions, export_gltf
     from darthand.model.load import load_model
@@ -28,7 +30,7 @@ def gltf(args) -> int:
     accessories = load_accessory_catalog(args.accessories, args.accessory, side=model.side) \
         if args.accessories else []
     options = GltfOptions(influences=parse_influences(args.influences), correctives=args.correctives,
-                          texture_size=args.texture_size, clip_keys=args.clip_keys)
+                          texture_size=args.texture_size)
     r = export_gltf(model, args.out, options=options, textures=textures, accessories=accessories)
     size = sum(Path(f).stat().st_size for f in r.files if Path(f).is_file())
     print(f"{args.out}: {model.side} hand, {r.vertices} glTF vertices ({r.model_vertices} model), "
@@ -40,6 +42,19 @@ def gltf(args) -> int:
     report = _validate(Path(args.out))
     print(f"Khronos glTF validator: {report.summary()}")
     return 1 if report.errors else 0
+
+
+def blend(args) -> int:
+    """`darthand export blend MODEL --out FILE.blend [--textures T]`: the Blender-native rig."""
+    from darthand.export.blender_rig import export_blend
+    from darthand.model.load import load_model
+
+    model = load_model(args.model)
+    texture = load_texture_catalog(args.textures)[0].albedo if args.textures else None
+    info = export_blend(model, args.out, texture=texture)
+    print(f"{args.out}: {model.side} hand, {info['shape_keys']} bone-driven corrective shape keys, "
+          f"{len(info['gestures'])} gesture actions, {info['bytes'] / 1e6:.1f} MB")
+    return 0
 
 
 def validate(args) -> int:

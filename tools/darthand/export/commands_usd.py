@@ -5,11 +5,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from darthand.export.common import load_accessory_catalog, load_texture_catalog, parse_influences
+from darthand.accessories.loader import load_accessory_catalog
+from darthand.export.influences import parse_influences
 from darthand.export.usd_asset import ExportOptions, export_usd
 from darthand.export.usd_validate import errors, validate_file, validate_variants
 from darthand.export.usdz import export_usdz, interface_layer
 from darthand.model.load import load_model
+from darthand.textures.loader import load_texture_catalog
 
 
 def usd(args) -> int:

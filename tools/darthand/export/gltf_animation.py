@@ -1,10 +1,10 @@
-"""Gestures as glTF animations: a short clip from the rest pose to the gesture, one per gesture.
+"""Gestures as glTF animations: one clip per gesture that holds the gesture for its whole length.
 
-Each clip has `keys` keyframes at t = 0 .. duration. Keyframe k holds the pose s_k * pose (s_k = k / (keys - 1)) as
-joint rotations (rotation channels of all 16 joint nodes; glTF slerps between keys, and since s * axis-angle is the
-slerp of the identity and the full rotation, every in-between rotation is exact) and the corrective weights of that
-pose (a `weights` channel per corrective-carrying mesh node; linear between keys, exact at the keys). The last key is
-the gesture itself, where an engine's result equals the rig's.
+A clip has two keyframes, at t = 0 and t = duration, both the gesture: the rotation channels of the 16 joint nodes
+hold their local rotations O_parent^T R_i O_i (skeleton.py) and a `weights` channel per corrective-carrying mesh
+node holds the encoded corrective weights (in [0, 1]). An engine's default looping playback (three.js's
+AnimationMixer, Blender's timeline) therefore shows the gesture itself at every time, never a ramp from the flat
+hand, and equals the rig's pose exactly.
 """
 
 from __future__ import annotations
@@ -12,25 +12,19 @@ from __future__ import annotations
 import numpy as np
 import pygltflib as gl
 
-from darthand.export.common import Correctives, xyzw_quaternions
+from darthand.export.correctives import Correctives
 from darthand.export.gltf_document import GltfDocument
-from darthand.model.layout import NUM_JOINTS
-from darthand.model.rotations import axis_angle_to_matrix
+from darthand.export.skeleton import Skeleton
+
+KEYS = 2   # keyframes per clip, both the gesture
 
 
-def clip_poses(pose: np.ndarray, keys: int) -> np.ndarray:
-    """(keys, 16, 3) axis-angle keyframes s_k * pose from rest (s = 0) to the gesture (s = 1)."""
-    s = np.linspace(0.0, 1.0, keys) if keys > 1 else np.ones(1)
-    return s[:, None, None] * np.asarray(pose, dtype=np.float64).reshape(1, NUM_JOINTS, 3)
-
-
-def add_gesture_animation(doc: GltfDocument, name: str, pose: np.ndarray, joint_nodes: list[int],
+def add_gesture_animation(doc: GltfDocument, name: str, pose: np.ndarray, skeleton: Skeleton, joint_nodes: list[int],
                           morph_nodes: list[int], correctives: Correctives, times: int) -> int:
-    """An animation named `name` for one gesture pose (48,); `times` is the accessor of the key times (shared by
-    all gestures). Returns the animation index."""
+    """An animation named `name` holding one gesture pose (48,) (MANO axis-angle); `times` is the accessor of the key
+    times (shared by all gestures). Returns the animation index."""
     keys = doc.gltf.accessors[times].count
-    rotations = axis_angle_to_matrix(clip_poses(pose, keys))                       # (keys, 16, 3, 3)
-    quats = xyzw_quaternions(rotations).astype(np.float32)                        # (keys, 16, 4)
+    quats = np.repeat(skeleton.local_quaternions(pose).astype(np.float32), keys, axis=0)      # (keys, 16, 4)
     anim = gl.Animation(name=name)
     for j, node in enumerate(joint_nodes):
         out = doc.accessor(np.ascontiguousarray(quats[:, j]), target=None, name=f"{name}_{j}_rotation")
@@ -38,7 +32,7 @@ def add_gesture_animation(doc: GltfDocument, name: str, pose: np.ndarray, joint_
         anim.channels.append(gl.AnimationChannel(sampler=len(anim.samplers) - 1,
                                                  target=gl.AnimationChannelTarget(node=node, path="rotation")))
     if correctives.count and morph_nodes:
-        weights = correctives.weights(rotations).astype(np.float32).reshape(-1)    # keys x K, key-major
+        weights = np.repeat(correctives.weights_of_poses(pose).astype(np.float32), keys, axis=0).reshape(-1)
         out = doc.accessor(weights, target=None, name=f"{name}_weights")
         anim.samplers.append(gl.AnimationSampler(input=times, output=out, interpolation=gl.ANIM_LINEAR))
         for node in morph_nodes:
@@ -47,7 +41,7 @@ def add_gesture_animation(doc: GltfDocument, name: str, pose: np.ndarray, joint_
     return doc.add("animations", anim)
 
 
-def add_key_times(doc: GltfDocument, keys: int, duration: float) -> int:
-    """The shared input accessor: `keys` times evenly spaced over [0, duration] seconds."""
-    t = np.linspace(0.0, duration, keys) if keys > 1 else np.array([duration])
-    return doc.accessor(t.astype(np.float32), target=None, minmax=True, name="gesture_key_times")
+def add_key_times(doc: GltfDocument, duration: float) -> int:
+    """The shared input accessor: KEYS times evenly spaced over [0, duration] seconds."""
+    return doc.accessor(np.linspace(0.0, duration, KEYS).astype(np.float32), target=None, minmax=True,
+                        name="gesture_key_times")

@@ -1,13 +1,16 @@
 """glTF 2.0 export of a hand model: `export_gltf(model, out, ...)` writes a .glb or a .gltf package.
 
 What one file holds (see gltf_rig, gltf_materials, gltf_animation, gltf_accessories for each part):
-    - the joint nodes (MANO order and names) and one skin with inverse bind matrices T(-J_i);
-    - the hand mesh, split along UV seams, with JOINTS_n/WEIGHTS_n (4 influences by default), its pose correctives
-      as morph targets (`full`: 135, `pca:K` / `pose-pca:K`: K, `none`; common.export_correctives, the same
-      correctives as the USD export) and the source vertex of every glTF vertex (_VERTEX_ID);
+    - the root node `<Side>Hand` drawing the hand mesh `<Side>HandMesh` with the skin `<Side>HandSkeleton`, and
+      under it the joint nodes (MANO order and names) with oriented bone frames (+Y along the bone);
+    - the hand mesh: primitive 0 the hand, split along UV seams, with JOINTS_n/WEIGHTS_n (4 influences by
+      default), its pose correctives as morph targets with weights in [0, 1] (correctives.export_correctives and
+      blendshapes.py, the same as the USD export) and the source vertex of every glTF vertex (_VERTEX_ID);
+      primitive 1 the forearm cap (model/cap.py), skinned, with the same morph targets;
     - a PBR skin material per texture variant, switched with KHR_materials_variants;
-    - one animation per gesture (joint rotations + morph weights), from rest to the gesture;
-    - accessories: rigid ones under their joint node, gloves skinned by the same skin.
+    - one animation per gesture (joint rotations + morph weights) holding the gesture for its whole length;
+    - accessories: rigid ones under their joint node, gloves skinned by the same skin;
+    - asset.extras.darthand: side, options, conventions (frame, origin, bones), the blend-shape encoding table.
 
 `.glb` embeds everything (images in the binary chunk): the single-file asset. `.gltf` writes `<stem>.bin` and the
 images under `textures/` beside it with relative URIs: the variants package, where each loader fetches only the
@@ -16,23 +19,31 @@ images of the variant it shows.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import pygltflib as gl
 
 from darthand.errors import InputError
-from darthand.export.common import (Accessory, Correctives, TextureSet, check_accessory, check_export_options,
-                                    check_textures_fit, export_correctives, gesture_poses, option_errors)
+from darthand.accessories.loader import Accessory, check_accessory
+from darthand.export.conventions import asset_conventions
+from darthand.export.correctives import Correctives, channel_offsets, export_correctives, option_errors
+from darthand.export.gestures import gesture_poses
 from darthand.export.gltf_accessories import add_accessory
 from darthand.export.gltf_animation import add_gesture_animation, add_key_times
 from darthand.export.gltf_document import GltfDocument
 from darthand.export.gltf_materials import MaterialBuilder, add_variants, variant_mappings
-from darthand.export.gltf_rig import (add_skeleton, add_skin, add_skinned_node, add_surface_mesh, hand_surface,
-                                      influence_count)
-from darthand.model.anatomy import rest_joints
+from darthand.export.gltf_rig import (add_skeleton, add_skin, add_surface_mesh, hand_surface, influence_count,
+                                      split_surface, surface_primitive)
+from darthand.export.options import check_export_options
+from darthand.export.skeleton import Skeleton, export_skeleton
+from darthand.export.texture_files import check_textures_fit
+from darthand.model.cap import forearm_cap
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import JOINT_NAMES, NUM_JOINTS
+from darthand.textures.loader import TextureSet
 
 
 @dataclass(frozen=True)
@@ -40,21 +51,20 @@ class GltfOptions:
     """What the exported asset models.
 
     influences: 4, 8 or None (all non-zero influences); correctives: 'full' | 'pca:K' | 'pose-pca:K' | 'none';
-    texture_size: downsize textures to this many pixels (longer side), None keeps them; clip_keys, clip_seconds:
-    keyframes and length of each gesture clip; vertex_ids: store each glTF vertex's model vertex (_VERTEX_ID).
+    texture_size: downsize textures to this many pixels (longer side), None keeps them; clip_seconds: length of
+    each gesture clip; vertex_ids: store each glTF vertex's model vertex (_VERTEX_ID).
     """
 
     influences: int | None = 4
     correctives: str = "full"
     texture_size: int | None = None
-    clip_keys: int = 5
     clip_seconds: float = 1.0
     vertex_ids: bool = True
 
     def check(self) -> None:
         check_export_options(self.influences, self.correctives, self.texture_size)
-        if self.clip_keys < 1 or self.clip_seconds <= 0:
-            raise InputError("clip_keys must be at least 1 and clip_seconds positive")
+        if not self.clip_seconds > 0:
+            raise InputError("clip_seconds must be positive")
 
 
 @dataclass
@@ -94,38 +104,53 @@ def export_gltf(model: HandModel, out: str | Path, *, options: GltfOptions = Glt
     names, poses = gesture_poses(model) if gestures is None else gestures
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3 * NUM_JOINTS)
     correctives = export_correctives(model, options.correctives)
-    side = name or f"{model.side}_hand"
+    prefix = model.side.capitalize()
+    root_name = name or f"{prefix}Hand"
 
     doc = GltfDocument()
-    doc.gltf.asset.extras = {"darthand": {"side": model.side, "correctives": correctives.mode,
-                                          "influences": options.influences or "all",
-                                          "model_vertices": model.num_vertices, "joint_names": list(JOINT_NAMES)}}
-    joints = rest_joints(model)
-    joint_nodes = add_skeleton(doc, model.parents, joints, JOINT_NAMES)
-    skin = add_skin(doc, joint_nodes, joints)
+    doc.gltf.asset.extras = {"darthand": {
+        "side": model.side, "correctives": correctives.mode, "influences": options.influences or "all",
+        "model_vertices": model.num_vertices, "joint_names": list(JOINT_NAMES), "gestures": list(names),
+        "conventions": asset_conventions(model), "blend_shapes": correctives.encoding.as_dict(),
+        "primitives": ["hand", "forearm_cap"]}}
+    skeleton = export_skeleton(model)
+    hand_node = doc.add("nodes", gl.Node(name=root_name))
+    doc.gltf.scenes[0].nodes.append(hand_node)
+    joint_nodes = add_skeleton(doc, skeleton, hand_node)
+    skin = add_skin(doc, joint_nodes, skeleton, name=f"{prefix}HandSkeleton")
 
     package_dir = out.parent if out.suffix.lower() == ".gltf" else None
     materials = MaterialBuilder(doc, package_dir, options.texture_size)
-    skin_materials = [materials.skin_material(t, name=f"skin_{t.id}") for t in textures] or \
-        [materials.skin_material(None)]
+    skin_materials = [materials.skin_material(t, name=f"{prefix}HandSkin_{t.id}") for t in textures] or \
+        [materials.skin_material(None, name=f"{prefix}HandSkin")]
     extensions = None
     if len(textures) > 1:
         add_variants(doc, [t.id for t in textures])
         extensions = variant_mappings(skin_materials)
 
-    surface = hand_surface(model, correctives.offsets, name=side)
+    surface = hand_surface(model, correctives.shape_offsets(), name=f"{prefix}HandMesh")
+    cap = forearm_cap(model)
+    cap_surface = split_surface(f"{prefix}ForearmCap", cap.vertices, cap.faces, cap.uvs, cap.faces_uv, cap.weights,
+                                correctives.shape_offsets(channel_offsets(cap.posedirs, correctives,
+                                                                          len(cap.vertices))))
+    # The cap's _VERTEX_ID continues after the hand's: V + cap vertex.
+    cap_surface = dataclasses.replace(cap_surface, source=cap_surface.source + model.num_vertices)
+    cap_primitive = surface_primitive(doc, cap_surface, influences=options.influences, material=skin_materials[0],
+                                      extensions=extensions, vertex_ids=options.vertex_ids)
     mesh = add_surface_mesh(doc, surface, influences=options.influences, material=skin_materials[0],
-                            target_names=correctives.names, extensions=extensions, vertex_ids=options.vertex_ids)
-    hand_node = add_skinned_node(doc, side, mesh, skin)
+                            target_names=correctives.names, extensions=extensions, vertex_ids=options.vertex_ids,
+                            more=[cap_primitive])
+    doc.gltf.nodes[hand_node].mesh, doc.gltf.nodes[hand_node].skin = mesh, skin
     morph_nodes = [hand_node] if correctives.count else []
 
     for acc in accessories:
-        node, morphs = add_accessory(doc, acc, materials=materials, joint_nodes=joint_nodes, rest_joints=joints,
-                                     skin=skin, influences=options.influences, correctives=correctives)
+        node, morphs = add_accessory(doc, acc, materials=materials, joint_nodes=joint_nodes, skeleton=skeleton,
+                                     skin=skin, influences=options.influences, correctives=correctives,
+                                     prefix=prefix)
         if morphs:
             morph_nodes.append(node)
 
-    _add_animations(doc, names, poses, joint_nodes, morph_nodes, correctives, options)
+    _add_animations(doc, names, poses, skeleton, joint_nodes, morph_nodes, correctives, options)
     written = doc.write(out) + materials.image_files
     errors = option_errors(model, correctives, options.influences, poses)
     return GltfExport(
@@ -136,12 +161,13 @@ def export_gltf(model: HandModel, out: str | Path, *, options: GltfOptions = Glt
         accessories=[a.id for a in accessories], **errors)
 
 
-def _add_animations(doc: GltfDocument, names: list[str], poses: np.ndarray, joint_nodes: list[int],
-                    morph_nodes: list[int], correctives: Correctives, options: GltfOptions) -> None:
+def _add_animations(doc: GltfDocument, names: list[str], poses: np.ndarray, skeleton: Skeleton,
+                    joint_nodes: list[int], morph_nodes: list[int], correctives: Correctives,
+                    options: GltfOptions) -> None:
     if len(names) != len(poses):
         raise InputError(f"gestures: {len(names)} names for {len(poses)} poses")
     if not len(names):
         return
-    times = add_key_times(doc, options.clip_keys, options.clip_seconds)
+    times = add_key_times(doc, options.clip_seconds)
     for gesture, pose in zip(names, poses):
-        add_gesture_animation(doc, gesture, pose, joint_nodes, morph_nodes, correctives, times)
+        add_gesture_animation(doc, gesture, pose, skeleton, joint_nodes, morph_nodes, correctives, times)

@@ -18,7 +18,8 @@ from urllib.parse import quote
 
 import pygltflib as gl
 
-from darthand.export.common import SKIN_COLOR, SKIN_ROUGHNESS, TextureSet, place_texture, texture_bytes
+from darthand.export.texture_files import place_texture, texture_bytes
+from darthand.textures.loader import SKIN_COLOR, SKIN_ROUGHNESS, TextureSet
 from darthand.export.gltf_document import GltfDocument
 
 VARIANTS_EXT = "KHR_materials_variants"
@@ -72,7 +73,8 @@ class MaterialBuilder:
                     index=self.texture(f"{textures.id}_roughness", textures.roughness, False))
             else:
                 pbr.roughnessFactor = SKIN_ROUGHNESS
-        return self.doc.add("materials", gl.Material(name=name, pbrMetallicRoughness=pbr))
+        extras = {"darthand": {"texture": textures.id}} if textures is not None else {}
+        return self.doc.add("materials", gl.Material(name=name, pbrMetallicRoughness=pbr, extras=extras))
 
     def pbr_material(self, name: str, base_color=(1.0, 1.0, 1.0, 1.0), metallic: float = 0.0,
                      roughness: float = 0.5, base_color_png: Path | None = None,

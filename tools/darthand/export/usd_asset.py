@@ -1,11 +1,14 @@
 """One self-contained USD asset package per hand, in the common asset structure.
 
     <out>/                       e.g. build/usd/right/
-      <name>.usda                interface layer: defaultPrim </Hand>, a SkelRoot of kind `component` with
-                                 assetInfo, stage metadata (metersPerUnit = 1, upAxis = Y, time codes), the
-                                 variant sets `texture` and `accessory`, and a payload to payload.usdc
-      payload.usdc               the rig: Skeleton, SkelAnimation of the gestures, the hand Mesh with its skin,
-                                 UVs, normals and pose-corrective BlendShapes, bound to </Hand/Looks/Skin>
+      <name>.usda                interface layer: defaultPrim </RightHand> (</LeftHand>), a SkelRoot of kind
+                                 `component` with assetInfo and darthand's conventions in customData, stage
+                                 metadata (metersPerUnit = 1, upAxis = Y, time codes), the variant sets `texture`,
+                                 `accessory` and `gesture`, and a payload to payload.usdc
+      payload.usdc               the rig (usd_skel.py): Skeleton with oriented joints, a SkelAnimation per gesture
+                                 and one of all gestures in turn, the hand Mesh (skin, UVs, normals, pose-corrective
+                                 BlendShapes with weights in [0, 1]) and the forearm cap Mesh, bound to the skin
+                                 material </RightHand/RightHandSkin>
       texture/<id>.usda, texture/<id>/*.png        one skin material per texture variant
       accessory/<id>.usdc, accessory/<id>/*.png    one accessory per accessory variant
       asset.json                 what was written: options, counts, gesture names by time code, error bounds
@@ -26,26 +29,30 @@ import numpy as np
 from pxr import Sdf, UsdGeom, Vt
 
 import darthand
+from darthand.accessories.loader import Accessory
 from darthand.errors import InputError
-from darthand.export.common import (Accessory, Correctives, TextureSet, check_export_options, check_textures_fit,
-                                    export_correctives, gesture_poses)
+from darthand.export.conventions import asset_conventions
+from darthand.export.correctives import Correctives, export_correctives
+from darthand.export.gestures import gesture_poses
+from darthand.export.options import check_export_options
+from darthand.export.texture_files import check_textures_fit
 from darthand.export.usd_materials import MaterialSpec, bind_material
-from darthand.export.usd_skel import SPARSE_TOL, define_rig
-from darthand.export.usd_variants import (add_accessory_variants, add_texture_variants, new_layer_stage,
-                                          skin_material, write_accessory_variant, write_texture_variant)
+from darthand.export.usd_skel import ALL_GESTURES, SPARSE_TOL, RigNames, define_rig
+from darthand.export.usd_variants import (add_accessory_variants, add_gesture_variants, add_texture_variants,
+                                          check_variant_id, new_layer_stage, skin_material, write_accessory_variant,
+                                          write_texture_variant)
 from darthand.fileio import staging_folder, write_json
 from darthand.model.hand_model import HandModel
+from darthand.textures.loader import TextureSet
 
-ROOT = Sdf.Path("/Hand")
-MATERIAL = ROOT.AppendPath("Looks/Skin")
 PLAIN_TEXTURE = "plain"  # the texture variant used when no texture catalogue is given: a constant skin colour
 
 
 @dataclass(frozen=True)
 class ExportOptions:
     """influences: joints per vertex, at most (None: as many as any vertex has non-zero weights, lossless);
-    correctives: 'full' | 'pca:K' | 'pose-pca:K' | 'none' (common.export_correctives); texture_size: downsize
-    every texture so its longer side is at most this many pixels (common.place_texture; None: link the files
+    correctives: 'full' | 'pca:K' | 'pose-pca:K' | 'none' (correctives.export_correctives); texture_size: downsize
+    every texture so its longer side is at most this many pixels (texture_files.place_texture; None: link the files
     unchanged); sparse_tol: blend-shape offsets shorter than this (metres) are left out."""
 
     influences: int | None = None
@@ -74,6 +81,11 @@ def export_usd(model: HandModel, out: str | os.PathLike, *, textures: list[Textu
     names, poses = gesture_poses(model) if gestures is None else (list(gestures[0]), np.asarray(gestures[1]))
     if len(names) != len(poses) or len(names) == 0:
         raise InputError(f"gestures: {len(names)} names for {len(poses)} poses (need at least one)")
+    _check_unique(list(names) + [ALL_GESTURES], "gesture")
+    for g in names:
+        check_variant_id(g, "gesture")
+    rig_names = RigNames.for_side(model.side)
+    root = Sdf.Path(f"/{rig_names.root}")
     check_textures_fit(model, textures)
     materials = {t.id: skin_material(t) for t in textures} or {PLAIN_TEXTURE: MaterialSpec(wrap="clamp")}
     _check_unique([t.id for t in textures], "texture")
@@ -85,27 +97,33 @@ def export_usd(model: HandModel, out: str | os.PathLike, *, textures: list[Textu
     try:
         t0 = time.perf_counter()
         correctives = export_correctives(model, options.correctives)
-        stats = write_payload(tmp / "payload.usdc", model, correctives, options, names, poses)
+        stats = write_payload(tmp / "payload.usdc", root, model, correctives, options, names, poses)
         texture_layers = {vid: write_texture_variant(tmp, vid, spec, options.texture_size)
                           for vid, spec in materials.items()}
         accessory_layers = {a.id: write_accessory_variant(tmp, a, correctives, options.influences,
-                                                          options.texture_size, options.sparse_tol)
+                                                          options.texture_size, options.sparse_tol, rig_names.prefix)
                             for a in accessories}
-        write_interface(tmp / f"{name}.usda", name, names, texture_layers, accessory_layers, default_texture)
+        write_interface(tmp / f"{name}.usda", name, root, rig_names, names, texture_layers, accessory_layers,
+                        default_texture, model)
         info = {
             "name": name,
             "side": model.side,
             "interface": f"{name}.usda",
             "payload": "payload.usdc",
-            "root_prim": str(ROOT),
+            "root_prim": str(root),
+            "prims": stats.prims,
+            "conventions": asset_conventions(model),
+            "blend_shapes": correctives.encoding.as_dict(),
             "model": {"source": model.meta.get("source"), "vertices": model.num_vertices,
                       "faces": model.num_faces, "tip_ids": model.tip_ids.tolist()},
             "options": {"influences": options.influences or "all", "correctives": options.correctives,
                         "texture_size": options.texture_size, "sparse_tol_m": options.sparse_tol},
             "rig": stats.as_dict(),
-            "gestures": {"names": names, "time_codes": list(range(len(names))),
+            "gestures": {"names": names, "time_codes": list(range(len(names))), "variant_set": "gesture",
+                         "timeline_variant": ALL_GESTURES,
                          "poses": np.asarray(poses, dtype=np.float64).round(12).tolist()},
-            "variants": {"texture": list(texture_layers), "accessory": ["none"] + list(accessory_layers)},
+            "variants": {"texture": list(texture_layers), "accessory": ["none"] + list(accessory_layers),
+                         "gesture": [ALL_GESTURES] + list(names)},
         }
         info["files"] = {p.relative_to(tmp).as_posix(): p.stat().st_size for p in sorted(tmp.rglob("*"))
                          if p.is_file()}
@@ -118,35 +136,39 @@ def export_usd(model: HandModel, out: str | os.PathLike, *, textures: list[Textu
     return {**info, "write_seconds": round(time.perf_counter() - t0, 3)}
 
 
-def write_payload(path: Path, model: HandModel, correctives: Correctives, options: ExportOptions, names: list[str],
-                  poses: np.ndarray):
-    """payload.usdc: the SkelRoot </Hand> with the rig; the mesh bound to the texture variant's material."""
-    stage = new_layer_stage(path, ROOT.name)
+def write_payload(path: Path, root: Sdf.Path, model: HandModel, correctives: Correctives, options: ExportOptions,
+                  names: list[str], poses: np.ndarray):
+    """payload.usdc: the SkelRoot `root` with the rig; the hand and the cap bound to the texture variant's material
+    (composed in by the interface's `texture` variant)."""
+    stage = new_layer_stage(path, root.name)
     _time_metadata(stage.GetRootLayer(), len(names))
-    stats = define_rig(stage, ROOT, model, correctives, names, poses, options.influences, options.sparse_tol)
-    UsdGeom.Scope.Define(stage, MATERIAL.GetParentPath())
-    bind_material(stage.GetPrimAtPath(ROOT.AppendChild("Hand")), MATERIAL)
+    stats = define_rig(stage, root, model, correctives, names, poses, options.influences, options.sparse_tol)
+    for role in ("hand", "forearm_cap"):
+        bind_material(stage.GetPrimAtPath(stats.prims[role]), Sdf.Path(stats.prims["material"]))
     stage.GetRootLayer().Save()
     return stats
 
 
-def write_interface(path: Path, name: str, gesture_names: list[str], texture_layers: dict[str, str],
-                    accessory_layers: dict[str, str], default_texture: str) -> None:
-    """The interface layer: metadata, the component root prim with assetInfo, the payload, the variant sets."""
+def write_interface(path: Path, name: str, root: Sdf.Path, rig_names: RigNames, gesture_names: list[str],
+                    texture_layers: dict[str, str], accessory_layers: dict[str, str], default_texture: str,
+                    model: HandModel) -> None:
+    """The interface layer: metadata, the component root prim with assetInfo and conventions, the payload, the
+    variant sets."""
     layer = Sdf.Layer.CreateNew(str(path))
-    layer.defaultPrim = ROOT.name
-    root = layer.pseudoRoot
-    root.SetInfo("metersPerUnit", 1.0)
-    root.SetInfo("upAxis", UsdGeom.Tokens.y)
+    layer.defaultPrim = root.name
+    layer.pseudoRoot.SetInfo("metersPerUnit", 1.0)
+    layer.pseudoRoot.SetInfo("upAxis", UsdGeom.Tokens.y)
     _time_metadata(layer, len(gesture_names))
     layer.customLayerData = {"darthand:gestures": Vt.StringArray(gesture_names)}
-    prim = Sdf.PrimSpec(layer, ROOT.name, Sdf.SpecifierDef, "SkelRoot")
+    prim = Sdf.PrimSpec(layer, root.name, Sdf.SpecifierDef, "SkelRoot")
     prim.kind = "component"
     prim.assetInfo = {"identifier": Sdf.AssetPath(f"./{path.name}"), "name": f"darthand_{name}",
                       "version": darthand.__version__}
+    prim.customData = {"darthand": {"conventions": _vt_dict(asset_conventions(model))}}
     prim.payloadList.Prepend(Sdf.Payload("./payload.usdc"))
-    add_texture_variants(layer, ROOT, texture_layers, default_texture)
-    add_accessory_variants(layer, ROOT, accessory_layers, "none")
+    add_texture_variants(layer, root, rig_names.material, texture_layers, default_texture)
+    add_accessory_variants(layer, root, rig_names.prefix, accessory_layers, "none")
+    add_gesture_variants(layer, root, rig_names, gesture_names)
     layer.Save()
 
 
@@ -177,6 +199,20 @@ def _time_metadata(layer: Sdf.Layer, count: int) -> None:
     layer.endTimeCode = max(0, count - 1)
     layer.timeCodesPerSecond = 1
     layer.framesPerSecond = 1
+
+
+def _vt_dict(d: dict) -> dict:
+    """A JSON-like dict as USD dictionary metadata (lists of strings / numbers as Vt arrays)."""
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out[k] = _vt_dict(v)
+        elif isinstance(v, (list, tuple)):
+            out[k] = Vt.StringArray([str(x) for x in v]) if any(isinstance(x, str) for x in v) else \
+                Vt.DoubleArray([float(x) for x in v])
+        else:
+            out[k] = v
+    return out
 
 
 def _check_unique(ids: list[str], what: str) -> None:

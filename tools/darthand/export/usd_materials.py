@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 from pxr import Gf, Sdf, Usd, UsdShade
 
-from darthand.export.common import SKIN_COLOR, SKIN_ROUGHNESS
+from darthand.textures.loader import SKIN_COLOR, SKIN_ROUGHNESS
 
 
 @dataclass(frozen=True)
@@ -21,7 +21,7 @@ class MaterialSpec:
 
     albedo: sRGB colour image; roughness: single-channel data map (red channel read); metallic_roughness: glTF
     layout data map (G roughness, B metallic); normal: tangent-space normal map (raw, [0, 1] -> [-1, 1]).
-    The constants default to the untextured skin (common.SKIN_COLOR, SKIN_ROUGHNESS).
+    The constants default to the untextured skin (textures.loader.SKIN_COLOR, SKIN_ROUGHNESS).
     """
 
     albedo: str | None = None

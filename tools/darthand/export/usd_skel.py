@@ -1,20 +1,24 @@
-"""UsdSkel authoring of the MANO rig: skeleton, skinned mesh, pose-corrective blend shapes, gesture animation.
+"""UsdSkel authoring of the MANO rig: skeleton, skinned meshes, pose-corrective blend shapes, gesture animations.
 
 How MANO maps onto UsdSkel (so that UsdSkel's own maths reproduces `forward` exactly):
 
-- Joint frames are world-aligned: bind transforms (skeleton space) and rest transforms (parent space) are pure
-  translations, to the rest joint centres J = J_regressor @ v_template and to J_i - J_parent. A joint's animated
-  local transform is then [R_i, J_i - J_parent], MANO's own, so its skeleton-space transform is MANO's A_i and
-  UsdSkel's skinning transform inverse(bind_i) * A_i is MANO's G_i = A_i [I, -J_i].
-- Pose correctives are blend shapes, which UsdSkel applies to the rest points before skinning, as MANO does. With
-  `full` correctives blend shape k is posedirs[:, :, k] and its weight is the pose feature f_k = (R_i - I)_rc;
-  these are as often negative as positive. Offsets below `sparse_tol` are left out (sparse pointIndices); the
-  largest dropped magnitude and the worst-case position error it can cause are returned.
+- Joints carry oriented bone frames O_i (export/skeleton.py, model/bones.py: Y along the bone, X the flexion axis):
+  bind transforms (skeleton space) are [O_i | J_i], rest transforms (parent space) [O_parent^T O_i |
+  O_parent^T (J_i - J_parent)], and an animated joint's local rotation is O_parent^T R_i O_i. Its skeleton-space
+  transform is then A_i [O_i | 0] (A_i MANO's) and UsdSkel's skinning transform inverse(bind_i) * that is MANO's
+  G_i = A_i [I, -J_i].
+- Pose correctives are blend shapes, which UsdSkel applies to the rest points before skinning, as MANO does. Each
+  corrective channel (a pose-feature entry (R_i - I)_rc for `full`) is split into shapes whose weights stay in
+  [0, 1] (export/blendshapes.py), so importers that clamp weights (Blender) need no fix-up. Offsets below
+  `sparse_tol` are left out (sparse pointIndices); the largest dropped magnitude and the worst-case position error
+  it can cause are returned.
+- Gestures: one SkelAnimation per gesture (the pose at the default time, no time samples) and one with every
+  gesture in turn (time code k = gesture k); the interface's `gesture` variant set points the skeleton's
+  animationSource at one of them.
 - Gf matrices act on row vectors, so every matrix authored here is the transpose of its column-vector form, and
   GfQuatf arrays are laid out (x, y, z, w) in memory, the reverse of rotations.py's (w, x, y, z).
 
-Shapes: V vertices, F faces, J = 16 joints, K blend shapes, G gestures (one time sample each, time code k for
-gesture k).
+Shapes: V vertices, F faces, J = 16 joints, K corrective channels, S blend shapes, G gestures.
 """
 
 from __future__ import annotations
@@ -24,12 +28,12 @@ from dataclasses import dataclass
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
 
-from darthand.export.common import (Correctives, influences_needed, local_translations, top_k_influences,
-                                    xyzw_quaternions)
-from darthand.model.anatomy import rest_joints
+from darthand.export.correctives import Correctives, channel_offsets
+from darthand.export.influences import influences_needed, top_k_influences
+from darthand.export.skeleton import Skeleton, export_skeleton
+from darthand.model.cap import forearm_cap
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import JOINT_NAMES, NUM_JOINTS
-from darthand.model.rotations import axis_angle_to_matrix
 from darthand.model.topology import vertex_normals
 
 SPARSE_TOL = 1e-9  # metres: blend-shape offsets shorter than this are not written
@@ -45,6 +49,7 @@ class RigStats:
     dropped_offset_max: float    # metres: longest offset left out of a sparse blend shape
     dropped_error_bound: float   # metres: max_v sum_k max_t |weight_k(t)| |dropped offset_vk| over the samples
     gestures: tuple[str, ...]
+    prims: dict              # role -> prim path: skeleton, hand, cap, material, gesture animations
 
     def as_dict(self) -> dict:
         return {**self.__dict__, "gestures": list(self.gestures)}
@@ -67,13 +72,6 @@ def quaternions(q_xyzw: np.ndarray) -> Vt.QuatfArray:
     return Vt.QuatfArray.FromNumpy(np.ascontiguousarray(q_xyzw, dtype=np.float32))
 
 
-def translations(t: np.ndarray) -> np.ndarray:
-    """(N, 4, 4) pure translations by t (N, 3)."""
-    m = np.tile(np.eye(4), (len(t), 1, 1))
-    m[:, :3, 3] = t
-    return m
-
-
 # ------------------------------------------------------------------------------------------------ skeleton
 
 
@@ -85,14 +83,13 @@ def joint_paths(parents: np.ndarray, names=JOINT_NAMES) -> list[str]:
     return paths
 
 
-def define_skeleton(stage: Usd.Stage, path: Sdf.Path, model: HandModel) -> UsdSkel.Skeleton:
-    """A Skeleton of the 16 joints with world-aligned bind and rest transforms (pure translations)."""
-    joints = rest_joints(model)
+def define_skeleton(stage: Usd.Stage, path: Sdf.Path, skeleton: Skeleton) -> UsdSkel.Skeleton:
+    """A Skeleton of the 16 joints with oriented bind and rest transforms (see the module docstring)."""
     skel = UsdSkel.Skeleton.Define(stage, path)
-    skel.CreateJointsAttr(Vt.TokenArray(joint_paths(model.parents)))
-    skel.CreateJointNamesAttr(Vt.TokenArray(list(JOINT_NAMES)))
-    skel.CreateBindTransformsAttr(matrices(translations(joints)))
-    skel.CreateRestTransformsAttr(matrices(translations(local_translations(joints, model.parents))))
+    skel.CreateJointsAttr(Vt.TokenArray(joint_paths(skeleton.parents)))
+    skel.CreateJointNamesAttr(Vt.TokenArray(list(skeleton.names)))
+    skel.CreateBindTransformsAttr(matrices(skeleton.bind))
+    skel.CreateRestTransformsAttr(matrices(skeleton.rest_local()))
     return skel
 
 
@@ -125,13 +122,16 @@ def bind_skin(prim: Usd.Prim, weights: np.ndarray | None, influences: int | None
 
     weights (N, J): skinned, the `influences` strongest per point sorted descending and renormalised, but never more
     than the point with the most non-zero weights has (None: that many, which loses nothing). joint: rigid binding
-    instead, every point follows that one joint (constant interpolation, one influence).
+    instead, every point follows that one joint with weight 1, written per point (one influence): Blender's USD
+    importer ignores constant-interpolation joint influences, so a constant binding would leave the accessory
+    behind.
     """
     binding = UsdSkel.BindingAPI.Apply(prim)
     binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1.0))
     if joint is not None:
-        binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([int(joint)]))
-        binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
+        n = len(UsdGeom.Mesh(prim).GetPointsAttr().Get())
+        binding.CreateJointIndicesPrimvar(False, 1).Set(Vt.IntArray.FromNumpy(np.full(n, int(joint), np.int32)))
+        binding.CreateJointWeightsPrimvar(False, 1).Set(Vt.FloatArray.FromNumpy(np.ones(n, np.float32)))
         return 1
     needed = influences_needed(weights)
     k = needed if influences is None else min(influences, needed)
@@ -152,22 +152,24 @@ def sparse_offsets(offsets: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndar
     return np.flatnonzero(keep), offsets[keep], np.where(keep, 0.0, length)
 
 
-def define_blend_shapes(stage: Usd.Stage, mesh: UsdGeom.Mesh, correctives: Correctives,
+def define_blend_shapes(stage: Usd.Stage, mesh: UsdGeom.Mesh, correctives: Correctives, channel_offsets: np.ndarray,
                         max_weights: np.ndarray | None = None,
                         sparse_tol: float = SPARSE_TOL) -> tuple[int, float, float]:
-    """One BlendShape prim per corrective under `mesh`, bound with skel:blendShapes / skel:blendShapeTargets.
+    """One BlendShape prim per exported shape under `mesh`, bound with skel:blendShapes / skel:blendShapeTargets.
 
-    max_weights (K,): the largest |weight| each shape takes (in the animation), used to bound the error of the
+    channel_offsets (N, 3, K): the mesh's corrective channels, encoded here into the S shapes of `correctives`.
+    max_weights (S,): the largest weight each shape takes (in the animations), used to bound the error of the
     dropped offsets (None: not bounded, nan). Returns (points written, longest dropped offset, dropped error
     bound) in metres.
     """
     if correctives.count == 0:
         return 0, 0.0, 0.0
+    offsets = correctives.shape_offsets(channel_offsets)
     binding = UsdSkel.BindingAPI(mesh.GetPrim())
     targets, written, dropped_max = [], 0, 0.0
-    bound = np.zeros(correctives.offsets.shape[0])
+    bound = np.zeros(offsets.shape[0])
     for k, name in enumerate(correctives.names):
-        idx, off, dropped = sparse_offsets(correctives.offsets[:, :, k], sparse_tol)
+        idx, off, dropped = sparse_offsets(offsets[:, :, k], sparse_tol)
         shape = UsdSkel.BlendShape.Define(stage, mesh.GetPath().AppendChild(name))
         shape.CreateOffsetsAttr(vec3f(off))
         shape.CreatePointIndicesAttr(Vt.IntArray.FromNumpy(idx.astype(np.int32)))
@@ -184,53 +186,116 @@ def define_blend_shapes(stage: Usd.Stage, mesh: UsdGeom.Mesh, correctives: Corre
 # ------------------------------------------------------------------------------------------------ animation
 
 
-def define_animation(stage: Usd.Stage, path: Sdf.Path, model: HandModel, correctives: Correctives,
-                     names: list[str], poses: np.ndarray) -> UsdSkel.Animation:
-    """A SkelAnimation with one time sample per gesture (time code k = gesture k).
+def define_animation(stage: Usd.Stage, path: Sdf.Path, skeleton: Skeleton, correctives: Correctives,
+                     poses: np.ndarray, timeline: bool) -> UsdSkel.Animation:
+    """A SkelAnimation of MANO axis-angle poses (G, 48): at the default time for one pose (timeline False, G = 1),
+    else one time sample per pose (time code k = pose k).
 
-    poses (G, 48) axis-angle. Translations are the rest local translations and scales 1 (constant, default
-    values); rotations are the quaternions of MANO's R_i; blendShapeWeights are the correctives' weights of R
-    (the pose feature itself for `full`). The gesture names are in customData 'darthand:gestures' (index = time).
+    Translations are the joints' constant local translations and scales 1 (default values); rotations the local
+    joint rotations O_parent^T R_i O_i; blendShapeWeights the correctives' encoded weights (in [0, 1]).
     """
-    rotations = axis_angle_to_matrix(np.asarray(poses, dtype=np.float64).reshape(-1, NUM_JOINTS, 3))
-    quats = xyzw_quaternions(rotations)                                     # (G, 16, 4) x, y, z, w
-    weights = correctives.weights(rotations).astype(np.float32)             # (G, K)
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3 * NUM_JOINTS)
+    quats = skeleton.local_quaternions(poses)                               # (G, 16, 4) x, y, z, w
+    weights = correctives.weights_of_poses(poses).astype(np.float32)        # (G, S)
     anim = UsdSkel.Animation.Define(stage, path)
-    anim.CreateJointsAttr(Vt.TokenArray(joint_paths(model.parents)))
-    anim.CreateTranslationsAttr(vec3f(local_translations(rest_joints(model), model.parents)))
+    anim.CreateJointsAttr(Vt.TokenArray(joint_paths(skeleton.parents)))
+    anim.CreateTranslationsAttr(vec3f(skeleton.translations))
     anim.CreateScalesAttr(Vt.Vec3hArray.FromNumpy(np.ones((NUM_JOINTS, 3), np.float16)))
+    times = [Usd.TimeCode(t) for t in range(len(poses))] if timeline else [Usd.TimeCode.Default()]
     rot_attr = anim.CreateRotationsAttr()
-    for t, q in enumerate(quats):
-        rot_attr.Set(quaternions(q), Usd.TimeCode(t))
+    for t, q in zip(times, quats):
+        rot_attr.Set(quaternions(q), t)
     if correctives.count:
         anim.CreateBlendShapesAttr(Vt.TokenArray(list(correctives.names)))
         bsw = anim.CreateBlendShapeWeightsAttr()
-        for t, w in enumerate(weights):
-            bsw.Set(Vt.FloatArray.FromNumpy(w), Usd.TimeCode(t))
-    anim.GetPrim().SetCustomDataByKey("darthand:gestures", Vt.StringArray(list(names)))
+        for t, w in zip(times, weights):
+            bsw.Set(Vt.FloatArray.FromNumpy(w), t)
     return anim
 
 
 # ------------------------------------------------------------------------------------------------ the rig
 
 
+@dataclass(frozen=True)
+class RigNames:
+    """Prim names under the asset's root, chosen so that a DCC import of a right and a left hand into one scene
+    has no collisions (Blender names objects, armatures, actions and materials after them)."""
+
+    prefix: str                   # 'Right' or 'Left'
+
+    @classmethod
+    def for_side(cls, side: str) -> "RigNames":
+        return cls(side.capitalize())
+
+    @property
+    def root(self) -> str:
+        return f"{self.prefix}Hand"
+
+    @property
+    def skeleton(self) -> str:
+        return f"{self.prefix}HandSkeleton"
+
+    @property
+    def hand(self) -> str:
+        return f"{self.prefix}HandMesh"
+
+    @property
+    def cap(self) -> str:
+        return f"{self.prefix}ForearmCap"
+
+    @property
+    def material(self) -> str:
+        return f"{self.prefix}HandSkin"
+
+    @property
+    def timeline(self) -> str:
+        return f"{self.prefix}HandGestures"
+
+    def gesture(self, name: str) -> str:
+        return f"{self.prefix}Hand_{name}"
+
+
+ALL_GESTURES = "all"   # the `gesture` variant whose animation holds every gesture in turn
+
+
 def define_rig(stage: Usd.Stage, root: Sdf.Path, model: HandModel, correctives: Correctives,
                names: list[str], poses: np.ndarray, influences: int | None = None,
                sparse_tol: float = SPARSE_TOL) -> RigStats:
-    """Under the SkelRoot at `root`: Skeleton `Skel`, SkelAnimation `Gestures`, Mesh `Hand` with its blend shapes.
+    """Under the SkelRoot at `root`: the Skeleton, one SkelAnimation per gesture and one of all gestures in turn,
+    the hand Mesh with its blend shapes and the forearm cap Mesh (RigNames give the prim names).
 
-    The skeleton is bound on the SkelRoot (inherited by every mesh below it, accessories included) and the
-    animation on the skeleton.
+    The skeleton is bound on the SkelRoot (inherited by every mesh below it, accessories included); its
+    animationSource (the timeline) is authored here and switched by the interface's `gesture` variant set.
     """
+    rig_names = RigNames.for_side(model.side)
+    skeleton = export_skeleton(model)
     skel_root = UsdSkel.Root.Define(stage, root)
-    skel = define_skeleton(stage, root.AppendChild("Skel"), model)
-    anim = define_animation(stage, root.AppendChild("Gestures"), model, correctives, names, poses)
+    skel = define_skeleton(stage, root.AppendChild(rig_names.skeleton), skeleton)
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3 * NUM_JOINTS)
+    anims = {ALL_GESTURES: define_animation(stage, root.AppendChild(rig_names.timeline), skeleton, correctives,
+                                            poses, timeline=True)}
+    for name, pose in zip(names, poses):
+        anims[name] = define_animation(stage, root.AppendChild(rig_names.gesture(name)), skeleton, correctives,
+                                       pose[None], timeline=False)
+    anims[ALL_GESTURES].GetPrim().SetCustomDataByKey("darthand:gestures", Vt.StringArray(list(names)))
     UsdSkel.BindingAPI.Apply(skel_root.GetPrim()).CreateSkeletonRel().SetTargets([skel.GetPath()])
-    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
+        [anims[ALL_GESTURES].GetPath()])
 
-    mesh = define_mesh(stage, root.AppendChild("Hand"), model.v_template, model.faces, model.uvs, model.faces_uv)
+    max_w = correctives.weights_of_poses(poses).max(axis=0) if correctives.count else []
+    mesh = define_mesh(stage, root.AppendChild(rig_names.hand), model.v_template, model.faces, model.uvs,
+                       model.faces_uv)
+    mesh.GetPrim().SetCustomDataByKey("darthand:role", "hand")
     k = bind_skin(mesh.GetPrim(), model.weights, influences)
-    max_w = np.abs(correctives.weights(axis_angle_to_matrix(
-        np.asarray(poses, dtype=np.float64).reshape(-1, NUM_JOINTS, 3)))).max(axis=0) if correctives.count else []
-    written, dropped_max, bound = define_blend_shapes(stage, mesh, correctives, max_w, sparse_tol)
-    return RigStats(k, correctives.count, written, dropped_max, bound, tuple(names))
+    written, dropped_max, bound = define_blend_shapes(stage, mesh, correctives, correctives.offsets, max_w, sparse_tol)
+
+    cap = forearm_cap(model)
+    cap_mesh = define_mesh(stage, root.AppendChild(rig_names.cap), cap.vertices, cap.faces, cap.uvs, cap.faces_uv)
+    cap_mesh.GetPrim().SetCustomDataByKey("darthand:role", "forearm_cap")
+    bind_skin(cap_mesh.GetPrim(), cap.weights, influences)
+    define_blend_shapes(stage, cap_mesh, correctives, channel_offsets(cap.posedirs, correctives, len(cap.vertices)),
+                        max_w, sparse_tol)
+    prims = {"skeleton": str(skel.GetPath()), "hand": str(mesh.GetPath()), "forearm_cap": str(cap_mesh.GetPath()),
+             "material": str(root.AppendChild(rig_names.material)),
+             "animations": {n: str(a.GetPath()) for n, a in anims.items()}}
+    return RigStats(k, correctives.count, written, dropped_max, bound, tuple(names), prims)

@@ -4,13 +4,15 @@ catalogue accessory).
 Each variant's content is a layer of its own inside the package, so selecting a variant opens only that layer:
 
     texture/<id>.usda     a Material `Skin` (UsdPreviewSurface), its images in texture/<id>/
-    accessory/<id>.usdc   an Xform `Accessory`: the accessory mesh bound to the hand's skeleton, and its material,
-                          its images in accessory/<id>/
+    accessory/<id>.usdc   an Xform `Accessory` holding the accessory mesh `<Side>_<id>` bound to the hand's skeleton
+                          and its material `<Side>_<id>_material`, its images in accessory/<id>/
 
-On the asset's root prim the `texture` variant `<id>` references texture/<id>.usda onto <root>/Looks/Skin (the
-hand mesh is bound to that path) and the `accessory` variant `<id>` payloads accessory/<id>.usdc onto
-<root>/Accessory. The accessory mesh inherits the skeleton binding from the SkelRoot: a rigid accessory follows
-one joint (constant-interpolation joint influence, weight 1), a skinned one (a glove) has per-point influences.
+On the asset's root prim the `texture` variant `<id>` references texture/<id>.usda onto <root>/<Side>HandSkin (the
+hand and cap meshes are bound to that path), the `accessory` variant `<id>` payloads accessory/<id>.usdc onto
+<root>/<Side>HandAccessory, and the `gesture` variant `<name>` points the skeleton's animationSource at the
+gesture's SkelAnimation (`all`: every gesture in turn, one per time code). The accessory mesh inherits the skeleton
+binding from the SkelRoot: a rigid accessory follows one joint (constant-interpolation joint influence, weight 1),
+a skinned one (a glove) has per-point influences.
 """
 
 from __future__ import annotations
@@ -22,11 +24,13 @@ from pathlib import Path
 import numpy as np
 from pxr import Sdf, Usd, UsdGeom
 
+from darthand.accessories.loader import Accessory, accessory_factors, check_accessory
 from darthand.errors import InputError
-from darthand.export.common import (Accessory, Correctives, TextureSet, accessory_factors, accessory_offsets,
-                                    check_accessory, place_texture)
+from darthand.export.correctives import Correctives, channel_offsets
+from darthand.export.texture_files import place_texture
 from darthand.export.usd_materials import MaterialSpec, bind_material, define_material
-from darthand.export.usd_skel import SPARSE_TOL, bind_skin, define_blend_shapes, define_mesh
+from darthand.export.usd_skel import ALL_GESTURES, SPARSE_TOL, RigNames, bind_skin, define_blend_shapes, define_mesh
+from darthand.textures.loader import TextureSet
 
 _VARIANT_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_-]*$")
 
@@ -88,8 +92,9 @@ def write_texture_variant(package: Path, vid: str, material: MaterialSpec, size:
 
 
 def write_accessory_variant(package: Path, acc: Accessory, correctives: Correctives, influences: int | None = None,
-                            size: int | None = None, sparse_tol: float = SPARSE_TOL) -> str:
-    """accessory/<id>.usdc (Xform `Accessory` with Mesh `Geom` and Material `Looks/Material`) and its images.
+                            size: int | None = None, sparse_tol: float = SPARSE_TOL, prefix: str = "Right") -> str:
+    """accessory/<id>.usdc (Xform `Accessory` with Mesh `<prefix>_<id>` and Material `<prefix>_<id>_material`) and
+    its images.
 
     A skinned accessory with its own correctives gets them as blend shapes in the hand's corrective basis, with
     the hand's blend-shape names, so the hand's animation drives them.
@@ -101,16 +106,15 @@ def write_accessory_variant(package: Path, acc: Accessory, correctives: Correcti
     root = UsdGeom.Xform.Define(stage, "/Accessory")
     if acc.kind:
         root.GetPrim().SetCustomDataByKey("darthand:kind", acc.kind)
-    mesh = define_mesh(stage, Sdf.Path("/Accessory/Geom"), np.asarray(acc.vertices, np.float64),
+    mesh = define_mesh(stage, Sdf.Path(f"/Accessory/{prefix}_{vid}"), np.asarray(acc.vertices, np.float64),
                        np.asarray(acc.faces), acc.uvs, acc.faces_uv)
+    mesh.GetPrim().SetCustomDataByKey("darthand:role", "accessory")
     bind_skin(mesh.GetPrim(), acc.weights, influences, joint=acc.parent_joint)
     if acc.skinned:
-        offsets = accessory_offsets(acc, correctives)
+        offsets = channel_offsets(acc.posedirs, correctives, len(acc.vertices))
         if offsets.shape[2]:
-            shapes = dataclasses.replace(correctives, offsets=offsets)
-            define_blend_shapes(stage, mesh, shapes, None, sparse_tol)
-    UsdGeom.Scope.Define(stage, "/Accessory/Looks")
-    material = define_material(stage, Sdf.Path("/Accessory/Looks/Material"), spec)
+            define_blend_shapes(stage, mesh, correctives, offsets, None, sparse_tol)
+    material = define_material(stage, Sdf.Path(f"/Accessory/{prefix}_{vid}_material"), spec)
     bind_material(mesh.GetPrim(), material.GetPath())
     stage.GetRootLayer().Save()
     return f"accessory/{vid}.usdc"
@@ -119,25 +123,37 @@ def write_accessory_variant(package: Path, acc: Accessory, correctives: Correcti
 # ------------------------------------------------------------------------------------------------ variant sets
 
 
-def add_texture_variants(layer: Sdf.Layer, root: Sdf.Path, layers: dict[str, str], default: str) -> None:
-    """Variant set `texture` on `root`: variant id references the layer layers[id] onto <root>/Looks/Skin."""
+def add_texture_variants(layer: Sdf.Layer, root: Sdf.Path, material: str, layers: dict[str, str],
+                         default: str) -> None:
+    """Variant set `texture` on `root`: variant id references the layer layers[id] onto <root>/<material>."""
     vset = _variant_set(layer, root, "texture", default)
     for vid, rel in layers.items():
         variant = Sdf.VariantSpec(vset, vid)
-        looks = Sdf.PrimSpec(variant.primSpec, "Looks", Sdf.SpecifierDef, "Scope")
-        skin = Sdf.PrimSpec(looks, "Skin", Sdf.SpecifierDef, "Material")
+        skin = Sdf.PrimSpec(variant.primSpec, material, Sdf.SpecifierDef, "Material")
         skin.referenceList.Prepend(Sdf.Reference(f"./{rel}"))
 
 
-def add_accessory_variants(layer: Sdf.Layer, root: Sdf.Path, layers: dict[str, str], default: str = "none") -> None:
+def add_accessory_variants(layer: Sdf.Layer, root: Sdf.Path, prefix: str, layers: dict[str, str],
+                           default: str = "none") -> None:
     """Variant set `accessory` on `root`: `none` (empty) and one variant per accessory payloading layers[id] onto
-    <root>/Accessory."""
+    <root>/<prefix>HandAccessory."""
     vset = _variant_set(layer, root, "accessory", default)
     Sdf.VariantSpec(vset, "none")
     for vid, rel in layers.items():
         variant = Sdf.VariantSpec(vset, vid)
-        acc = Sdf.PrimSpec(variant.primSpec, "Accessory", Sdf.SpecifierDef, "Xform")
+        acc = Sdf.PrimSpec(variant.primSpec, f"{prefix}HandAccessory", Sdf.SpecifierDef, "Xform")
         acc.payloadList.Prepend(Sdf.Payload(f"./{rel}"))
+
+
+def add_gesture_variants(layer: Sdf.Layer, root: Sdf.Path, names: RigNames, gestures: list[str]) -> None:
+    """Variant set `gesture` on `root`: `all` (default: every gesture in turn, time code k = gesture k) and one
+    variant per gesture, each pointing the skeleton's animationSource at that SkelAnimation."""
+    vset = _variant_set(layer, root, "gesture", ALL_GESTURES)
+    for vid, anim in [(ALL_GESTURES, names.timeline)] + [(g, names.gesture(g)) for g in gestures]:
+        variant = Sdf.VariantSpec(vset, vid)
+        skel = Sdf.PrimSpec(variant.primSpec, names.skeleton, Sdf.SpecifierOver)
+        rel = Sdf.RelationshipSpec(skel, "skel:animationSource", custom=False)
+        rel.targetPathList.Prepend(root.AppendChild(anim))
 
 
 def _variant_set(layer: Sdf.Layer, root: Sdf.Path, name: str, default: str) -> Sdf.VariantSetSpec:

@@ -23,15 +23,26 @@ def mirror_pose(pose) -> np.ndarray:
     return (p.reshape(p.shape[:-1] + (-1, 3)) * _AA_SIGN).reshape(p.shape)
 
 
+def mirror_points(points: np.ndarray) -> np.ndarray:
+    """Points (..., 3) of the mirror-image hand: x -> -x."""
+    return np.asarray(points) * _S
+
+
+def mirror_posedirs(posedirs: np.ndarray) -> np.ndarray:
+    """Pose correctives (N, 3, 135) of the mirror-image hand: each offset's x flips, each feature (R - I)_ab picks
+    up the sign s_a s_b."""
+    return np.asarray(posedirs) * _S[None, :, None] * _FEATURE_SIGN[None, None, :]
+
+
 def mirror_model(model: HandModel) -> HandModel:
     """The mirror image of `model` (right <-> left): mirrored pose on it gives mirrored vertices."""
     flip = [0, 2, 1]   # reverses each triangle's winding, keeping its first corner
     comps = model.hands_components
     fields = dict(
-        v_template=model.v_template * _S,
+        v_template=mirror_points(model.v_template),
         faces=model.faces[:, flip],
         shapedirs=model.shapedirs * _S[None, :, None],
-        posedirs=model.posedirs * _S[None, :, None] * _FEATURE_SIGN[None, None, :],
+        posedirs=mirror_posedirs(model.posedirs),
         hands_mean=mirror_pose(model.hands_mean),
         hands_components=mirror_pose(comps),
         side="left" if model.side == "right" else "right",

@@ -2,8 +2,9 @@
 loaded package, textures and the last scene); `write_frame` writes image.png, mask.png, labels.json (+ depth.exr).
 
 A frame: pose the subject (internal forward pass or UsdSkel), frame the camera, build (or reuse) the Embree scene,
-trace one sample per pixel inside the scene's projected bounds, shade with shadows, supersample the edge pixels,
-composite over the background, label.
+trace one sample per pixel inside the scene's projected bounds, light the vertices those samples need with indirect
+light (indirect.py), shade with shadows (skin: skin.py), supersample the edge pixels, composite over the
+background, label.
 """
 
 from __future__ import annotations
@@ -23,9 +24,11 @@ from darthand.render import aa
 from darthand.render.camera import Camera, load_camera
 from darthand.render.image import (composite, encode_mask8, encode_rgba8, load_background,
                                    straight_colour, write_exr, write_png)
+from darthand.render.indirect import VertexLight
 from darthand.render.labels import frame_labels
 from darthand.render.lights import Lighting, load_lighting, world_lights
 from darthand.render.scene import Scene, scene_for
+from darthand.render.shade import ShadingOptions
 from darthand.render.subject import Subject
 from darthand.render.trace import (TILE, Context, Samples, default_threads, pixel_centres, scene_bounds,
                                    single_threaded_blas, touched_tiles, trace_parallel)
@@ -83,18 +86,19 @@ class Renderer:
     def render(self, pose=None, *, texture: str | None = None, skin_tone_offset: float = 0.0,
                accessory: str | None = None, camera="three_quarter", lights=None, background=None,
                width: int = 512, height: int = 512, samples: int = DEFAULT_SAMPLES, aa_shading: str = "triangle",
-               labels: bool = True, keypoint_order: str = "openpose") -> Frame:
+               shading=None, labels: bool = True, keypoint_order: str = "openpose") -> Frame:
         """One frame. pose: None (flat), a gesture name, a pose file or (48,) MANO axis-angle (flat-hand relative).
         camera: a Camera, a view name, a camera JSON path or dict (camera.load_camera), framed on the posed hand.
         lights: a Lighting, a lights JSON path or dict, or None (lights.default_lighting). background: image path or
         (H, W, 3) linear array, or None (transparent). samples: sub-samples per edge pixel (1, 4, 8, 16);
-        aa_shading: shade them once per pixel per triangle ('triangle') or each ('sample') (see aa.py)."""
+        aa_shading: shade them once per pixel per triangle ('triangle') or each ('sample') (see aa.py). shading: a
+        shade.ShadingOptions or a dict of its fields (ambient occlusion, skin model), None for the defaults."""
         with single_threaded_blas():
             prepared = self._prepare(pose, texture=texture, skin_tone_offset=skin_tone_offset, accessory=accessory,
                                      camera=camera, lights=lights, width=width, height=height,
                                      keypoint_order=keypoint_order)
             return self._finish(prepared, background=background, samples=samples, aa_shading=aa_shading,
-                                labels=labels)
+                                shading=shading, labels=labels)
 
     def render_many(self, poses, **options) -> Iterator[Frame]:
         """Frames of `poses` (an iterable of what `render` takes as pose), in order, with the other options of
@@ -104,7 +108,8 @@ class Renderer:
         Do not call `render` on the same Renderer while iterating: the helper thread owns its caches meanwhile."""
         from concurrent.futures import ThreadPoolExecutor
 
-        finish = {k: options.pop(k) for k in ("background", "samples", "aa_shading", "labels") if k in options}
+        finish = {k: options.pop(k) for k in ("background", "samples", "aa_shading", "shading", "labels")
+                  if k in options}
         poses = iter(poses)
         # The helper is the only thread that calls _prepare (the source's caches and self._scene are not locked).
         with single_threaded_blas(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="darthand-prepare") as helper:
@@ -136,27 +141,51 @@ class Renderer:
         return subject, scene, cam, lighting, timings
 
     def _finish(self, prepared: tuple, *, background=None, samples: int = DEFAULT_SAMPLES,
-                aa_shading: str = "triangle", labels: bool = True) -> Frame:
+                aa_shading: str = "triangle", shading=None, labels: bool = True) -> Frame:
         subject, scene, cam, lighting, timings = prepared
         return render_subject(subject, scene, cam, lighting, background=background, samples=samples,
-                              aa_shading=aa_shading, threads=self.threads, labels=labels, timings=timings)
+                              aa_shading=aa_shading, shading=shading, threads=self.threads, labels=labels,
+                              timings=timings)
 
 
 _END = object()
 
 
+def shading_options(shading) -> ShadingOptions:
+    """ShadingOptions from None (the defaults), an instance, or a dict of its fields (InputError naming an unknown
+    one)."""
+    if shading is None:
+        return ShadingOptions()
+    if isinstance(shading, ShadingOptions):
+        return shading
+    if isinstance(shading, dict):
+        known = ShadingOptions.__dataclass_fields__
+        unknown = sorted(set(shading) - set(known))
+        if unknown:
+            raise InputError(f"shading: unknown option {unknown[0]!r} (known: {', '.join(known)})")
+        return ShadingOptions(**shading)
+    raise InputError(f"shading: expected ShadingOptions or a dict, got {type(shading).__name__}")
+
+
 def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighting, *, background=None,
-                   samples: int = DEFAULT_SAMPLES, aa_shading: str = "triangle", threads: int = 1,
+                   samples: int = DEFAULT_SAMPLES, aa_shading: str = "triangle", shading=None, threads: int = 1,
                    labels: bool = True, timings: dict | None = None) -> Frame:
-    """Render a posed subject whose scene is built: primary samples in the projected bounds, adaptive
-    supersampling of edges (aa.supersample: `samples` sub-samples, `aa_shading` 'triangle' or 'sample'),
-    compositing, labels."""
+    """Render a posed subject whose scene is built: primary samples in the projected bounds with indirect light at
+    the vertices they need (indirect.py), adaptive supersampling of edges (aa.supersample: `samples` sub-samples,
+    `aa_shading` 'triangle' or 'sample'), compositing, labels. shading: see `shading_options`."""
     timings = {} if timings is None else timings
     aa.check_options(samples, aa_shading)
+    options = shading_options(shading)
     H, W = cam.height, cam.width
     check_memory(f"rendering a {W}x{H} image", BYTES_PER_PIXEL * W * H)
-    ctx = Context(scene, cam, world_lights(lighting, cam.R, cam.t), lighting.ambient, threads)
     stats: dict = {}
+    t = time.perf_counter()
+    lights = world_lights(lighting, cam.R, cam.t)
+    indirect = None
+    if options.ao_rays:
+        indirect = VertexLight(scene, lights, lighting.ambient, options.ao_rays, options.interreflection, stats)
+    timings["indirect_setup"] = _lap(t)
+    ctx = Context(scene, cam, lights, lighting.ambient, threads, indirect, options.skin)
 
     t = time.perf_counter()
     r0, r1, c0, c1 = scene_bounds(cam, subject.all_vertices())
@@ -218,9 +247,10 @@ def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighti
             None if background is None else "array")
         doc = frame_labels(subject, cam, scene, full_alpha, files={"image": IMAGE, "mask": MASK},
                            extra={"render": {"samples": samples, "aa_shading": aa_shading, "background": bg_name,
-                                             "lights": lighting.to_json()}})
+                                             "lights": lighting.to_json(), "shading": options.to_json()}})
     timings["labels"] = _lap(t)
-    stats["total_rays"] = stats.get("rays", 0) + stats.get("shadow_rays", 0) + (21 if labels else 0)
+    stats["total_rays"] = (stats.get("rays", 0) + stats.get("shadow_rays", 0) + stats.get("indirect_rays", 0)
+                           + (21 if labels else 0))
     return Frame(rgba, colour, full_alpha, full_geom, full_depth, doc, subject, cam, timings, stats)
 
 

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from darthand.errors import InputError
-from darthand.export.common import Accessory, TextureSet, load_accessory_catalog, load_texture_catalog
+from darthand.accessories.loader import Accessory, load_accessory_catalog
+from darthand.textures.loader import TextureSet, load_texture_catalog
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
 from darthand.model.topology import face_joints, vertex_normals
@@ -103,12 +104,13 @@ class HandAssets:
             self._face_joints["hand"] = face_joints(m.faces, m.weights)
         faces, uvs, faces_uv = self._static_arrays("hand", m)
         hand = Surface("hand", hand_v, faces, hand_n, self.skin(texture, skin_tone_offset), uvs, faces_uv,
-                       m.v_template, "hand", self._face_joints["hand"])
+                       m.v_template, "hand", self._face_joints["hand"], face_labels=m.face_labels)
         surfaces = [hand]
         if accessory != NONE:
             if self._last_accessory is None or self._last_accessory[0] != (key, accessory):
                 self._last_accessory = ((key, accessory), self.posed_accessory(self.accessories[accessory], posed))
             surfaces.append(self._last_accessory[1])
+        surfaces.append(self.posed_cap(posed, betas, hand.material))      # last: surface indices 0 hand, 1 accessory
         info = {"source": self.source, "texture": texture, "skin_tone_offset": float(skin_tone_offset),
                 "accessory": accessory, "gesture": gesture,
                 "accessory_parent_joint": None if accessory == NONE else self.accessories[accessory].parent_joint}
@@ -141,6 +143,20 @@ class HandAssets:
                 None if mesh.uvs is None else np.ascontiguousarray(mesh.uvs, np.float32),
                 None if mesh.faces_uv is None else np.ascontiguousarray(mesh.faces_uv, np.int32))
         return arrays
+
+    def posed_cap(self, posed, betas, material: Material) -> Surface:
+        """The forearm cap (model/cap.py) for a forward-pass result, in the hand's material."""
+        from darthand.model.cap import forearm_cap
+
+        if "cap" not in self._face_joints:
+            cap = forearm_cap(self.model)
+            self._face_joints["cap"] = (cap, face_joints(cap.faces, cap.weights), *(
+                None if a is None else np.ascontiguousarray(a, t) for a, t in
+                ((cap.faces, np.int32), (cap.uvs, np.float32), (cap.faces_uv, np.int32))))
+        cap, joints, faces, uvs, faces_uv = self._face_joints["cap"]
+        v = cap.pose(posed, betas)[0].astype(np.float32)
+        return Surface("forearm_cap", v, faces, vertex_normals(v, faces), material, uvs, faces_uv, cap.vertices,
+                       "cap", joints)
 
     def posed_accessory(self, acc: Accessory, posed) -> Surface:
         """The accessory placed for a forward-pass result: rigid ones by their joint's skinning transform,

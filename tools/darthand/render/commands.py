@@ -45,8 +45,9 @@ def render(args) -> int:
     frame = renderer.render(pose, texture=args.texture, skin_tone_offset=args.skin_tone_offset,
                             accessory=args.accessory, camera=args.camera, lights=args.lights,
                             background=args.background, width=width, height=height, samples=args.samples,
-                            aa_shading=args.aa_shading,
-                            keypoint_order=args.keypoint_order)
+                            aa_shading=args.aa_shading, keypoint_order=args.keypoint_order,
+                            shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection,
+                                     "skin": args.skin})
     paths = write_frame(frame, args.out, depth=args.depth)
     lab = frame.labels
     total = sum(frame.timings.values())

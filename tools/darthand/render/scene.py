@@ -65,6 +65,16 @@ class FaceData:
         return np.take(self.table, prim, axis=1)
 
 
+def interpolate(values: np.ndarray, faces: np.ndarray, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> np.ndarray:
+    """Per-vertex values (N, ...) interpolated at hits on faces `prim` (M,) with barycentrics (1 - bu - bv, bu, bv):
+    (M, ...)."""
+    f = faces[prim]
+    a, b, c = values[f[:, 0]], values[f[:, 1]], values[f[:, 2]]
+    if a.ndim > 1:
+        bu, bv = bu[:, None], bv[:, None]
+    return a + bu * (b - a) + bv * (c - a)
+
+
 class Scene:
     """The Embree scenes of a subject's surfaces, committed, with the scene's size for ray offsets and the per-face
     shading data of each surface.

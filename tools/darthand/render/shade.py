@@ -4,13 +4,18 @@ shadows.
 Written here (not taken from a library) because no package in the project shades Embree hits; the models are the
 usual real-time ones, vectorised over every hit of a batch:
 
-- Skin diffuse: wrap lighting per channel, max(0, (n.l + w) / (1 + w)) (GPU Gems 1, ch. 16): w = 0 is Lambert; a
-  larger red w lets red light reach past the terminator, as light scattered under the skin does.
+- Skin diffuse, by `ShadingOptions.skin`: 'subsurface' (skin.py: the diffusion profile pre-integrated over the
+  surface's curvature, per channel, nails excluded); 'wrap', wrap lighting per channel, max(0, (n.l + w) / (1 + w))
+  (GPU Gems 1, ch. 16; w = 0 is Lambert, a larger red w lets red light reach past the terminator, but it adds
+  light rather than moving it: not energy-conserving); 'lambert'.
 - Metallic-roughness (accessories): Lambert diffuse of albedo (1 - metallic); specular F0 = mix(f0, albedo,
   metallic).
 - Specular: GGX distribution, height-correlated Smith visibility, Schlick's Fresnel; alpha = roughness^2.
 - Ambient: albedo (1 - metallic) ambient, plus an ambient specular from Karis' analytic fit of the split-sum
   environment BRDF ("Physically Based Shading on Mobile", 2014), so that metals are not black without a highlight.
+  With indirect light (indirect.py, `ShadingOptions.ao_rays` > 0) the diffuse part is albedo times the indirect
+  irradiance at the hit (the ambient light's visible part and light interreflected from other surfaces), and the
+  specular part is scaled by the open fraction V (a common stand-in for specular occlusion).
 - Intensities have pi folded in (lights.py): radiance = pi BRDF E cos, i.e. albedo E cos for a Lambert surface.
 - Texture filtering: the mip level comes from the sample's footprint in the texture: a pixel at depth z spans
   z / f metres facing the camera, stretched by 1 / |cos| of the angle between the ray and the face (the longer
@@ -28,23 +33,59 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from darthand.errors import InputError
+from darthand.render.skin import skin_width, subsurface_diffuse
 from darthand.render.subject import Material
 
 SHADOW_LIFT = 2e-3          # shadow-ray origin offset, relative to the scene's bounding-box diagonal
 MIN_ROUGHNESS = 0.045       # GGX is singular at alpha = 0
+DEFAULT_AO_RAYS = 16        # ambient-occlusion rays per vertex (benchmarks/render_reference.py: speed against error)
+SKIN_MODELS = ("subsurface", "wrap", "lambert")
+DEFAULT_SKIN = "subsurface"
+
+
+@dataclass(frozen=True)
+class ShadingOptions:
+    """How a frame is shaded beyond the direct lights (indirect.py): ao_rays, rays per vertex for the ambient light's
+    occlusion and the interreflected light (0: ambient light is never blocked, nothing is interreflected);
+    interreflection, add light reflected between surfaces (False: ambient occlusion only); skin, the skin's diffuse
+    model (SKIN_MODELS: 'subsurface', 'wrap' the earlier look, 'lambert')."""
+
+    ao_rays: int = DEFAULT_AO_RAYS
+    interreflection: bool = True
+    skin: str = DEFAULT_SKIN
+
+    def __post_init__(self):
+        if isinstance(self.ao_rays, bool) or not (isinstance(self.ao_rays, (int, np.integer))
+                                                  and 0 <= self.ao_rays <= 4096):
+            raise InputError(f"ao_rays: {self.ao_rays!r} is not a whole number of rays in 0..4096")
+        if not isinstance(self.interreflection, (bool, np.bool_)):
+            raise InputError(f"interreflection: {self.interreflection!r} is not true or false")
+        if self.skin not in SKIN_MODELS:
+            raise InputError(f"skin: {self.skin!r} is not one of {', '.join(SKIN_MODELS)}")
+
+    def to_json(self) -> dict:
+        return {"ao_rays": int(self.ao_rays), "interreflection": bool(self.interreflection), "skin": self.skin}
 
 
 @dataclass
 class Hits:
     """Surface attributes at M ray hits on one surface, float32, component-major: position, normal (shading, facing
     the viewer), view (unit, toward the camera) (3, M); uv (2, M) or None; footprint (M,) the longer side of the
-    sample's footprint in uv units, or None."""
+    sample's footprint in uv units, or None; indirect (3, M) the indirect irradiance and visible (M,) the ambient
+    light's open fraction (indirect.VertexLight.at), or None (the ambient light reaches everything unblocked);
+    radius (M,) the surface's curvature radius (skin.surface_radius) and skin (M,) bool, not a nail, for the
+    subsurface skin model, or None."""
 
     position: np.ndarray
     normal: np.ndarray
     view: np.ndarray
     uv: np.ndarray | None
     footprint: np.ndarray | None
+    indirect: np.ndarray | None = None
+    visible: np.ndarray | None = None
+    radius: np.ndarray | None = None
+    skin: np.ndarray | None = None
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -156,21 +197,64 @@ def ambient_specular(f0, roughness: np.ndarray, nv: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------------------------------------ lights
 
 
+def vertex_albedo(material: Material, uvs: np.ndarray | None, count: int) -> np.ndarray:
+    """(N, 3) float32 diffuse albedo (1 - metallic) x albedo at N vertices with uvs (N, 2) (or None), filtered
+    over about a 32nd of the texture (the scale at which vertices sample it)."""
+    if count == 0:
+        return np.zeros((0, 3), np.float32)
+    z = np.zeros((3, count), np.float32)
+    uv = None if uvs is None else np.ascontiguousarray(np.asarray(uvs, np.float32).T)
+    footprint = None if uv is None else np.full(count, 1 / 32, np.float32)
+    return np.ascontiguousarray(material_params(material, Hits(z, z, z, uv, footprint)).albedo.T)
+
+
+def ambient_light(p: SurfaceParams, ambient: np.ndarray, spec, nv: np.ndarray, hits: Hits) -> np.ndarray:
+    """(3, M) radiance reflected from the ambient light (3,) and other surfaces: albedo x the indirect irradiance
+    (albedo x ambient without it), plus spec x Karis' ambient specular x the open fraction."""
+    out = p.albedo * (ambient[:, None] if hits.indirect is None else hits.indirect)
+    if spec:
+        specular = spec * ambient[:, None] * ambient_specular(p.f0, p.roughness, nv)
+        out += specular if hits.visible is None else specular * hits.visible
+    return out
+
+
+def diffuse_model(material: Material, p: SurfaceParams, hits: Hits, skin_model: str):
+    """(response(ndl (M,)) -> (3, M) or (M,), reach): a surface's diffuse response per unit irradiance at the
+    light's cosine, and the lowest cosine at which it can be lit (below 0: past the terminator; shadow rays are cast
+    where the response is not nil)."""
+    if material.kind != "skin" or skin_model == "lambert" or (skin_model == "subsurface" and hits.radius is None):
+        return (lambda ndl: np.maximum(ndl, 0)), 0.0
+    if skin_model == "subsurface":
+        width = skin_width(material)
+        nails = None if hits.skin is None or hits.skin.all() else np.flatnonzero(~hits.skin)
+
+        def subsurface(ndl):
+            out = subsurface_diffuse(ndl, hits.radius, width)
+            if nails is not None:
+                out[:, nails] = np.maximum(ndl[nails], 0)
+            return out
+        return subsurface, -1.0
+    wrap = np.asarray(material.wrap, np.float32)
+    if not wrap.any():
+        return (lambda ndl: np.maximum(ndl, 0)), 0.0
+    return (lambda ndl: wrap_diffuse(ndl, wrap)), -float(wrap.max())
+
+
 def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarray, occluded, extent: float,
-          counters: dict | None = None) -> np.ndarray:
+          counters: dict | None = None, skin_model: str = DEFAULT_SKIN) -> np.ndarray:
     """(3, M) float32 outgoing radiance at the hits.
 
     lights: world-frame lights (lights.world_lights). occluded(origins (K, 3), directions (K, 3), tfar) -> (K,)
     bool: the scene's occlusion query. extent: the scene's size (m), for the shadow-ray offset. counters: adds
-    'shadow_rays'.
+    'shadow_rays'. Indirect light comes with the hits (Hits.indirect, Hits.visible). skin_model: how a skin
+    material's diffuse part responds to a light (SKIN_MODELS).
     """
     p = material_params(material, hits)
     n, v = hits.normal, hits.view
     nv = np.clip(_dot(n, v), 1e-4, 1)
     spec = np.float32(material.specular)
-    out = ambient[:, None] * (p.albedo + spec * ambient_specular(p.f0, p.roughness, nv) if spec else p.albedo)
-    wrap = np.asarray(material.wrap, np.float32) if material.kind == "skin" else np.zeros(3, np.float32)
-    reach = -float(wrap.max())
+    out = ambient_light(p, ambient, spec, nv, hits)
+    response, reach = diffuse_model(material, p, hits, skin_model)
     lift = np.float32(SHADOW_LIFT * max(extent, 1e-3))
     for light in lights:
         if light["type"] == "directional":
@@ -183,7 +267,9 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
             l = l / np.maximum(dist, 1e-9)
             scale = light["radiance"][:, None] / np.maximum(dist * dist, 1e-12)
         ndl = _dot(n, l)
-        reached = ndl > reach
+        diffuse = response(ndl)
+        # Where the diffuse response is nil (and so is the specular, n.l <= 0) no shadow ray is needed.
+        reached = ndl > 0 if reach >= 0 else (diffuse.max(axis=0) if diffuse.ndim == 2 else diffuse) > 1e-4
         if light["shadows"]:
             idx = np.flatnonzero(reached)
             if len(idx):
@@ -193,7 +279,7 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
                 reached[idx[occluded(np.ascontiguousarray(origin), np.ascontiguousarray(dirs), tfar)]] = False
                 if counters is not None:
                     counters["shadow_rays"] = counters.get("shadow_rays", 0) + len(idx)
-        colour = p.albedo * (wrap_diffuse(ndl, wrap) if wrap.any() else np.maximum(ndl, 0))
+        colour = p.albedo * diffuse
         if spec:
             h = _normalize(v + l)
             colour += spec * ggx_specular(np.clip(ndl, 0, 1), nv, np.clip(_dot(n, h), 0, 1),

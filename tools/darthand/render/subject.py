@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from darthand.render.skin import SKIN_MFP_MM
 from darthand.render.texture import MipTexture, checker_texture, constant_texture
 
 SKIN_F0 = 0.028                      # normal-incidence reflectance of skin (refractive index about 1.4)
@@ -31,6 +32,7 @@ class Material:
         `metallic_channel` when they are textured (None: the constants roughness_value / metallic_value).
         Roughness is perceptual (GGX alpha = roughness^2).
     specular: scale of the specular lobe (1 physically based, 0 a purely diffuse surface).
+    mfp_mm: skin's mean free path per channel (mm), for the subsurface skin model (skin.py).
     """
 
     kind: str = "pbr"
@@ -43,6 +45,7 @@ class Material:
     f0: float = DIELECTRIC_F0
     name: str = ""
     specular: float = 1.0
+    mfp_mm: tuple = SKIN_MFP_MM
 
 
 def checker_material() -> Material:
@@ -61,9 +64,11 @@ def skin_material(maps: MipTexture | None = None, roughness_channel: int | None 
 class Surface:
     """One posed triangle mesh: vertices (N, 3) float32 world, faces (F, 3) int32, vertex normals (N, 3) float32,
     per-corner uvs (T, 2) float32 + faces_uv (F, 3) int32 (or None), rest-pose vertices (N, 3) (for checks), its
-    material, `role` 'hand' or 'accessory', and face_joints (F,) the joint that moves each face most (skinned
-    surfaces; None for rigid ones), for keypoint visibility. A rigid surface also carries `local` (N, 3) float32,
-    its vertices in its joint's frame (the same array every frame, so its ray-tracing structure is built once), and
+    material, `role` 'hand', 'accessory' or 'cap' (the forearm cap), and face_joints (F,) the joint that moves each
+    face most (skinned surfaces; None for rigid ones), for keypoint visibility; face_labels (F,) int8 the model's
+    surface labels (model.layout.FACE_LABELS, -1 unlabelled) or None: the skin model leaves nails out. A rigid surface
+    also carries `local` (N, 3) float32, its vertices in its joint's frame (the same array every frame, so its
+    ray-tracing structure is built once), and
     `transform` (4, 4) float64, the rigid transform G with vertices = G @ [local, 1]."""
 
     name: str
@@ -78,6 +83,7 @@ class Surface:
     face_joints: np.ndarray | None = None
     local: np.ndarray | None = None
     transform: np.ndarray | None = None
+    face_labels: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)

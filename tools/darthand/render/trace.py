@@ -18,10 +18,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
+from darthand.model.layout import FACE_LABEL_IDS
 from darthand.render.camera import Camera
-from darthand.render.scene import Scene
-from darthand.render.shade import shade, surface_hits
+from darthand.render.indirect import VertexLight
+from darthand.render.scene import Scene, interpolate
+from darthand.render.shade import DEFAULT_SKIN, shade, surface_hits
+from darthand.render.skin import surface_radius
 
+NAIL = FACE_LABEL_IDS["nail"]
 MIN_CHUNK = 4096          # samples per parallel task, at least
 TILE = 8                  # pixels: primary rays are traced only in tiles some projected triangle touches
 _POOLS: dict[int, ThreadPoolExecutor] = {}
@@ -58,13 +62,16 @@ def pool(threads: int) -> ThreadPoolExecutor:
 
 @dataclass
 class Context:
-    """What every sample batch of one frame shares."""
+    """What every sample batch of one frame shares; indirect: the frame's indirect light at the vertices
+    (indirect.VertexLight), or None; skin: the skin model (shade.SKIN_MODELS)."""
 
     scene: Scene
     camera: Camera
     lights: list
     ambient: np.ndarray
     threads: int = 1
+    indirect: VertexLight | None = None
+    skin: str = DEFAULT_SKIN
     dDdx: np.ndarray = field(init=False)
     dDdy: np.ndarray = field(init=False)
 
@@ -169,19 +176,49 @@ def shade_hits(ctx: Context, hits: RayHits, footprint: float = 1.0,
             continue
         at = surface_hits(ctx.scene.faces[g], hits.prim[idx], hits.u[idx], hits.v[idx], hits.directions[:, idx],
                           hits.depth[idx], pixel_angle)
+        if ctx.indirect is not None:
+            at.indirect, at.visible = ctx.indirect.at(g, hits.prim[idx], hits.u[idx], hits.v[idx])
+        if ctx.skin == "subsurface" and surface.material.kind == "skin":
+            skin_at(at, surface, hits.prim[idx], hits.u[idx], hits.v[idx])
         normal[:, idx] = at.normal
         radiance[:, idx] = shade(surface.material, at, ctx.lights, ctx.ambient, ctx.scene.occluded,
-                                 ctx.scene.extent, counters)
+                                 ctx.scene.extent, counters, ctx.skin)
     if stats is not None:
         stats["shade"] = stats.get("shade", 0.0) + time.perf_counter() - t0
         stats["shadow_rays"] = stats.get("shadow_rays", 0) + counters.get("shadow_rays", 0)
     return normal, radiance
 
 
+def prepare_shading(ctx: Context, hits: RayHits, stats: dict | None = None) -> None:
+    """Before hits are shaded in parallel: the indirect light at the vertices of the faces they hit (this thread).
+    stats: adds seconds 'indirect'."""
+    if ctx.indirect is None:
+        return
+    t0 = time.perf_counter()
+    for g in range(len(ctx.scene.surfaces)):
+        prim = hits.prim[hits.geom == g]
+        if len(prim):
+            ctx.indirect.ensure(g, prim)
+    if stats is not None:
+        stats["indirect"] = stats.get("indirect", 0.0) + time.perf_counter() - t0
+
+
+def skin_at(at, surface, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> None:
+    """Fill the subsurface skin model's inputs of hits `at` on a skin surface: curvature radius, and which hits are
+    skin rather than nail."""
+    radius = surface_radius(surface)
+    if radius is None:
+        return
+    at.radius = interpolate(radius, surface.faces, prim, bu, bv)
+    if surface.face_labels is not None:
+        at.skin = surface.face_labels[prim] != NAIL
+
+
 def trace_samples(ctx: Context, uv: np.ndarray, footprint: float = 1.0, stats: dict | None = None) -> Samples:
     """Trace, shade and shadow the samples at pixel positions uv (N, 2) (one chunk, this thread); see
     `intersect_samples` and `shade_hits` for footprint and stats."""
     hits = intersect_samples(ctx, uv, stats)
+    prepare_shading(ctx, hits, stats)
     normal, radiance = shade_hits(ctx, hits, footprint, stats)
     return Samples(hits.geom, hits.prim, hits.depth, normal, radiance)
 
@@ -207,8 +244,14 @@ def in_chunks(ctx: Context, n: int, work, stats: dict | None = None) -> list:
 
 
 def trace_parallel(ctx: Context, uv: np.ndarray, footprint: float = 1.0, stats: dict | None = None) -> Samples:
-    """`trace_samples` of uv (N, 2) over chunks on `ctx.threads` threads; results in input order."""
-    return Samples.concat(in_chunks(ctx, len(uv), lambda a, b, s: trace_samples(ctx, uv[a:b], footprint, s), stats))
+    """`trace_samples` of uv (N, 2) over chunks on `ctx.threads` threads; results in input order. With indirect
+    light, all samples are intersected first, then the vertices they need are lit, then they are shaded."""
+    if ctx.indirect is None:
+        return Samples.concat(in_chunks(ctx, len(uv), lambda a, b, s: trace_samples(ctx, uv[a:b], footprint, s),
+                                        stats))
+    hits = intersect_parallel(ctx, uv, stats)
+    normal, radiance = shade_parallel(ctx, hits, footprint, stats)
+    return Samples(hits.geom, hits.prim, hits.depth, normal, radiance)
 
 
 def intersect_parallel(ctx: Context, uv: np.ndarray, stats: dict | None = None) -> RayHits:
@@ -219,6 +262,7 @@ def intersect_parallel(ctx: Context, uv: np.ndarray, stats: dict | None = None) 
 def shade_parallel(ctx: Context, hits: RayHits, footprint: float = 1.0,
                    stats: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """`shade_hits` over chunks on `ctx.threads` threads: (normal (3, N), radiance (3, N))."""
+    prepare_shading(ctx, hits, stats)
     parts = in_chunks(ctx, len(hits.geom), lambda a, b, s: shade_hits(ctx, hits.take(slice(a, b)), footprint, s),
                       stats)
     return tuple(np.concatenate(p, axis=1) for p in zip(*parts))

@@ -17,15 +17,14 @@ import numpy as np
 from pxr import Usd, UsdGeom, UsdShade, UsdSkel
 
 from darthand.errors import InputError
-from darthand.export.common import dense_weights
+from darthand.export.influences import dense_weights
 from darthand.export.package_files import check_usd_package, read_asset_info
 from darthand.model.layout import KEYPOINT_ORDERS, NUM_JOINTS
 from darthand.model.topology import face_joints, vertex_normals
 from darthand.render.subject import Material, Subject, Surface, skin_material
 from darthand.render.texture import constant_texture, load_maps
 
-HAND_MESH = "Hand"
-ACCESSORY_MESH = "Accessory/Geom"
+ROLE_KEY = "darthand:role"   # customData of the package's meshes: hand, forearm_cap, accessory
 
 
 class UsdPackage:
@@ -99,20 +98,21 @@ class UsdPackage:
         t, gesture = self.time_code(pose)
         texture, accessory = self.select(texture, accessory)
         points = skinned_points(self.stage, [t])
-        base = self.root.GetPath()
+        meshes = role_meshes(self.root)
         surfaces = []
-        for rel, role in ((HAND_MESH, "hand"), (ACCESSORY_MESH, "accessory")):
-            path = base.AppendPath(rel)
-            prim = self.stage.GetPrimAtPath(path)
-            if not prim:
+        # Surface order: 0 hand, 1 accessory, then the cap (frames index surfaces so).
+        for role, kind in (("hand", "hand"), ("accessory", "accessory"), ("forearm_cap", "cap")):
+            prim = meshes.get(role)
+            if prim is None:
                 continue
-            key = str(path)
+            key = str(prim.GetPath())
             if key not in points:
-                raise InputError(f"{self.interface}: {path} is not skinned to the skeleton")
-            surfaces.append(_surface(prim, points[key][0], role, skin_tone_offset,
-                                     name=texture if role == "hand" else accessory))
+                raise InputError(f"{self.interface}: {key} is not skinned to the skeleton")
+            surfaces.append(_surface(prim, points[key][0], kind, skin_tone_offset,
+                                     name={"hand": texture, "accessory": accessory}.get(role, role)))
         if not surfaces or surfaces[0].role != "hand":
-            raise InputError(f"{self.interface}: no hand mesh at {base.AppendPath(HAND_MESH)}")
+            raise InputError(f"{self.interface}: no hand mesh (a Mesh with customData {ROLE_KEY} = 'hand') under "
+                             f"{self.root.GetPath()}")
         joints = self.joints(t)
         hand_v = surfaces[0].vertices.astype(np.float64)
         if self.tip_ids.max() >= len(hand_v):
@@ -120,7 +120,7 @@ class UsdPackage:
         kp = np.concatenate([joints, hand_v[self.tip_ids]])[KEYPOINT_ORDERS[keypoint_order]]
         poses = self.info.get("gestures", {}).get("poses")
         pose_vec = np.asarray(poses[t], np.float64) if poses and t < len(poses) else np.zeros(3 * NUM_JOINTS)
-        acc_prim = self.stage.GetPrimAtPath(base.AppendPath(ACCESSORY_MESH))
+        acc_prim = meshes.get("accessory")
         parent = _rigid_joint(acc_prim) if acc_prim else None
         info = {"source": str(self.interface), "texture": texture, "skin_tone_offset": float(skin_tone_offset),
                 "accessory": accessory, "gesture": gesture, "accessory_parent_joint": parent, "time_code": t}
@@ -128,7 +128,7 @@ class UsdPackage:
 
     def joints(self, t: int) -> np.ndarray:
         """(16, 3) posed joint centres: the translations of the skeleton-space joint transforms (the package's
-        joint frames are world-aligned at rest, so these are MANO's posed joints)."""
+        joints' origins are the joint centres whatever their orientation, so these are MANO's posed joints)."""
         cache = UsdSkel.Cache()
         root = UsdSkel.Root(self.root)
         cache.Populate(root, Usd.PrimDefaultPredicate)
@@ -140,6 +140,16 @@ class UsdPackage:
 
 
 # ------------------------------------------------------------------------------------------------ reading prims
+
+
+def role_meshes(root: Usd.Prim) -> dict:
+    """{role: Mesh prim} of the meshes under `root` that carry customData darthand:role (the first of each)."""
+    out = {}
+    for prim in Usd.PrimRange(root):
+        role = prim.GetCustomDataByKey(ROLE_KEY) if prim.IsA(UsdGeom.Mesh) else None
+        if role and role not in out:
+            out[role] = prim
+    return out
 
 
 def _surface(prim: Usd.Prim, points: np.ndarray, role: str, offset: float, name: str) -> Surface:
@@ -172,7 +182,7 @@ def _material(prim: Usd.Prim, role: str, offset: float, name: str, has_uvs: bool
     bound = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
     surface = bound.ComputeSurfaceSource()[0] if bound else None
     if not surface:
-        return skin_material(name=name) if role == "hand" else Material(name=name)
+        return skin_material(name=name) if role in ("hand", "cap") else Material(name=name)
 
     def read(input_name, default):
         inp = surface.GetInput(input_name)
@@ -198,13 +208,13 @@ def _material(prim: Usd.Prim, role: str, offset: float, name: str, has_uvs: bool
     if metal_file:
         channels.append(channel.get(metal_ch, 2))
     if albedo_file or data:
-        maps = load_maps(albedo_file, offset=offset if role == "hand" else 0.0, data=data,
+        maps = load_maps(albedo_file, offset=offset if role in ("hand", "cap") else 0.0, data=data,
                          channels=channels or (0,), base_color=tuple(base))
     else:
         maps = constant_texture(base)
     rc = 3 if rough_file else None
     mc = (3 + len(channels) - 1) if metal_file else None
-    if role == "hand":
+    if role in ("hand", "cap"):
         return skin_material(maps, rc, float(rough), name=name)
     return Material("pbr", maps, rc, float(rough), mc, float(metal), name=name)
 
@@ -213,7 +223,7 @@ def _dense_weights(prim: Usd.Prim, n: int) -> np.ndarray | None:
     """(N, 16) skin weights of a per-point skinned prim; None for a rigid (constant) binding."""
     binding = UsdSkel.BindingAPI(prim)
     idx_pv, w_pv = binding.GetJointIndicesPrimvar(), binding.GetJointWeightsPrimvar()
-    if not idx_pv or idx_pv.GetInterpolation() == UsdGeom.Tokens.constant:
+    if not idx_pv or _rigid_joint(prim) is not None:
         return None
     k = idx_pv.GetElementSize()
     return dense_weights(np.asarray(idx_pv.Get(), np.int64).reshape(n, k),
@@ -221,9 +231,14 @@ def _dense_weights(prim: Usd.Prim, n: int) -> np.ndarray | None:
 
 
 def _rigid_joint(prim: Usd.Prim) -> int | None:
+    """The one joint a rigidly bound prim follows (a constant binding, or every point on one joint), else None."""
     pv = UsdSkel.BindingAPI(prim).GetJointIndicesPrimvar()
-    if pv and pv.GetInterpolation() == UsdGeom.Tokens.constant:
-        return int(pv.Get()[0])
+    if not pv:
+        return None
+    idx = np.asarray(pv.Get())
+    if pv.GetInterpolation() == UsdGeom.Tokens.constant or (pv.GetElementSize() == 1 and len(idx) and
+                                                             (idx == idx[0]).all()):
+        return int(idx[0])
     return None
 
 

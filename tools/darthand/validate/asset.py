@@ -48,7 +48,7 @@ class BlendShape:
 
 @dataclass
 class Mesh:
-    """A triangle mesh of the package. role: 'hand' or 'accessory'.
+    """A triangle mesh of the package. role: 'hand', 'cap' (the forearm cap) or 'accessory'.
 
     points (N, 3) float64 in the hand's rest frame; faces (F, 3) int64 (polygons fan-triangulated); uvs (T, 2) and
     uv_faces (F, 3) per-corner indices into uvs, or None; skin (None: not skinned); blend_shapes;

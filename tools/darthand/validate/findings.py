@@ -38,8 +38,8 @@ RULES: dict[str, Rule] = {
     "rig.joint-count": Rule("error", "the skeleton does not have MANO's 16 joints"),
     "rig.hierarchy": Rule("error", "the joint parents differ from MANO's"),
     "rig.joint-names": Rule("warning", "the joint names differ from MANO's (wrist, index1, ...)"),
-    "rig.bind-transform": Rule("error", "a bind transform is not a pure translation (joint frames not world-aligned)"),
-    "rig.rest-transform": Rule("error", "a rest transform is not a pure translation"),
+    "rig.bind-transform": Rule("error", "a bind transform is not rigid (an orthonormal rotation with det +1 and a translation)"),
+    "rig.rest-transform": Rule("error", "a rest transform is not rigid"),
     "rig.bind-rest-mismatch": Rule("error", "bind transforms are not the composition of the rest transforms"),
     "rig.skin-layout": Rule("error", "joint indices and weights have inconsistent sizes or interpolation"),
     "rig.joint-index": Rule("error", "a joint index is outside the skeleton"),
@@ -50,8 +50,8 @@ RULES: dict[str, Rule] = {
     "rig.blendshape-nonfinite": Rule("error", "a blend-shape offset is NaN or infinite"),
     "rig.blendshape-index": Rule("error", "a blend-shape point index is outside the mesh"),
     "rig.blendshape-duplicate-index": Rule("error", "a blend shape lists a point index twice"),
-    "rig.correctives-missing": Rule("error", "correctives are claimed but some of the 135 pose_jJJ_rRC names "
-                                             "are missing"),
+    "rig.correctives-missing": Rule("error", "correctives are claimed but the shapes (pose_<joint>_rRC_pos/neg) "
+                                             "of some of the 135 channels are missing"),
     # mesh
     "mesh.nonfinite-point": Rule("error", "a point is NaN or infinite"),
     "mesh.face-index": Rule("error", "a face indexes a point outside the mesh"),

@@ -13,7 +13,7 @@ How darthand's glTF maps onto the neutral form (gltf_export's layout, and what a
         moved by the node's global rest transform into the hand's frame;
     morph targets -> dense BlendShapes named by mesh.extras.targetNames; images -> TextureRefs (colour: base
         colour and emissive textures; data: metallic-roughness, normal, occlusion);
-    ids: KHR_materials_variants names (or the single skin material's `skin_<id>` name) are texture ids, accessory
+    ids: KHR_materials_variants names (or the single skin material's extras `darthand.texture`) are texture ids, accessory
         node names are accessory ids.
 """
 
@@ -392,12 +392,16 @@ class GltfReader:
             skinned = node.get("skin") is not None
             role = "hand" if skinned and not hand_found else "accessory"
             hand_found = hand_found or role == "hand"
-            name = str(node.get("name") or f"node{n}")
+            # an accessory's catalogue id: the node's extras (darthand writes it there; its name has the side
+            # prefix), else its name
+            name = str(_dict(_dict(node, "extras"), "darthand").get("accessory") or node.get("name") or f"node{n}")
             if role == "accessory":
                 self.pkg.accessory_ids.append((name, f"/nodes/{n}"))
             for p, prim in enumerate(_list(meshes[m], "primitives")):
                 where = f"/meshes/{m}/primitives/{p}"
-                mesh = self.guard(where, self.read_primitive, n, node, meshes[m], prim, where, role, name)
+                # the hand node's further primitives are the forearm cap (darthand writes it as primitive 1)
+                kind = "cap" if role == "hand" and p > 0 else role
+                mesh = self.guard(where, self.read_primitive, n, node, meshes[m], prim, where, kind, name)
                 if isinstance(mesh, Mesh):
                     self.pkg.meshes.append(mesh)
 
@@ -491,9 +495,12 @@ class GltfReader:
         material = _list(_list(self.doc, "meshes")[mesh_index], "primitives")[prim_index].get("material")
         materials = _list(self.doc, "materials")
         if isinstance(material, int) and 0 <= material < len(materials):
+            texture = _dict(_dict(materials[material], "extras"), "darthand").get("texture")
             name = str(materials[material].get("name") or "")
-            if name.startswith("skin_"):
-                self.pkg.texture_ids.append((name[len("skin_"):], f"/materials/{material}"))
+            if texture is None and name.startswith("skin_"):
+                texture = name[len("skin_"):]        # packages written before the texture id moved to extras
+            if texture is not None:
+                self.pkg.texture_ids.append((str(texture), f"/materials/{material}"))
 
 
 def node_parents(nodes: list[dict]) -> list[int]:

@@ -1,6 +1,7 @@
 """Accessory rules.
 
-    acc.binding      an accessory is rigidly bound to exactly one joint (USD: constant-interpolation joint
+    acc.binding      an accessory is rigidly bound to exactly one joint (USD: constant-interpolation, or per-point
+                     with every point on one joint at weight 1,
                      influence; glTF: a child node of a joint node) or skinned per point (gloves)
     acc.bad-joint    the rigid joint is one the skeleton has
     acc.distance     at rest, the accessory's closest point is within MAX_GAP of the hand surface (an accessory the

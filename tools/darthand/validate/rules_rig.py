@@ -3,16 +3,17 @@
     rig.no-skeleton / rig.no-skin   the hand has no skeleton, or its mesh no joint influences
     rig.joint-count, rig.hierarchy  16 joints with MANO's parents [-1, 0, 1, 2, 0, 4, ...]
     rig.joint-names (warning)       the names wrist, index1, ... (engines and retargeting find joints by name)
-    rig.bind-transform              bind transforms (skeleton space) are pure translations: joint frames are
-                                    world-aligned, which is how darthand maps MANO onto UsdSkel / glTF skins
-    rig.rest-transform              rest transforms (parent space) are pure translations
+    rig.bind-transform              bind transforms (skeleton space) are rigid: a rotation (orthonormal, det +1)
+                                    and a translation; darthand's joints carry oriented bone frames
+                                    (model/bones.py), which skinning maps back onto MANO exactly
+    rig.rest-transform              rest transforms (parent space) are rigid
     rig.bind-rest-mismatch          bind_i = bind_parent(i) @ rest_i, within TRANSFORM_TOLERANCE
     rig.skin-layout, rig.joint-index, rig.weights-nonfinite, rig.weights-negative, rig.weights-sum
                                     influences: sizes agree, indices in 0..J-1, weights finite, >= 0, sum 1 +- 1e-6
     rig.blendshape-layout, rig.blendshape-nonfinite, rig.blendshape-index, rig.blendshape-duplicate-index
                                     blend shapes: offsets finite, point indices in range and unique
     rig.correctives-missing         a mesh that claims MANO's pose correctives (the package says so, or it has any
-                                    shape named pose_jJJ_rRC) has all 135 of them
+                                    shape named pose_<joint>_rRC_pos|neg) has the shapes of all 135 channels
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from darthand.validate.findings import Finding, examples, finding
 
 WEIGHT_SUM_TOLERANCE = 1e-6
 TRANSFORM_TOLERANCE = 1e-5           # metres for translations, absolute for rotation entries
-CORRECTIVE_NAME = re.compile(r"^pose_j\d\d_r\d\d$")
+CORRECTIVE_NAME = re.compile(r"^pose_[a-z]+\d_r\d\d_(pos|neg)$")
 
 
 def check_rig(pkg: Package) -> list[Finding]:
@@ -71,10 +72,10 @@ def check_skeleton(skel: Skeleton) -> list[Finding]:
         if mats.shape != (J, 4, 4):
             out.append(finding(rule, skel.path, f"has {len(mats)} {name} transforms for {J} joints"))
             continue
-        bad = np.flatnonzero(~is_translation(mats))
+        bad = np.flatnonzero(~is_rigid(mats))
         if len(bad):
-            out.append(finding(rule, skel.path, f"{name} transforms that are not pure translations: joints "
-                               f"{examples(bad)} (first: {skel.names[bad[0]]})"))
+            out.append(finding(rule, skel.path, f"{name} transforms that are not rigid (rotation and translation): "
+                               f"joints {examples(bad)} (first: {skel.names[bad[0]]})"))
     if skel.bind.shape == skel.rest.shape == (J, 4, 4) and J:
         err = chain_error(skel)
         bad = np.flatnonzero(~(err <= TRANSFORM_TOLERANCE))
@@ -85,11 +86,15 @@ def check_skeleton(skel: Skeleton) -> list[Finding]:
     return out
 
 
-def is_translation(m: np.ndarray) -> np.ndarray:
-    """(J,) True where the column-vector transform (J, 4, 4) is a finite pure translation."""
-    linear_ok = np.abs(m[:, :3, :3] - np.eye(3)).max(axis=(1, 2)) <= TRANSFORM_TOLERANCE
-    row_ok = np.abs(m[:, 3, :] - [0, 0, 0, 1]).max(axis=1) <= TRANSFORM_TOLERANCE
-    return np.isfinite(m).all(axis=(1, 2)) & linear_ok & row_ok
+def is_rigid(m: np.ndarray) -> np.ndarray:
+    """(J,) True where the column-vector transform (J, 4, 4) is finite and rigid: an orthonormal 3x3 block with
+    determinant +1, and a last row (0, 0, 0, 1)."""
+    finite = np.isfinite(m).all(axis=(1, 2))
+    R = np.where(finite[:, None, None], m[:, :3, :3], 0.0)
+    orthonormal = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max(axis=(1, 2)) <= TRANSFORM_TOLERANCE
+    proper = np.abs(np.linalg.det(R) - 1.0) <= TRANSFORM_TOLERANCE
+    row_ok = np.abs(np.where(finite[:, None], m[:, 3, :], 0.0) - [0, 0, 0, 1]).max(axis=1) <= TRANSFORM_TOLERANCE
+    return finite & orthonormal & proper & row_ok
 
 
 def chain_error(skel: Skeleton) -> np.ndarray:
@@ -174,11 +179,17 @@ def check_correctives(mesh: Mesh) -> list[Finding]:
     names = {s.name for s in mesh.blend_shapes}
     if not (mesh.claims_correctives or any(CORRECTIVE_NAME.match(n) for n in names)):
         return []
-    from darthand.export.common import corrective_names   # imports the forward pass: only when needed
-
-    missing = [n for n in corrective_names() if n not in names]
+    missing = [n for n in corrective_shape_names() if n not in names]
     if not missing:
         return []
     more = ", ..." if len(missing) > 3 else ""
     return [finding("rig.correctives-missing", mesh.path, f"claims MANO's 135 pose correctives but lacks "
-                    f"{len(missing)}: {', '.join(missing[:3])}{more}")]
+                    f"{len(missing)} of their {len(corrective_shape_names())} shapes: {', '.join(missing[:3])}{more}")]
+
+
+def corrective_shape_names() -> tuple[str, ...]:
+    """The blend-shape names of the full correctives (each channel's _pos and _neg shapes, export/blendshapes.py)."""
+    from darthand.export.blendshapes import encode_channels
+    from darthand.export.correctives import corrective_names, pose_feature_ranges   # imports the forward pass
+
+    return encode_channels(corrective_names(), *pose_feature_ranges()).names

@@ -16,7 +16,7 @@ What is composed and checked:
     whole composition, findings already seen not repeated; mesh, rig, texture and accessory rules on what the
     variant adds.
 
-Paths of findings inside a variant use USD's variant-selection syntax, e.g. `/Hand{accessory=ring_01}Accessory/Geom`.
+Paths of findings inside a variant use USD's variant-selection syntax, e.g. `/RightHand{accessory=ring_01}RightHandAccessory/Right_ring_01`.
 
     usd.<validator name>        a finding of that OpenUSD validator (severity Error / Warn / Info as it reports)
     usd.layer-outside-package   a layer the asset composes lies outside the package folder (absolute or '..'
@@ -256,7 +256,7 @@ def variant_arcs(prim: Usd.Prim, set_name: str, name: str) -> list[tuple]:
 
 
 def _variant_label(root: Sdf.Path, set_name: str, name: str):
-    """Label prims of a composition under a variant selection: /Hand/X -> /Hand{set=name}X."""
+    """Label prims of a composition under a variant selection: /RightHand/X -> /RightHand{set=name}X."""
     selected = root.AppendVariantSelection(set_name, name)
 
     def label(p: Sdf.Path) -> str:

@@ -109,7 +109,8 @@ def read_meshes(stage: Usd.Stage, pkg: Package, label: Label, limits: Limits, un
     for prim in Usd.PrimRange(start):
         if not prim.IsA(UsdGeom.Mesh):
             continue
-        role = "accessory" if is_accessory(prim) else "hand"
+        role = "accessory" if is_accessory(prim) else \
+            "cap" if prim.GetCustomDataByKey("darthand:role") == "forearm_cap" else "hand"
         mesh, found = read_mesh(prim, role, label, limits, xf_cache)
         out += found
         if mesh is not None:
@@ -122,7 +123,8 @@ def read_meshes(stage: Usd.Stage, pkg: Package, label: Label, limits: Limits, un
 def is_accessory(prim: Usd.Prim) -> bool:
     p = prim
     while p and not p.IsPseudoRoot():
-        if p.GetName() == ACCESSORY_PRIM or p.GetCustomDataByKey(KIND_KEY):
+        if p.GetName() == ACCESSORY_PRIM or p.GetCustomDataByKey(KIND_KEY) or \
+                p.GetCustomDataByKey("darthand:role") == "accessory":
             return True
         p = p.GetParent()
     return False
@@ -206,6 +208,10 @@ def read_skin(prim: Usd.Prim, num_points: int, where: str, limits: Limits) -> tu
         return broken, [finding("rig.skin-layout", where, f"joint indices ({ji.GetInterpolation()}, elementSize {k}, "
                               f"{idx.size} values) and weights ({jw.GetInterpolation()}, elementSize {kw}, "
                               f"{w.size} values) do not match")]
+    if not rigid and k == 1 and idx.size and (idx == idx[0]).all() and (w == 1).all():
+        # every point on one joint with weight 1 (how darthand writes rigid accessories: per point, which
+        # Blender's importer reads, rather than constant): the same binding as a constant one
+        return Skin(idx[:1].reshape(1, 1), w[:1].reshape(1, 1), True, joint_count(binding)), []
     return Skin(idx.reshape(-1, k), w.reshape(-1, kw), rigid, joint_count(binding)), []
 
 

@@ -1,5 +1,6 @@
-"""darthand.export.common: pruned influences, exported correctives, gestures, UV splitting, texture files, accessory
-correctives, and the texture and accessory catalogues in the formats their stages write."""
+"""The parts the export writers share: pruned influences, exported correctives and their [0, 1] blend-shape encoding,
+gestures, UV splitting, texture files, accessory correctives, and the texture and accessory catalogues read through
+their stages' loaders, in the formats their stages write."""
 
 from __future__ import annotations
 
@@ -14,10 +15,14 @@ from scipy.spatial.transform import Rotation
 from synthetic import tube_hand
 
 from darthand.errors import InputError
-from darthand.export.common import (Accessory, accessory_offsets, corrective_error, corrective_names, dense_weights,
-                                    export_correctives, exported_model, gesture_poses, load_accessory_catalog,
-                                    load_texture_catalog, parse_correctives, parse_influences, place_texture,
-                                    split_uv_vertices, texture_bytes, top_k_influences)
+from darthand.accessories.loader import Accessory, load_accessory_catalog
+from darthand.export.correctives import (channel_offsets, corrective_error, corrective_names, export_correctives,
+                                         exported_model, parse_correctives)
+from darthand.export.gestures import gesture_poses
+from darthand.export.gltf_rig import split_uv_vertices
+from darthand.export.influences import dense_weights, parse_influences, top_k_influences
+from darthand.export.texture_files import place_texture, texture_bytes
+from darthand.textures.loader import load_texture_catalog
 from darthand.fileio import sha256_file
 from darthand.model.forward import forward
 from darthand.model.layout import NUM_JOINTS
@@ -97,19 +102,54 @@ def test_option_parsing():
 def test_corrective_names_are_unique_identifiers():
     names = corrective_names()
     assert len(names) == 135 == len(set(names))
-    assert names[0] == "pose_j01_r00" and names[-1] == "pose_j15_r22"
+    assert names[0] == "pose_index1_r00" and names[-1] == "pose_thumb3_r22"
     assert all(n.isidentifier() for n in names)
 
 
-def test_full_correctives_weights_are_the_pose_feature(model):
-    """Weights = flatten(R_i - I), computed here with scipy's rotations: negative entries stay negative."""
+def test_full_correctives_values_are_the_pose_feature(model):
+    """Channel values = flatten(R_i - I), computed here with scipy's rotations: negative entries stay negative."""
     poses = np.random.default_rng(3).normal(0, 0.6, (5, 48))
     R = Rotation.from_rotvec(poses.reshape(-1, 3)).as_matrix().reshape(5, 16, 3, 3)
     expected = (R[:, 1:] - np.eye(3)).reshape(5, 135)
     full = export_correctives(model, "full")
-    np.testing.assert_allclose(full.weights_of_poses(poses), expected, atol=1e-12)
+    np.testing.assert_allclose(full.values(R), expected, atol=1e-12)
     assert (expected < 0).any() and (expected > 0).any()
-    assert full.offsets is model.posedirs and full.count == 135
+    assert full.offsets is model.posedirs
+    # 15 joints x (3 diagonal entries, one negative shape each + 6 off-diagonal ones, two shapes each)
+    assert full.count == 15 * (3 + 12) == 225
+
+
+@pytest.mark.parametrize("mode", ["full", "pca:12", "pose-pca:8"])
+def test_encoded_weights_stay_in_0_1_and_reproduce_the_signed_correctives(model, mode):
+    """For rotations of every size (up to pi, beyond what hands do), every exported weight lies in [0, 1] and the
+    encoded shapes sum to exactly the signed corrective offset sum_k c_k d_k, computed here from the projection."""
+    rng = np.random.default_rng(11)
+    axes = rng.normal(size=(64, 16, 3))
+    angles = rng.uniform(0, np.pi, (64, 16, 1))
+    poses = (axes / np.linalg.norm(axes, axis=-1, keepdims=True) * angles).reshape(64, 48)
+    poses[0] = np.tile([np.pi, 0, 0], 16)                 # R - I diagonal at its extreme -2
+    c = export_correctives(model, mode)
+    w = c.weights_of_poses(poses)
+    assert w.min() >= 0 and w.max() <= 1
+    assert mode != "full" or w.max() == 1.0               # the pose feature's bounds are attained
+    R = Rotation.from_rotvec(poses.reshape(-1, 3)).as_matrix().reshape(64, 16, 3, 3)
+    f = (R[:, 1:] - np.eye(3)).reshape(64, 135)
+    signed = f if c.projection is None else f @ c.projection.T
+    V = model.num_vertices
+    exact = signed @ c.offsets.reshape(3 * V, -1).T
+    encoded = w @ c.shape_offsets().reshape(3 * V, -1).T
+    assert np.abs(encoded - exact).max() < 1e-12
+    np.testing.assert_allclose(c.encoding.decode(w), signed, atol=1e-12)
+
+
+def test_encoding_table_names_channels_and_scales(model):
+    enc = export_correctives(model, "full").encoding
+    table = enc.as_dict()["shapes"]
+    by_name = {row["name"]: row for row in table}
+    assert by_name["pose_index1_r00_neg"] == {"name": "pose_index1_r00_neg", "channel": "pose_index1_r00",
+                                              "scale": -2.0}
+    assert "pose_index1_r00_pos" not in by_name            # R - I is never positive on the diagonal
+    assert by_name["pose_index1_r01_pos"]["scale"] == 1.0 and by_name["pose_index1_r01_neg"]["scale"] == -1.0
 
 
 def test_pca_is_exact_for_low_rank_correctives(model):
@@ -129,7 +169,7 @@ def test_pca_is_exact_for_low_rank_correctives(model):
 def test_pose_pca_is_optimal_in_mean_square_over_its_pose_sample(model):
     """Eckart-Young on A L: over the very poses whose covariance defines it, pose-pca:K has the smallest mean
     squared offset error of all rank-K schemes, pca:K's included; with K = 135 it is exact."""
-    from darthand.export.common import POSE_PCA_SAMPLES, POSE_PCA_SEED
+    from darthand.export.correctives import POSE_PCA_SAMPLES, POSE_PCA_SEED
     from darthand.model.anatomy import sample_poses
 
     poses = sample_poses(model, POSE_PCA_SAMPLES, np.random.default_rng(POSE_PCA_SEED))
@@ -216,7 +256,7 @@ def test_textures_are_downsized_in_linear_light_never_upsized(tmp_path):
 # ------------------------------------------------------------------------------------------------ accessories
 
 
-def test_accessory_offsets_fit_the_accessory_correctives_in_the_hand_basis(model):
+def test_channel_offsets_fit_the_accessory_correctives_in_the_hand_basis(model):
     """D = G P^+: the glove's own correctives G carried by the hand's blend-shape weights c = P f.
 
     full: D = G. pca:K (P = W_K, orthonormal rows): D c = G W_K^T W_K f, the projection of f on the top right
@@ -225,17 +265,17 @@ def test_accessory_offsets_fit_the_accessory_correctives_in_the_hand_basis(model
     """
     G = np.random.default_rng(8).normal(0, 1e-3, model.posedirs.shape)
     glove = Accessory("glove", model.v_template, model.faces, weights=model.weights, posedirs=G)
-    assert accessory_offsets(glove, export_correctives(model, "full")) is G
-    assert accessory_offsets(glove, export_correctives(model, "none")).shape == (model.num_vertices, 3, 0)
+    assert channel_offsets(glove.posedirs, export_correctives(model, "full"), len(G)) is G
+    assert channel_offsets(glove.posedirs, export_correctives(model, "none"), len(G)).shape == (model.num_vertices, 3, 0)
     f = np.random.default_rng(9).normal(0, 0.3, (5, 135))
     W = np.linalg.svd(model.posedirs.reshape(-1, 135), full_matrices=False)[2][:8]
     pca = export_correctives(model, "pca:8")
-    D = accessory_offsets(glove, pca)
+    D = channel_offsets(glove.posedirs, pca, len(G))
     np.testing.assert_allclose(np.einsum("nck,bk->bnc", D, f @ pca.projection.T),
                                np.einsum("nck,bk->bnc", G, f @ W.T @ W), atol=1e-15)
     pose_pca = export_correctives(model, "pose-pca:8")
     P = pose_pca.projection
-    D = accessory_offsets(glove, pose_pca)
+    D = channel_offsets(glove.posedirs, pose_pca, len(G))
     residual = (D @ P - G).reshape(-1, 135) @ P.T
     assert np.abs(residual).max() < 1e-9 * np.abs(G.reshape(-1, 135) @ P.T).max()
     transpose = (G @ P.T).reshape(-1, 8)                       # what treating P as orthonormal would give
