@@ -22,7 +22,10 @@ def main(argv: list[str] | None = None) -> int:
 
         with deaf_to_ctrl_c():     # a Ctrl-C during the imports is taken after them (OpenUSD's module loader would
             parser = build_parser()     # print it as a warning with a traceback and go on)
-            args = parser.parse_args(argv)
+            try:
+                args = parser.parse_args(argv)
+            except SystemExit as e:     # --help, or a bad option (its one line already printed): an exit code, so
+                return e.code if isinstance(e.code, int) else 2     # main() called in process returns it too
         if not getattr(args, "run", None):
             parser.print_help()
             return 2
