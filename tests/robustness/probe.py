@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import concurrent.futures as cf
 import ctypes
+import errno
 import json
 import os
 import re
@@ -80,13 +81,21 @@ class Watch:
     """inotify IN_OPEN/IN_ACCESS on some files: did anything open them?"""
 
     def __init__(self, paths):
-        self.fd = _libc.inotify_init1(os.O_NONBLOCK | os.O_CLOEXEC)
+        self.fd = -1
+        for _ in range(40):     # EMFILE: every process of the user shares fs.inotify.max_user_instances (128)
+            self.fd = _libc.inotify_init1(os.O_NONBLOCK | os.O_CLOEXEC)
+            if self.fd >= 0 or ctypes.get_errno() != errno.EMFILE:
+                break
+            time.sleep(0.25)
+        if self.fd < 0:
+            raise OSError(ctypes.get_errno(), f"inotify_init1: {os.strerror(ctypes.get_errno())}")
         self.names = {}
         for p in paths:
             if os.path.lexists(p) and not Path(p).is_fifo():
                 wd = _libc.inotify_add_watch(self.fd, str(p).encode(), IN_OPEN | IN_ACCESS)
-                if wd >= 0:
-                    self.names[wd] = str(p)
+                if wd < 0:      # a watch that is not there would pass every test
+                    raise OSError(ctypes.get_errno(), f"inotify_add_watch {p}: {os.strerror(ctypes.get_errno())}")
+                self.names[wd] = str(p)
 
     def opened(self) -> list[str]:
         out = set()
@@ -101,8 +110,15 @@ class Watch:
                 if mask & (IN_OPEN | IN_ACCESS) and wd in self.names:
                     out.add(self.names[wd])
                 i += 16 + length
-        os.close(self.fd)
+        self.close()
         return sorted(out)
+
+    def close(self) -> None:
+        if self.fd >= 0:
+            os.close(self.fd)
+            self.fd = -1
+
+    __del__ = close         # a watch left unread (its test failed first) still gives its instance back
 
 
 # ------------------------------------------------------------------------------------------------ processes

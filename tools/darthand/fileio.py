@@ -100,8 +100,15 @@ def _non_finite(obj) -> tuple[str, float] | None:
             return where or "(top level)", x
         if isinstance(x, (dict, list, tuple)):
             items = x.items() if isinstance(x, dict) else enumerate(x)
-            todo += [(f"{where}.{k}" if where else str(k), v) for k, v in reversed(list(items))]
+            todo += [(f"{where}.{field_key(k)}" if where else field_key(k), v) for k, v in reversed(list(items))]
     return None
+
+
+def field_key(key) -> str:
+    """A key or index as it appears in a dotted field name: escaped when it holds a newline or other character
+    that would break the one-line error message (a key from a hostile file can be anything)."""
+    text = str(key)
+    return text if text.isprintable() else ascii(text)[1:-1]
 
 
 # ------------------------------------------------------------------------------------------------ reading
