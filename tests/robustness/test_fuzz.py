@@ -32,6 +32,7 @@ from darthand.errors import InputError
 
 FUZZ = settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
 SLOW_FUZZ = settings(max_examples=8, deadline=None, suppress_health_check=list(HealthCheck))
+VALIDATOR_FUZZ = settings(SLOW_FUZZ, max_examples=4)    # each example starts the Khronos validator (node): ~4 s
 
 
 # ------------------------------------------------------------------------------------------------ JSON values
@@ -464,7 +465,7 @@ def test_gltf_reader(fx, tmp_path_factory, data):
     assert watch.opened() == []
 
 
-@SLOW_FUZZ
+@VALIDATOR_FUZZ
 @given(data=st.data())
 def test_validate_with_the_khronos_validator_never_opens_outside_files(fx, tmp_path_factory, data):
     from darthand.validate.run import validate_paths
