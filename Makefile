@@ -11,7 +11,9 @@ PYTHON ?= python3
 # Steps whose inputs are ready run JOBS at a time: on two cores the single-threaded steps (gestures, the USD and
 # glTF writers, validation) overlap the two-process ones (textures, accessories) instead of leaving a core idle.
 JOBS   ?= 2
+ifeq ($(MAKELEVEL),0)   # a second make (assets, after the repair) shares the first one's job slots
 MAKEFLAGS += -j$(JOBS)
+endif
 VENV   := .venv
 # Blender as a Python module (bpy from PyPI) in its own environment: bpy 5.0 pins numpy < 2, the project uses
 # numpy 2. Tests import packages with it; `make assets` writes the .blend rigs with it.
@@ -39,7 +41,7 @@ POSES        := $(wildcard assets_src/poses/*.json)
 # A stage's outputs depend on its own code too, so editing a generator rebuilds what it made.
 src = $(wildcard tools/darthand/$(1)/*.py tools/darthand/$(1)/*/*.py)
 
-.PHONY: assets shapes test test-all bench usdz clean venv node blender chromium FORCE
+.PHONY: assets verify-build shapes test test-all bench usdz clean venv node blender chromium FORCE
 .DEFAULT_GOAL := assets
 # A step that fails leaves no output make would take as up to date next time (grouped targets: all of them), so a
 # failed step fails again on every run until its cause is fixed.
@@ -147,8 +149,15 @@ ASSETS := build/model/right.npz build/template/gestures.json build/textures/cata
 build/manifest.json: $(ASSETS)
 	@$(DH) manifest --build build
 
+# Outputs damaged since the manifest was written (a truncated texture, a deleted file) are removed and their steps
+# dated back, so the rules above rebuild them (no-op without a manifest). The build is a second make, started after
+# the repair: with JOBS > 1 a prerequisite listed beside verify-build would be judged while the repair runs.
+verify-build: | $(STAMP)
+	@$(DH) verify --build build --repair
+
 # Every run: exit 1 while any check the manifest records fails.
-assets: build/manifest.json
+assets: verify-build
+	@$(MAKE) --no-print-directory build/manifest.json
 	@$(DH) manifest --build build --check
 
 # One variant combination as a .usdz: make usdz TEXTURE=light_tattoos_07 ACCESSORY=watch_03_round_metal

@@ -7,19 +7,16 @@ planning, resume, records and progress, so another runner (Ray's, for a cluster)
 Workers are started with 'spawn' (a fresh interpreter: nothing inherited from a parent that may hold an Embree
 device or thread pools); each opens its sources (dataset/sources.SourceSpec) on first use and renders
 single-threaded. They ignore Ctrl-C (the parent stops them after their current frame) and exit by themselves when
-their parent dies (a watchdog thread notices the re-parenting), so a killed run leaves no orphans.
+their parent dies (darthand.processes.init_worker), so a killed run leaves no orphans.
 """
 
 from __future__ import annotations
 
 import os
-import threading
 import time
 from concurrent.futures import Future
 
 from darthand.errors import InputError
-
-WATCHDOG_S = 0.5
 
 # The worker's state: set by _init_worker (spawned processes) or LocalRunner (in-process); renderers opened on use.
 _STATE: dict = {}
@@ -35,18 +32,10 @@ def set_worker_state(specs: dict, settings: dict, threads: int | None, stop=None
 
 
 def _init_worker(specs: dict, settings: dict, threads: int, stop, parent: int) -> None:
-    import signal
+    from darthand.processes import init_worker
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)      # the parent handles Ctrl-C and stops the workers
+    init_worker(parent)        # the parent handles Ctrl-C and stops the workers; they end when it dies
     set_worker_state(specs, settings, threads, stop)
-    threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="darthand-watchdog").start()
-
-
-def _watch_parent(parent: int) -> None:
-    """Exit this worker as soon as its parent process is gone (it was killed, or exited without stopping us)."""
-    while os.getppid() == parent:
-        time.sleep(WATCHDOG_S)
-    os._exit(3)
 
 
 def worker_renderer(side: str):
@@ -116,7 +105,10 @@ class LocalRunner:
 
     def submit(self, chunk: list) -> Future:
         if self._pool is not None:
-            return self._pool.submit(render_chunk, chunk)
+            from darthand.processes import deaf_to_ctrl_c
+
+            with deaf_to_ctrl_c():          # submit may start a worker: Ctrl-C must not reach it while it imports
+                return self._pool.submit(render_chunk, chunk)
         future: Future = Future()
         try:
             future.set_result(render_chunk(chunk))
