@@ -18,7 +18,7 @@ the nearest code (half to even).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -38,6 +38,7 @@ class Layout:
     texel: np.ndarray
     empty: list
     count: list
+    _masks: dict = field(default_factory=dict, repr=False)
 
     @classmethod
     def of(cls, texel: np.ndarray, res: int) -> "Layout":
@@ -48,6 +49,16 @@ class Layout:
             counts.append(halve(counts[-1]))
         return cls(shape=(res, res), texel=np.asarray(texel), empty=[c == 0 for c in counts],
                    count=[None] + [np.maximum(c, 1).astype(np.float32) for c in counts[1:]])
+
+    def fill_mask(self, level: int, channels: int) -> np.ndarray:
+        """(h_L, w_L, channels) uint8: 255 in the blocks of `level` that hold no stored texel, else 0 (made once per
+        level and channel count: a full-size mask, not a broadcast one, keeps the per-image pass a plain AND)."""
+        key = (level, channels)
+        if key not in self._masks:
+            empty = self.empty[level]
+            self._masks[key] = np.where(np.broadcast_to(empty, empty.shape[:2] + (channels,)), np.uint8(255),
+                                        np.uint8(0))
+        return self._masks[key]
 
 
 def pad(layout: Layout, values: np.ndarray) -> np.ndarray:
@@ -69,8 +80,10 @@ def pad(layout: Layout, values: np.ndarray) -> np.ndarray:
         mean /= layout.count[level]
         means.append(np.rint(mean, out=mean).astype(np.uint8))   # 0 in empty blocks (0 / 1)
     padded = means[-1]
-    for level in range(len(means) - 2, -1, -1):
-        padded = np.where(layout.empty[level], upsample(padded, means[level].shape), means[level])
+    for level in range(len(means) - 2, -1, -1):      # means[level] is 0 where the parent's value goes, so:
+        up = upsample(padded, means[level].shape)
+        np.bitwise_and(up, layout.fill_mask(level, values.shape[1]), out=up)
+        padded = np.bitwise_or(up, means[level], out=up)
     return padded
 
 
