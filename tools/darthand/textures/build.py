@@ -35,7 +35,7 @@ from darthand.budget import check_memory
 from darthand.errors import InputError
 from darthand.fileio import file_in, read_json, sha256_file, write_json
 from darthand.model.hand_model import HandModel
-from darthand.processes import deaf_to_ctrl_c, init_worker
+from darthand.processes import deaf_to_ctrl_c, init_worker, keep_freed_memory
 from darthand.textures import sheet as sheet_mod
 from darthand.model.atlas import ensure_uvs
 from darthand.textures.bake import Bake, cached_bake, load_bake, source_digest
@@ -163,6 +163,7 @@ _WORKER_BAKE: Bake | None = None
 def _init_worker(bake_path: str) -> None:
     global _WORKER_BAKE
     init_worker()         # Ctrl-C is the parent's to handle; the worker ends with its parent
+    keep_freed_memory()   # every variant makes and drops the same few-MB arrays: reuse them, not fresh pages
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import OpenImageIO as oiio
 
