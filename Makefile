@@ -2,7 +2,8 @@
 # Each target bootstraps .venv from pyproject.toml on first use (idempotent); Node tooling (the Khronos glTF
 # validator, three.js) comes from package-lock.json when npm is on the machine.
 #
-# Variables: MANO=path/to/MANO_RIGHT.pkl (source model; default: the open CC0 hand), RES (texture size, default
+# Variables: MANO=path/to/MANO_RIGHT.pkl (source model; default: the open CC0 hand), BETAS="b1 b2 ..." (build the
+# hand of that shape: every package, texture and accessory fits it; default the mean shape), RES (texture size, default
 # 2048), SIDE (right, left or both), TEXTURE / ACCESSORY (catalogue ids for `make usdz`; default: the package's
 # default texture and no accessory).
 
@@ -20,6 +21,7 @@ STAMP  := $(VENV)/.installed-stamp
 BENCH_STAMP := $(VENV)/.bench-stamp
 NODE_STAMP := node_modules/.installed-stamp
 MANO   ?=
+BETAS  ?=
 RES    ?= 2048
 SIDE   ?= both
 TEXTURE   ?=
@@ -56,13 +58,15 @@ $(NODE_STAMP): package.json package-lock.json
 	 else echo "npm not found: glTF validator tests will be skipped"; fi
 
 # ------------------------------------------------------------------ assets
-# The source model is recorded so that switching MANO=... rebuilds everything that depends on it.
+# The source model and shape are recorded so that switching MANO=... or BETAS=... rebuilds everything that depends
+# on them.
 build/model/source.txt: FORCE | $(STAMP)
 	@mkdir -p build/model
-	@echo '$(SOURCE_MODEL)' | cmp -s - $@ || echo '$(SOURCE_MODEL)' > $@
+	@echo '$(SOURCE_MODEL) $(strip $(BETAS))' | cmp -s - $@ || echo '$(SOURCE_MODEL) $(strip $(BETAS))' > $@
 
 build/model/right.npz build/model/left.npz &: build/model/source.txt $(SOURCE_DEPS) $(call src,model) $(STAMP)
-	@$(STEP) model -- $(DH) model build $(SOURCE_MODEL) --out-dir build/model --atlas-res $(RES)
+	@$(STEP) model -- $(DH) model build $(SOURCE_MODEL) --out-dir build/model --atlas-res $(RES) \
+	    $(if $(strip $(BETAS)),--betas '$(strip $(BETAS))')
 
 build/template/gestures.json build/template/gestures.png &: build/model/right.npz $(POSES) $(call src,template)
 	@$(STEP) gestures -- $(DH) template gestures build/model/right.npz --out-dir build/template

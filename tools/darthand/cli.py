@@ -82,6 +82,8 @@ def _add_model_commands(sub) -> None:
     p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for right.npz and left.npz")
     p.add_argument("--atlas-res", type=int, default=2048, metavar="PX",
                    help="texture size the xatlas UV atlas is padded for, when the model has no UVs (default 2048)")
+    p.add_argument("--betas", metavar="B", help="build the hand of this shape: shape coefficients separated by spaces "
+                   "or commas, missing trailing ones 0 (e.g. '1.5 -0.5'; default the mean shape)")
     p.set_defaults(run=commands.build)
 
 
@@ -204,6 +206,9 @@ def _add_export_commands(sub) -> None:
                         "pose-pca weights them by how anatomical poses use them, a smaller error for the same K), "
                         "none (default full)")
     size_help = "downsize textures so that their longer side is at most PX pixels (default: use the files unchanged)"
+    dials_help = ("the shape directions as blend shapes a user can dial, each reaching |delta beta| = R from the built "
+                  "shape at weight 1; the joints stay the built shape's (the dial error is reported); 0 for none "
+                  "(default 3)")
 
     p = g.add_parser("usd", help="write a USD asset package: interface .usda, payload, texture and accessory variants")
     p.add_argument("model", metavar="MODEL", help=model_help)
@@ -217,6 +222,7 @@ def _add_export_commands(sub) -> None:
     p.add_argument("--correctives", default="full", metavar="MODE", help=correctives_help)
     p.add_argument("--texture-size", type=int, metavar="PX", help=size_help)
     p.add_argument("--name", metavar="NAME", help="name of the interface layer NAME.usda (default: the model's side)")
+    p.add_argument("--shape-dials", type=float, default=3.0, metavar="R", help=dials_help)
     p.set_defaults(run=commands_usd.usd)
 
     p = g.add_parser("usdz", help="write one variant combination of a USD package as a flattened .usdz")
@@ -253,6 +259,7 @@ def _add_export_commands(sub) -> None:
     p.add_argument("--correctives", default="full", metavar="MODE", help=correctives_help)
     p.add_argument("--validate", action="store_true",
                    help="run the Khronos glTF validator on the result (exit 1 on errors)")
+    p.add_argument("--shape-dials", type=float, default=3.0, metavar="R", help=dials_help)
     p.set_defaults(run=commands_gltf.gltf)
 
     p = g.add_parser("blend", help="write the Blender-native rig (.blend, through bpy in .venv-blender): bones along "

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.model.atlas import ensure_uvs
 from darthand.model.forward import forward
@@ -91,6 +92,9 @@ def build(args) -> int:
     """
     source = load_model(args.model)
     enhanced = ensure_uvs(add_wrist(source), args.atlas_res)
+    betas = parse_betas(getattr(args, "betas", None))
+    if betas is not None:
+        enhanced = enhanced.shaped(betas)
     other = mirror_model(enhanced)
     out = Path(args.out_dir)
     for model in (enhanced, other):
@@ -98,6 +102,20 @@ def build(args) -> int:
     for fix in source.meta.get("fixes", []):
         print(f"  fixed on load: {fix}")
     uv = "xatlas atlas" if "uv_atlas" in enhanced.meta else "the template's UVs"
+    shape = f"; shape betas {' '.join(f'{b:g}' for b in betas)}" if betas is not None else ""
     print(f"{out}/right.npz, left.npz: {enhanced.num_vertices} vertices, {enhanced.num_faces} faces "
-          f"(from {args.model}, {source.num_vertices} vertices; {uv})")
+          f"(from {args.model}, {source.num_vertices} vertices; {uv}{shape})")
     return 0
+
+
+def parse_betas(text: str | None) -> np.ndarray | None:
+    """'1.5 -0.5' or '1.5,-0.5' -> array([1.5, -0.5]); None or blank -> None; InputError naming a bad entry."""
+    if text is None or not str(text).strip():
+        return None
+    values = []
+    for item in str(text).replace(",", " ").split():
+        try:
+            values.append(float(item))
+        except ValueError:
+            raise InputError(f"--betas: {item!r} is not a number") from None
+    return np.asarray(values)
