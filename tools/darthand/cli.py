@@ -394,6 +394,16 @@ def _add_dataset_arguments(p) -> None:
                    help="comma-separated accessory ids to draw from, 'all' (default) or 'none' (no accessories)")
     p.add_argument("--accessory-share", type=float, default=d["accessory_share"], metavar="X",
                    help="share of the frames with an accessory (default 0.25, DART's)")
+    p.add_argument("--shapes", default=d["shapes"]["mode"], choices=("normal", "uniform", "none"),
+                   help="hand shape per frame: betas ~ N(0, sigma^2) truncated at +-limit (normal, the default: the "
+                        "open hand's shape space is calibrated so that N(0, I) spans adult hands), uniform in "
+                        "+-limit, or none (the model's own shape, as DART); a USD package renders its baked shape")
+    p.add_argument("--shape-sigma", type=float, default=d["shapes"]["sigma"], metavar="S",
+                   help="standard deviation of the normal shape distribution (default 1)")
+    p.add_argument("--shape-limit", type=float, default=d["shapes"]["limit"], metavar="L",
+                   help="largest |beta| drawn (default 3, the extreme shapes `make shapes` checks)")
+    p.add_argument("--shape-dims", type=int, default=None, metavar="N",
+                   help="draw only the first N shape directions, the rest 0 (default all)")
     p.add_argument("--views", default="random", metavar="random|VIEWS",
                    help=f"'random' (directions uniform over the sphere by equal-area cells, not along the forearm) "
                         f"and/or views ({', '.join(VIEWS)}), comma-separated, one drawn per frame (default random)")
