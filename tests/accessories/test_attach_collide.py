@@ -52,7 +52,7 @@ def test_surface_distance_matches_closed_form():
 
 def test_closed_hand_caps_the_open_end():
     hand = add_wrist(tube_hand(0), rings=4, length=0.05)
-    closed = ClosedHand(hand.faces, hand.num_vertices)
+    closed = ClosedHand(hand.faces)
     v = closed.vertices(hand.v_template)
     tm = trimesh.Trimesh(v, closed.faces, process=False)
     assert tm.is_watertight and tm.volume > 0
@@ -82,3 +82,40 @@ def test_glove_measure_inside_into_and_through():
     verts, faces, inner = _shell(0.008, 0.009)                          # 1 mm through the outer surface
     into, through = glove_penetration(verts, faces, inner, pts, nrm)
     assert through == pytest.approx(0.001, abs=5e-5) and into == pytest.approx(0.002, abs=5e-5)
+
+
+def test_inside_matches_closed_form_spheres_and_their_union():
+    """The exit test (first face met, both ways) against the closed form on a sphere, and on two overlapping
+    spheres (a self-intersecting surface, like a posed hand whose fingers cross): inside either is inside, where
+    plain ray parity calls the overlap outside."""
+    rng = np.random.default_rng(5)
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.01)
+    pts = rng.uniform(-0.012, 0.012, (4000, 3))
+    r = np.linalg.norm(pts, axis=1)
+    solid = Solid(sphere.vertices, sphere.faces)
+    inside = np.zeros(len(pts), bool)
+    inside[solid.inside(pts)] = True
+    clear = np.abs(r - 0.01) > 1e-4                  # the icosphere's facets sit within 0.1 mm of the sphere
+    assert np.array_equal(inside[clear], r[clear] < 0.01)
+    both = trimesh.util.concatenate([sphere, sphere.copy().apply_translation([0.006, 0, 0])])
+    solid = Solid(both.vertices, both.faces)
+    got = np.zeros(len(pts), bool)
+    got[solid.inside(pts)] = True
+    r2 = np.linalg.norm(pts - [0.006, 0, 0], axis=1)
+    clear &= np.abs(r2 - 0.01) > 1e-4
+    assert np.array_equal(got[clear], ((r < 0.01) | (r2 < 0.01))[clear])
+    overlap = clear & (r < 0.01) & (r2 < 0.01)
+    assert overlap.sum() > 100 and not both.ray.contains_points(pts[overlap]).any()
+
+
+def test_all_hits_meets_every_layer_in_order():
+    """Rays along +x through three nested boxes meet six faces at the closed-form distances, nearest first."""
+    boxes = trimesh.util.concatenate([trimesh.creation.box(extents=[s] * 3) for s in (0.01, 0.02, 0.03)])
+    solid = Solid(boxes.vertices, boxes.faces)
+    origins = np.array([[-0.02, 0.001, 0.002], [-0.02, -0.003, 0.001]])
+    rid, face, dist = solid.all_hits(origins, np.tile([1.0, 0, 0], (2, 1)), reach=1.0)
+    for k in range(2):
+        want = np.array([0.005, 0.01, 0.015, 0.025, 0.03, 0.035])
+        assert np.allclose(dist[rid == k], want, atol=1e-6)
+    rid, _, dist = solid.all_hits(origins, np.tile([1.0, 0, 0], (2, 1)), reach=0.012)
+    assert np.allclose(dist, [0.005, 0.01, 0.005, 0.01], atol=1e-6)

@@ -65,7 +65,7 @@ def hand():
 def built(hand, tmp_path_factory):
     out = tmp_path_factory.mktemp("acc")
     catalog = build_accessories(hand, cat.load_spec(), out, ids=SUBSET, n_sampled=2, gestures=["fist"],
-                                tile=48)
+                                tile=48, placement_poses=2)
     return out, catalog
 
 
@@ -118,7 +118,7 @@ def test_build_is_deterministic_and_order_independent(hand, built, tmp_path):
 
 
 def test_quick_ring_build_is_valid_and_repeatable(hand, tmp_path):
-    kw = dict(ids=["ring_01_court_gold"], n_sampled=0, gestures=[], sheet=False)
+    kw = dict(ids=["ring_01_court_gold"], n_sampled=0, gestures=[], sheet=False, placement_poses=2)
     a = build_accessories(hand, cat.load_spec(), tmp_path / "a", **kw)
     b = build_accessories(hand, cat.load_spec(), tmp_path / "b", **kw)
     cat.check_catalog(json.loads((tmp_path / "a" / "catalog.json").read_text()))

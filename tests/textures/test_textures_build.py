@@ -117,18 +117,30 @@ def test_model_without_uvs_gets_an_atlas(tmp_path):
     jsonschema.validate(c, SCHEMA)
 
 
-def test_contact_sheet_shows_every_entry(built):
+def test_contact_sheet_groups_every_entry_by_category(built):
+    """One section per category (a header strip, then rows of tiles), in catalogue order; every tile a hand."""
+    from darthand.textures import sheet as sheet_mod
+
     out, catalog = built
-    sheet = read_image(out / catalog["contact_sheet"])
-    tiles = len(catalog["entries"])
-    assert sheet.shape[1] == 160 * min(18, tiles)
-    rows = -(-tiles // 18)
-    assert sheet.shape[0] == rows * (160 + 14)
-    # Every tile shows a hand: plenty of non-background pixels.
-    for i in range(tiles):
-        r, c = divmod(i, 18)
-        tile = sheet[r * 174:r * 174 + 160, c * 160:(c + 1) * 160].reshape(-1, 3).astype(int)
-        assert (np.abs(tile - [52, 54, 58]).sum(1) > 30).mean() > 0.15, i
+    img = read_image(out / catalog["contact_sheet"])
+    groups = {}
+    for e in catalog["entries"]:
+        groups.setdefault(sheet_mod.group_name(e), []).append(e)
+    cols = min(sheet_mod.COLUMNS, max(len(g) for g in groups.values()))
+    tile, cell = sheet_mod.TILE, sheet_mod.TILE + sheet_mod.LABEL_HEIGHT
+    assert img.shape[1] == tile * cols
+    assert img.shape[0] == sum(sheet_mod.HEADER_HEIGHT + -(-len(g) // cols) * cell for g in groups.values())
+    y = 0
+    for members in groups.values():
+        assert (img[y + 2, -2] == sheet_mod.HEADER).all()          # the header strip (its right end has no text)
+        y += sheet_mod.HEADER_HEIGHT
+        for i in range(len(members)):
+            r, c = divmod(i, cols)
+            t = img[y + r * cell:y + r * cell + tile, c * tile:(c + 1) * tile].reshape(-1, 3).astype(int)
+            assert (np.abs(t - sheet_mod.BACKGROUND).sum(1) > 30).mean() > 0.15
+        y += -(-len(members) // cols) * cell
+    labels = [sheet_mod.describe(e) for e in catalog["entries"]]
+    assert "light 07 ring line" in labels and any(lab.startswith("dark 02 ") for lab in labels)
 
 
 def _args(**kw):

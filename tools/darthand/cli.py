@@ -189,8 +189,9 @@ def _add_accessories_commands(sub) -> None:
                    help="sampled anatomical poses in the verification sweep (default 300)")
     p.add_argument("--tolerance", type=float, default=1.0,
                    help="penetration (mm) above which a rigid item is refitted (default 1.0)")
-    p.add_argument("--no-refit", action="store_true", help="report penetrations without refitting")
+    p.add_argument("--no-refit", action="store_true", help="report penetrations without placing rings or refitting")
     p.add_argument("--no-sheet", action="store_true", help="skip the contact sheet")
+    p.add_argument("--jobs", type=int, default=1, metavar="N", help="worker processes for the pose sweeps (default 1)")
     p.set_defaults(run=commands.build)
 
 

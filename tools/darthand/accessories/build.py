@@ -20,225 +20,63 @@ from __future__ import annotations
 
 import io
 import json
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import OpenImageIO as oiio
 
 from darthand.accessories import catalog as cat
-from darthand.accessories.attach import apply, axis_distance, pose_skinned, to_local
-from darthand.accessories.collide import (ClosedHand, Solid, glove_penetration, inward_vertices, neighbourhood,
-                                          rigid_penetration)
-from darthand.accessories.fit import WRIST_JOINT, Fit, fit_ring, fit_wrist, wrist_axis
-from darthand.accessories.generators import rigid_generator
-from darthand.accessories.generators.glove import glove
-from darthand.accessories.mesh import AccessoryMesh
+from darthand.accessories.item import Built, generate
 from darthand.accessories.preview import render_view
+from darthand.accessories.placement import TRAINING_POSES, place_rings
+from darthand.accessories.sweep import measure, sweep_poses
 from darthand.accessories.textures import linear_to_srgb
 from darthand.errors import InputError
 from darthand.fileio import atomic_path, write_bytes, write_json
-from darthand.model.anatomy import bone_ends, rest_joints, sample_poses
-from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
-from darthand.model.layout import JOINT_NAMES, MANO_PARENTS
+from darthand.model.layout import JOINT_NAMES
 from darthand.model.topology import vertex_normals
 
 FORMAT, FORMAT_VERSION = "darthand-accessory", 1
 
 
-@dataclass
-class Built:
-    """One generated accessory: its expanded entry, local-frame mesh, fit (None for gloves) and clearance."""
-
-    entry: dict
-    mesh: AccessoryMesh
-    fit: Fit | None
-    clearance: float
-    figures: dict = field(default_factory=dict)
-
-    @property
-    def id(self) -> str:
-        return self.entry["id"]
-
-    @property
-    def rest(self) -> np.ndarray:
-        return np.eye(4) if self.fit is None else self.fit.rest
-
-    @property
-    def world_vertices(self) -> np.ndarray:
-        return apply(self.rest, self.mesh.vertices)
-
-
-# ---------------------------------------------------------------- fitting and generating
-def axial_width(entry: dict) -> float:
-    """How much of the bone (m) a rigid accessory's bore spans, for the section slab."""
-    if entry["type"] == "ring":
-        return float(entry["width"])
-    if entry["type"] == "watch":
-        return float(entry["strap_width"])
-    style = entry["style"]
-    if style in ("bangle", "cuff"):
-        return float(entry["width"])
-    if style in ("chain", "charm"):
-        return 2 * 4.3 * float(entry["wire"])
-    if style == "beads":
-        return float(entry["bead_diameter"])
-    return 2.0 * float(entry["thickness"])
-
-
-def generate(model: HandModel, entry: dict, seed: int, clearance: float | None = None) -> Built:
-    """Fit (rigid items) and generate one catalogue entry (metres) on `model`."""
-    rng = cat.item_rng(seed, entry["id"])
-    what = f"accessory {entry['id']}"
-    if entry["type"] == "glove":
-        return Built(entry, glove(model, entry, rng), None, float(entry["clearance"]))
-    clearance = float(entry["clearance"]) if clearance is None else clearance
-    width = axial_width(entry)
-    for _ in range(2):
-        if entry["type"] == "ring":
-            fit = fit_ring(model, entry["finger"], width, clearance, float(entry.get("t", 0.5)), what)
-        else:
-            fit = fit_wrist(model, _wrist_offset(model, entry, width), width, clearance, what)
-        mesh = rigid_generator(entry["type"])({**entry, **fit.bore}, cat.item_rng(seed, entry["id"]))
-        # Parts may reach past the nominal width (a rope's strands, a signet's shoulders): fit again over them.
-        extent = 2 * float(np.abs(mesh.vertices[:, 0]).max())
-        if entry["type"] == "watch" or extent <= width + 1e-4:      # a watch's case stands clear of the wrist
-            break
-        width = extent
-    return Built(entry, mesh, fit, clearance)
-
-
-def _wrist_offset(model: HandModel, entry: dict, width: float) -> float:
-    """The entry's offset along the forearm, pulled back if the item would hang off the forearm's end."""
-    j0, axis = wrist_axis(model)
-    end = float(((model.v_template - j0) @ axis).max())
-    return min(float(entry.get("offset", 0.03)), end - width / 2 - 0.002)
-
-
-# ---------------------------------------------------------------- verification across poses
-def sweep_poses(model: HandModel, seed: int, n_sampled: int, gestures: list[str] | None = None):
-    """(names, (P, 48) poses): the rest pose, the named gestures, then `n_sampled` anatomical samples."""
-    from darthand.model.poses import gesture_poses
-
-    g_names, g_poses = gesture_poses(model, gestures)
-    sampled = sample_poses(model, n_sampled, cat.item_rng(seed, "pose-sweep")) if n_sampled else np.zeros((0, 48))
-    names = ["rest"] + list(g_names) + [f"sample_{i:03d}" for i in range(n_sampled)]
-    return names, np.concatenate([np.zeros((1, 48)), g_poses, sampled])
-
-
-def measure(model: HandModel, built: list[Built], poses: np.ndarray, chunk: int = 16) -> dict:
-    """Per accessory id: penetration depth per pose (m) and, for rigid items, the drift of the distance from
-    the accessory's centre to its bone axis; gloves also get the depth through their outer surface."""
-    closed = ClosedHand(model.faces, model.num_vertices)
-    joints = rest_joints(model)
-    ends = bone_ends(model, joints)
-    j0, fore = wrist_axis(model)
-    probes = {}
-    for b in built:
-        if b.fit is None:
-            sk = b.mesh.skin
-            rim = sk["layer"][b.mesh.faces].min(1) != sk["layer"][b.mesh.faces].max(1)
-            on_rim = np.unique(b.mesh.faces[rim])
-            interior = np.setdiff1d(np.where(sk["layer"] == 0)[0], on_rim)
-            near = neighbourhood(model.faces, model.num_vertices, rings=3)
-            hand_ids = sk["source_vertex"][interior]
-            face_src = sk["source_vertex"][b.mesh.faces[:, 0]]
-            probes[b.id] = ("glove", hand_ids,
-                            lambda r, t, near=near, h=hand_ids, f=face_src: np.asarray(near[h[r], f[t]]).ravel() > 0)
-        else:
-            normals = b.mesh.normals
-            inner = inward_vertices(b.mesh.vertices, normals)
-            probes[b.id] = ("rigid", Solid(b.mesh.vertices, b.mesh.faces), b.mesh.vertices[inner],
-                            own_vertices(model, b.fit.joint))
-    out = {b.id: {"depth": np.zeros(len(poses)), "through": np.zeros(len(poses)), "fit": np.zeros(len(poses)),
-                  "drift": 0.0} for b in built}
-    for s in range(0, len(poses), chunk):
-        posed = forward(model, poses[s:s + chunk])
-        gloves = {b.id: pose_skinned(b.mesh.vertices, b.mesh.skin["weights"], b.mesh.skin["posedirs"],
-                                     posed.rotations, posed.transforms) for b in built if b.fit is None}
-        for p in range(len(posed.vertices)):
-            hv = posed.vertices[p]
-            hand = closed.solid(hv)
-            normals = None
-            for b in built:
-                probe, fig = probes[b.id], out[b.id]
-                if probe[0] == "rigid":
-                    M = posed.transforms[p, b.fit.joint] @ b.fit.rest
-                    own_d, other_d = rigid_penetration(probe[1], to_local(M, hv), hand, apply(M, probe[2]),
-                                                       probe[3], hv)
-                    fig["fit"][s + p], fig["depth"][s + p] = own_d, max(own_d, other_d)
-                    fig["drift"] = max(fig["drift"], abs(_axis_distance(b, M, posed, p, joints, ends, j0, fore)
-                                                         - _axis_distance(b, b.fit.rest, None, p, joints, ends, j0,
-                                                                          fore)))
-                else:
-                    normals = vertex_normals(hv, model.faces) if normals is None else normals
-                    idx = probe[1]
-                    into, through = glove_penetration(gloves[b.id][p], b.mesh.faces, b.mesh.skin["inner_faces"],
-                                                      hv[idx], normals[idx], local=probe[2])
-                    fig["depth"][s + p], fig["through"][s + p] = into, through
-    return out
-
-
-def own_vertices(model: HandModel, joint: int) -> np.ndarray:
-    """(V,) bool: the hand part a rigid accessory on `joint` is fitted to -- for a finger joint, the vertices
-    skinned mostly to it or the joints after it; for the wrist, the whole hand."""
-    if joint == WRIST_JOINT:
-        return np.ones(model.num_vertices, bool)
-    chain = [joint]
-    for k in range(joint + 1, len(model.parents)):
-        if model.parents[k] in chain:
-            chain.append(k)
-    return np.isin(np.argmax(model.weights, axis=1), chain)
-
-
-def _axis_distance(b: Built, M: np.ndarray, posed, p: int, joints, ends, j0, fore) -> float:
-    """Distance from the placed accessory's centre to its bone axis: for rings the line through the joint and its
-    child as the forward pass reports them (posed) or the rest joints (posed None); for wrist items the forearm
-    axis through the wrist joint, turned by the root's rotation."""
-    j = b.fit.joint
-    if j == WRIST_JOINT:
-        if posed is None:
-            a, e = j0, j0 + fore
-        else:
-            a = posed.joints[p, WRIST_JOINT]
-            e = a + posed.transforms[p, WRIST_JOINT, :3, :3] @ fore
-    elif posed is None:
-        a, e = joints[j], ends[j]
-    else:
-        a, e = posed.joints[p, j], posed.joints[p, int(np.where(MANO_PARENTS == j)[0][0])]
-    return float(axis_distance(M[:3, 3], a, e))
-
-
 # ---------------------------------------------------------------- the stage
 def build_accessories(model: HandModel, spec: dict, out_dir: str | Path, ids=None, types=None, *,
                       n_sampled: int = 300, gestures: list[str] | None = None, tolerance_mm: float = 1.0,
-                      refit: bool = True, sheet: bool = True, tile: int = 192) -> dict:
+                      refit: bool = True, sheet: bool = True, tile: int = 192, workers: int = 1,
+                      placement_poses: int = TRAINING_POSES) -> dict:
     """Build the catalogue's accessories (or the `ids` / `types` subset) on `model` into `out_dir`; return and
-    write catalog.json. Rigid items whose penetration across poses exceeds `tolerance_mm` are refitted once with
-    their clearance grown by the excess (both figures are reported)."""
+    write catalog.json. Rings are placed and their bores sized over training poses (`placement`, with `refit`);
+    rigid items whose fit penetration across the sweep still exceeds `tolerance_mm` are refitted once with their
+    clearance grown by the excess (both figures are reported). `workers` processes share the pose sweeps;
+    `placement_poses` sampled poses (with the rest pose and `gestures`) train the ring placement."""
     if model.side != "right":
         raise InputError(f"{model.meta.get('source', 'model')}: accessories are fitted on a right hand "
                          f"(got side {model.side!r}); mirror the built accessories for the left")
     out_dir = Path(out_dir)
     seed = int(spec["seed"])
     items = cat.entries(spec, ids, types)
-    built = [generate(model, e, seed) for e in items]
+    placed = place_rings(model, items, seed, workers, placement_poses, gestures) if refit else {}
+    built = []
+    for e in items:
+        p = placed.get(e["id"])
+        b = generate(model, e, seed) if p is None else generate(model, {**e, "t": p.t}, seed, clearance=p.clearance)
+        b.figures = {"before_refit": None, "placement": p}
+        built.append(b)
     names, poses = sweep_poses(model, seed, n_sampled, gestures)
-    figures = measure(model, built, poses)
+    figures = measure(model, built, poses, workers)
     tol = tolerance_mm / 1000.0
     n_named = len(names) - n_sampled                       # rest and gestures
+    regrown = []
     for i, b in enumerate(built):
-        f = figures[b.id]
-        # Refit on what resizing can fix: the part it sits on, in the named (realistic) poses; sampled poses at
-        # the joint limits crush the skin itself and are reported, not chased. Growth is capped at 2 mm.
-        worst = float(f["fit"][1:n_named].max(initial=0.0))
-        b.figures = {"before_refit": None}
-        if refit and b.fit is not None and worst > tol:
+        worst = float(figures[b.id]["fit"][1:].max(initial=0.0))
+        if refit and b.fit is not None and worst > tol:    # what a larger bore fixes; growth capped at 2 mm
             grown = generate(model, b.entry, seed, clearance=b.clearance + min(worst - tol / 2, 0.002))
-            grown.figures = {"before_refit": float(f["fit"][1:].max()) * 1000.0}
+            grown.figures = {**b.figures, "before_refit": worst * 1000.0}
             built[i] = grown
-            figures[b.id] = measure(model, [grown], poses)[b.id]
+            regrown.append(grown)
+    if regrown:
+        figures.update(measure(model, regrown, poses, workers))
     out_dir.mkdir(parents=True, exist_ok=True)
     entries_out = [write_accessory(out_dir, b, figures[b.id], names, n_named) for b in built]
     sheet_name = None
@@ -275,12 +113,14 @@ def write_accessory(out_dir: Path, b: Built, fig: dict, pose_names: list[str], n
     depth_mm = fig["depth"] * 1000.0
     sweep = depth_mm[1:]
     pen = {"rest": float(depth_mm[0]), "poses": float(sweep.max()) if len(sweep) else None,
+           "poses_p99": float(np.percentile(sweep, 99)) if len(sweep) else None,
            "gestures": float(depth_mm[1:n_named].max()) if n_named > 1 else None,
            "worst_pose": pose_names[1 + int(np.argmax(sweep))] if len(sweep) and sweep.max() > 0 else None,
            "before_refit": b.figures.get("before_refit")}
     if b.fit is not None:
         fit_mm = fig["fit"] * 1000.0
         pen.update(fit_rest=float(fit_mm[0]), fit_poses=float(fit_mm[1:].max()) if len(sweep) else None,
+                   fit_poses_p99=float(np.percentile(fit_mm[1:], 99)) if len(sweep) else None,
                    fit_gestures=float(fit_mm[1:n_named].max()) if n_named > 1 else None)
     else:
         through = fig["through"] * 1000.0
@@ -303,6 +143,11 @@ def write_accessory(out_dir: Path, b: Built, fig: dict, pose_names: list[str], n
         entry["max_axis_drift_mm"] = float(fig["drift"] * 1000.0) if len(sweep) else None
         if b.entry["type"] == "ring":
             entry["finger"] = b.entry["finger"]
+            entry["position_along_bone"] = float(b.entry.get("t", 0.5))
+            p = b.figures.get("placement")
+            if p is not None:
+                entry["placement_worst_fit_mm"] = {f"{t:g}": round(w * 1000.0, 4) for t, w in
+                                                   p.worst_by_position.items()}
     return entry
 
 

@@ -20,9 +20,23 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
+from embreex import rtcore_scene
+from embreex.mesh_construction import TriangleMesh
+from embreex.rtcore import EmbreeDevice
 from trimesh.ray.ray_pyembree import RayMeshIntersector
 
 from darthand.model.topology import boundary_loops
+
+
+_DEVICE: EmbreeDevice | None = None
+
+
+def _device() -> EmbreeDevice:
+    """One Embree device per process."""
+    global _DEVICE
+    if _DEVICE is None:
+        _DEVICE = EmbreeDevice()
+    return _DEVICE
 
 
 def surface_distance(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, trees=None) -> np.ndarray:
@@ -57,80 +71,129 @@ def surface_trees(vertices: np.ndarray, tris: np.ndarray):
 
 
 class Solid:
-    """A closed mesh with an Embree scene for inside tests and depths of points inside it."""
+    """A closed, outward-wound mesh with an Embree scene for inside tests and depths of points inside it.
+
+    Inside test: a point is inside when the first face met by a ray from it is one the ray leaves through (its
+    normal along the ray), checked along two opposite directions; the points where the two disagree (a grazing hit,
+    a ray entering another overlapping part first) get trimesh's ray-parity test. One Embree query per direction
+    instead of parity's repeated multi-hit queries, and where a posed hand's surface crosses itself (two fingers
+    pressed into each other) a point inside both is inside, where parity alone would count it out.
+    """
+
+    DIRECTION = np.array([0.5774, 0.5772, 0.5776]) / np.linalg.norm([0.5774, 0.5772, 0.5776])  # off every axis
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray):
         self.vertices, self.faces = np.asarray(vertices, float), np.asarray(faces)
-        self.mesh = trimesh.Trimesh(self.vertices, self.faces, process=False)
-        self.ray = RayMeshIntersector(self.mesh)
+        tri = self.vertices[self.faces]
+        self.face_normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        self.scene = rtcore_scene.EmbreeScene(_device())
+        TriangleMesh(self.scene, np.ascontiguousarray(self.vertices, np.float32),
+                     np.ascontiguousarray(self.faces, np.int32))
         self.lo, self.hi = self.vertices.min(0), self.vertices.max(0)
         self._trees = None
+        self._ray = None
+
+    @property
+    def ray(self) -> RayMeshIntersector:
+        """trimesh's Embree intersector of the same mesh (multi-hit queries, ray parity)."""
+        if self._ray is None:
+            self._ray = RayMeshIntersector(trimesh.Trimesh(self.vertices, self.faces, process=False))
+        return self._ray
 
     def inside(self, points: np.ndarray) -> np.ndarray:
-        """Indices of the points inside the solid (bounding-box filter, then Embree ray parity)."""
+        """Indices of the points (K, 3) inside the solid (bounding-box filter, then the exit test)."""
         near = np.where(((points >= self.lo) & (points <= self.hi)).all(1))[0]
-        return near[self.ray.contains_points(points[near])] if len(near) else near
+        if len(near) == 0:
+            return near
+        forward, backward = (self._leaves_first(points[near], d) for d in (self.DIRECTION, -self.DIRECTION))
+        inside = forward & backward
+        unsure = np.flatnonzero(forward != backward)
+        if len(unsure):
+            inside[unsure] = self.ray.contains_points(points[near[unsure]])
+        return near[inside]
 
-    def max_depth(self, points: np.ndarray, batch: int = 32) -> float:
-        """Largest depth (m) of any point inside the solid, 0 if none is.
+    def cast(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(face index, or -1 where nothing is met; distance) of the first face met by rays from `origins`
+        (K, 3) along unit `directions` (K, 3)."""
+        hit = self.scene.run(np.ascontiguousarray(origins, np.float32),
+                             np.ascontiguousarray(np.broadcast_to(directions, origins.shape), np.float32), output=1)
+        return hit["primID"], hit["tfar"]
+
+    def all_hits(self, points: np.ndarray, directions: np.ndarray, reach: float,
+                 eps: float = 1e-7) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every face met within `reach` metres by rays from `points` (K, 3) along unit `directions` (K, 3)
+        (starting `eps` out): (ray index, face index, distance) arrays, nearest first per ray, by first-hit
+        queries moved past each hit."""
+        rays, faces, dists = [], [], []
+        todo = np.arange(len(points))
+        travelled = np.full(len(points), eps)
+        while len(todo):
+            hit, tfar = self.cast(points[todo] + travelled[todo, None] * directions[todo], directions[todo])
+            ok = (hit >= 0) & (travelled[todo] + tfar <= reach)
+            todo, hit = todo[ok], hit[ok]
+            travelled[todo] += tfar[ok]
+            rays.append(todo), faces.append(hit), dists.append(travelled[todo].copy())
+            travelled[todo] += eps
+        rays, faces, dists = np.concatenate(rays), np.concatenate(faces), np.concatenate(dists)
+        order = np.lexsort((dists, rays))
+        return rays[order].astype(np.int64), faces[order].astype(np.int64), dists[order].astype(np.float64)
+
+    def _leaves_first(self, points: np.ndarray, direction: np.ndarray) -> np.ndarray:
+        """(K,) bool: the first face a ray from each point along `direction` meets is one it leaves through."""
+        prim, _ = self.cast(points, direction)
+        out = np.zeros(len(points), bool)
+        ok = prim >= 0
+        out[ok] = self.face_normals[prim[ok]] @ direction > 0
+        return out
+
+    def max_depth(self, points: np.ndarray) -> float:
+        """Largest depth (m) of any of `points` (K, 3) inside the solid, 0 if none is."""
+        return self.deepest(points[self.inside(points)])
+
+    def deepest(self, points: np.ndarray, batch: int = 32) -> float:
+        """Largest distance (m) from the surface of any of `points` (K, 3) known to be inside the solid (0 if
+        K = 0): their largest depth.
 
         The nearest vertex's distance bounds each depth from above, so points are measured exactly in decreasing
         order of that bound until the best exact depth beats every remaining bound.
         """
-        inside = self.inside(points)
-        if len(inside) == 0:
+        if len(points) == 0:
             return 0.0
         if self._trees is None:
             self._trees = surface_trees(self.vertices, self.vertices[self.faces])
-        bound, _ = self._trees[0].query(points[inside])
+        bound, _ = self._trees[0].query(points)
         order = np.argsort(-bound)
         best = 0.0
         for s in range(0, len(order), batch):
             if bound[order[s]] <= best:
                 break
-            sel = inside[order[s:s + batch]]
+            sel = order[s:s + batch]
             best = max(best, float(surface_distance(points[sel], self.vertices, self.faces, self._trees).max()))
         return best
 
 
 class ClosedHand:
-    """The hand mesh with its boundary loops capped by fans around their centroids, re-posable per pose."""
+    """The hand mesh (or a part of it: a subset of its faces) with its boundary loops capped by fans around their
+    centroids, re-posable per pose. Only the vertices its faces use are kept: the depth bounds come from the
+    nearest vertex, which must lie on this surface."""
 
-    def __init__(self, faces: np.ndarray, num_vertices: int):
+    def __init__(self, faces: np.ndarray):
+        self.used, compact = np.unique(faces, return_inverse=True)
+        faces = compact.reshape(faces.shape)
         self.loops = boundary_loops(faces)
-        caps, n = [faces], num_vertices
+        caps, n = [faces], len(self.used)
         for loop in self.loops:
             caps.append(np.stack([np.roll(loop, -1), loop, np.full(len(loop), n)], 1))
             n += 1
         self.faces = np.concatenate(caps)
 
     def vertices(self, posed: np.ndarray) -> np.ndarray:
-        """(V + loops, 3) posed vertices with the cap centres appended."""
-        return np.concatenate([posed] + [posed[lp].mean(0, keepdims=True) for lp in self.loops])
+        """(used + loops, 3) the posed vertices (V, 3) it uses, with the cap centres appended."""
+        mine = posed[self.used]
+        return np.concatenate([mine] + [mine[lp].mean(0, keepdims=True) for lp in self.loops])
 
     def solid(self, posed: np.ndarray) -> Solid:
         return Solid(self.vertices(posed), self.faces)
-
-
-def rigid_penetration(accessory: Solid, hand_local: np.ndarray, hand: Solid, inner_world: np.ndarray,
-                      own: np.ndarray, hand_world: np.ndarray) -> tuple[float, float]:
-    """Overlap depth (m) of one rigid accessory and the posed hand, the larger of both directions, as
-    (with the hand part it is fitted to, with any other part -- a neighbouring finger, the palm).
-
-    accessory: the accessory's solid in its local frame; hand_local: the posed hand vertices in that frame;
-    hand: the posed, capped hand (world); inner_world: the accessory's inward-facing vertices, posed (world);
-    own: (V,) bool, the hand vertices of the part it is fitted to; hand_world: the posed hand vertices (an
-    accessory vertex inside the hand counts for the part of its nearest hand vertex).
-    """
-    fit = accessory.max_depth(hand_local[own])
-    other = accessory.max_depth(hand_local[~own])
-    inside = hand.inside(inner_world)
-    if len(inside):
-        _, nearest = cKDTree(hand_world).query(inner_world[inside])
-        mine = own[nearest]
-        fit = max(fit, hand.max_depth(inner_world[inside[mine]]))
-        other = max(other, hand.max_depth(inner_world[inside[~mine]]))
-    return fit, other
 
 
 def inward_vertices(vertices: np.ndarray, normals: np.ndarray) -> np.ndarray:
@@ -151,41 +214,37 @@ def glove_penetration(glove_vertices: np.ndarray, glove_faces: np.ndarray, inner
     neighbourhood, so a finger's glove pressed against the palm's glove (hand-on-hand contact, not a glove
     fault) is not read as the finger being through its own glove.
     """
-    mesh = trimesh.Trimesh(glove_vertices, glove_faces, process=False)
-    ray = RayMeshIntersector(mesh)
-    fn = mesh.face_normals
-    eps = 1e-7
+    glove = Solid(glove_vertices, glove_faces)
+    fn = glove.face_normals
     keep = local if local is not None else (lambda r, t: np.ones(len(r), bool))
-    tri, rid, loc = ray.intersects_id(hand_points + eps * hand_normals, hand_normals, multiple_hits=True,
-                                      return_locations=True)
-    ok = keep(rid, tri)
-    tri, rid, loc = tri[ok], rid[ok], loc[ok]
-    dist = np.linalg.norm(loc - hand_points[rid], axis=1)
-    first = np.full(len(hand_points), -1)
-    best = np.full(len(hand_points), np.inf)
-    for t, r, d in zip(tri, rid, dist):
-        if d < best[r]:
-            best[r], first[r] = d, t
+    eps = 1e-7
+    # From the hollow, the first face met along the hand's normal is the inner layer, seen from its front (its
+    # normal faces the hand). One first-hit query; the rays whose first hit is not over their own neighbourhood
+    # look past it.
+    first, _ = glove.cast(hand_points + eps * hand_normals, hand_normals)
+    hit = np.flatnonzero(first >= 0)
+    foreign = hit[~keep(hit, first[hit])]
+    if len(foreign):
+        rid, tri, _ = glove.all_hits(hand_points[foreign], hand_normals[foreign], np.inf, eps)
+        ok = keep(foreign[rid], tri)
+        rid, tri = rid[ok], tri[ok]
+        nearest = np.r_[True, rid[1:] != rid[:-1]][:len(rid)]   # hits come nearest first per ray
+        first[foreign] = -1
+        first[foreign[rid[nearest]]] = tri[nearest]
     hollow = np.zeros(len(hand_points), bool)
     hit = first >= 0
-    # From the hollow, the first face met is the inner layer, seen from its front (its normal faces the hand).
     hollow[hit] = inner_mask[first[hit]] & ((fn[first[hit]] * hand_normals[hit]).sum(1) < 0)
     bad = np.where(~hollow)[0]
     if len(bad) == 0:
         return 0.0, 0.0
-    tri, rid, loc = ray.intersects_id(hand_points[bad] - eps * hand_normals[bad], -hand_normals[bad],
-                                      multiple_hits=True, return_locations=True)
+    # Back along -n from a vertex outside the hollow: the first inner-layer face is how far it is into the glove,
+    # an outer-layer face before it how far through.
+    rid, tri, d = glove.all_hits(hand_points[bad], -hand_normals[bad], reach, eps)
     ok = keep(bad[rid], tri)
-    tri, rid, loc = tri[ok], rid[ok], loc[ok]
-    d = np.linalg.norm(loc - hand_points[bad][rid], axis=1)
+    rid, tri, d = rid[ok], tri[ok], d[ok]
     into = through = 0.0
-    for k in range(len(bad)):
-        sel = (rid == k) & (d < reach)
-        if not sel.any():
-            continue
-        dk, tk = d[sel], tri[sel]
-        order = np.argsort(dk)
-        dk, tk = dk[order], tk[order]
+    for k in np.unique(rid):
+        dk, tk = d[rid == k], tri[rid == k]
         inner_hits, outer_hits = dk[inner_mask[tk]], dk[~inner_mask[tk]]
         if len(inner_hits):
             into = max(into, float(inner_hits[0]))

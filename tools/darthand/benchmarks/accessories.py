@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from darthand.accessories.build import generate, measure, sweep_poses
+from darthand.accessories.build import generate
+from darthand.accessories.sweep import measure, sweep_poses
 from darthand.accessories.catalog import entries, load_spec
 from darthand.benchmarks._common import bench_model
 

@@ -37,7 +37,7 @@ def per_variant(model, res: int, ids=SAMPLE_IDS) -> dict:
     build_mod._WORKER_BAKE = b
     from darthand.textures.variant import render_variant
 
-    from darthand.textures.imageio import image_buffer, write_png, write_tx
+    from darthand.textures.imageio import write_png, write_tx
 
     render_variant(b, entries[ids[0]])  # warm-up: first-touch allocations, k-d tree
     t_render, t_total, t_png, t_tx = [], [], [], []
@@ -46,12 +46,11 @@ def per_variant(model, res: int, ids=SAMPLE_IDS) -> dict:
             t0 = time.perf_counter()
             v = render_variant(b, entries[i])
             t_render.append(time.perf_counter() - t0)
-            buf = image_buffer(v.albedo)
             t0 = time.perf_counter()
-            write_png(Path(tmp) / "a.png", buf)
+            write_png(Path(tmp) / "a.png", v.albedo)
             t_png.append(time.perf_counter() - t0)
             t0 = time.perf_counter()
-            write_tx(Path(tmp) / "a.tx", buf)
+            write_tx(Path(tmp) / "a.tx", v.albedo)
             t_tx.append(time.perf_counter() - t0)
             t0 = time.perf_counter()
             build_mod._render_one((entries[i].to_json(), tmp, res, b.key, True, True))

@@ -3,7 +3,7 @@
 
 Layout of `out_dir` (build/textures/):
     <id>.png                 sRGB albedo, 8-bit
-    <id>.tx                  the same, tiled and mip-mapped (OpenImageIO make_texture)
+    <id>.tx                  the same, tiled and mip-mapped (imageio.write_tx)
     roughness_<hash>.png     roughness (raw, 8-bit); variants with identical roughness share one file
     labels_<res>.png         semantic label per texel (layout.FACE_LABELS index, 255 = no surface)
     coverage_<res>.png       255 where a texel centre lies on the surface
@@ -38,7 +38,7 @@ from darthand.textures import sheet as sheet_mod
 from darthand.model.atlas import ensure_uvs
 from darthand.textures.bake import Bake, cached_bake, load_bake, source_digest
 from darthand.textures.catalog import Entry, expand_catalog, select
-from darthand.textures.imageio import image_buffer, read_small, write_png, write_tx
+from darthand.textures.imageio import block_mean, mip_pyramid, read_small, write_png, write_tx
 from darthand.textures.variant import render_variant
 
 CATALOG_FORMAT = "darthand-texture-catalog"
@@ -46,7 +46,7 @@ CATALOG_VERSION = 1
 # Every module of the stage can change an image: their source is part of each entry's fingerprint.
 RENDER_MODULES = ("anatomy", "bake", "canvas", "catalog", "color", "curves", "imageio", "motifs", "noise",
                   "overlays", "raster", "regions", "sampling", "skin", "surface", "variant")
-THUMB_SOURCE = 256  # size of the albedo copy a worker hands back for the contact sheet
+THUMB_SOURCE = 512  # size of the albedo copy a worker hands back for the contact sheet
 
 
 def build_textures(model: HandModel, spec: dict, out_dir: str | Path, res: int = 2048, ids=None, categories=None,
@@ -196,8 +196,7 @@ def _render_one(job) -> tuple[dict, np.ndarray]:
     out_dir = Path(out_dir)
     v = render_variant(_WORKER_BAKE, entry)
     files = {"albedo": f"{entry.id}.png", "roughness": None, "tx": None}
-    albedo = image_buffer(v.albedo, srgb=True)  # one buffer for the PNG and the .tx
-    write_png(out_dir / files["albedo"], albedo)
+    write_png(out_dir / files["albedo"], v.albedo)
     record = {k: entry_json[k] for k in ("id", "category", "kind", "tone", "mst", "tone_srgb", "offset", "seed",
                                          "index")}
     if roughness:
@@ -206,26 +205,30 @@ def _render_one(job) -> tuple[dict, np.ndarray]:
         if not (out_dir / files["roughness"]).is_file():  # shared by every variant with the same roughness
             write_png(out_dir / files["roughness"], v.roughness, srgb=False)
         record["roughness_sha256"] = sha256_file(out_dir / files["roughness"])
+    levels = mip_pyramid(v.albedo) if tx else None          # the .tx's levels; one of them is the thumbnail's
     if tx:
         files["tx"] = f"{entry.id}.tx"
-        write_tx(out_dir / files["tx"], albedo)
+        write_tx(out_dir / files["tx"], v.albedo, levels=levels)
+    else:
+        (out_dir / f"{entry.id}.tx").unlink(missing_ok=True)  # an earlier build's, now out of date
     record.update(resolution=res, sha256=sha256_file(out_dir / files["albedo"]), files=files,
                   params=entry_json["params"], fingerprint=fingerprint(entry, res, bake_key, tx, roughness))
-    return record, sheet_mod.small_copy(v.albedo, THUMB_SOURCE)
+    thumb = next((lv for lv in levels if lv.shape[1] <= THUMB_SOURCE), None) if levels else None
+    return record, block_mean(v.albedo, THUMB_SOURCE) if thumb is None else thumb
 
 
 # ------------------------------------------------------------------------------------------ contact sheet
-def make_contact_sheet(out_dir: str | Path, catalog: dict, bake: Bake | None = None, thumbs: dict | None = None,
-                       tile: int = 160, columns: int = 18) -> Path:
-    """Write out_dir/contact_sheet.png from the catalog's entries: in-memory copies where given, else the
-    files on disk (the .tx's matching MIP level when there is one)."""
+def make_contact_sheet(out_dir: str | Path, catalog: dict, bake: Bake | None = None,
+                       thumbs: dict | None = None) -> Path:
+    """Write out_dir/contact_sheet.png from the catalog's entries, grouped by category: in-memory copies where
+    given, else the files on disk (the .tx's matching MIP level when there is one)."""
     out_dir = Path(out_dir)
     if bake is None:
         bake_path = out_dir / f"bake_{catalog['resolution']}.npz"
         if not bake_path.is_file():
             raise InputError(f"{bake_path}: no baked maps for the contact sheet; run 'darthand textures build' first")
         bake = load_bake(bake_path)
-    maps = sheet_mod.preview_maps(bake.mesh, tile)
+    maps = sheet_mod.preview_maps(bake.mesh)
     thumbs = thumbs or {}
     tiles = []
     for record in catalog["entries"]:
@@ -233,9 +236,9 @@ def make_contact_sheet(out_dir: str | Path, catalog: dict, bake: Bake | None = N
         if src is None:
             f = record["files"].get("tx") or record["files"]["albedo"]
             src = read_small(out_dir / f, THUMB_SOURCE)
-        tiles.append((record["id"], sheet_mod.thumbnail(src, maps)))
+        tiles.append((sheet_mod.group_name(record), sheet_mod.describe(record), sheet_mod.thumbnail(src, maps)))
     path = out_dir / "contact_sheet.png"
-    sheet_mod.contact_sheet(tiles, path, columns=columns)
+    sheet_mod.contact_sheet(tiles, path)
     return path
 
 

@@ -244,9 +244,10 @@ def apply_palm_prints(canvas: Canvas, surface: Surface, p: dict, rng) -> None:
 
 
 def _crease(canvas, idx, strength):
-    """Creases read as darker, slightly redder lines (the melanin of the fold's walls)."""
-    canvas.dm[idx] += strength * np.float32(0.16 + 0.12 * canvas.melanin)
-    canvas.dh[idx] += strength * np.float32(0.1)
+    """Creases read as darker, slightly redder lines (the melanin of the fold's walls, and its shadow: an albedo
+    map is all a renderer without displacement has of a fold)."""
+    canvas.dm[idx] += strength * np.float32(0.3 + 0.2 * canvas.melanin)
+    canvas.dh[idx] += strength * np.float32(0.14)
 
 
 def _finger_creases(canvas, surface, p, width):
@@ -318,7 +319,7 @@ def sample_scars(rng, spec, index):
     if kind in ("burn", "pitted") and p["place"]["site"] == "finger":
         p["place"]["site"] = "dorsum"
     if p["place"]["site"] == "finger":
-        p["length_mm"] = round(min(p["length_mm"], 14.0), 5)
+        p["length_mm"] = round(min(p["length_mm"], 18.0), 5)
     return p
 
 
@@ -329,14 +330,15 @@ def apply_scars(canvas: Canvas, surface: Surface, p: dict, rng) -> None:
 
 
 def _scar_colour(canvas, idx, prof, p, raised=False):
-    """Scar tissue: less melanin (pale) with a pigmented rim on darker skin, pink while fresh; shinier."""
+    """Scar tissue: less melanin (pale) with a pigmented rim on darker skin, pink to red while fresh; shinier.
+    Strong enough to read in a 512^2 render of the whole hand (about 0.5 mm per pixel)."""
     m0, s = canvas.melanin, canvas.pigment_scale
     if raised:  # keloid: darker and redder
-        canvas.dm[idx] += prof * np.float32(0.45 * s)
-        canvas.dh[idx] += prof * np.float32(0.25 + 0.3 * p["freshness"])
+        canvas.dm[idx] += prof * np.float32(0.6 * s)
+        canvas.dh[idx] += prof * np.float32(0.35 + 0.45 * p["freshness"])
     else:
-        canvas.dm[idx] -= prof * np.float32(0.7 * m0 + 0.15)
-        canvas.dh[idx] += prof * np.float32(0.12 + 0.5 * p["freshness"])
+        canvas.dm[idx] -= prof * np.float32(0.85 * m0 + 0.25)
+        canvas.dh[idx] += prof * np.float32(0.22 + 0.7 * p["freshness"])
     canvas.roughness[idx] = canvas.roughness[idx] * (1 - 0.4 * prof) + 0.33 * 0.4 * prof
 
 
@@ -351,7 +353,7 @@ def _incision(canvas, surface, frame, p, rng):
     prof = (1.0 - smoothstep(0.55, 1.0, d / np.maximum(half, 1e-5))).astype(np.float32)
     _scar_colour(canvas, idx, prof, p, raised=p["kind"] == "keloid")
     rim = (smoothstep(0.8, 1.2, d / np.maximum(half, 1e-5)) * (1.0 - smoothstep(1.2, 2.2, d / np.maximum(half, 1e-5))))
-    canvas.dm[idx] += rim.astype(np.float32) * np.float32(0.18 * canvas.melanin)
+    canvas.dm[idx] += rim.astype(np.float32) * np.float32(0.3 * canvas.melanin)
     if p["kind"] == "stitched":
         _stitches(canvas, idx, uv, curve, p, width)
 
@@ -410,16 +412,16 @@ def sample_tattoos(rng, spec, index):
     band = place["site"] in ("finger_band", "wrist_band")
     motif = draw(rng, sorted(BAND_MOTIFS) if band else sorted(MOTIFS))
     ink = draw(rng, spec["inks"])
-    p = {"motif": motif, "place": place, "size_mm": draw(rng, spec["size_mm"]), "angle": draw(rng, [-0.5, 0.5]),
+    size = spec.get("site_size_mm", {}).get(place["site"], spec["size_mm"])   # a finger is smaller than a forearm
+    p = {"motif": motif, "place": place, "size_mm": draw(rng, size), "angle": draw(rng, [-0.5, 0.5]),
          "ink": ink, "ink_srgb": spec["ink_colors"][ink], "age": draw(rng, spec["age"]),
          "outline": bool(rng.random() < spec["outline_probability"]) and ink != "black"}
-    if place["site"] == "finger":
-        p["size_mm"] = round(min(p["size_mm"], 11.0), 5)
-    if band:
-        p["size_mm"] = round(min(p["size_mm"], 9.0 if place["site"] == "finger_band" else 24.0), 5)
-        if place["site"] == "finger_band":
-            place["finger"] = draw(rng, ["index", "middle", "ring", "pinky"])
+    if place["site"] == "finger_band":
+        place["finger"] = draw(rng, ["index", "middle", "ring", "pinky"])
     return p
+
+
+TATTOO_STROKE = 0.3 * MM  # every stroke and shape grows by this much: lines of a few tenths of a mm would not read
 
 
 def apply_tattoos(canvas: Canvas, surface: Surface, p: dict, rng) -> None:
@@ -431,10 +433,10 @@ def apply_tattoos(canvas: Canvas, surface: Surface, p: dict, rng) -> None:
         idx, q = _band_coordinates(canvas, surface, place, half)
         sdf = BAND_MOTIFS[p["motif"]](q) * half
     else:
-        frame = _frame(surface, place)
+        frame = _frame(surface, _fitted(surface, place, half))
         idx, uv = surface.decal(frame, 1.5 * half, facing=0.35)
         q = rotate(uv, -p["angle"]) / half
-        sdf = MOTIFS[p["motif"]](q) * half
+        sdf = MOTIFS[p["motif"]](q) * half - TATTOO_STROKE
     blur = max(surface.texel_size, (0.08 + 0.25 * p["age"]) * MM)
     cover = (1.0 - smoothstep(-blur, blur, sdf)).astype(np.float32)
     fade = 1.0 - p["age"] * (0.35 + 0.25 * _fine(canvas, idx, "mid", 0))
@@ -447,6 +449,23 @@ def apply_tattoos(canvas: Canvas, surface: Surface, p: dict, rng) -> None:
         canvas.paint(idx, _lin([0.1, 0.1, 0.12]), 0.92 * fade * line, mode="multiply")
     else:
         canvas.paint(idx, aged, density, mode="multiply")
+
+
+def _fitted(surface: Surface, place: dict, half: float) -> dict:
+    """The placement with `along` moved just enough for a decal of half-size `half` (m) to stay on its site: on
+    the back of the hand between the wrist and the knuckles, on the forearm between the wrist and its end."""
+    site = place["site"]
+    if site in ("dorsum", "palm"):
+        knuckles = 0.5 * (surface.joint("index", 0) + surface.joint("pinky", 0))
+        span = float(np.linalg.norm(knuckles - surface.joints[0]))
+        lo, hi = 0.6 * half / span, 1.0 - 0.8 * half / span
+    elif site in ("wrist_dorsal", "wrist_inner"):
+        span = max(surface._forearm_extent() - 0.012, 1e-3)     # the site's `along` runs over this length
+        lo, hi = (half + 0.002) / span, (span - half) / span
+    else:
+        return place
+    along = float(np.clip(place["along"], lo, hi)) if lo <= hi else 0.5 * (lo + hi)
+    return {**place, "along": along}
 
 
 def _band_coordinates(canvas, surface, place, half):

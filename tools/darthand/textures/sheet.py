@@ -1,5 +1,6 @@
-"""Contact sheet: every variant as a thumbnail of the textured hand (back and palm views), so a person can see
-the catalogue at a glance.
+"""Contact sheet: every variant as a thumbnail of the textured hand (back and palm views), grouped by category
+under a header, each labelled with its tone, number and what it shows, so a person can see the catalogue at a
+glance.
 
 Previews are orthographic renders of the rest-pose mesh with a simple lambert term so the shape reads; the
 shading is the preview's only, never part of an albedo. Thumbnails sample a small copy of each albedo.
@@ -16,7 +17,11 @@ import OpenImageIO as oiio
 from darthand.textures.raster import rasterize
 
 BACKGROUND = np.array([52, 54, 58], np.uint8)
-LABEL_HEIGHT = 14
+HEADER = np.array([30, 31, 34], np.uint8)
+LABEL_HEIGHT = 20
+HEADER_HEIGHT = 34
+TILE = 240
+COLUMNS = 12
 SUPERSAMPLE = 2
 
 
@@ -32,7 +37,7 @@ class PreviewMaps:
     shade: np.ndarray
 
 
-def preview_maps(mesh: dict, tile: int = 160) -> PreviewMaps:
+def preview_maps(mesh: dict, tile: int = TILE) -> PreviewMaps:
     """Back view (top half) and palm view (bottom half) of the mesh, fingers to the left, in a tile x tile
     square (before the label strip)."""
     w, h = tile * SUPERSAMPLE, (tile // 2) * SUPERSAMPLE
@@ -60,15 +65,6 @@ def preview_maps(mesh: dict, tile: int = 160) -> PreviewMaps:
     return PreviewMaps(w, 2 * h, np.concatenate(pixels), np.concatenate(uv_all), np.concatenate(shade_all))
 
 
-def small_copy(albedo: np.ndarray, size: int = 256) -> np.ndarray:
-    """Block-mean downsample of a square (res, res, 3) uint8 image to (size, size, 3) uint8 (res >= size)."""
-    res = albedo.shape[0]
-    if res <= size:
-        return albedo
-    k = res // size
-    return albedo[:size * k, :size * k].reshape(size, k, size, k, 3).mean(axis=(1, 3)).round().astype(np.uint8)
-
-
 def thumbnail(albedo: np.ndarray, maps: PreviewMaps) -> np.ndarray:
     """(tile, tile, 3) uint8 preview of a hand textured with `albedo` (any square size, sRGB uint8)."""
     res = albedo.shape[0]
@@ -87,27 +83,53 @@ def thumbnail(albedo: np.ndarray, maps: PreviewMaps) -> np.ndarray:
     return out.mean(axis=(1, 3)).round().astype(np.uint8)
 
 
-def contact_sheet(tiles: list[tuple[str, np.ndarray]], path: str | Path, columns: int = 18) -> np.ndarray:
-    """Lay out (label, tile image) pairs in a grid with a label strip under each; write the PNG atomically and
-    return the sheet (H, W, 3) uint8."""
+def describe(record: dict) -> str:
+    """A tile's label: tone and number, and what the variant shows (a tattoo's motif, a scar's kind, ...)."""
+    p = record.get("params", {}).get(record["category"], {})
+    what = p.get("motif") or p.get("kind") or p.get("style") or p.get("polish") or ""
+    if record.get("kind") == "base_variation":
+        what = record["category"].replace("_", " ")
+    if isinstance(what, str) and what:
+        what = " " + what.replace("_", " ")
+    return f"{record['tone']} {record['index']:02d}{what}"
+
+
+def group_name(record: dict) -> str:
+    """The sheet section of a catalogue record: its overlay category, or 'base variations'."""
+    return "base variations" if record.get("kind") == "base_variation" else record["category"].replace("_", " ")
+
+
+def contact_sheet(tiles: list[tuple[str, str, np.ndarray]], path: str | Path, columns: int = COLUMNS) -> np.ndarray:
+    """Lay out (group, label, tile image) triples in catalogue order: each group starts a new row under a header
+    with its name and size, each tile has its label below. Writes the PNG atomically and returns the sheet
+    (H, W, 3) uint8."""
     from darthand.textures.imageio import write_png
 
     if not tiles:
         raise ValueError("contact sheet needs at least one tile")
-    th, tw = tiles[0][1].shape[:2]
-    columns = min(columns, len(tiles))
-    rows = (len(tiles) + columns - 1) // columns
+    th, tw = tiles[0][2].shape[:2]
+    groups: dict[str, list] = {}
+    for group, label, img in tiles:
+        groups.setdefault(group, []).append((label, img))
+    columns = min(columns, max(len(g) for g in groups.values()))
     cell_h = th + LABEL_HEIGHT
-    sheet = np.tile(BACKGROUND, (rows * cell_h, columns * tw, 1))
-    for i, (_, img) in enumerate(tiles):
-        r, c = divmod(i, columns)
-        sheet[r * cell_h:r * cell_h + th, c * tw:(c + 1) * tw] = img
+    height = sum(HEADER_HEIGHT + -(-len(g) // columns) * cell_h for g in groups.values())
+    sheet = np.tile(BACKGROUND, (height, columns * tw, 1))
+    texts, y = [], 0
+    for group, members in groups.items():
+        sheet[y:y + HEADER_HEIGHT] = HEADER
+        texts.append((8, y + HEADER_HEIGHT - 9, f"{group} ({len(members)})", 22, [1.0, 1.0, 1.0]))
+        y += HEADER_HEIGHT
+        for i, (label, img) in enumerate(members):
+            r, c = divmod(i, columns)
+            top = y + r * cell_h
+            sheet[top:top + th, c * tw:(c + 1) * tw] = img
+            texts.append((c * tw + 4, top + th + LABEL_HEIGHT - 5, label, 14, [0.85, 0.85, 0.85]))
+        y += -(-len(members) // columns) * cell_h
     buf = oiio.ImageBuf(oiio.ImageSpec(sheet.shape[1], sheet.shape[0], 3, oiio.UINT8))
     buf.set_pixels(oiio.ROI(), np.ascontiguousarray(sheet))
-    for i, (label, _) in enumerate(tiles):
-        r, c = divmod(i, columns)
-        oiio.ImageBufAlgo.render_text(buf, c * tw + 3, r * cell_h + th + LABEL_HEIGHT - 3, label, 10,
-                                      "DroidSans", [0.85, 0.85, 0.85])
+    for x, y, text, size, colour in texts:
+        oiio.ImageBufAlgo.render_text(buf, x, y, text, size, "DroidSans", colour)
     sheet = buf.get_pixels(oiio.UINT8)
     write_png(path, sheet)
     return sheet

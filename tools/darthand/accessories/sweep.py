@@ -1,0 +1,278 @@
+"""Verifying fitted accessories across poses: the pose sweep and the penetration figures of every pose.
+
+Figures per accessory and pose (metres):
+  fit     rigid items: the overlap of the accessory and the part of the hand it is fitted to -- for a ring its
+          digit, for a wrist item the whole hand -- both ways: vertices of that part inside the accessory, and the
+          accessory's inward-facing vertices inside the part's closed surface (a digit's skin capped where it meets
+          the palm). A neighbouring finger or the palm pressed against a ring is contact, not fit: it counts in
+          `depth` only.
+  depth   the same against the whole hand, so contact with any part of it counts (the larger of the two); for
+          gloves, how far the hand reaches beyond the glove's inner surface;
+  through gloves: how far the hand reaches beyond the glove's outer surface;
+  drift   rigid items: the largest change of the distance from the accessory's centre to its bone axis.
+
+The sweep is split over poses: each worker process measures every accessory on its share of the poses (whole
+batches of `CHUNK` poses), and a pose's figures depend only on its batch, so the result is the same, bit for bit,
+for any number of workers.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import multiprocessing
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from darthand.accessories import catalog as cat
+from darthand.accessories.attach import apply, axis_distance, pose_skinned, to_local
+from darthand.accessories.collide import ClosedHand, Solid, glove_penetration, inward_vertices, neighbourhood
+from darthand.accessories.fit import WRIST_JOINT, wrist_axis
+from darthand.model.anatomy import bone_ends, rest_joints, sample_poses
+from darthand.model.forward import forward
+from darthand.model.hand_model import HandModel
+from darthand.model.layout import FINGER_JOINTS, MANO_PARENTS
+from darthand.model.topology import face_joints, vertex_normals
+
+CHUNK = 16               # poses posed at once
+MIN_POSES_PER_WORKER = 24
+
+
+def sweep_poses(model: HandModel, seed: int, n_sampled: int, gestures: list[str] | None = None,
+                stream: str = "pose-sweep"):
+    """(names, (P, 48) poses): the rest pose, the named gestures, then `n_sampled` anatomical samples drawn from
+    the generator of (seed, `stream`)."""
+    from darthand.model.poses import gesture_poses
+
+    g_names, g_poses = gesture_poses(model, gestures)
+    sampled = sample_poses(model, n_sampled, cat.item_rng(seed, stream)) if n_sampled else np.zeros((0, 48))
+    names = ["rest"] + list(g_names) + [f"sample_{i:03d}" for i in range(n_sampled)]
+    return names, np.concatenate([np.zeros((1, 48)), g_poses, sampled])
+
+
+@dataclass(frozen=True)
+class RigidProbe:
+    """What the sweep needs of a rigid accessory: its joint and rest placement, its local-frame mesh, the
+    inward-facing vertices (local) and the hand part it is fitted to (a digit index, or -1 for the whole hand)."""
+
+    id: str
+    joint: int
+    rest: np.ndarray
+    vertices: np.ndarray
+    faces: np.ndarray
+    inner: np.ndarray
+    part: int
+
+
+@dataclass(frozen=True)
+class GloveProbe:
+    """A glove's skinned mesh and the covered hand vertices whose normals are cast through it."""
+
+    id: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    weights: np.ndarray
+    posedirs: np.ndarray
+    inner_faces: np.ndarray
+    hand_ids: np.ndarray
+    face_source: np.ndarray
+
+
+def probes(built) -> list:
+    """Light, picklable probes of built accessories (`build.Built`: entry, mesh, fit)."""
+    out = []
+    for b in built:
+        m = b.mesh
+        if b.fit is None:
+            sk = m.skin
+            rim = sk["layer"][m.faces].min(1) != sk["layer"][m.faces].max(1)
+            interior = np.setdiff1d(np.where(sk["layer"] == 0)[0], np.unique(m.faces[rim]))
+            out.append(GloveProbe(b.id, m.vertices, m.faces, sk["weights"], sk["posedirs"], sk["inner_faces"],
+                                  sk["source_vertex"][interior], sk["source_vertex"][m.faces[:, 0]]))
+        else:
+            out.append(RigidProbe(b.id, int(b.fit.joint), b.fit.rest, m.vertices, m.faces,
+                                  m.vertices[inward_vertices(m.vertices, m.normals)], digit_of(b.fit.joint)))
+    return out
+
+
+def digit_of(joint: int) -> int:
+    """Index into FINGERS of the digit a joint belongs to; -1 for the wrist (the whole hand)."""
+    for k, chain in enumerate(FINGER_JOINTS.values()):
+        if joint in chain:
+            return k
+    return -1
+
+
+def measure(model: HandModel, built, poses: np.ndarray, workers: int = 1) -> dict:
+    """Per accessory id: {"fit", "depth", "through"} (P,) arrays (m) and "drift" (m) over `poses` (P, 48)."""
+    items = probes(built)
+    workers = max(1, min(int(workers), len(poses) // MIN_POSES_PER_WORKER))
+    if workers == 1:
+        return measure_probes(model, items, poses)
+    # Shares in whole chunks: each pose is posed in the same batch as in one process, so figures agree to the bit.
+    chunks = -(-len(poses) // CHUNK)
+    bounds = np.minimum(np.linspace(0, chunks, workers + 1).astype(int) * CHUNK, len(poses))
+    ctx = multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_single_thread) as pool:
+        parts = list(pool.map(measure_probes, [model] * workers, [items] * workers,
+                              [poses[a:b] for a, b in zip(bounds[:-1], bounds[1:])]))
+    return {i.id: {"fit": np.concatenate([p[i.id]["fit"] for p in parts]),
+                   "depth": np.concatenate([p[i.id]["depth"] for p in parts]),
+                   "through": np.concatenate([p[i.id]["through"] for p in parts]),
+                   "drift": max(p[i.id]["drift"] for p in parts)} for i in items}
+
+
+def _single_thread() -> None:
+    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(name, "1")
+
+
+def measure_probes(model: HandModel, items: list, poses: np.ndarray) -> dict:
+    """`measure` in this process, on probes."""
+    out = {i.id: {"fit": np.zeros(len(poses)), "depth": np.zeros(len(poses)), "through": np.zeros(len(poses)),
+                  "drift": 0.0} for i in items}
+    rigid = [i for i in items if isinstance(i, RigidProbe)]
+    gloves = [i for i in items if isinstance(i, GloveProbe)]
+    hand = HandParts(model)
+    axes = _BoneAxes(model)
+    solids = {i.id: Solid(i.vertices, i.faces) for i in rigid}
+    near = neighbourhood(model.faces, model.num_vertices, rings=3) if gloves else None
+    for s in range(0, len(poses), CHUNK):
+        posed = forward(model, poses[s:s + CHUNK])
+        B = len(posed.vertices)
+        placed = {i.id: posed.transforms[:, i.joint] @ i.rest for i in rigid}
+        for i in rigid:
+            fig = out[i.id]
+            fit, depth = hand_inside_rigid(solids[i.id], to_local(placed[i.id], posed.vertices),
+                                           hand.own_vertices(i.part))
+            fig["fit"][s:s + B], fig["depth"][s:s + B] = fit, depth
+            fig["drift"] = max(fig["drift"], axes.drift(i, placed[i.id], posed))
+        worn = {g.id: pose_skinned(g.vertices, g.weights, g.posedirs, posed.rotations, posed.transforms)
+                for g in gloves}
+        for p in range(B):
+            if rigid:
+                for item_id, (fit, depth) in rigid_inside_hand(hand, rigid, placed, posed.vertices[p], p).items():
+                    fig = out[item_id]
+                    fig["fit"][s + p] = max(fig["fit"][s + p], fit)
+                    fig["depth"][s + p] = max(fig["depth"][s + p], depth, fit)
+            if gloves:
+                _gloves_at(model, gloves, worn, posed.vertices[p], p, near, out, s + p)
+    return out
+
+
+class HandParts:
+    """The hand's closed surface and, per digit, the digit's skin capped where it meets the palm; both re-posed per
+    pose. A face belongs to the digit of the joint with the largest summed corner weight (the wrist and palm joint
+    0 belong to no digit)."""
+
+    def __init__(self, model: HandModel):
+        self.model = model
+        self.whole = ClosedHand(model.faces)
+        joint_digit = np.array([digit_of(j) for j in range(len(model.parents))])
+        self.face_digit = joint_digit[face_joints(model.faces, model.weights)]
+        self._digits: dict[int, ClosedHand | None] = {}
+        self._own: dict[int, np.ndarray] = {}
+
+    def digit(self, k: int) -> ClosedHand | None:
+        """The capped surface of digit k (None when its faces do not bound a simple tube)."""
+        if k not in self._digits:
+            try:
+                self._digits[k] = ClosedHand(self.model.faces[self.face_digit == k])
+            except ValueError:      # a pinched boundary: measure against the whole hand instead
+                self._digits[k] = None
+        return self._digits[k]
+
+    def own_vertices(self, k: int) -> np.ndarray:
+        """(V,) bool: the vertices of digit k's faces (every vertex for k = -1, the whole hand)."""
+        if k not in self._own:
+            own = np.zeros(self.model.num_vertices, bool)
+            if k < 0 or self.digit(k) is None:
+                own[:] = True
+            else:
+                own[self.model.faces[self.face_digit == k].ravel()] = True
+            self._own[k] = own
+        return self._own[k]
+
+
+def hand_inside_rigid(solid: Solid, local: np.ndarray, own: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(fit, depth) (B,): the deepest hand vertex inside a rigid accessory per pose, among the vertices of the part
+    it is fitted to (`own` (V,) bool) and among all. local (B, V, 3): the posed hand in the accessory's frame."""
+    B, V = local.shape[:2]
+    local = local.reshape(-1, 3)
+    fit, depth = np.zeros(B), np.zeros(B)
+    inside = solid.inside(local)
+    pose, vid = np.divmod(inside, V)
+    for p in np.unique(pose):
+        here = pose == p
+        depth[p] = solid.deepest(local[inside[here]])
+        mine = here & own[vid]
+        fit[p] = depth[p] if mine.sum() == here.sum() else solid.deepest(local[inside[mine]])
+    return fit, depth
+
+
+def rigid_inside_hand(hand: HandParts, rigid: list, placed: dict, vertices: np.ndarray, p: int) -> dict:
+    """{id: (fit, depth)} of the rigid accessories whose inward-facing vertices are inside the posed hand
+    (vertices (V, 3)): depth is measured to the whole hand's surface, fit to the surface of the part the accessory
+    is fitted to, counting only the vertices inside that part."""
+    pts = np.concatenate([apply(placed[i.id][p], i.inner) for i in rigid])
+    owner = np.repeat(np.arange(len(rigid)), [len(i.inner) for i in rigid])
+    whole = hand.whole.solid(vertices)
+    inside = whole.inside(pts)
+    out, digits = {}, {}
+    for k in np.unique(owner[inside]):
+        item = rigid[k]
+        mine = pts[inside[owner[inside] == k]]
+        depth = whole.deepest(mine)
+        part = hand.digit(item.part) if item.part >= 0 else None
+        if part is None:
+            fit = depth
+        else:
+            if item.part not in digits:
+                digits[item.part] = part.solid(vertices)
+            own = digits[item.part]
+            in_own = own.inside(mine)
+            fit = own.deepest(mine[in_own])
+        out[item.id] = (float(fit), float(depth))
+    return out
+
+
+class _BoneAxes:
+    """The bone axes rigid accessories are measured against: a finger joint and its child (rings), the forearm
+    axis through the wrist joint (wrist items)."""
+
+    def __init__(self, model: HandModel):
+        self.joints = rest_joints(model)
+        self.ends = bone_ends(model, self.joints)
+        self.j0, self.fore = wrist_axis(model)
+
+    def distance(self, joint: int, centre: np.ndarray, posed=None, p: int = 0) -> float:
+        if joint == WRIST_JOINT:
+            a = self.j0 if posed is None else posed.joints[p, WRIST_JOINT]
+            d = self.fore if posed is None else posed.transforms[p, WRIST_JOINT, :3, :3] @ self.fore
+            return float(axis_distance(centre, a, a + d))
+        if posed is None:
+            return float(axis_distance(centre, self.joints[joint], self.ends[joint]))
+        child = int(np.where(MANO_PARENTS == joint)[0][0])
+        return float(axis_distance(centre, posed.joints[p, joint], posed.joints[p, child]))
+
+    def drift(self, item: RigidProbe, placed: np.ndarray, posed) -> float:
+        """Largest change over the posed batch of the accessory centre's distance to its bone axis."""
+        rest = self.distance(item.joint, item.rest[:3, 3])
+        return max(abs(self.distance(item.joint, placed[p, :3, 3], posed, p) - rest) for p in range(len(placed)))
+
+
+def _gloves_at(model: HandModel, gloves: list, worn: dict, hand: np.ndarray, p: int, near, out: dict,
+               index: int) -> None:
+    """Glove figures at pose p of the batch (worn: each glove's posed vertices (B, G, 3), hand: the posed hand
+    (V, 3)): the covered hand vertices cast along their posed normals."""
+    normals = vertex_normals(hand, model.faces)
+    for g in gloves:
+        def local(r, t, g=g):
+            if len(r) == 0:
+                return np.zeros(0, bool)
+            return np.asarray(near[g.hand_ids[r], g.face_source[t]]).ravel() > 0
+
+        into, through = glove_penetration(worn[g.id][p], g.faces, g.inner_faces, hand[g.hand_ids],
+                                          normals[g.hand_ids], local=local)
+        out[g.id]["depth"][index], out[g.id]["through"][index] = into, through
