@@ -194,6 +194,18 @@ def _add_accessories_commands(sub) -> None:
     p.add_argument("--jobs", type=int, default=1, metavar="N", help="worker processes for the pose sweeps (default 1)")
     p.set_defaults(run=commands.build)
 
+    p = g.add_parser("shapes", help="refit the catalogue to sampled hand shapes: refit time, penetration over the "
+                                    "shapes and the named gestures, with and without refitting")
+    p.add_argument("model", metavar="MODEL", help="the model the catalogue was built on (build/model/right.npz)")
+    p.add_argument("--catalog", required=True, metavar="CATALOG", help="build/accessories/catalog.json")
+    p.add_argument("--out", required=True, metavar="FILE.json", help="where to write the figures")
+    p.add_argument("--shapes", type=int, default=50, metavar="N", help="sampled shapes, the first the built one "
+                   "(default 50)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the shape draws (default 0)")
+    p.add_argument("--limit", type=float, default=3.0, help="largest |beta| drawn (default 3)")
+    p.add_argument("--no-compare", action="store_true", help="skip the sweep without refitting")
+    p.set_defaults(run=commands.shapes)
+
 
 # ---------------------------------------------------------------- export
 def _add_export_commands(sub) -> None:
