@@ -43,6 +43,9 @@ src = $(wildcard tools/darthand/$(1)/*.py tools/darthand/$(1)/*/*.py)
 
 .PHONY: assets shapes test test-all bench usdz clean venv node blender FORCE
 .DEFAULT_GOAL := assets
+# A step that fails leaves no output make would take as up to date next time (grouped targets: all of them), so a
+# failed step fails again on every run until its cause is fixed.
+.DELETE_ON_ERROR:
 
 # ------------------------------------------------------------------ set-up
 venv: $(STAMP)
@@ -70,7 +73,8 @@ build/model/source.txt: FORCE | $(STAMP)
 	@mkdir -p build/model
 	@echo '$(SOURCE_MODEL) $(strip $(BETAS))' | cmp -s - $@ || echo '$(SOURCE_MODEL) $(strip $(BETAS))' > $@
 
-build/model/right.npz build/model/left.npz &: build/model/source.txt $(SOURCE_DEPS) $(call src,model) $(STAMP)
+# The model carries its gestures fitted to it (model/gesture_fit), so the gesture files are its inputs too.
+build/model/right.npz build/model/left.npz &: build/model/source.txt $(SOURCE_DEPS) $(POSES) $(call src,model) $(STAMP)
 	@$(STEP) model -- $(DH) model build $(SOURCE_MODEL) --out-dir build/model --atlas-res $(RES) \
 	    $(if $(strip $(BETAS)),--betas '$(strip $(BETAS))')
 
@@ -137,7 +141,9 @@ ASSETS := build/model/right.npz build/template/gestures.json build/textures/cata
 build/manifest.json: $(ASSETS)
 	@$(DH) manifest --build build
 
+# Every run: exit 1 while any check the manifest records fails.
 assets: build/manifest.json
+	@$(DH) manifest --build build --check
 
 # One variant combination as a .usdz: make usdz TEXTURE=light_tattoos_07 ACCESSORY=watch_03_round_metal
 usdz: build/usd/right/right.usda

@@ -1,4 +1,10 @@
-"""MANO-format pickle fixtures built from tests/synthetic.py (the real MANO files are licensed).
+"""MANO-format pickle fixtures (the real MANO files are licensed and never in the repository).
+
+`mano_like_model` is a realistic one: the open CC0 hand remeshed to MANO's budget (778 vertices, 1538 faces, a
+16-vertex wrist loop), re-rigged and laid out as MANO's file is; `write_mano_like` pickles it as MANO_RIGHT.pkl /
+MANO_LEFT.pkl. From the command line (to try `make assets MANO=...` by hand):
+
+    .venv/bin/python tests/model/mano_fixture.py OUT_DIR [--thicken MM]
 
 `write_mano_pkl` writes a HandModel the way the official MANO_RIGHT.pkl / MANO_LEFT.pkl are laid out: a protocol 2
 pickle of a dict whose `shapedirs` is a chumpy `Ch` (optionally a `Select` over a wider `Ch`), whose J_regressor is
@@ -13,6 +19,7 @@ the `Ch`/`Select` classes below only pretend to live in `chumpy.ch` / `chumpy.re
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import pickle
 import struct
@@ -24,7 +31,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from darthand.model.hand_model import HandModel
-from synthetic import tube_hand
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: also when run as a script
+from synthetic import tube_hand  # noqa: E402
 
 ROOT_PARENT = 4294967295  # uint32(-1), as in the official files
 
@@ -290,3 +299,116 @@ class _Evil:
 def write_nested_malicious(path, marker: Path, key: str = "bs_style", **kwargs) -> Path:
     """A complete MANO pickle except that dict entry `key` is a call creating `marker` (a REDUCE inside the dict)."""
     return write_mano_pkl(path, override={key: _Evil(marker)}, **kwargs)
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# A realistic MANO-format model: the open hand remeshed to MANO's budget and re-rigged.
+
+MANO_VERTICES, MANO_LOOP = 778, 16
+
+
+@functools.lru_cache(maxsize=4)
+def mano_like_model(thicken_mm: float = 0.0) -> HandModel:
+    """The open CC0 hand as MANO's file would hold it: 778 vertices, 1538 faces, one 16-vertex wrist loop,
+    fingertips at MANO's tip vertex ids (layout.MANO_TIP_IDS), vertex 777 the wrist-loop vertex most bound to the
+    wrist (DART copies its weights to the new wrist rings), no UVs, no face labels.
+
+    The mesh is the open hand's with 4 wrist-loop vertices merged into their neighbours and then MeshLab's quadric
+    edge collapse down to 778 vertices (boundary kept, no optimal placement, so every vertex is a source vertex and
+    its skin weights, correctives and ten shape directions carry over exactly); the joint regressor is fitted anew
+    to the source joints (template.regressor); the PCA pose basis and mean of 2000 anatomical samples.
+    thicken_mm: push every vertex out along its normal first (a hand thicker than the one the gestures were
+    authored on). Cached: about half a second.
+    """
+    from darthand.model.anatomy import sample_poses
+    from darthand.model.layout import MANO_TIP_IDS
+    from darthand.model.load import open_hand
+    from darthand.model.topology import boundary_loops, vertex_normals
+    from darthand.template.regressor import fit_regressor
+
+    source = open_hand("right")
+    vertices, faces = source.v_template, _merge_loop_vertices(source.faces, MANO_LOOP)
+    if thicken_mm:
+        vertices = vertices + thicken_mm * 1e-3 * vertex_normals(vertices, source.faces)
+    keep, faces = _decimate(vertices, faces, MANO_VERTICES)
+    tips = np.array([np.argmin(np.linalg.norm(vertices[keep] - vertices[t], axis=1)) for t in source.tip_ids])
+    loop = boundary_loops(faces)[0]
+    anchor = int(loop[np.argmax(source.weights[keep][loop, 0])])
+    order = _mano_order(len(keep), dict(zip(tips.tolist(), MANO_TIP_IDS.tolist())) | {anchor: MANO_VERTICES - 1})
+    keep = keep[order]
+    faces = np.argsort(order)[faces]
+    v, weights = vertices[keep], source.weights[keep]
+    joints = np.asarray(source.J_regressor @ source.v_template)
+    regressor, _ = fit_regressor(v, weights, joints, v[MANO_TIP_IDS])
+    model = HandModel.create(v_template=v, faces=faces, weights=weights, posedirs=source.posedirs[keep],
+                             J_regressor=regressor, parents=source.parents, shapedirs=source.shapedirs[keep],
+                             tip_ids=MANO_TIP_IDS, side="right", meta={"source": "mano-like fixture"})
+    poses = sample_poses(model, 2000, np.random.default_rng(7))[:, 3:]
+    mean = poses.mean(0)
+    components = np.linalg.svd(poses - mean, full_matrices=False)[2]
+    return model.replace(hands_mean=mean, hands_components=components)
+
+
+def write_mano_like(out_dir, thicken_mm: float = 0.0) -> tuple[Path, Path]:
+    """Write `mano_like_model(thicken_mm)` as out_dir/MANO_RIGHT.pkl and MANO_LEFT.pkl (with MANO_LEFT's shapedirs
+    x-sign bug); return both paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    model = mano_like_model(thicken_mm)
+    return (write_mano_pkl(out / "MANO_RIGHT.pkl", model, side="right"),
+            write_mano_pkl(out / "MANO_LEFT.pkl", model, side="left"))
+
+
+def _merge_loop_vertices(faces: np.ndarray, size: int) -> np.ndarray:
+    """Faces with the wrist loop cut down to `size` vertices: evenly spaced loop vertices merge into their next
+    loop neighbour (each merge removes one vertex and one face)."""
+    from darthand.model.topology import boundary_loops
+
+    loop = boundary_loops(faces)[0]
+    faces = faces.copy()
+    drop = len(loop) - size
+    for k in np.round(np.arange(drop) * len(loop) / max(drop, 1)).astype(int)[:drop]:
+        faces[faces == loop[k]] = loop[(k + 1) % len(loop)]
+    return faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])]
+
+
+def _decimate(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """(source vertex of each kept vertex (V',), faces over the kept vertices (F', 3)) after MeshLab's quadric
+    edge collapse to `target_vertices`, keeping the boundary and vertex positions."""
+    import pymeshlab
+
+    from darthand.model.topology import boundary_loops
+    from darthand.template.decimate import source_vertices
+
+    loop = sum(len(lp) for lp in boundary_loops(faces))
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=vertices, face_matrix=faces))
+    ms.meshing_remove_unreferenced_vertices()
+    ms.meshing_decimation_quadric_edge_collapse(targetfacenum=2 * target_vertices - 2 - loop, qualitythr=0.5,
+                                                preserveboundary=True, boundaryweight=10.0, optimalplacement=False,
+                                                preservenormal=True, preservetopology=True, planarquadric=True)
+    ms.meshing_remove_unreferenced_vertices()
+    out = ms.current_mesh()
+    keep = source_vertices(vertices, out.vertex_matrix(), tolerance=0.0)
+    assert len(keep) == target_vertices, len(keep)
+    return keep, out.face_matrix().astype(np.int64)
+
+
+def _mano_order(n: int, fixed: dict) -> np.ndarray:
+    """(n,) a vertex order in which vertex k of `fixed` lands at index fixed[k], the others in their order."""
+    order = np.full(n, -1)
+    order[list(fixed.values())] = list(fixed)
+    order[order < 0] = [k for k in range(n) if k not in fixed]
+    return order
+
+
+if __name__ == "__main__":
+    import argparse
+
+    parser = argparse.ArgumentParser(description="write a MANO-format fixture (MANO_RIGHT.pkl, MANO_LEFT.pkl)")
+    parser.add_argument("out_dir")
+    parser.add_argument("--thicken", type=float, default=0.0, metavar="MM", help="push the skin out by MM")
+    args = parser.parse_args()
+    for path in write_mano_like(args.out_dir, args.thicken):
+        print(path)
+

@@ -147,3 +147,16 @@ def test_mirror_twice_is_identity(enhanced):
     p = np.random.default_rng(2).normal(size=(3, 48))
     np.testing.assert_array_equal(mirror_pose(mirror_pose(p)), p)
     np.testing.assert_array_equal(mirror_pose(p.reshape(3, 16, 3)), mirror_pose(p).reshape(3, 16, 3))
+
+
+def test_wrist_of_a_left_hand_is_the_mirror_of_the_right_hands(base):
+    """A left source (MANO_LEFT.pkl) gets the wrist its right image would: the new vertices in the same order,
+    faces and UV faces wound as the mirror winds them."""
+    left = add_wrist(mirror_model(base))
+    right = mirror_model(add_wrist(base))
+    for name in ("v_template", "faces", "weights", "uvs", "faces_uv", "face_labels"):
+        a, b = getattr(left, name), getattr(right, name)
+        assert (a is None) == (b is None), name
+        if a is not None:
+            np.testing.assert_array_equal(a, b, err_msg=name)
+    assert len(inconsistent_edges(left.faces)) == 0

@@ -26,7 +26,7 @@ def test_manifest_lists_outputs_with_true_hashes(tmp_path):
     jsonschema.validate(m, SCHEMA)
     assert [e["path"] for e in m["outputs"]] == ["textures/a.png"]
     assert m["outputs"][0]["sha256"] == hashlib.sha256(b"abc").hexdigest()
-    assert set(m["steps_seconds"]) == {"demo"}
+    assert set(m["steps_seconds"]) == set(m["steps_cpu_seconds"]) == {"demo"}
     assert json.loads((build / "manifest.json").read_text()) == m
 
 
@@ -74,3 +74,44 @@ def test_atomic_hard_link_over_the_same_file_leaves_no_temporary(tmp_path):
             tmp.unlink()
             os.link(src, tmp)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dst.png", "src.png"]
+
+
+def _checks(gestures_between: int = 0, render_ok: bool = True, validate_exit: int = 0) -> dict:
+    entry = {"finite": True, "inverted_faces": 0, "between_fingers_faces": gestures_between,
+             "between": {"thumb-index": gestures_between} if gestures_between else {}}
+    return {"gestures": {"gestures": {"ok": entry}},
+            "render": {"ok": render_ok, "packages": {"left": {"checks": {"uv_seams": {"ok": render_ok}}}}},
+            "validate": {"exit_code": validate_exit, "counts": {"error": 2 if validate_exit else 0}},
+            "textures": {"variants": 325, "resolution": 64}}
+
+
+def test_failed_checks_name_each_failing_report():
+    from darthand.manifest import failed_checks
+
+    assert failed_checks(_checks()) == []
+    lines = failed_checks(_checks(gestures_between=3, render_ok=False, validate_exit=1))
+    assert len(lines) == 3
+    assert lines[0].startswith("gestures: gesture 'ok': 3 faces where digits intersect (thumb-index 3)")
+    assert lines[1] == "render: checks failed (left: uv_seams)"
+    assert lines[2] == "validate: exit code 1 (2 errors, see validate/report.json)"
+
+
+def test_manifest_check_exits_1_while_a_recorded_check_fails(tmp_path, capsys):
+    """`darthand manifest --check` (what `make assets` runs last): 1 and one line per failure, every time."""
+    from darthand.cli import main
+
+    build = tmp_path / "build"
+    (build / "checks").mkdir(parents=True)
+    report = build / "checks" / "report.json"
+    report.write_text(json.dumps(_checks(render_ok=False)["render"]))
+    m = write_manifest(build)
+    jsonschema.validate(m, SCHEMA)
+    assert m["failed_checks"] == ["render: checks failed (left: uv_seams)"]
+    cli = ["manifest", "--build", str(build), "--check"]
+    for _ in range(2):
+        assert main(cli) == 1 and "render: checks failed (left: uv_seams)" in capsys.readouterr().out
+    report.write_text(json.dumps(_checks()["render"]))
+    write_manifest(build)
+    assert main(cli) == 0 and capsys.readouterr().out == ""
+    (build / "manifest.json").write_text("{")
+    assert main(cli) == 2 and "manifest.json: " in capsys.readouterr().err

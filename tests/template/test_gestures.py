@@ -16,8 +16,8 @@ from darthand.model.npz_io import load_npz
 from darthand.model.poses import POSES_DIR, gesture_angles, list_gestures, load_gesture, load_pose_file
 from darthand.model.preview import render_mesh
 from darthand.schemas import load_schema
-from darthand.template.gesture_checks import (face_parts, gesture_problems, gesture_report, inverted_faces,
-                                              part_intersections, self_intersecting, write_gesture_checks,
+from darthand.model.intersections import face_parts, part_intersections, self_intersecting
+from darthand.template.gesture_checks import (gesture_problems, gesture_report, inverted_faces, write_gesture_checks,
                                               write_gesture_sheet)
 from synthetic import tube_hand, tube_mesh
 
@@ -161,9 +161,13 @@ def test_gesture_report_on_the_tube_hand():
                                                                     between={"thumb-index": 11}),
            "c": dict(report["flat"], finite=False)}
     assert gesture_problems({"flat": report["flat"]}) == []
-    assert gesture_problems(bad) == ["gesture 'a': 3 inverted triangles",
-                                     "gesture 'b': 11 faces where digits intersect (thumb-index 11), more than 10",
+    remedy = ("the gestures are not fitted to this model: build it with `darthand model build` (make assets) or "
+              "change assets_src/poses/{}.json")
+    assert gesture_problems(bad) == ["gesture 'a': 3 inverted triangles; " + remedy.format("a"),
+                                     "gesture 'b': 11 faces where digits intersect (thumb-index 11), more than 0; "
+                                     + remedy.format("b"),
                                      "gesture 'c': non-finite vertices"]
+    assert gesture_problems(bad, max_between_fingers=11)[1:] == ["gesture 'c': non-finite vertices"]
 
 
 def test_preview_render_sees_the_mesh(tmp_path):
@@ -196,3 +200,18 @@ def test_open_hand_gestures_are_clean(tmp_path):
     assert (tmp_path / "gestures.png").is_file() and (tmp_path / "gestures.json").is_file()
     left = gesture_report(mirror_model(model), ["fist", "ok"])
     assert gesture_problems(report) == [] and gesture_problems(left) == []
+
+
+def test_failures_of_fitted_gestures_name_what_to_change():
+    entry = {"finite": True, "inverted_faces": 0, "between_fingers_faces": 7, "between": {"thumb-index": 7},
+             "fit": {"status": "unresolved", "changed_deg": {}, "at_bound": ["thumb1.bend"], "clearance_mm": 1.0}}
+    assert gesture_problems({"ok": entry}) == [
+        "gesture 'ok': 7 faces where digits intersect (thumb-index 7), more than 0; after fitting to this model "
+        "(unresolved, stopped at the bound of thumb1.bend): change the index and thumb angles or the contacts in "
+        "assets_src/poses/ok.json"]
+    mirror = {"finite": True, "inverted_faces": 2, "between_fingers_faces": 0, "finger_palm_faces": 0,
+              "between": {}}
+    clean = dict(entry, between_fingers_faces=0, between={}, finger_palm_faces=0)
+    assert gesture_problems({"ok": dict(clean, mirror=mirror)}) == [
+        "gesture 'ok' (mirror): 2 inverted triangles; after fitting to this model (unresolved, stopped at the bound "
+        "of thumb1.bend): change the digit angles or the contacts in assets_src/poses/ok.json"]

@@ -8,7 +8,7 @@ import pytest
 from darthand.model.layout import FACE_LABEL_IDS, FACE_LABELS
 from darthand.model.atlas import atlas_padding, compute_atlas, ensure_uvs, seam_edges
 from darthand.textures.raster import rasterize
-from darthand.textures.regions import derive_face_labels, ensure_face_labels, skeleton
+from darthand.model.regions import derive_face_labels, ensure_face_labels, skeleton
 from texture_hand import fixture_model
 
 TEMPLATE = Path(__file__).resolve().parents[2] / "assets_src" / "template" / "open_right.npz"

@@ -121,8 +121,8 @@ def _add_template_commands(sub) -> None:
     p.add_argument("model", metavar="MODEL", nargs="?", default="open",
                    help="a MANO pkl, a darthand .npz or a built-in name (default: open)")
     p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for gestures.json and gestures.png")
-    p.add_argument("--max-between-fingers", type=int, default=10,
-                   help="faces where two digits may intersect before a gesture fails (default 10)")
+    p.add_argument("--max-between-fingers", type=int, default=0,
+                   help="faces where two digits may intersect before a gesture fails (default 0)")
     p.set_defaults(run=commands.gestures_command)
 
     p = g.add_parser("shapes", help="check a model's shape space: extreme shapes at rest and through every gesture, "
@@ -320,7 +320,7 @@ def _add_render_arguments(p) -> None:
     p.add_argument("package", metavar="PACKAGE", help=RENDER_PACKAGE_HELP)
     p.add_argument("--out", required=True, metavar="DIR", help="output folder for image.png, mask.png, labels.json")
     p.add_argument("--pose", default=None, metavar="POSE",
-                   help="a gesture name (assets_src/poses), a pose file (schemas/pose.schema.json) or 48 "
+                   help="a gesture name (as fitted to the model), a pose file (schemas/pose.schema.json) or 48 "
                         "comma-separated MANO axis-angle numbers relative to the flat hand; USD packages take a "
                         "gesture name or a time code (default: the flat hand)")
     p.add_argument("--pose-index", type=int, default=0, metavar="N", help="which pose of a pose file (default 0)")
@@ -547,12 +547,17 @@ def _add_manifest_command(sub) -> None:
                        description="write build/manifest.json: outputs with sha256, step seconds, checks")
     p.add_argument("--build", default="build", help="build folder (default: build)")
     p.add_argument("--out", default=None, help="manifest path (default: BUILD/manifest.json)")
+    p.add_argument("--check", action="store_true",
+                   help="write nothing: print the checks the manifest records as failed, exit 1 if there are any")
 
     def run(args):
-        from darthand.manifest import write_manifest
+        from darthand.manifest import check_manifest, write_manifest
+        if args.check:
+            return check_manifest(args.out or f"{args.build}/manifest.json")
         m = write_manifest(args.build, args.out)
         total = sum(e["bytes"] for e in m["outputs"])
-        print(f"manifest: {len(m['outputs'])} outputs, {total / 1e6:.1f} MB, checks: {sorted(m['checks'])}")
+        print(f"manifest: {len(m['outputs'])} outputs, {total / 1e6:.1f} MB, checks: {sorted(m['checks'])}"
+              + (f", {len(m['failed_checks'])} failed" if m["failed_checks"] else ""))
         return 0
 
     p.set_defaults(run=run)

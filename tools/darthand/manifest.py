@@ -81,7 +81,9 @@ def write_manifest(build: str | Path = "build", out: str | Path | None = None) -
     build = Path(build)
     out = Path(out) if out else build / "manifest.json"
     previous = json.loads(out.read_text()) if out.is_file() else {}
-    steps = {p.stem: json.loads(p.read_text())["seconds"] for p in sorted((build / "steps").glob("*.json"))}
+    records = {p.stem: json.loads(p.read_text()) for p in sorted((build / "steps").glob("*.json"))}
+    steps = {name: r["seconds"] for name, r in records.items()}
+    cpu = {name: r["cpu_seconds"] for name, r in records.items() if "cpu_seconds" in r}
     checks = {name: json.loads((build / rel).read_text()) for name, rel in CHECK_REPORTS.items()
               if (build / rel).is_file()}
     checks.update(catalogue_checks(build))
@@ -89,8 +91,40 @@ def write_manifest(build: str | Path = "build", out: str | Path | None = None) -
         "darthand_version": __version__,
         "model": model_used(build),
         "steps_seconds": steps,
+        "steps_cpu_seconds": cpu,
         "checks": checks,
+        "failed_checks": failed_checks(checks),
         "outputs": file_entries(build, out, previous),
     }
     write_json(out, manifest)
     return manifest
+
+
+def failed_checks(checks: dict) -> list[str]:
+    """One line per check report that did not pass: the gesture guard's problems, render checks not ok,
+    validation with errors or an unreadable package."""
+    from darthand.template.gesture_checks import gesture_problems
+
+    out = []
+    if "gestures" in checks:
+        out += [f"gestures: {line}" for line in gesture_problems(checks["gestures"].get("gestures", {}))]
+    if "render" in checks and not checks["render"].get("ok", False):
+        bad = [f"{side}: {name}" for side, pkg in checks["render"].get("packages", {}).items()
+               for name, c in pkg.get("checks", {}).items() if isinstance(c, dict) and not c.get("ok", True)]
+        out.append(f"render: checks failed ({', '.join(bad) or 'see checks/report.json'})")
+    if "validate" in checks and checks["validate"].get("exit_code", 0) != 0:
+        counts = checks["validate"].get("counts", {})
+        out.append(f"validate: exit code {checks['validate']['exit_code']} ({counts.get('error', '?')} errors, "
+                   "see validate/report.json)")
+    return out
+
+
+def check_manifest(path: str | Path) -> int:
+    """`darthand manifest --check`: print each failed check of the manifest at `path`; 1 if any, else 0."""
+    from darthand.fileio import read_json
+
+    manifest = read_json(Path(path), "manifest")
+    failures = failed_checks(manifest.get("checks", {}))
+    for line in failures:
+        print(f"{path}: {line}")
+    return 1 if failures else 0

@@ -43,9 +43,10 @@ def sweep_poses(model: HandModel, seed: int, n_sampled: int, gestures: list[str]
                 stream: str = "pose-sweep"):
     """(names, (P, 48) poses): the rest pose, the named gestures, then `n_sampled` anatomical samples drawn from
     the generator of (seed, `stream`)."""
-    from darthand.model.poses import gesture_poses
+    from darthand.model.gestures import model_gestures
 
-    g_names, g_poses = gesture_poses(model, gestures)
+    g = model_gestures(model, gestures)
+    g_names, g_poses = g.names, g.poses
     sampled = sample_poses(model, n_sampled, cat.item_rng(seed, stream)) if n_sampled else np.zeros((0, 48))
     names = ["rest"] + list(g_names) + [f"sample_{i:03d}" for i in range(n_sampled)]
     return names, np.concatenate([np.zeros((1, 48)), g_poses, sampled])

@@ -101,9 +101,9 @@ def validate_jobs(sources: dict, jobs: list[dict], where: str = "jobs") -> None:
     for side, source in sources.items():
         model = getattr(source, "model", None)
         if model is not None and not hasattr(source, "gestures"):
-            from darthand.model.poses import list_gestures
+            from darthand.model.gestures import model_gestures
 
-            gestures = set(list_gestures())
+            gestures = set(model_gestures(model).names)
         else:
             model, gestures = None, set(source.gestures)
         known[side] = (set(source.texture_ids()), set(source.accessory_ids()) | {"none"}, gestures, model)

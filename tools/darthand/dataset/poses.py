@@ -86,16 +86,16 @@ def load_reference(spec, model, max_mb: float = DEFAULT_MAX_REFERENCE_MB, gestur
     `gestures`: some of its names), or a path to a darthand pose file or a FreiHAND training_mano.json. `max_mb`:
     the largest file read (InputError naming the budget and how to raise it otherwise)."""
     from darthand.fileio import read_json
-    from darthand.model.poses import gesture_poses
 
     if spec in (None, "gestures"):
-        from darthand.model.poses import list_gestures
+        from darthand.model.gestures import model_gestures
 
+        known = model_gestures(model)                      # the model's own (fitted) gestures
         for name in gestures or ():
-            if name not in list_gestures():
-                raise InputError(f"poses: {name!r} is not a gesture ({', '.join(list_gestures())})")
-        names, poses = gesture_poses(model, list(gestures) if gestures else None)
-        return reference_from_poses(poses, "gestures", names)
+            if name not in known.names:
+                raise InputError(f"poses: {name!r} is not a gesture ({', '.join(known.names)})")
+        chosen = model_gestures(model, list(gestures)) if gestures else known
+        return reference_from_poses(chosen.poses, "gestures", chosen.names)
     path = Path(str(spec))
     if not path.is_file():
         raise InputError(f"reference poses: {spec!r} is neither 'gestures' nor a file")

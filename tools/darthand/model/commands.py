@@ -12,10 +12,12 @@ from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.model.atlas import ensure_uvs
 from darthand.model.forward import forward
+from darthand.model.gesture_fit import with_fitted_gestures
 from darthand.model.hand_model import HandModel
 from darthand.model.load import load_model
 from darthand.model.mirror import mirror_model
 from darthand.model.npz_io import save_npz
+from darthand.model.regions import ensure_face_labels
 from darthand.model.topology import boundary_loops, non_manifold_edges
 from darthand.model.wrist import add_wrist
 
@@ -88,23 +90,29 @@ def build(args) -> int:
     """The pipeline's model step: the wrist-enhanced model of each side, as build/model/{right,left}.npz.
 
     A model without UVs (MANO) gets a deterministic xatlas atlas for textures of `--atlas-res` texels, made once on
-    the wrist-enhanced mesh and mirrored with it, so textures, USD and glTF all use the same UVs.
+    the wrist-enhanced mesh and mirrored with it, so textures, USD and glTF all use the same UVs; a model without
+    face labels gets labels derived from its geometry (`regions.derive_face_labels`). Every named gesture is fitted
+    to the model and recorded in it (`gesture_fit`), so every later stage poses the same collision-free gestures.
     """
     source = load_model(args.model)
     enhanced = ensure_uvs(add_wrist(source), args.atlas_res)
+    right = enhanced if enhanced.side == "right" else mirror_model(enhanced)
     betas = parse_betas(getattr(args, "betas", None))
-    if betas is not None:
-        enhanced = enhanced.shaped(betas)
-    other = mirror_model(enhanced)
+    if betas is not None:               # the shape first: gestures are fitted to the hand they will pose
+        right = right.shaped(betas)
+    right = with_fitted_gestures(ensure_face_labels(right))
     out = Path(args.out_dir)
-    for model in (enhanced, other):
+    for model in (right, mirror_model(right)):
         save_npz(model, out / f"{model.side}.npz")
     for fix in source.meta.get("fixes", []):
         print(f"  fixed on load: {fix}")
-    uv = "xatlas atlas" if "uv_atlas" in enhanced.meta else "the template's UVs"
+    uv = "xatlas atlas" if "uv_atlas" in right.meta else "the template's UVs"
+    labels = "derived face labels" if source.face_labels is None else "the template's face labels"
+    status = [g["status"] for g in right.meta["gestures"]["gestures"].values()]
+    fits = ", ".join(f"{status.count(s)} {s}" for s in ("kept", "fitted", "unresolved") if s in status)
     shape = f"; shape betas {' '.join(f'{b:g}' for b in betas)}" if betas is not None else ""
-    print(f"{out}/right.npz, left.npz: {enhanced.num_vertices} vertices, {enhanced.num_faces} faces "
-          f"(from {args.model}, {source.num_vertices} vertices; {uv}{shape})")
+    print(f"{out}/right.npz, left.npz: {right.num_vertices} vertices, {right.num_faces} faces "
+          f"(from {args.model}, {source.num_vertices} vertices; {uv}; {labels}{shape}); gestures: {fits}")
     return 0
 
 

@@ -134,14 +134,7 @@ def list_gestures(poses_dir: str | Path | None = None) -> list[str]:
 def gesture_angles(name: str, poses_dir: str | Path | None = None) -> np.ndarray:
     """(16, 3) anatomical angles [twist, spread, bend] in radians of a named gesture, checked against the schema
     and the joint limits."""
-    folder = Path(POSES_DIR if poses_dir is None else poses_dir)
-    path = folder / f"{name}.json"
-    if not path.is_file():
-        raise InputError(f"{path}: no such gesture (known: {', '.join(list_gestures(folder)) or 'none'})")
-    doc = read_json(path, "pose file")
-    _check_schema(path, doc, "gesture")
-    if doc["name"] != path.stem:
-        raise InputError(f"{path}: field 'name' is {doc['name']!r}, expected the file name {path.stem!r}")
+    path, doc = _gesture_doc(name, poses_dir)
     angles = np.zeros((NUM_JOINTS, 3))
     for joint, values in doc["joints"].items():
         j = JOINT_NAMES.index(joint)
@@ -153,6 +146,29 @@ def gesture_angles(name: str, poses_dir: str | Path | None = None) -> np.ndarray
                                  f"{lo}..{hi}")
             angles[j, k] = np.deg2rad(deg)
     return angles
+
+
+def gesture_contacts(name: str, poses_dir: str | Path | None = None) -> list[tuple[str, str]]:
+    """The parts a named gesture means to touch (its `contacts`: pairs of 'palm' or digit names), [] if none."""
+    path, doc = _gesture_doc(name, poses_dir)
+    pairs = [tuple(pair) for pair in doc.get("contacts", [])]
+    for k, (a, b) in enumerate(pairs):
+        if a == b:
+            raise InputError(f"{path}: field 'contacts[{k}]' pairs {a!r} with itself")
+    return pairs
+
+
+def _gesture_doc(name: str, poses_dir: str | Path | None) -> tuple[Path, dict]:
+    """(path, document) of a named gesture, checked against the schema."""
+    folder = Path(POSES_DIR if poses_dir is None else poses_dir)
+    path = folder / f"{name}.json"
+    if not path.is_file():
+        raise InputError(f"{path}: no such gesture (known: {', '.join(list_gestures(folder)) or 'none'})")
+    doc = read_json(path, "pose file")
+    _check_schema(path, doc, "gesture")
+    if doc["name"] != path.stem:
+        raise InputError(f"{path}: field 'name' is {doc['name']!r}, expected the file name {path.stem!r}")
+    return path, doc
 
 
 def load_gesture(name: str, model: HandModel, poses_dir: str | Path | None = None) -> np.ndarray:

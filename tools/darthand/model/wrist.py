@@ -34,12 +34,15 @@ def add_wrist(model: HandModel, rings: int = 4, length: float | None = None, tap
     if taper <= 0 or (length is not None and length <= 0):
         raise InputError("length and taper must be positive")
     loop = wrist_loop(model)
+    left = model.side == "left"
+    if left:  # walk the loop as its right-hand image runs, so the new vertices come in the same order either side
+        loop = np.roll(loop[::-1], 1)
     centre, axis, radius = loop_frame(model, loop)
     length = radius if length is None else length
     new_vertices = extrude_rings(model.v_template[loop], centre, axis, rings, length, taper)
     V, L = model.num_vertices, len(loop)
     ring_ids = np.concatenate([loop[None], V + np.arange(rings * L).reshape(rings, L)])   # (rings+1, L)
-    new_faces = ring_faces(ring_ids)
+    new_faces = ring_faces(ring_ids)[:, [0, 2, 1] if left else [0, 1, 2]]
     anchor = default_anchor(model, loop) if anchor is None else anchor
     if not 0 <= anchor < V:
         raise InputError(f"anchor: vertex {anchor} is outside 0..{V - 1}")
@@ -52,7 +55,7 @@ def add_wrist(model: HandModel, rings: int = 4, length: float | None = None, tap
         shapedirs=np.concatenate([model.shapedirs, ring_shapedirs(model.shapedirs[loop], axis, rings, taper)]),
     )
     if model.has_uvs:
-        fields["uvs"], fields["faces_uv"] = wrist_uvs(model, ring_ids, length, radius)
+        fields["uvs"], fields["faces_uv"] = wrist_uvs(model, ring_ids, length, radius, left)
     if model.face_labels is not None:
         fields["face_labels"] = np.concatenate(
             [model.face_labels, np.full(len(new_faces), FACE_LABEL_IDS["wrist"], np.int8)])
@@ -153,7 +156,8 @@ def ring_weights(model: HandModel, loop: np.ndarray, anchor: int, rings: int, sm
     return ((1 - t) * model.weights[loop][None] + t * root).reshape(rings * L, -1)
 
 
-def wrist_uvs(model: HandModel, ring_ids: np.ndarray, length: float, radius: float) -> tuple[np.ndarray, np.ndarray]:
+def wrist_uvs(model: HandModel, ring_ids: np.ndarray, length: float, radius: float,
+              left: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """UVs and faces_uv for the model with the wrist: the rings get a rectangle of their own in the atlas.
 
     The rectangle is `meta['wrist_uv_band']` = [u0, v0, u1, v1] when the template reserved one; otherwise the
@@ -179,4 +183,6 @@ def wrist_uvs(model: HandModel, ring_ids: np.ndarray, length: float, radius: flo
     a, b = idx[:-1, :-1], idx[:-1, 1:]
     c, d = idx[1:, :-1], idx[1:, 1:]
     faces_uv = np.stack([np.stack([b, a, c], -1), np.stack([b, c, d], -1)], axis=2).reshape(-1, 3)
+    if left:  # as the ring faces: wound the other way
+        faces_uv = faces_uv[:, [0, 2, 1]]
     return np.concatenate([uvs, grid]), np.concatenate([model.faces_uv, faces_uv])

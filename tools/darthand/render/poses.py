@@ -14,11 +14,11 @@ from darthand.model.layout import NUM_JOINTS
 def resolve_pose(model: HandModel, pose, index: int = 0, cache: dict | None = None) -> tuple[np.ndarray, str | None]:
     """(48,) float64 MANO axis-angle relative to the flat hand, and the gesture name (None unless named).
 
-    pose: None (flat hand, zeros); a gesture name (assets_src/poses/<name>.json, turned into this model's pose);
+    pose: None (flat hand, zeros); a gesture name (one of the model's gestures, `model.gestures.model_gestures`);
         a pose file path (schemas/pose.schema.json; pose number `index` of it); or 48 numbers.
     cache: a dict the caller keeps per model, gesture name -> pose (reading and converting a gesture costs ms).
     """
-    from darthand.model.poses import list_gestures, load_gesture
+    from darthand.model.gestures import model_gestures
 
     if pose is None:
         return np.zeros(3 * NUM_JOINTS), None
@@ -26,14 +26,15 @@ def resolve_pose(model: HandModel, pose, index: int = 0, cache: dict | None = No
         name = str(pose)
         if cache is not None and name in cache:
             return cache[name].copy(), name
-        if name in list_gestures():
-            vec = load_gesture(name, model)
+        gestures = model_gestures(model)
+        if name in gestures.names:
+            vec = gestures.pose(name)
             if cache is not None:
                 cache[name] = vec.copy()
             return vec, name
         path = Path(name)
         if not path.is_file():
-            raise InputError(f"pose: {name!r} is neither a gesture ({', '.join(list_gestures())}) nor a pose file")
+            raise InputError(f"pose: {name!r} is neither a gesture ({', '.join(gestures.names)}) nor a pose file")
         poses = pose_file_vectors(model, path)
         if not 0 <= index < len(poses):
             raise InputError(f"{path}: has {len(poses)} poses, no pose number {index}")

@@ -34,7 +34,9 @@ def import_command(args) -> int:
 
 
 def gestures_command(args) -> int:
-    """`darthand template gestures [MODEL] --out-dir DIR`: gesture checks and contact sheet; 1 if a check fails."""
+    """`darthand template gestures [MODEL] --out-dir DIR`: the guard of the model's gestures (fitted to it by
+    `model build`, else as authored) and of its mirror image: gestures.json and the contact sheet; 1 if a check
+    fails, with one line per failure naming what to change."""
     from darthand.model.load import load_model
     from darthand.template.gesture_checks import gesture_problems, write_gesture_checks
 
@@ -43,8 +45,11 @@ def gestures_command(args) -> int:
     for line in problems:
         print(line)
     worst = max((r.get("between_fingers_faces", 0) for r in report.values()), default=0)
-    print(f"{args.out_dir}/gestures.png: {len(report)} gestures, {len(problems)} problems, "
-          f"at most {worst} faces where digits intersect")
+    fitted = sum(r.get("fit", {}).get("status") == "fitted" for r in report.values())
+    gaps = [d for r in report.values() for d in r.get("contacts", {}).values() if d is not None]
+    contact = f", contacts {min(gaps):.2f}..{max(gaps):.2f} mm apart" if gaps else ""
+    print(f"{args.out_dir}/gestures.png: {len(report)} gestures ({fitted} fitted to the model), {len(problems)} "
+          f"problems, at most {worst} faces where digits intersect{contact}")
     return 1 if problems else 0
 
 

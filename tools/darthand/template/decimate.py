@@ -16,6 +16,7 @@ import pymeshlab
 from scipy.spatial import cKDTree
 
 from darthand.model import topology
+from darthand.model.proximity import closest_surface_points
 
 
 def decimate(vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray, faces_uv: np.ndarray, target_vertices: int,
@@ -78,54 +79,3 @@ def source_vertices(src_vertices: np.ndarray, points: np.ndarray, tolerance: flo
     if dist.max() > tolerance:
         raise ValueError(f"decimated vertex {int(np.argmax(dist))} is {dist.max():.3g} from every source vertex")
     return idx
-
-
-def closest_surface_points(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray, candidates: int = 24):
-    """Nearest point on a triangle mesh for each of `points` (P, 3).
-
-    Returns (face index (P,), barycentric coordinates (P, 3), distance (P,)). Candidate faces are the `candidates`
-    faces with the nearest centroids (exact for meshes whose triangles are small against the query distances,
-    as here: trimesh's exact query needs rtree, which the project does not depend on).
-    """
-    tris = vertices[faces]
-    k = min(candidates, len(faces))
-    _, cand = cKDTree(tris.mean(1)).query(points, k=k)
-    cand = cand.reshape(len(points), k)
-    bary = _closest_barycentric(tris[cand], points[:, None, :])  # (P, k, 3)
-    closest = np.einsum("pkc,pkcd->pkd", bary, tris[cand])
-    dist = np.linalg.norm(closest - points[:, None, :], axis=2)
-    best = np.argmin(dist, axis=1)
-    rows = np.arange(len(points))
-    return cand[rows, best], bary[rows, best], dist[rows, best]
-
-
-def _closest_barycentric(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Barycentric coordinates (..., 3) of the point of triangle `tri` (..., 3, 3) nearest `p` (..., 3).
-
-    Ericson, Real-Time Collision Detection 5.1.5, vectorised: project onto the plane, then clamp to the edge or
-    vertex region the projection falls outside of.
-    """
-    a, b, c = tri[..., 0, :], tri[..., 1, :], tri[..., 2, :]
-    ab, ac, ap = b - a, c - a, p - a
-    bp, cp = p - b, p - c
-    d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
-    d3, d4 = (ab * bp).sum(-1), (ac * bp).sum(-1)
-    d5, d6 = (ab * cp).sum(-1), (ac * cp).sum(-1)
-    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-    denom = va + vb + vc
-    with np.errstate(divide="ignore", invalid="ignore"):
-        v = np.where(denom != 0, vb / denom, 0.0)
-        w = np.where(denom != 0, vc / denom, 0.0)
-        out = np.stack([1 - v - w, v, w], -1)
-        regions = [  # (condition, barycentrics), later entries win
-            ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0),
-             lambda t: np.stack([0 * t, 1 - t, t], -1), (d4 - d3) / ((d4 - d3) + (d5 - d6))),  # edge bc
-            ((vb <= 0) & (d2 >= 0) & (d6 <= 0), lambda t: np.stack([1 - t, 0 * t, t], -1), d2 / (d2 - d6)),  # ac
-            ((vc <= 0) & (d1 >= 0) & (d3 <= 0), lambda t: np.stack([1 - t, t, 0 * t], -1), d1 / (d1 - d3)),  # ab
-            ((d6 >= 0) & (d5 <= d6), lambda t: np.stack([0 * t, 0 * t, 1 + 0 * t], -1), d6),  # vertex c
-            ((d3 >= 0) & (d4 <= d3), lambda t: np.stack([0 * t, 1 + 0 * t, 0 * t], -1), d3),  # vertex b
-            ((d1 <= 0) & (d2 <= 0), lambda t: np.stack([1 + 0 * t, 0 * t, 0 * t], -1), d1),  # vertex a
-        ]
-        for cond, make, t in regions:
-            out = np.where(cond[..., None], make(np.nan_to_num(t)), out)
-    return out

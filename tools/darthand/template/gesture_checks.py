@@ -1,4 +1,6 @@
-"""Checks of a model posed in every named gesture: finite vertices, inverted triangles, self-intersections.
+"""Checks of a model posed in every named gesture: finite vertices, inverted triangles, self-intersections,
+contact distances -- the guard of the gestures fitted to the model (model/gesture_fit), with the authored angles'
+figures beside them ("before") and the left mirror's checks.
 
 Inverted triangles. A face is inverted when its posed normal points against the normal it should have: the rest
 normal turned by the face's own skinning rotation, the polar (nearest) rotation of its blended linear part
@@ -6,11 +8,7 @@ sum_j w_j R_j with the weights averaged over its three corners. Comparing with t
 dominant joint's keeps faces in a bent crease, which legitimately turn by a fraction of the bend, from counting as
 flipped; only faces folded over by the skinning do. Faces whose posed area collapses to ~0 are counted apart.
 
-Self-intersections are MeshLab's (pymeshlab `compute_selection_by_self_intersections_per_face`, which ignores
-neighbouring faces). Each face belongs to the part of its dominant joint: the palm (joint 0) or one of the five
-digits. A face intersecting a face of another part is found by running the filter on the two parts together and
-keeping the faces not already selected within either part alone. (MeshLab can flag exactly coplanar, disjoint
-triangles, as on a polygonal cylinder's flat strips; a skinned hand has none.)
+Self-intersections between parts of the hand: `darthand.model.intersections` (MeshLab's per-face test).
 """
 
 from __future__ import annotations
@@ -19,31 +17,20 @@ import itertools
 from pathlib import Path
 
 import numpy as np
-import pymeshlab
 
 from darthand.fileio import write_json
 from darthand.model.forward import forward
+from darthand.model.gestures import fitted_record, model_gestures
 from darthand.model.hand_model import HandModel
-from darthand.model.layout import FINGER_JOINTS, FINGERS, NUM_JOINTS
-from darthand.model.poses import gesture_poses
+from darthand.model.intersections import (PARTS, between_digits, face_parts, intersections_within_parts,
+                                          part_intersections)
+from darthand.model.mirror import mirror_model
+from darthand.model.poses import gesture_contacts, gesture_poses
 from darthand.model.preview import HIGHLIGHT, SKIN, contact_sheet, render_mesh, write_png
-from darthand.model.topology import face_joints
+from darthand.model.proximity import PartSurfaces
+from darthand.model.topology import vertex_normals
 
-PARTS = ("palm",) + FINGERS
 DEGENERATE_AREA = 1e-12  # m^2 (1 mm^2 = 1e-6 m^2)
-
-
-def joint_parts() -> np.ndarray:
-    """(16,) index into PARTS of each joint: 0 palm (the root), else its digit."""
-    part = np.zeros(NUM_JOINTS, dtype=np.int64)
-    for k, finger in enumerate(FINGERS):
-        part[list(FINGER_JOINTS[finger])] = k + 1
-    return part
-
-
-def face_parts(model: HandModel) -> np.ndarray:
-    """(F,) index into PARTS of each face: the part of the joint with the largest summed corner weight."""
-    return joint_parts()[face_joints(model.faces, model.weights)]
 
 
 def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -72,52 +59,17 @@ def inverted_faces(model: HandModel, vertices: np.ndarray,
     return (np.einsum("bfk,bfk->bf", posed, expected) < 0) & ~degenerate, degenerate
 
 
-def self_intersecting(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(F,) bool faces that intersect another, non-adjacent face (pymeshlab)."""
-    if len(faces) == 0:
-        return np.zeros(0, dtype=bool)
-    ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.asarray(vertices, dtype=np.float64), face_matrix=faces))
-    ms.compute_selection_by_self_intersections_per_face()
-    return ms.current_mesh().face_selection_array().astype(bool)
-
-
-def intersections_within_parts(vertices: np.ndarray, faces: np.ndarray,
-                               parts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(F,) bool faces intersecting anything, and (F,) bool faces intersecting a face of their own part."""
-    everywhere = self_intersecting(vertices, faces)
-    alone = np.zeros(len(faces), dtype=bool)
-    if everywhere.any():
-        for p in np.unique(parts):
-            alone[parts == p] = self_intersecting(vertices, faces[parts == p])
-    return everywhere, alone
-
-
-def part_intersections(vertices: np.ndarray, faces: np.ndarray, parts: np.ndarray, masks=None) -> dict:
-    """Self-intersections of one posed mesh (V, 3), split by part (masks: its `intersections_within_parts`, when
-    already computed).
-
-    Returns {"faces": all self-intersecting faces, "within": {part: faces intersecting their own part},
-    "between": {"a-b": faces of a or b that intersect the other part}} (counts).
-    """
-    everywhere, alone = intersections_within_parts(vertices, faces, parts) if masks is None else masks
-    out = {"faces": int(everywhere.sum()),
-           "within": {PARTS[p]: int(alone[parts == p].sum()) for p in np.unique(parts[alone])},
-           "between": {}}
-    for p, q in itertools.combinations(np.unique(parts[everywhere & ~alone]), 2):
-        pair = (parts == p) | (parts == q)
-        hit = self_intersecting(vertices, faces[pair]) & ~alone[pair]
-        if hit.any():
-            out["between"][f"{PARTS[p]}-{PARTS[q]}"] = int(hit.sum())
-    return out
-
-
 def gesture_report(model: HandModel, names: list[str] | None = None, poses_dir=None) -> dict:
-    """Per gesture: NaN check, inverted/degenerate triangle counts and self-intersection counts.
+    """Per gesture of `model` (`model.gestures.model_gestures`: fitted to it when it carries a fit): NaN check,
+    inverted/degenerate triangle counts, self-intersection counts, contact distances; for fitted gestures also
+    the same figures for the authored angles ("before") and the fit's record; the left mirror's checks.
 
     {name: {"finite": bool, "inverted_faces": n, "degenerate_faces": n, "self_intersecting_faces": n,
             "between_fingers_faces": n (faces of one digit intersecting another digit),
-            "finger_palm_faces": n (digit-palm), "within": {...}, "between": {...}}}
+            "finger_palm_faces": n (digit-palm), "within": {...}, "between": {...},
+            "contacts": {"a-b": mm} (intended contacts: smallest signed distance, negative = passing through),
+            "closest": {"pair": "a-b", "mm": x} or None (the nearest two parts not meant to touch, within 5 mm),
+            "fit": {"status", "changed_deg", "at_bound", "clearance_mm"}, "before": {...}, "mirror": {...}}}
     """
     return checked_gestures(model, names, poses_dir)[3]
 
@@ -125,7 +77,36 @@ def gesture_report(model: HandModel, names: list[str] | None = None, poses_dir=N
 def checked_gestures(model: HandModel, names: list[str] | None = None, poses_dir=None) -> tuple:
     """(names, posed vertices (G, V, 3), crossing (G, F) bool: faces intersecting another part of the hand,
     `gesture_report`): what the report and the contact sheet both need, computed once."""
-    names, poses = gesture_poses(model, names, poses_dir)
+    gestures = model_gestures(model, names, poses_dir)
+    names = list(gestures.names)
+    record = fitted_record(model)
+    contacts = [record["gestures"][n]["contacts"] if gestures.fitted else gesture_contacts(n, poses_dir)
+                for n in names]
+    surfaces = PartSurfaces(model)
+    vertices, crossing, report = pose_checks(model, gestures.poses, names, contacts, surfaces)
+    if gestures.fitted:
+        _, authored = gesture_poses(model, names)
+        before = pose_checks(model, authored, names, contacts, surfaces)[2]
+        for name in names:
+            fit = record["gestures"][name]
+            report[name]["fit"] = {k: fit[k] for k in ("status", "changed_deg", "at_bound", "clearance_mm")}
+            report[name]["before"] = {k: before[name].get(k) for k in BEFORE_FIELDS}
+    mirror = mirror_model(model)
+    mirrored = pose_checks(mirror, model_gestures(mirror, names, poses_dir).poses, names)[2]
+    for name in names:
+        report[name]["mirror"] = dict({k: mirrored[name].get(k) for k in MIRROR_FIELDS}, side=mirror.side)
+    return names, vertices, crossing, report
+
+
+BEFORE_FIELDS = ("inverted_faces", "between_fingers_faces", "finger_palm_faces", "between", "contacts", "closest")
+MIRROR_FIELDS = ("finite", "inverted_faces", "between_fingers_faces", "finger_palm_faces", "between")
+
+
+def pose_checks(model: HandModel, poses: np.ndarray, names: list[str], contacts: list | None = None,
+                surfaces: PartSurfaces | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The checks of poses (G, 48) named `names`: (posed vertices (G, V, 3), crossing (G, F), {name: entry}).
+    With `contacts` (per pose, pairs of part names) and `surfaces`, entries also get contact and closest
+    distances."""
     posed = forward(model, poses)
     inverted, degenerate = inverted_faces(model, posed.vertices, posed.world_rotations)
     parts = face_parts(model)
@@ -142,29 +123,62 @@ def checked_gestures(model: HandModel, names: list[str] | None = None, poses_dir
             inter = part_intersections(v, model.faces, parts, masks)
             between = inter["between"]
             entry.update(
-                self_intersecting_faces=inter["faces"],
-                between_fingers_faces=sum(n for k, n in between.items() if "palm" not in k),
+                self_intersecting_faces=inter["faces"], between_fingers_faces=between_digits(between),
                 finger_palm_faces=sum(n for k, n in between.items() if "palm" in k),
                 within=inter["within"], between=between)
+            if surfaces is not None:
+                entry.update(part_distances(surfaces, v, model.faces, contacts[g]))
         report[name] = entry
-    return names, posed.vertices, crossing, report
+    return posed.vertices, crossing, report
 
 
-def gesture_problems(report: dict, max_between_fingers: int = 10) -> list[str]:
-    """One line per failed check in a `gesture_report`: non-finite vertices, inverted triangles, more than
-    `max_between_fingers` faces where two digits intersect."""
+def part_distances(surfaces: PartSurfaces, vertices: np.ndarray, faces: np.ndarray, contacts: list) -> dict:
+    """{"contacts": {"a-b": mm} for the intended contacts, "closest": {"pair", "mm"} of the nearest two parts
+    not meant to touch (None when none come within 5 mm)}; signed distances, negative = passing through."""
+    normals = vertex_normals(vertices, faces)
+    meant = {tuple(sorted(PARTS.index(p) for p in pair)) for pair in contacts}
+    out = {"contacts": {}, "closest": None}
+    for p, q in itertools.combinations(range(len(PARTS)), 2):
+        d = surfaces.distance(vertices, normals, p, q)
+        if (p, q) in meant:
+            out["contacts"][f"{PARTS[p]}-{PARTS[q]}"] = round(d * 1e3, 3) if np.isfinite(d) else None
+        elif np.isfinite(d) and (out["closest"] is None or d * 1e3 < out["closest"]["mm"]):
+            out["closest"] = {"pair": f"{PARTS[p]}-{PARTS[q]}", "mm": round(d * 1e3, 3)}
+    return out
+
+
+def gesture_problems(report: dict, max_between_fingers: int = 0) -> list[str]:
+    """One line per failed check in a `gesture_report` (and its left mirror), each naming what to change:
+    non-finite vertices, inverted triangles, more than `max_between_fingers` faces where two digits intersect."""
     problems = []
     for name, r in report.items():
-        if not r["finite"]:
-            problems.append(f"gesture '{name}': non-finite vertices")
-            continue
-        if r["inverted_faces"]:
-            problems.append(f"gesture '{name}': {r['inverted_faces']} inverted triangles")
-        if r["between_fingers_faces"] > max_between_fingers:
-            pairs = ", ".join(f"{k} {n}" for k, n in r["between"].items() if "palm" not in k)
-            problems.append(f"gesture '{name}': {r['between_fingers_faces']} faces where digits intersect ({pairs}), "
-                            f"more than {max_between_fingers}")
+        for side, checks in (("", r), (" (mirror)", r.get("mirror"))):
+            if checks is None or (side and checks == {k: r.get(k) for k in MIRROR_FIELDS}):
+                continue  # the mirror fails exactly where the model does: say it once
+            at = f"gesture '{name}'{side}"
+            if not checks["finite"]:
+                problems.append(f"{at}: non-finite vertices")
+                continue
+            if checks["inverted_faces"]:
+                problems.append(f"{at}: {checks['inverted_faces']} inverted triangles; {what_to_change(name, r)}")
+            if checks["between_fingers_faces"] > max_between_fingers:
+                pairs = ", ".join(f"{k} {n}" for k, n in checks["between"].items() if "palm" not in k)
+                problems.append(f"{at}: {checks['between_fingers_faces']} faces where digits intersect ({pairs}), "
+                                f"more than {max_between_fingers}; {what_to_change(name, r)}")
     return problems
+
+
+def what_to_change(name: str, r: dict) -> str:
+    """The remedy a failed gesture's message names: fit the gestures to the model, or change what stopped the
+    fit (the angles it left at a bound, the digits that still cross) in the gesture's file."""
+    fit = r.get("fit")
+    if fit is None:
+        return ("the gestures are not fitted to this model: build it with `darthand model build` (make assets) "
+                "or change " + f"assets_src/poses/{name}.json")
+    digits = sorted({p for k in r.get("between", {}) for p in k.split("-") if p != "palm"})
+    bound = f", stopped at the bound of {', '.join(fit['at_bound'])}" if fit.get("at_bound") else ""
+    return (f"after fitting to this model ({fit['status']}{bound}): change the {' and '.join(digits) or 'digit'} "
+            f"angles or the contacts in assets_src/poses/{name}.json")
 
 
 def write_gesture_checks(model: HandModel, out_dir: str | Path, names: list[str] | None = None) -> dict:
@@ -172,7 +186,8 @@ def write_gesture_checks(model: HandModel, out_dir: str | Path, names: list[str]
     return the report."""
     out_dir = Path(out_dir)
     checked = checked_gestures(model, names)
-    write_json(out_dir / "gestures.json", {"model": model.meta.get("source"), "gestures": checked[3]})
+    write_json(out_dir / "gestures.json", {"model": model.meta.get("source"),
+                                           "fitted": fitted_record(model) is not None, "gestures": checked[3]})
     write_gesture_sheet(model, out_dir / "gestures.png", checked=checked)
     return checked[3]
 

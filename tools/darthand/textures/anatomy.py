@@ -11,7 +11,7 @@ from scipy.spatial import cKDTree
 
 from darthand.model.layout import FACE_LABEL_IDS, FINGER_JOINTS, FINGERS
 from darthand.textures.noise import smoothstep
-from darthand.textures.regions import (Skeleton, face_geometry, hand_frame, nearest_bones, segment_coordinates,
+from darthand.model.regions import (Skeleton, face_geometry, hand_frame, nearest_bones, segment_coordinates,
                                        to_hand_frame)
 
 # Dorsal knuckles: (joint index into FINGER_JOINTS chain, Gaussian radius in metres). Thumb: its 2nd and 3rd.

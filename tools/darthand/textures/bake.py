@@ -29,12 +29,12 @@ from darthand.model.hand_model import HandModel
 from darthand.model.topology import vertex_normals
 from darthand.textures import anatomy, noise
 from darthand.textures.raster import rasterize
-from darthand.textures.regions import ensure_face_labels, face_geometry, skeleton
+from darthand.model.regions import ensure_face_labels, face_geometry, skeleton
 
 BAKE_VERSION = 6
 # The modules whose code decides what a bake holds: their source is part of the cache key, so editing them
 # invalidates cached bakes by itself.
-BAKE_MODULES = ("anatomy", "bake", "curves", "noise", "raster", "regions")
+BAKE_MODULES = ("anatomy", "bake", "curves", "noise", "raster", "model/regions")
 MARGIN = 2.0  # texels of true surface values around every island
 NOISE_SEED = 0x0DA27  # the noise bank is part of the bake: fixed, so every catalogue shares it
 # band: (fields, feature size in metres, octaves). Variants mix two fields of a band at a random angle, so
@@ -144,10 +144,11 @@ def prepare_model(model: HandModel) -> HandModel:
 
 
 def source_digest(modules) -> str:
-    """sha256 of the source of darthand.textures modules (by name), in order."""
+    """sha256 of the source of darthand modules, in order: names of this stage's modules ('anatomy') or paths
+    within the package ('model/regions')."""
     h = hashlib.sha256()
     for name in modules:
-        h.update((Path(__file__).parent / f"{name}.py").read_bytes())
+        h.update((Path(__file__).parents[int("/" in name)] / f"{name}.py").read_bytes())
     return h.hexdigest()
 
 

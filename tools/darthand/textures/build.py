@@ -45,7 +45,7 @@ CATALOG_FORMAT = "darthand-texture-catalog"
 CATALOG_VERSION = 1
 # Every module of the stage can change an image: their source is part of each entry's fingerprint.
 RENDER_MODULES = ("anatomy", "bake", "canvas", "catalog", "color", "curves", "imageio", "motifs", "noise",
-                  "overlays", "raster", "regions", "sampling", "skin", "surface", "variant")
+                  "overlays", "raster", "model/regions", "sampling", "skin", "surface", "variant")
 THUMB_SOURCE = 512  # size of the albedo copy a worker hands back for the contact sheet
 
 

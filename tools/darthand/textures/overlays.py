@@ -16,7 +16,7 @@ from darthand.textures.canvas import Canvas
 from darthand.textures.curves import bezier, curve_distance
 from darthand.textures.motifs import BAND_MOTIFS, BAND_PERIOD, MOTIFS, rotate, segment
 from darthand.textures.noise import smoothstep
-from darthand.textures.regions import FOREARM_AXIS, PALM_NORMAL, hand_frame
+from darthand.model.regions import FOREARM_AXIS, PALM_NORMAL, hand_frame
 from darthand.textures.sampling import draw
 from darthand.textures.skin import spots
 from darthand.textures.surface import Frame, Surface

@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 
 from darthand.model.layout import FACE_LABEL_IDS, FINGER_JOINTS, FINGERS
 from darthand.textures.bake import Bake
-from darthand.textures.regions import FOREARM_AXIS, PALM_NORMAL, face_geometry, skeleton_from_joints
+from darthand.model.regions import FOREARM_AXIS, PALM_NORMAL, face_geometry, skeleton_from_joints
 
 _TREES: dict[str, cKDTree] = {}  # per process: one texel tree per bake
 _BONE_ORDER: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # per process: texels grouped by bone

@@ -1,5 +1,6 @@
 """Where things are on a MANO-layout hand: its skeleton of bones, and semantic face labels derived from geometry
-for models that come without them (MANO).
+for models that come without them (MANO). The model build labels such a model (so every stage sees the same
+labels); the textures stage places its maps with the skeleton.
 
 Frame (MANO canonical, right hand): fingers toward -X, palm facing -Y, thumb toward +Z, wrist near +X.
 """
@@ -166,10 +167,16 @@ def derive_face_labels(model: HandModel, *, nail_start: float = 0.55, nail_end: 
 
 
 def ensure_face_labels(model: HandModel) -> HandModel:
-    """`model` unchanged if every face has a label, else a copy whose unlabelled faces take derived labels."""
+    """`model` unchanged if every face has a label, else a copy whose unlabelled faces take derived labels (a
+    left hand's from its right mirror image: the derivation reads the right hand's frame; faces keep their order)."""
     if model.face_labels is not None and (model.face_labels >= 0).all():
         return model
-    derived = derive_face_labels(model)
+    if model.side == "left":
+        from darthand.model.mirror import mirror_model
+
+        derived = derive_face_labels(mirror_model(model))
+    else:
+        derived = derive_face_labels(model)
     labels = derived if model.face_labels is None else np.where(model.face_labels >= 0, model.face_labels, derived)
     return model.replace(face_labels=labels)
 
