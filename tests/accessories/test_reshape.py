@@ -188,3 +188,17 @@ def test_penetration_over_shapes_matches_an_independent_measure(hand, items):
     assert res["fit"][0, 1].max() > 5e-5                       # the comparison above compared real depths
     unrefit = penetration_over_shapes(hand, [acc], betas, poses, refit=False)
     assert unrefit["fit"][0, 1].max() > res["fit"][0, 1].max() + 1e-4
+
+
+def test_the_left_hand_refit_is_the_mirror_image_of_the_right(hand, items):
+    """Accessories mirrored by the loader (rest frames included) refit on the mirrored hand to the mirror image of
+    the right hand's refit."""
+    from darthand.accessories.loader import mirror_accessory
+    from darthand.model.mirror import mirror_model
+
+    right = [a for a, _ in items.values()]
+    b = np.random.default_rng(5).standard_normal(10)
+    expected = ShapeRefitter(hand, right).refit(b)
+    got = ShapeRefitter(mirror_model(hand), [mirror_accessory(a) for a in right]).refit(b)
+    for e, g in zip(expected, got):
+        assert np.abs(g.vertices - e.vertices * [-1, 1, 1]).max() < 1e-6, e.id

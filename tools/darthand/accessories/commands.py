@@ -41,7 +41,7 @@ def shapes(args) -> int:
     from darthand.accessories.shape_sweep import penetration_over_shapes, sample_shapes, summary
     from darthand.errors import InputError
     from darthand.fileio import write_json
-    from darthand.model.poses import gesture_poses
+    from darthand.model.gestures import model_gestures
 
     model = load_npz(args.model)
     if model.num_betas == 0:
@@ -49,7 +49,8 @@ def shapes(args) -> int:
     if not 1 <= args.shapes <= 10000:
         raise InputError(f"--shapes: {args.shapes} is outside 1..10000")
     accessories = load_accessory_catalog(args.catalog, side=model.side)
-    names, poses = gesture_poses(model)
+    gestures = model_gestures(model)           # as fitted to the built hand: what a dataset poses every shape in
+    names, poses = list(gestures.names), gestures.poses
     betas = sample_shapes(model, args.shapes, args.seed, args.limit)
     t = time.perf_counter()
     refitter = ShapeRefitter(model, accessories).prepare()
