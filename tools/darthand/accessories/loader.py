@@ -6,12 +6,14 @@ is read; other stages import from here.
 from __future__ import annotations
 
 import dataclasses
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.fileio import file_in, open_regular
 from darthand.model.layout import NUM_JOINTS, NUM_POSE_FEATURES
 from darthand.schemas import read_catalog
 
@@ -130,11 +132,13 @@ def mirror_accessory(acc: Accessory) -> Accessory:
 
 def _entry_accessory(path: Path, entry: dict) -> Accessory:
     files = entry["files"]
-    mesh_path = path.parent / files["npz"]
+    mesh_path = file_in(path.parent, files["npz"], "accessory mesh", must_exist=False)
     try:
-        with np.load(mesh_path) as z:
+        with open_regular(mesh_path, "accessory mesh") as f, np.load(f, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as e:
+    except InputError as e:
+        raise InputError(f"{mesh_path}: unreadable accessory mesh ({str(e).split(': ', 1)[-1]})") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
         raise InputError(f"{mesh_path}: unreadable accessory mesh ({e})") from None
     for key in ("vertices", "faces"):
         if key not in arrays:
@@ -147,8 +151,8 @@ def _entry_accessory(path: Path, entry: dict) -> Accessory:
         id=entry["id"], vertices=np.asarray(arrays["vertices"], np.float64),
         faces=np.asarray(arrays["faces"], np.int64), uvs=opt("uvs", np.float64), faces_uv=opt("faces_uv", np.int64),
         parent_joint=entry["parent_joint"], weights=opt("weights", np.float64), posedirs=opt("posedirs", np.float64),
-        material=dict(entry["material"]), base_color_png=path.parent / files["base_color"],
-        metallic_roughness_png=path.parent / files["metallic_roughness"], kind=entry["type"],
+        material=dict(entry["material"]), base_color_png=file_in(path.parent, files["base_color"], "texture", False),
+        metallic_roughness_png=file_in(path.parent, files["metallic_roughness"], "texture", False), kind=entry["type"],
         rest_transform=opt("rest_transform", np.float64) if entry["parent_joint"] is not None else None,
         shapedirs=opt("shapedirs", np.float64))
     check_accessory(acc, str(path))

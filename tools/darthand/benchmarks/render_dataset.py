@@ -20,20 +20,26 @@ from pathlib import Path
 GOAL_IMAGES_PER_SECOND = 25.0
 
 
-def run(frames: int | None = None) -> dict:
+def dataset_inputs(tmp: Path) -> tuple:
+    """(model, texture catalogue, accessories folder, where from): the build's whole catalogue, else one texture
+    and one accessory built in `tmp`."""
     from darthand.benchmarks.render import ROOT, _sources
+
+    model = ROOT / "build" / "model" / "right.npz"
+    tex = ROOT / "build" / "textures" / "catalog.json"
+    if model.is_file() and tex.is_file():
+        return model, tex, ROOT / "build" / "accessories", "build/ (the whole catalogue)"
+    model, textures, accessories, _, where = _sources(tmp)
+    return model, textures, accessories, where + " (one texture: run `make assets` for the DART-style catalogue run)"
+
+
+def run(frames: int | None = None) -> dict:
     from darthand.dataset.run import render_package
 
     frames = int(os.environ.get("DARTHAND_BENCH_DATASET_FRAMES", frames or 10_000))
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        model = ROOT / "build" / "model" / "right.npz"
-        tex = ROOT / "build" / "textures" / "catalog.json"
-        if model.is_file() and tex.is_file():
-            textures, accessories, where = tex, ROOT / "build" / "accessories", "build/ (the whole catalogue)"
-        else:
-            model, textures, accessories, _, where = _sources(tmp)
-            where += " (one texture: run `make assets` for the DART-style catalogue run)"
+        model, textures, accessories, where = dataset_inputs(tmp)
 
         def progress(done: int, total: int, seconds: float, last=[-60.0]) -> None:
             if seconds - last[0] >= 30 or done == total:

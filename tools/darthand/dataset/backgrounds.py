@@ -104,7 +104,10 @@ _CACHE_SIZE = [0]
 
 def background_pixels(spec: dict, width: int, height: int) -> tuple[np.ndarray, dict]:
     """((height, width, 3) float32 linear background, {'used': file or 'builtin:<id>', 'skipped': [files that did
-    not decode]}) of a background spec."""
+    not decode]}) of a background spec; a spec with 'color' (linear RGB) is that plain colour."""
+    if "color" in spec:
+        color = np.asarray(spec["color"], np.float32)
+        return np.broadcast_to(color, (height, width, 3)).copy(), {"used": "color", "skipped": []}
     skipped = []
     for name in spec.get("files", []):
         path = str(Path(spec["folder"]) / name)

@@ -65,14 +65,17 @@ def render_dataset(args) -> int:
     doc = run(args.package, args.out, jobs, planner=planner, start=args.start, count=args.count, specs=specs,
               sources=sources, processes=args.processes, threads=args.threads, size=args.size,
               samples=args.samples, aa_shading=args.aa_shading, resume=args.resume, progress=True,
-              shard_size=args.shard_size, max_frames=args.max_frames, jobs_source=origin)
+              shard_size=args.shard_size, max_frames=args.max_frames, jobs_source=origin,
+              cluster=None if args.ray is None else {"address": args.ray or None, "files": args.ray_files})
     t = doc["timings"]
     line = f"[render-dataset] {Path(args.out) / 'dataset.json'}: {doc['rendered']} frames rendered"
     if doc["skipped"]:
         line += f", {doc['skipped']} already there"
-    if doc["rendered"]:
+    if doc["rendered"] and "images_per_second" in t:
+        workers = f"{t['processes']} Ray workers on {len(doc['runner']['nodes'])} nodes" \
+            if doc["runner"]["kind"] == "ray" else f"{t['processes']} processes"
         line += (f", {t['images_per_second']:.1f} images/s ({t['ms_per_image']:.0f} ms per image after "
-                 f"{t['startup_s']:.1f} s start-up, {t['processes']} processes)")
+                 f"{t['startup_s']:.1f} s start-up, {workers})")
     print(line)
     skipped = doc["summary"]["skipped_backgrounds"]
     if skipped["count"]:

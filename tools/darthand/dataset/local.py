@@ -7,41 +7,39 @@ planning, resume, records and progress, so another runner (Ray's, for a cluster)
 Workers are started with 'spawn' (a fresh interpreter: nothing inherited from a parent that may hold an Embree
 device or thread pools); each opens its sources (dataset/sources.SourceSpec) on first use and renders
 single-threaded. They ignore Ctrl-C (the parent stops them after their current frame) and exit by themselves when
-their parent dies (a watchdog thread notices the re-parenting), so a killed run leaves no orphans.
+their parent dies (darthand.processes.init_worker), so a killed run leaves no orphans.
 """
 
 from __future__ import annotations
 
 import os
-import threading
 import time
 from concurrent.futures import Future
 
 from darthand.errors import InputError
 
-WATCHDOG_S = 0.5
-
 # The worker's state: set by _init_worker (spawned processes) or LocalRunner (in-process); renderers opened on use.
 _STATE: dict = {}
 
 
-def _init_worker(specs: dict, settings: dict, threads: int, stop, parent: int) -> None:
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)      # the parent handles Ctrl-C and stops the workers
+def set_worker_state(specs: dict, settings: dict, threads: int | None, stop=None) -> dict:
+    """Make this process a worker that render_chunk renders with: {side: SourceSpec} opened on use, run.py's
+    settings, render threads, a stop event (or None); returns the state (a spawned worker, the in-process runner and
+    a Ray actor, dataset/ray_runner.py, each set it)."""
     _STATE.clear()
-    _STATE.update(specs=specs, settings=settings, threads=threads, stop=stop, renderers={}, open_s=0.0)
-    threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="darthand-watchdog").start()
+    _STATE.update(specs=dict(specs), settings=settings, threads=threads, stop=stop, renderers={}, open_s=0.0)
+    return _STATE
 
 
-def _watch_parent(parent: int) -> None:
-    """Exit this worker as soon as its parent process is gone (it was killed, or exited without stopping us)."""
-    while os.getppid() == parent:
-        time.sleep(WATCHDOG_S)
-    os._exit(3)
+def _init_worker(specs: dict, settings: dict, threads: int, stop, parent: int) -> None:
+    from darthand.processes import init_worker
+
+    init_worker(parent)        # the parent handles Ctrl-C and stops the workers; they end when it dies
+    set_worker_state(specs, settings, threads, stop)
 
 
-def _renderer(side: str):
+def worker_renderer(side: str):
+    """This worker's renderer of a side, its source opened on first use."""
     from darthand.render.api import Renderer
 
     renderers = _STATE["renderers"]
@@ -67,7 +65,7 @@ def render_chunk(items: list) -> dict:
             break
         t, c = time.monotonic(), time.process_time()
         try:
-            renderer = _renderer(job.get("side") or default_side)
+            renderer = worker_renderer(job.get("side") or default_side)
             frame, background = render_job(renderer, job, settings)
             t_w = time.perf_counter()
             summary = write_dataset_frame(frame, job, digest, settings["out_dir"], renderer.source, background)
@@ -90,8 +88,7 @@ class LocalRunner:
         self.processes = processes
         self._pool = None
         if processes == 1:
-            _STATE.clear()
-            _STATE.update(specs=specs, settings=settings, threads=threads, stop=None, renderers={}, open_s=0.0)
+            set_worker_state(specs, settings, threads)
             if opened:
                 from darthand.render.api import Renderer
 
@@ -108,7 +105,10 @@ class LocalRunner:
 
     def submit(self, chunk: list) -> Future:
         if self._pool is not None:
-            return self._pool.submit(render_chunk, chunk)
+            from darthand.processes import deaf_to_ctrl_c
+
+            with deaf_to_ctrl_c():          # submit may start a worker: Ctrl-C must not reach it while it imports
+                return self._pool.submit(render_chunk, chunk)
         future: Future = Future()
         try:
             future.set_result(render_chunk(chunk))

@@ -48,7 +48,7 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
                    threads: int | None = None, size: int = 512, samples: int = 8, aa_shading: str = "triangle",
                    resume: bool = True, progress=True, shard_size: int = DEFAULT_SHARD_SIZE,
                    chunk_size: int | None = None, max_frames: int = DEFAULT_MAX_FRAMES,
-                   jobs_source: dict | None = None) -> dict:
+                   jobs_source: dict | None = None, cluster: dict | None = None) -> dict:
     """Render frames into out_dir (module docstring); returns the dataset.json document.
 
     The frames: `jobs` (a list of job dicts or a jobs file), or frames start .. start + count - 1 of `planner`
@@ -59,6 +59,8 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
     resume: skip what is already rendered from the same jobs (module docstring). samples, aa_shading: edge
         anti-aliasing (api.Renderer.render). progress: False, True (a line at most every 5 s) or a
         callable(done, total, seconds).
+    cluster: render on a Ray cluster instead of local processes (dataset/ray_runner.RayRunner: {'address': ...,
+        'files': 'auto'|'shared'|'ship'}); processes, when given, is then the number of Ray workers.
     A frame that fails stops the run with an InputError 'frame N: cause'.
     """
     from darthand.dataset.jobs import check_jobs, load_jobs, validate_jobs
@@ -67,7 +69,10 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
     t_start = time.monotonic()
     aa.check_options(samples, aa_shading)
     size = _bounded_int(size, "size", 8, MAX_SIZE, "pixels")
-    processes = _bounded_int(len(os.sched_getaffinity(0)) if processes is None else processes, "processes", 1, 256)
+    if cluster is None:
+        processes = _bounded_int(len(os.sched_getaffinity(0)) if processes is None else processes, "processes", 1,
+                                 256)
+    workers = None if processes is None else _bounded_int(processes, "processes", 1, 100_000)
     threads = None if threads is None else _bounded_int(threads, "threads", 1, 256)
     shard_size = _bounded_int(shard_size, "shard size", 1, 10_000_000)
     if planner is None:
@@ -90,19 +95,26 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
     out = Path(out_dir)
     _prepare_folders(out)
     settings = {"out_dir": str(out), "size": size, "samples": int(samples), "aa_shading": aa_shading}
-    processes = max(1, min(processes, total))
-
-    from darthand.dataset.local import LocalRunner
-
-    report = _progress_printer() if progress is True else (progress or None)
     stats = RunStats(t_start)
-    runner = LocalRunner(specs, settings, processes, threads, opened=sources if processes == 1 else None)
+    report = _progress_printer(stats) if progress is True else (progress or None)
+    if cluster is not None:
+        from darthand.dataset.ray_runner import RayRunner
+
+        runner = RayRunner(specs, settings, sources, workers=workers, **cluster)
+        processes = runner.processes
+    else:
+        from darthand.dataset.local import LocalRunner
+
+        processes = max(1, min(processes, total))
+        runner = LocalRunner(specs, settings, processes, threads, opened=sources if processes == 1 else None)
     try:
         _render_shards(shards, runner, settings, resume, processes, chunk_size, stats, total, report)
     finally:
         runner.close()
     models = {side: model_info(src) for side, src in (sources or {}).items()}
-    return _write_dataset(out, package, jobs_source, planner, total, settings, stats, processes, models)
+    doc = _write_dataset(out, package, jobs_source, planner, total, settings, stats, processes, models,
+                         getattr(runner, "describe", lambda: {"kind": "local"})())
+    return doc
 
 
 def _render_shards(shards, runner, settings, resume, processes, chunk_size, stats, total, report) -> None:
@@ -277,14 +289,25 @@ class RunStats:
         self.frames_counted = 0
         self.coverage = 0.0
         self.skipped_backgrounds: dict = {}
+        self.nodes: dict = {}
 
     def add_result(self, result: dict) -> None:
+        """A chunk's result (local.render_chunk's); frames without 'end' were rendered before a worker was lost
+        (ray_runner) and count without timings; 'node' (ray_runner) keys the per-node figures."""
         pid = result["pid"]
-        self.open_s[pid] = result["open_s"]
-        self.rss[pid] = max(self.rss.get(pid, 0), result["maxrss_mb"])
+        if pid is not None:
+            self.open_s[pid] = result["open_s"]
+            self.rss[pid] = max(self.rss.get(pid, 0), result["maxrss_mb"])
         for k, v in result["steps"].items():
             self.steps[k] = self.steps.get(k, 0.0) + v
+        node = self.nodes.setdefault(result["node"], {"ip": result.get("ip"), "frames": 0, "first_end": math.inf,
+                                                      "last_end": -math.inf}) if result.get("node") else None
         for f in result["frames"]:
+            if "end" not in f:
+                continue
+            if node is not None:
+                node["frames"] += 1
+                node["first_end"], node["last_end"] = min(node["first_end"], f["end"]), max(node["last_end"], f["end"])
             self.first_end[pid] = min(self.first_end.get(pid, math.inf), f["end"])
             self.last_end[pid] = max(self.last_end.get(pid, -math.inf), f["end"])
             self.ends.append(f["end"])
@@ -317,7 +340,7 @@ class RunStats:
         t_end = time.monotonic()
         n = self.rendered
         out = {"processes": processes, "wall_s": round(t_end - self.t_start, 3), "frames": n}
-        if not n:
+        if not n or not self.first_end:
             return out
         warm = max(self.first_end.values())
         after = sum(1 for e in self.ends if e > warm)
@@ -336,7 +359,19 @@ class RunStats:
             "tail_idle_s": round(last - min(self.last_end.values()), 3),
             "worker_peak_rss_mb": sorted(self.rss.values()),
         })
+        if self.nodes:
+            out["nodes"] = self.node_rates()
         return out
+
+    def node_rates(self) -> dict:
+        """{node: {ip, frames, images_per_second}}: each node's frames over the time between its first and last
+        (so start-up is left out, as in images_per_second)."""
+        rates = {}
+        for key, n in sorted(self.nodes.items()):
+            span = n["last_end"] - n["first_end"]
+            rates[key] = {"ip": n["ip"], "frames": n["frames"],
+                          "images_per_second": round((n["frames"] - 1) / span, 2) if span > 0 else None}
+        return rates
 
     def summary(self) -> dict:
         n = max(1, self.frames_counted)
@@ -347,8 +382,9 @@ class RunStats:
                                         "files": sorted(self.skipped_backgrounds)[:100]}}
 
 
-def _progress_printer(every_s: float = 5.0):
-    """A progress callback: frames done, images/s, ETA, at most every `every_s` seconds and at the end."""
+def _progress_printer(stats: RunStats | None = None, every_s: float = 5.0):
+    """A progress callback: frames done, images/s, ETA, at most every `every_s` seconds and at the end; with
+    several nodes (ray_runner), each node's frames and images/s."""
     last = [-math.inf]
 
     def report(done: int, total: int, seconds: float) -> None:
@@ -356,7 +392,13 @@ def _progress_printer(every_s: float = 5.0):
             last[0] = seconds
             rate = done / seconds if seconds > 0 else 0.0
             eta = f", ETA {(total - done) / rate:.0f} s" if rate and done < total else ""
-            print(f"[render-dataset] {done}/{total} frames, {seconds:.1f} s, {rate:.1f} images/s{eta}", flush=True)
+            nodes = ""
+            if stats is not None and stats.nodes:
+                nodes = "; " + ", ".join(f"node {key}@{n['ip']} {n['frames']}"
+                                         + (f" ({n['images_per_second']:.1f}/s)" if n["images_per_second"] else "")
+                                         for key, n in stats.node_rates().items())
+            print(f"[render-dataset] {done}/{total} frames, {seconds:.1f} s, {rate:.1f} images/s{eta}{nodes}",
+                  flush=True)
     return report
 
 
@@ -372,7 +414,7 @@ def model_info(source) -> dict:
 
 
 def _write_dataset(out: Path, package, jobs_source, planner, total, settings, stats: RunStats, processes,
-                   models) -> dict:
+                   models, runner: dict) -> dict:
     """dataset.json: the run's inputs, counts and timings (no per-frame list: those are in the shard records)."""
     doc = {"format": DATASET_FORMAT, "version": DATASET_VERSION, "package": str(package),
            "jobs": jobs_source or ({"plan": planner.spec} if planner is not None else {"given": "list"}),
@@ -381,7 +423,7 @@ def _write_dataset(out: Path, package, jobs_source, planner, total, settings, st
            "aa_shading": settings["aa_shading"],
            "files": {kind: name.replace("000000", "<index>") for kind, name in frame_names(0).items()},
            "models": models, "rendered": stats.rendered, "skipped": stats.skipped,
-           "summary": stats.summary(), "timings": stats.timings(processes)}
+           "summary": stats.summary(), "timings": stats.timings(processes), "runner": runner}
     write_json(out / "dataset.json", doc)
     return doc
 

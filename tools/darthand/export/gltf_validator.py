@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from darthand.errors import DarthandError
+from darthand.fileio import regular_file
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
 PACKAGE = "gltf-validator"
@@ -26,12 +27,25 @@ const path = require("path");
 const validator = require(process.argv[1]);
 const file = process.argv[2];
 const maxIssues = parseInt(process.argv[3], 10);
+const root = fs.realpathSync(path.dirname(file));
+// Only relative URIs naming a regular file inside the asset's folder (links resolved) are read: a URI of an
+// untrusted asset must not make the validator read anything else, or block on a FIFO.
+function packageFile(uri) {
+  const rel = decodeURIComponent(uri);
+  if (/^[A-Za-z][A-Za-z0-9+.-]+:/.test(rel) || path.isAbsolute(rel)) { throw "absolute URI, not read"; }
+  const target = fs.realpathSync(path.resolve(path.dirname(file), rel));
+  if (!target.startsWith(root + path.sep)) { throw "outside the asset's folder, not read"; }
+  if (!fs.statSync(target).isFile()) { throw "not a regular file, not read"; }
+  return target;
+}
 validator.validateBytes(new Uint8Array(fs.readFileSync(file)), {
   uri: path.basename(file),
   maxIssues: maxIssues,
   writeTimestamp: false,
   externalResourceFunction: (uri) => new Promise((resolve, reject) => {
-    fs.readFile(path.resolve(path.dirname(file), decodeURIComponent(uri)), (err, data) => {
+    let target;
+    try { target = packageFile(uri); } catch (e) { reject(`${uri}: ${e}`); return; }
+    fs.readFile(target, (err, data) => {
       if (err) { reject(err.toString()); } else { resolve(new Uint8Array(data)); }
     });
   }),
@@ -93,6 +107,7 @@ def validate(path: str | Path, *, max_issues: int = 0, timeout: float = 600.0) -
     DarthandError if it could not read the file at all.
     """
     path = Path(path).resolve()
+    regular_file(path, "glTF file")       # node would block on a FIFO
     pkg = validator_package()
     env = dict(os.environ, NODE_OPTIONS="--max-old-space-size=4096")
     proc = subprocess.run(["node", "-e", _SCRIPT, str(pkg), str(path), str(max_issues)], capture_output=True,

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,7 +44,7 @@ from darthand.export.usd_skel import ALL_GESTURES, SPARSE_TOL, RigNames, define_
 from darthand.export.usd_variants import (add_accessory_variants, add_gesture_variants, add_texture_variants,
                                           check_variant_id, new_layer_stage, skin_material, write_accessory_variant,
                                           write_texture_variant)
-from darthand.fileio import write_json
+from darthand.fileio import staging_folder, write_json
 from darthand.model.hand_model import HandModel
 from darthand.textures.loader import TextureSet
 
@@ -99,8 +98,7 @@ def export_usd(model: HandModel, out: str | os.PathLike, *, textures: list[Textu
     if default_texture not in materials:
         raise InputError(f"texture: the default {default_texture!r} is not one of the texture variants")
     _check_unique([a.id for a in accessories] + ["none"], "accessory")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    tmp = staging_folder(out)      # also removes the staging folders a killed run left beside `out`
     try:
         t0 = time.perf_counter()
         correctives = export_correctives(model, options.correctives)
@@ -186,7 +184,7 @@ def replace_folder(tmp: Path, out: Path) -> None:
     """Move the finished folder `tmp` to `out`, replacing a previous `out` (renamed aside first, then removed)."""
     old = None
     if out.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.parent))
+        old = staging_folder(out)
         os.replace(out, old / out.name)
     os.chmod(tmp, 0o755)  # mkdtemp made it private
     os.replace(tmp, out)

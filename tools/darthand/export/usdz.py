@@ -11,14 +11,14 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 from pathlib import Path
 
 from pxr import Sdf, Usd, UsdUtils
 
 from darthand.errors import InputError
+from darthand.export.package_files import ASSET_INFO, check_usd_package, read_asset_info
 from darthand.export.usd_validate import select_variants
-from darthand.fileio import atomic_path
+from darthand.fileio import atomic_path, staging_folder
 
 
 def export_usdz(package: str | os.PathLike, out: str | os.PathLike, texture: str | None = None,
@@ -30,10 +30,11 @@ def export_usdz(package: str | os.PathLike, out: str | os.PathLike, texture: str
     out = Path(out)
     if out.suffix != ".usdz":
         raise InputError(f"{out}: the output must end in .usdz")
+    check_usd_package(interface, root_dir)
     stage = Usd.Stage.Open(str(interface), Usd.Stage.LoadAll)
     select_variants(stage, {k: v for k, v in (("texture", texture), ("accessory", accessory)) if v is not None})
     flat = stage.Flatten()
-    staging = Path(tempfile.mkdtemp(prefix=".usdz.", dir=out.parent if out.parent.exists() else None))
+    staging = staging_folder(out)
     try:
         root_name = f"{interface.stem}.usdc"
 
@@ -75,13 +76,11 @@ def interface_layer(package: str | os.PathLike) -> Path:
         return path
     if not path.is_dir():
         raise InputError(f"{path}: no such USD package folder or layer")
-    info = path / "asset.json"
-    if info.is_file():
-        import json
-        try:
-            return path / json.loads(info.read_text())["interface"]
-        except (ValueError, KeyError):
-            raise InputError(f"{info}: not a darthand asset.json (no 'interface')") from None
+    info = read_asset_info(path)
+    if info:
+        if "interface" not in info:
+            raise InputError(f"{path / ASSET_INFO}: not a darthand asset.json (no 'interface')")
+        return path / info["interface"]
     candidates = sorted(path.glob("*.usda"))
     if len(candidates) != 1:
         raise InputError(f"{path}: expected one interface .usda at the top of the package, found {len(candidates)}")

@@ -14,10 +14,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from darthand.budget import check_memory
 from darthand.errors import InputError
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import KEYPOINT_ORDERS, NUM_JOINTS
 from darthand.model.rotations import axis_angle_to_matrix, check_finite_pose
+
+
+# Largest magnitudes accepted at the API: poses in radians (MANO's are within +-pi; 1e4 keeps float32 maths
+# finite), betas in standard deviations of the shape space (MANO's are within +-5), translations in metres.
+MAX_MAGNITUDE = {"pose": 1e4, "betas": 100.0, "trans": 1e4}
 
 
 @dataclass(frozen=True)
@@ -53,6 +59,9 @@ def forward(model: HandModel, pose, betas=None, *, flat_hand_mean: bool = True, 
         raise InputError(f"dtype: {dtype} is not supported, use float32 or float64")
     aa = full_pose(model, pose, flat_hand_mean=flat_hand_mean, ncomps=ncomps).astype(dtype, copy=False)
     B = aa.shape[0]
+    # vertices, posed and shaped templates, correctives and the skinning temporaries: about 6 (B, V, 3) arrays
+    check_memory(f"posing {B} poses of a {model.num_vertices}-vertex model",
+                 6 * B * model.num_vertices * 3 * dtype.itemsize)
     arrays = _prepared(model, dtype)
     v_shaped, joints = shape_blend(model, arrays, betas, B, dtype)         # (1|B, 3, V), (1|B, 16, 3)
     rotations = axis_angle_to_matrix(aa)                                   # (B, 16, 3, 3)
@@ -95,6 +104,12 @@ def full_pose(model: HandModel, pose, *, flat_hand_mean: bool = True, ncomps: in
     if p.ndim != 2 or p.shape[1] != 3 * NUM_JOINTS:
         raise InputError(f"pose: shape {p.shape} is not (B, 48), (B, 16, 3) or (48,)")
     check_finite_pose(p)
+    with np.errstate(invalid="ignore"):
+        big = np.abs(p) > MAX_MAGNITUDE["pose"]
+    if big.any():
+        b, k = np.unravel_index(int(np.argmax(big)), p.shape)
+        raise InputError(f"pose: value {p[b, k]:g} at [{b}, {k}] is beyond +-{MAX_MAGNITUDE['pose']:g} radians "
+                         "(an axis-angle rotation needs at most pi)")
     if not flat_hand_mean:
         p = p.copy()
         p[:, 3:] += model.hands_mean.astype(p.dtype)
@@ -209,10 +224,14 @@ def _batch(x, tail: tuple | None, B: int, name: str) -> np.ndarray:
         a = a[None]
     if a.ndim != 2 or (tail is not None and a.shape[1:] != tail) or a.shape[0] not in (1, B):
         raise InputError(f"{name}: shape {np.asarray(x).shape} does not fit a batch of {B}")
-    bad = ~np.isfinite(a)
+    if a.dtype.kind not in "biuf":
+        raise InputError(f"{name}: expected real numbers, got dtype {a.dtype}")
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(a) <= MAX_MAGNITUDE[name])
     if bad.any():
         i, j = np.unravel_index(int(np.argmax(bad)), a.shape)
-        raise InputError(f"{name}: non-finite value {a[i, j]} at [{i}, {j}]")
+        what = "non-finite value" if not np.isfinite(a[i, j]) else f"value beyond +-{MAX_MAGNITUDE[name]:g}"
+        raise InputError(f"{name}: {what} {a[i, j]} at [{i}, {j}]")
     return np.broadcast_to(a, (B, a.shape[1]))
 
 

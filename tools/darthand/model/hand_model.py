@@ -26,9 +26,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from darthand.errors import InputError
-from darthand.model.layout import NUM_JOINTS, NUM_POSE_FEATURES
+from darthand.model.layout import FACE_LABELS, NUM_JOINTS, NUM_POSE_FEATURES
 
 SIDES = ("right", "left")
+# Largest magnitude a float field may hold: a hand in metres is far below it, and products of such values stay finite.
+MAX_MAGNITUDE = 1e6
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,23 +73,21 @@ class HandModel:
     def create(cls, *, source: str = "model", **fields) -> "HandModel":
         """Coerce dtypes, fill optional fields, check consistency; `source` names the file in error messages."""
         f = dict(fields)
-        V = np.asarray(f["v_template"]).shape[0]
+        V = np.shape(f["v_template"])[0] if np.ndim(f["v_template"]) else 0
         f.setdefault("shapedirs", np.zeros((V, 3, 0)))
         f.setdefault("hands_mean", np.zeros(45))
         f.setdefault("hands_components", np.eye(45))
-        f["v_template"] = _float(f["v_template"])
-        f["faces"] = _int(f["faces"])
-        f["weights"] = _float(f["weights"])
-        f["posedirs"] = _float(f["posedirs"])
-        f["J_regressor"] = sp.csr_matrix(f["J_regressor"], dtype=np.float64)
-        f["parents"] = _int(f["parents"])
-        f["shapedirs"] = _float(f["shapedirs"])
-        f["hands_mean"] = _float(f["hands_mean"]).reshape(-1)
-        f["hands_components"] = _float(f["hands_components"])
-        f["tip_ids"] = _int(f["tip_ids"]).reshape(-1)
-        for key in ("uvs", "faces_uv", "face_labels"):
+        kinds = dict.fromkeys(("v_template", "weights", "posedirs", "shapedirs", "hands_mean", "hands_components",
+                               "uvs"), _float)
+        kinds.update(dict.fromkeys(("faces", "parents", "tip_ids", "faces_uv"), _int), face_labels=_int8)
+        for key, convert in kinds.items():
             if f.get(key) is not None:
-                f[key] = {"uvs": _float, "faces_uv": _int, "face_labels": _int8}[key](f[key])
+                f[key] = _converted(convert, f[key], key, source)
+        f["hands_mean"] = f["hands_mean"].reshape(-1)
+        f["tip_ids"] = f["tip_ids"].reshape(-1)
+        f["J_regressor"] = _sparse(f["J_regressor"], source)
+        if not isinstance(f.get("meta") or {}, dict):
+            raise InputError(f"{source}: field 'meta' is a {type(f['meta']).__name__}, expected a dict")
         f["meta"] = dict(f.get("meta") or {})
         model = cls(**f)
         check_model(model, source)
@@ -103,6 +103,30 @@ class HandModel:
         """The model of one shape, betas (S,): see `model.shape.shaped_model`."""
         from darthand.model.shape import shaped_model
         return shaped_model(self, betas)
+
+
+def _converted(convert, value, key: str, source: str) -> np.ndarray:
+    """convert(value), with the dtype checked first: numbers (and booleans) only, so strings, objects and complex
+    values are refused by name instead of being cast."""
+    a = value if isinstance(value, np.ndarray) else np.asarray(value)
+    kinds = "biu" if convert is not _float else "biuf"
+    if a.dtype.kind not in kinds:
+        want = "integer" if convert is not _float else "real number"
+        raise InputError(f"{source}: field '{key}' has dtype {a.dtype}, expected {want}s")
+    if convert is not _float and a.size and (a.min() < np.iinfo(np.int64).min or a.max() > np.iinfo(np.int64).max):
+        raise InputError(f"{source}: field '{key}' holds an integer outside the 64-bit range")
+    return convert(a)
+
+
+def _sparse(value, source: str) -> sp.csr_matrix:
+    """A checked float64 CSR copy: shape, index dtypes, index bounds and indptr order (`check_format(full_check)`),
+    so a matrix product never reads outside its arrays."""
+    try:
+        m = sp.csr_matrix(value, dtype=np.float64)
+        m.check_format(full_check=True)
+    except (ValueError, TypeError, IndexError, OverflowError) as e:
+        raise InputError(f"{source}: field 'J_regressor' is not a valid sparse matrix ({str(e)[:120]})") from None
+    return m
 
 
 def _float(a) -> np.ndarray:
@@ -131,10 +155,12 @@ def check_model(m: HandModel, source: str = "model") -> None:
             fail(fieldname, f"has shape {'x'.join(map(str, arr.shape))}, expected {want}")
 
     def finite(fieldname: str, arr: np.ndarray):
-        bad = ~np.isfinite(arr)
+        with np.errstate(invalid="ignore"):
+            bad = ~(np.abs(arr) <= MAX_MAGNITUDE)
         if bad.any():
             idx = np.unravel_index(int(np.argmax(bad)), arr.shape)
-            fail(fieldname, f"has a non-finite value ({arr[idx]}) at index {tuple(int(i) for i in idx)}")
+            what = "a non-finite value" if not np.isfinite(arr[idx]) else f"a value beyond +-{MAX_MAGNITUDE:g}"
+            fail(fieldname, f"has {what} ({arr[idx]}) at index {tuple(int(i) for i in idx)}")
 
     shape("v_template", m.v_template, (None, 3))
     if V < 4:
@@ -170,6 +196,35 @@ def check_model(m: HandModel, source: str = "model") -> None:
             fail("faces_uv", f"indexes a UV outside 0..{len(m.uvs) - 1}")
     if m.face_labels is not None:
         shape("face_labels", m.face_labels, (F,))
+        if F and (m.face_labels.min() < -1 or m.face_labels.max() >= len(FACE_LABELS)):
+            fail("face_labels", f"holds a label outside -1..{len(FACE_LABELS) - 1}")
+    check_meta(m.meta, source)
+
+
+# Known metadata keys and what their values must be (other keys are kept as they are).
+META_TYPES = {"source": str, "fixes": list, "warnings": list, "wrist": dict, "wrist_uv_band": list,
+              "uv_atlas": dict, "provenance": dict, "correctives": dict, "mirrored_from": str}
+WRIST_INTS = ("rings", "ring_size", "base_vertices", "base_faces", "anchor")
+
+
+def check_meta(meta: dict, source: str = "model") -> None:
+    """The metadata keys darthand reads have the types it reads them as (meta_json comes from the file)."""
+    def fail(key: str, msg: str):
+        raise InputError(f"{source}: field 'meta.{key}' {msg}")
+
+    for key, kind in META_TYPES.items():
+        if key in meta and not isinstance(meta[key], kind):
+            fail(key, f"is a {type(meta[key]).__name__}, expected a {kind.__name__}")
+    for key in ("fixes", "warnings"):
+        if not all(isinstance(x, str) for x in meta.get(key, [])):
+            fail(key, "must be a list of strings")
+    wrist = meta.get("wrist", {})
+    for key in WRIST_INTS:
+        if key in wrist and not (isinstance(wrist[key], int) and 0 <= wrist[key] < 1 << 31):
+            fail(f"wrist.{key}", f"is {str(wrist[key])[:40]}, expected a non-negative integer")
+    band = meta.get("wrist_uv_band")
+    if band is not None and not (len(band) == 4 and all(isinstance(x, (int, float)) and 0 <= x <= 1 for x in band)):
+        fail("wrist_uv_band", "must be four numbers in [0, 1] (u0, v0, u1, v1)")
 
 
 def check_parents(parents: np.ndarray, source: str = "model") -> None:

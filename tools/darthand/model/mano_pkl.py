@@ -24,12 +24,15 @@ from __future__ import annotations
 import hashlib
 import io
 import pickle
+import pickletools
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
+from darthand.budget import check_memory
 from darthand.errors import InputError, UnsafePickleError
+from darthand.fileio import read_bytes
 from darthand.model.hand_model import HandModel, check_parents
 from darthand.model.layout import FINGER_JOINTS, FINGERS, MANO_TIP_IDS, NUM_JOINTS, NUM_POSE_FEATURES
 
@@ -370,14 +373,15 @@ def read_pickle(path: str | Path) -> tuple[object, str]:
     Raises UnsafePickleError for a refused global or call, InputError for a missing, unreadable or corrupt file.
     """
     path = Path(path)
+    data = read_bytes(path, "file")
+    check_memory(f"unpickling {path}", 4 * len(data))
     try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, expected a MANO .pkl file") from None
-    except OSError as e:
-        raise InputError(f"{path}: cannot read ({e.strerror or type(e).__name__})") from None
+        depth = pickle_depth(data, MAX_PICKLE_DEPTH)
+    except Exception as e:  # noqa: BLE001 - pickletools parsing untrusted bytes: any failure is a corrupt file
+        raise InputError(f"{path}: not a readable pickle, truncated or corrupt ({_first_line(e)})") from None
+    if depth > MAX_PICKLE_DEPTH:
+        raise InputError(f"{path}: not a MANO pickle: its objects nest more than {MAX_PICKLE_DEPTH} levels deep; "
+                         "nothing in the file was executed")
     try:
         obj = SafeManoUnpickler(io.BytesIO(data)).load()
     except _Refused as e:
@@ -387,6 +391,71 @@ def read_pickle(path: str | Path) -> tuple[object, str]:
     except Exception as e:  # noqa: BLE001 - anything an untrusted byte stream provokes is bad input, not a bug
         raise InputError(f"{path}: not a readable MANO pickle ({type(e).__name__}: {_first_line(e)})") from None
     return obj, hashlib.sha256(data).hexdigest()
+
+
+# Objects may nest this deep (a MANO pickle nests about 6: dict, Ch, state dict, ndarray, state tuple, shape).
+MAX_PICKLE_DEPTH = 100
+# Opcodes that add to an object already on the stack (the object stays, one level above what it receives).
+_IN_PLACE = {"APPEND", "APPENDS", "SETITEM", "SETITEMS", "ADDITEMS", "BUILD"}
+_MEMO_PUT = {"PUT", "BINPUT", "LONG_BINPUT", "MEMOIZE"}
+_MEMO_GET = {"GET", "BINGET", "LONG_BINGET"}
+
+
+def pickle_depth(data: bytes, limit: int | None = None) -> int:
+    """How deeply the objects a pickle builds nest, from its opcodes alone (nothing is built or called).
+
+    Hashing or comparing a tuple nested a million deep recurses in C and overflows the stack, so such a file must
+    be refused before it is unpickled. Each stack entry carries the depth of the object it stands for; an opcode
+    that builds a container from entries pushes one more than the deepest of them. Stops as soon as the depth
+    passes `limit`. ValueError for bytes that are not a pickle (pickletools' own checks).
+    """
+    mark = object()
+    stack: list = []
+    memo: dict = {}
+    deepest = 0
+    for op, arg, _ in pickletools.genops(data):
+        name = op.name
+        if name == "MARK":
+            stack.append(mark)
+            continue
+        if name in _MEMO_PUT:
+            memo[len(memo) if name == "MEMOIZE" else arg] = stack[-1] if stack else 0
+            continue
+        if name in _MEMO_GET:
+            stack.append(memo.get(arg, 0))
+            continue
+        if name in ("STOP", "PROTO", "FRAME"):
+            continue
+        if name == "POP":
+            if stack:
+                stack.pop()
+            continue
+        if name == "DUP":
+            stack.append(stack[-1] if stack else 0)
+            continue
+        taken = []
+        before = op.stack_before
+        if pickletools.markobject in before:
+            while stack and stack[-1] is not mark:
+                taken.append(stack.pop())
+            if stack:
+                stack.pop()
+            below = before.index(pickletools.markobject)
+        else:
+            below = len(before)
+        for _ in range(below):
+            if stack and stack[-1] is not mark:
+                taken.append(stack.pop())
+        if name in _IN_PLACE and taken:           # the container (popped last: lowest on the stack) stays
+            depth = max(taken[-1], 1 + max(taken[:-1], default=-1))
+            stack.append(depth)
+        else:
+            depth = 1 + max(taken, default=-1)
+            stack += [depth] * len(op.stack_after)
+        deepest = max(deepest, depth)
+        if limit is not None and deepest > limit:
+            break
+    return deepest
 
 
 def is_mano_pkl(path: str | Path) -> bool:

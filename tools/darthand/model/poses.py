@@ -11,6 +11,7 @@ A pose file (`darthand model pose --pose POSE.json`) holds axis-angle vectors di
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import jsonschema
@@ -90,11 +91,17 @@ def _short(x, n: int = 40) -> str:
 
 
 def _check_finite(path: Path, field: str, arr: np.ndarray) -> None:
-    bad = ~np.isfinite(arr)
+    """Every value finite and within the forward pass's bound for the field (radians for poses)."""
+    from darthand.model.forward import MAX_MAGNITUDE
+
+    limit = MAX_MAGNITUDE[field]
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(arr) <= limit)
     if bad.any():
         idx = np.unravel_index(int(np.argmax(bad)), arr.shape)
         where = "".join(f"[{int(i)}]" for i in idx)
-        raise InputError(f"{path}: field '{field}{where}' is {arr[idx]}, expected a finite number")
+        raise InputError(f"{path}: field '{field}{where}' is {arr[idx]}, expected a finite number within "
+                         f"+-{limit:g}")
 
 
 # ------------------------------------------------------------------------------------------------ pose files
@@ -107,7 +114,7 @@ def load_pose_file(path: str | Path) -> tuple[np.ndarray, np.ndarray | None, boo
     """
     path = Path(path)
     doc = read_json(path, "pose file")
-    _check_schema(path, doc, "pose_file")
+    _check_schema(path, _structure(doc), "pose_file")
     raw = np.asarray(doc["pose"], dtype=np.float64)
     _check_finite(path, "pose", raw)
     pose = np.atleast_2d(raw)
@@ -121,6 +128,28 @@ def load_pose_file(path: str | Path) -> tuple[np.ndarray, np.ndarray | None, boo
         if betas.ndim == 2 and betas.shape[0] not in (1, pose.shape[0]):
             raise InputError(f"{path}: field 'betas' has {betas.shape[0]} rows for {pose.shape[0]} poses")
     return pose, betas, bool(doc.get("flat_hand_mean", True))
+
+
+def _structure(doc):
+    """The document to check against the schema: a batch of poses (or betas) that is a plain (N, k) table of numbers
+    is represented by its first row, so a file of a million poses is not checked number by number by jsonschema
+    (minutes); anything less regular is checked whole, for the schema's message naming the bad entry."""
+    if not isinstance(doc, dict):
+        return doc
+    out = dict(doc)
+    for key in ("pose", "betas"):
+        rows = doc.get(key)
+        if isinstance(rows, list) and len(rows) > 1 and _plain_table(rows):
+            out[key] = rows[:1]
+    return out
+
+
+def _plain_table(rows: list) -> bool:
+    """Every row a list of the same length holding only ints and floats (no bools, strings or nested lists); C-level
+    iteration, so a million rows take a fraction of a second."""
+    if set(map(type, rows)) != {list} or len(set(map(len, rows))) != 1:
+        return False
+    return set(map(type, itertools.chain.from_iterable(rows))) <= {int, float}
 
 
 # ------------------------------------------------------------------------------------------------ gestures

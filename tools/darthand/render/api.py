@@ -17,6 +17,7 @@ from typing import Iterator
 
 import numpy as np
 
+from darthand.budget import check_memory
 from darthand.errors import InputError
 from darthand.fileio import write_json
 from darthand.render import aa
@@ -34,6 +35,8 @@ from darthand.render.trace import (TILE, Context, Samples, default_threads, pixe
 from darthand.textures.color import encode_srgb8
 
 DEFAULT_SAMPLES = 8
+# Peak memory per image pixel while rendering (measured about 115 bytes at 2048^2 with the hand filling the frame).
+BYTES_PER_PIXEL = 200
 IMAGE, MASK, LABELS, DEPTH = "image.png", "mask.png", "labels.json", "depth.exr"
 
 
@@ -122,6 +125,7 @@ class Renderer:
     def _prepare(self, pose, *, texture=None, skin_tone_offset=0.0, accessory=None, camera="three_quarter",
                  lights=None, width=512, height=512, keypoint_order="openpose", betas=None) -> tuple:
         """(subject, scene, camera, lighting, timings): the frame's work before tracing."""
+        check_skin_tone_offset(skin_tone_offset)
         timings: dict = {}
         t = time.perf_counter()
         shape = {} if betas is None else {"betas": betas}      # a USD package has no shape to change
@@ -175,6 +179,7 @@ def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighti
     aa.check_options(samples, aa_shading)
     options = shading_options(shading)
     H, W = cam.height, cam.width
+    check_memory(f"rendering a {W}x{H} image", BYTES_PER_PIXEL * W * H)
     stats: dict = {}
     t = time.perf_counter()
     lights = world_lights(lighting, cam.R, cam.t)
@@ -325,7 +330,7 @@ def open_source(package, *, textures=None, accessories=None, model=None):
     from darthand.render.assets import HandAssets, default_catalogues
 
     path = Path(str(package))
-    if path.is_dir() and (path / "asset.json").is_file() or path.suffix in (".usda", ".usd", ".usdc"):
+    if path.is_dir() and os.path.lexists(path / "asset.json") or path.suffix in (".usda", ".usd", ".usdc"):
         from darthand.render.usd_source import UsdPackage
 
         return UsdPackage.open(path, model=model)
@@ -347,6 +352,12 @@ def render(package, pose=None, **options) -> Frame:
     source_opts = {k: options.pop(k) for k in ("textures", "accessories", "model") if k in options}
     threads = options.pop("threads", None)
     return Renderer(open_source(package, **source_opts), threads).render(pose, **options)
+
+
+def check_skin_tone_offset(offset) -> None:
+    """The sRGB skin-tone offset must be a number in [-1, 1] (beyond it every channel saturates)."""
+    if not (isinstance(offset, (int, float, np.number)) and -1 <= offset <= 1):
+        raise InputError(f"skin_tone_offset: {offset!r} is not a number in [-1, 1]")
 
 
 def _lap(t0: float) -> float:

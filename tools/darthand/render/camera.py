@@ -24,6 +24,8 @@ from darthand.model.preview import VIEWS, camera_basis
 
 DEFAULT_FOV_DEG = 30.0
 DEFAULT_MARGIN = 0.08
+MAX_MAGNITUDE = 1e9      # largest entry of K (pixels) and t (metres): beyond it projections stop being finite
+MAX_SIDE = 1 << 20       # image side in pixels (the memory budget refuses far less)
 
 
 @dataclass(frozen=True, eq=False)
@@ -39,15 +41,16 @@ class Camera:
     def __post_init__(self):
         for name, shape in (("K", (3, 3)), ("R", (3, 3)), ("t", (3,))):
             a = np.asarray(getattr(self, name), dtype=np.float64)
-            if a.shape != shape or not np.isfinite(a).all():
-                raise InputError(f"camera: field '{name}' must be finite with shape {shape}, got {a.shape}")
+            if a.shape != shape or not (np.abs(a) <= MAX_MAGNITUDE).all():
+                raise InputError(f"camera: field '{name}' must be finite (within +-{MAX_MAGNITUDE:g}) with shape "
+                                 f"{shape}, got {a.shape}")
             object.__setattr__(self, name, a)
         if not (np.abs(self.R @ self.R.T - np.eye(3)).max() < 1e-6 and np.linalg.det(self.R) > 0):
             raise InputError("camera: field 'R' is not a rotation matrix")
         if self.K[0, 0] <= 0 or self.K[1, 1] <= 0 or self.K[2, 2] != 1 or self.K[1, 0] or self.K[2, 0] or self.K[2, 1]:
             raise InputError("camera: field 'K' must be upper triangular with positive focal lengths and K[2,2] = 1")
-        if int(self.width) < 1 or int(self.height) < 1:
-            raise InputError(f"camera: image size {self.width}x{self.height} must be positive")
+        if not (1 <= int(self.width) <= MAX_SIDE and 1 <= int(self.height) <= MAX_SIDE):
+            raise InputError(f"camera: image size {self.width}x{self.height} is outside 1..{MAX_SIDE} pixels a side")
         object.__setattr__(self, "width", int(self.width))
         object.__setattr__(self, "height", int(self.height))
 

@@ -18,7 +18,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from darthand.errors import InputError
-from darthand.fileio import atomic_path
+from darthand.fileio import atomic_path, regular_file
 from darthand.textures.color import encode_srgb8, srgb_to_linear
 
 # zlib run-length strategy: on the 'Up'-filtered rows of a render (long runs of zeros around and inside the hand) it
@@ -52,11 +52,30 @@ def encode_mask8(alpha: np.ndarray) -> np.ndarray:
     return np.rint(np.clip(alpha, 0, 1) * 255).astype(np.uint8)
 
 
+def read_image_buf(path: str | os.PathLike, what: str = "image") -> oiio.ImageBuf:
+    """An image file decoded whole into an ImageBuf, after checking that it is a regular file and that its declared
+    size fits the memory budget; InputError naming the file when it is truncated or corrupt (OpenImageIO reads
+    lazily and would otherwise hand back the pixels decoded before the damage)."""
+    from darthand.budget import check_memory
+
+    regular_file(path, what)
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise InputError(f"{path}: cannot read {what} ({oiio.geterror() or 'unknown format'})")
+    spec = inp.spec()
+    inp.close()
+    check_memory(f"decoding {path} ({spec.width}x{spec.height})", 8 * spec.width * spec.height * spec.nchannels)
+    buf = oiio.ImageBuf(str(path))
+    if not buf.read(force=True) or buf.has_error:
+        reason = (buf.geterror() or "read failed").strip().splitlines()
+        raise InputError(f"{path}: cannot read {what}: {reason[0] if reason else 'read failed'} (truncated or "
+                         "corrupt)")
+    return buf
+
+
 @functools.lru_cache(maxsize=4)
 def _background(path: str, mtime: int, width: int, height: int) -> np.ndarray:
-    buf = oiio.ImageBuf(path)
-    if buf.has_error:
-        raise InputError(f"{path}: cannot read background image ({buf.geterror()})")
+    buf = read_image_buf(path, "background image")
     spec = buf.spec()
     # Scale to cover the frame, keeping the aspect ratio, then crop the centre.
     scale = max(width / spec.width, height / spec.height)
@@ -78,9 +97,8 @@ def load_background(path: str | os.PathLike, width: int, height: int) -> np.ndar
     """(height, width, 3) float32 linear background: the image (8-bit files are sRGB, float files linear) scaled to
     cover the frame and centre-cropped."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such background image")
-    return _background(str(path.resolve()), path.stat().st_mtime_ns, int(width), int(height))
+    st = regular_file(path, "background image")
+    return _background(str(path.resolve()), st.st_mtime_ns, int(width), int(height))
 
 
 def write_png(path: str | os.PathLike, pixels: np.ndarray, srgb: bool = True) -> None:

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.model.forward import MAX_MAGNITUDE
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import NUM_JOINTS
 
@@ -42,9 +43,12 @@ def resolve_pose(model: HandModel, pose, index: int = 0, cache: dict | None = No
     vec = np.asarray(pose, dtype=np.float64).reshape(-1)
     if vec.shape != (3 * NUM_JOINTS,):
         raise InputError(f"pose: a MANO pose has {3 * NUM_JOINTS} numbers, got {vec.size}")
-    if not np.isfinite(vec).all():
-        raise InputError(f"pose: value {vec[~np.isfinite(vec)][0]} at index {int(np.argmax(~np.isfinite(vec)))} "
-                         "is not finite")
+    limit = MAX_MAGNITUDE["pose"]
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(vec) <= limit)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise InputError(f"pose: value {vec[i]} at index {i} is not a finite number within +-{limit:g} radians")
     return vec, None
 
 

@@ -383,10 +383,9 @@ def srgb8_to_linear_lut(offset: float = 0.0) -> np.ndarray:
 
 
 def _open(path: Path) -> oiio.ImageBuf:
-    buf = oiio.ImageBuf(str(path))
-    if buf.has_error or not path.is_file():
-        raise InputError(f"{path}: cannot read image ({buf.geterror() or 'no such file'})")
-    return buf
+    from darthand.render.image import read_image_buf
+
+    return read_image_buf(path, "texture")
 
 
 def read_codes(path: str | os.PathLike) -> np.ndarray:

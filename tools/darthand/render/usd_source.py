@@ -10,7 +10,7 @@ from (the `model` argument, or build/model/<side>.npz beside the build's usd/ fo
 
 from __future__ import annotations
 
-import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +18,7 @@ from pxr import Usd, UsdGeom, UsdShade, UsdSkel
 
 from darthand.errors import InputError
 from darthand.export.influences import dense_weights
+from darthand.export.package_files import check_usd_package, read_asset_info
 from darthand.model.layout import KEYPOINT_ORDERS, NUM_JOINTS
 from darthand.model.topology import face_joints, vertex_normals
 from darthand.render.subject import Material, Subject, Surface, skin_material
@@ -44,11 +45,11 @@ class UsdPackage:
         """A package from its folder or interface layer; `model` (HandModel or path) supplies the fingertip ids
         when asset.json does not."""
         path = Path(path)
-        info_path = (path if path.is_dir() else path.parent) / "asset.json"
-        info = json.loads(info_path.read_text()) if info_path.is_file() else {}
+        info = read_asset_info(path if path.is_dir() else path.parent)
         interface = path / info.get("interface", f"{path.name}.usda") if path.is_dir() else path
-        if not interface.is_file():
+        if not os.path.lexists(interface):
             raise InputError(f"{interface}: no USD interface layer here")
+        check_usd_package(interface)        # nothing outside the package, no FIFO, before OpenUSD opens anything
         stage = Usd.Stage.Open(str(interface))
         if stage is None or not stage.GetDefaultPrim():
             raise InputError(f"{interface}: not a darthand USD package (no default prim)")

@@ -31,9 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.budget import check_memory
 from darthand.errors import InputError
-from darthand.fileio import sha256_file, write_json
+from darthand.fileio import file_in, read_json, sha256_file, write_json
 from darthand.model.hand_model import HandModel
+from darthand.processes import deaf_to_ctrl_c, init_worker
 from darthand.textures import sheet as sheet_mod
 from darthand.model.atlas import ensure_uvs
 from darthand.textures.bake import Bake, cached_bake, load_bake, source_digest
@@ -47,6 +49,8 @@ CATALOG_VERSION = 1
 RENDER_MODULES = ("anatomy", "bake", "canvas", "catalog", "color", "curves", "imageio", "motifs", "noise",
                   "overlays", "raster", "model/regions", "sampling", "skin", "surface", "variant")
 THUMB_SOURCE = 512  # size of the albedo copy a worker hands back for the contact sheet
+# Peak memory per texel of each process (the bake and one variant's layers; measured about 92 bytes from 1024 to 2048).
+BYTES_PER_TEXEL = 100
 
 
 def build_textures(model: HandModel, spec: dict, out_dir: str | Path, res: int = 2048, ids=None, categories=None,
@@ -57,6 +61,8 @@ def build_textures(model: HandModel, spec: dict, out_dir: str | Path, res: int =
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     res = int(res)
+    check_memory(f"{res}x{res} textures in {max(workers, 1)} worker processes",
+                 BYTES_PER_TEXEL * res * res * (1 + max(workers, 1)))
     entries = expand_catalog(spec)
     chosen = select(entries, ids, categories)
     had_uvs = model.has_uvs
@@ -129,19 +135,25 @@ def _previous_records(path: Path, res: int) -> dict:
     if not path.is_file():
         return {}
     try:
-        old = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError):
+        old = read_json(path, "texture catalogue")
+    except InputError:              # an unreadable previous catalogue: every entry is rendered again
         return {}
-    if old.get("format") != CATALOG_FORMAT or old.get("resolution") != res:
+    if not isinstance(old, dict) or old.get("format") != CATALOG_FORMAT or old.get("resolution") != res \
+            or not isinstance(old.get("entries"), list):
         return {}
-    return {r["id"]: r for r in old.get("entries", []) if isinstance(r, dict) and "id" in r}
+    return {r["id"]: r for r in old["entries"] if isinstance(r, dict) and isinstance(r.get("id"), str)}
 
 
 def _files_intact(out_dir: Path, record: dict) -> bool:
-    files = record.get("files", {})
-    if not all((out_dir / f).is_file() for f in files.values() if f):
+    """The entry's files are regular files in `out_dir` and its albedo has the recorded sha256."""
+    files = record.get("files")
+    if not isinstance(files, dict) or not isinstance(files.get("albedo"), str):
         return False
-    return sha256_file(out_dir / files["albedo"]) == record.get("sha256")
+    try:
+        paths = [file_in(out_dir, f, "texture") for f in files.values() if f]
+    except (InputError, TypeError):        # missing, or a name leading out of the folder: render it again
+        return False
+    return bool(paths) and sha256_file(out_dir / files["albedo"]) == record.get("sha256")
 
 
 # ------------------------------------------------------------------------------------------ rendering
@@ -150,6 +162,7 @@ _WORKER_BAKE: Bake | None = None
 
 def _init_worker(bake_path: str) -> None:
     global _WORKER_BAKE
+    init_worker()         # Ctrl-C is the parent's to handle; the worker ends with its parent
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import OpenImageIO as oiio
 
@@ -176,15 +189,15 @@ def _render_all(todo, bake, bake_path, out_dir, res, tx, roughness, workers, pro
     ctx = multiprocessing.get_context("spawn")  # no forked copies of OpenImageIO's threads
     with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
                                 initargs=(str(bake_path),)) as pool:
-        futures = [pool.submit(_render_one, job) for job in jobs]
+        with deaf_to_ctrl_c():                  # submit starts the workers; Ctrl-C is ours, even while they import
+            futures = [pool.submit(_render_one, job) for job in jobs]
         try:
             for fut in cf.as_completed(futures):
                 result = fut.result()
                 bar.step(result[0]["id"])
                 yield result
-        except BaseException:
-            for f in futures:
-                f.cancel()
+        except BaseException:         # Ctrl-C or a failed variant: running ones finish (atomic files), none start
+            pool.shutdown(wait=True, cancel_futures=True)
             raise
     bar.done()
 

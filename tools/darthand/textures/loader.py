@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from darthand.errors import InputError
+from darthand.fileio import file_in
 from darthand.schemas import read_catalog
 
 # The hand's look without a texture (both package writers and the renderer): a mid skin tone, linear RGB, and its
@@ -39,8 +40,9 @@ def load_texture_catalog(path: str | Path) -> list[TextureSet]:
     if not data["entries"]:
         raise InputError(f"{path}: field 'entries' is empty (build textures with the textures stage)")
     entries = sorted(data["entries"], key=lambda e: e["id"] != data.get("default"))     # stable: default first
-    return [TextureSet(e["id"], path.parent / e["files"]["albedo"],
-                       path.parent / e["files"]["roughness"] if e["files"]["roughness"] else None)
+    return [TextureSet(e["id"], file_in(path.parent, e["files"]["albedo"], "texture", must_exist=False),
+                       file_in(path.parent, e["files"]["roughness"], "texture", must_exist=False)
+                       if e["files"]["roughness"] else None)
             for e in entries]
 
 

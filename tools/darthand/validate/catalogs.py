@@ -9,9 +9,11 @@ catalogue modules. `plain` (the USD writer's untextured variant) and `none` (no 
 
 from __future__ import annotations
 
-import json
 from functools import lru_cache
 from pathlib import Path
+
+from darthand.errors import DarthandError
+from darthand.fileio import read_json
 
 ALWAYS_TEXTURES = {"plain"}
 ALWAYS_ACCESSORIES = {"none"}
@@ -51,8 +53,8 @@ def _nearby(root: Path, names: tuple[str, ...]) -> Path | None:
 @lru_cache(maxsize=16)
 def _catalog_ids(path: str, keys: tuple[str, ...]) -> frozenset:
     try:
-        data = json.loads(Path(path).read_text())
-    except (OSError, ValueError):
+        data = read_json(path, "catalogue")
+    except DarthandError:          # not a readable catalogue: no ids from it (the texture rules say what is unknown)
         return frozenset()
     entries = data if isinstance(data, list) else next(
         (data[k] for k in keys if isinstance(data, dict) and isinstance(data.get(k), list)), [])

@@ -20,14 +20,16 @@ How darthand's glTF maps onto the neutral form (gltf_export's layout, and what a
 from __future__ import annotations
 
 import base64
-import json
 import os
+import stat
 import struct
 from pathlib import Path
 from urllib.parse import unquote
 
 import numpy as np
 
+from darthand.errors import DarthandError
+from darthand.fileio import file_kind, parse_json
 from darthand.validate.asset import BlendShape, Limits, Mesh, Package, Skeleton, Skin, TextureRef
 from darthand.validate.findings import Finding, finding
 
@@ -35,6 +37,7 @@ COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 51
 WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 GLB_MAGIC, JSON_CHUNK, BIN_CHUNK = b"glTF", 0x4E4F534A, 0x004E4942
 VARIANTS = "KHR_materials_variants"
+MAX_JSON_DEPTH = 256     # glTF documents nest about 8 deep; extras may nest more, within reason
 
 
 class Unreadable(Exception):
@@ -66,9 +69,9 @@ def load_document(path: Path, limits: Limits) -> tuple[dict, bytes | None]:
             raise Unreadable(f"{size} bytes of JSON, above the limit of {limits.max_json_bytes}")
         text, blob = path.read_bytes(), None
     try:
-        data = json.loads(text)
-    except (ValueError, UnicodeDecodeError) as e:
-        raise Unreadable(f"not glTF: the JSON does not parse ({e})") from None
+        data = parse_json(text, path.name, "glTF document", max_depth=MAX_JSON_DEPTH)
+    except DarthandError as e:
+        raise Unreadable(f"not glTF: {str(e).split(': ', 1)[-1]}") from None
     version = str(_dict(data, "asset").get("version", "")) if isinstance(data, dict) else ""
     if not version.startswith("2."):
         raise Unreadable("not a glTF 2.0 asset (no asset.version 2.x)")
@@ -237,11 +240,17 @@ def package_file(uri: str, base: Path, root: Path) -> tuple[Path | None, str]:
     root_n = Path(os.path.normpath(root))
     if root_n not in lexical.parents:
         return None, "leads outside the package folder"
-    if not lexical.is_file():
+    if not os.path.lexists(lexical):
         return None, "does not exist"
     real, real_root = Path(os.path.realpath(lexical)), Path(os.path.realpath(root))
     if real_root not in real.parents:
         return None, f"is a link to {real}, outside the package folder"
+    try:
+        mode = os.stat(lexical).st_mode
+    except OSError:
+        return None, "does not exist"
+    if not stat.S_ISREG(mode):
+        return None, f"is {file_kind(mode)}, not a regular file (not opened)"
     return lexical, ""
 
 

@@ -51,12 +51,12 @@ def package_checks(check_package, path: Path) -> list[dict]:
 
 def nearby_model(path: Path) -> Path | None:
     """<dir>/model/<side>.npz for the package's side, in its folder or up to SEARCH_DEPTH folders above."""
-    import json
+    from darthand.export.package_files import read_asset_info
 
     folder = path if path.is_dir() else path.parent
     try:
-        side = json.loads((folder / "asset.json").read_text()).get("side", folder.name)
-    except (OSError, ValueError, AttributeError):
+        side = read_asset_info(folder).get("side", folder.name)
+    except DarthandError:
         side = folder.name
     for base in [folder, *list(folder.parents)[:SEARCH_DEPTH]]:
         candidate = base / "model" / f"{side}.npz"

@@ -6,7 +6,8 @@
                             the package folder
     tex.symlink-outside     the file is inside the package but is a symlink to somewhere outside it
     tex.missing             nothing at the path (or not in the usdz)
-    tex.unreadable          OpenImageIO cannot open it, or it is corrupt. By default a PNG's signature, header
+    tex.unreadable          OpenImageIO cannot open it, or it is corrupt, or it is not a regular file (a FIFO or
+                            device is never opened). By default a PNG's signature, header
                             chunk CRC and final IEND chunk are checked (catches truncated and foreign files at the
                             cost of reading 45 bytes); `deep` walks every chunk's CRC and decodes every image
     tex.not-power-of-two    width or height is not a power of two
@@ -21,6 +22,7 @@
 from __future__ import annotations
 
 import os
+import stat
 import struct
 import tempfile
 import zlib
@@ -28,6 +30,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+from darthand.fileio import file_kind
 from darthand.validate.asset import Limits, Package, TextureRef
 from darthand.validate.catalogs import known_texture_ids
 from darthand.validate.findings import Finding, finding
@@ -91,6 +94,10 @@ def check_location(ref: TextureRef, root: Path, real_root: Path | None = None) -
                         "outside the package folder")]
     if not real.exists():
         return [finding("tex.missing", ref.path, f"texture {_rel(lexical, root)} is a broken link")]
+    mode = real.stat().st_mode
+    if not stat.S_ISREG(mode):          # a FIFO would block the decoder forever, a device never end
+        return [finding("tex.unreadable", ref.path, f"texture {_rel(lexical, root)} is {file_kind(mode)}, not a "
+                        "regular file; not opened")]
     return []
 
 

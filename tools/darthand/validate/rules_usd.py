@@ -25,13 +25,14 @@ Paths of findings inside a variant use USD's variant-selection syntax, e.g. `/Ri
 
 from __future__ import annotations
 
-import json
 import os
 import re
 from pathlib import Path
 
 from pxr import Ar, Sdf, Tf, Usd
 
+from darthand.errors import DarthandError
+from darthand.export.package_files import ASSET_INFO, Problem, read_asset_info, usd_problems
 from darthand.export.usd_validate import validate_stage
 from darthand.validate.asset import Limits, Package
 from darthand.validate.findings import UNREADABLE, Finding, finding
@@ -50,27 +51,39 @@ ROOT_LAYER_VALIDATORS = METADATA_VALIDATORS | {
 SEVERITY = {"Error": "error", "Warn": "warning", "Info": "info"}
 
 
-def read_usd(path: Path, limits: Limits = Limits()) -> tuple[Package, list[Finding]]:
-    """The package of a .usda/.usdc/.usd/.usdz file and the USD findings. Raises Unreadable when the file cannot
+def read_usd(path: Path, limits: Limits = Limits()) -> tuple[Package | None, list[Finding]]:
+    """The package of a .usda/.usdc/.usd/.usdz file and the USD findings; (None, findings) when the package refers
+    to layers that must not be opened (outside the package, links leaving it, FIFOs and other non-regular files:
+    export.package_files), which are reported without composing anything. Raises Unreadable when the file cannot
     be opened at all."""
     usdz = path.suffix.lower() == ".usdz"
-    info = {} if usdz else asset_info(path.parent)
+    info, found = ({}, []) if usdz else asset_info(path.parent)
     pkg = Package(path, "usdz" if usdz else "usd", path if usdz else path.parent, side=info.get("side"))
-    claims = (info.get("options") or {}).get("correctives") == "full"
     with Tf.DiagnosticTrap() as trap:    # USD's warnings become findings (or are repeats of them), not stderr noise
         try:
-            return pkg, UsdCheck(path, pkg, limits, claims).run()
+            blocked = [p for p in usd_problems(path, pkg.root) if p.role == "layer"]
+            if blocked:
+                return None, found + [layer_finding(p) for p in blocked]
+            claims = (info.get("options") or {}).get("correctives") == "full"
+            return pkg, found + UsdCheck(path, pkg, limits, claims).run()
         finally:
             trap.Clear()
 
 
-def asset_info(folder: Path) -> dict:
-    """darthand's asset.json beside the layer ({} when absent or unreadable: it is optional for the rules)."""
+def layer_finding(problem: Problem) -> Finding:
+    """A layer that is not opened: outside the package (or a link leaving it), or not a regular file."""
+    rule = "usd.layer-outside-package" if "outside" in problem.reason else UNREADABLE
+    return finding(rule, problem.where, f"the asset composes @{problem.asset}@, which {problem.reason}; the "
+                   "package is not opened")
+
+
+def asset_info(folder: Path) -> tuple[dict, list[Finding]]:
+    """darthand's asset.json beside the layer ({} when absent; optional for the rules) and a file.malformed
+    finding when it is there but not a sound asset.json."""
     try:
-        data = json.loads((folder / "asset.json").read_text())
-        return data if isinstance(data, dict) else {}
-    except (OSError, ValueError):
-        return {}
+        return read_asset_info(folder), []
+    except DarthandError as e:
+        return {}, [finding("file.malformed", ASSET_INFO, str(e).split(": ", 1)[-1])]
 
 
 class UsdCheck:

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 from darthand.errors import DarthandError
+from darthand.fileio import regular_file
 from darthand.validate.asset import Limits, Package
 from darthand.validate.findings import SEVERITIES, UNREADABLE, Finding, PackageResult, Report, finding
 
@@ -51,7 +52,7 @@ def package_files(path: Path) -> tuple[list[Path], str]:
         return [], "no such file or folder"
     if not path.is_dir():
         return [], "not a regular file"
-    if (path / "asset.json").is_file() or any(path.glob("*.usda")):
+    if os.path.lexists(path / "asset.json") or any(path.glob("*.usda")):
         from darthand.export.usdz import interface_layer
         try:
             return [interface_layer(path)], ""
@@ -85,6 +86,10 @@ def read_package(path: Path, fmt: str, limits: Limits) -> tuple[Package | None, 
                               f"({', '.join(GLTF_SUFFIXES)}) file")]
     if not os.access(path, os.R_OK):
         return None, [finding(UNREADABLE, path.name, "permission denied")]
+    try:
+        regular_file(path)
+    except DarthandError as e:          # a FIFO or device would block or never end: never opened
+        return None, [finding(UNREADABLE, path.name, str(e).split(": ", 1)[-1])]
     try:
         if fmt in ("gltf", "glb"):
             from darthand.validate.rules_gltf import check_gltf

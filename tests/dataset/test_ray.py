@@ -1,0 +1,255 @@
+"""render-dataset on a real Ray cluster on 127.0.0.1: a head and worker nodes as separate `ray start` process trees
+(dataset/ray_local.LocalRayCluster, one CPU each), driven through the real command line.
+
+Independent truths: the bytes of a local run (`--processes 1`, no Ray) for every output file; the kernel's record of
+renames into the output folders (inotify) for "nothing written twice"; a worker node started in its own mount
+namespace with an empty tmpfs over the test's folders, so it truly cannot see the inputs or the output folder (a
+cluster without a shared filesystem, on one machine).
+
+Every cluster process is killed by the fixtures (their own process trees only, never `ray stop`), also on failure.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import re
+import struct
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import pytest
+from helpers_dataset import SIZE, files_of
+
+from darthand.cli import main
+
+ray = pytest.importorskip("ray", reason="Ray is not installed (make test installs it: pip install '.[cluster]')")
+from darthand.dataset.ray_local import LocalRayCluster, can_hide_folders, free_port  # noqa: E402
+
+RUN_TIMEOUT_S = 240
+HIDE = can_hide_folders()
+NO_HIDE = "needs root and `unshare` to start a node without the shared filesystem"
+pytestmark = pytest.mark.xdist_group("ray")          # one pytest worker, one cluster (make test: --dist loadgroup)
+
+
+@pytest.fixture(scope="session")
+def head():
+    """A one-node cluster (the head, one CPU); tests add worker nodes and kill them. Session-wide: xdist may
+    interleave other modules' tests with these, which would restart a module-wide cluster."""
+    with LocalRayCluster(nodes=1, cpus=1) as cluster:
+        yield cluster
+
+
+@pytest.fixture(scope="session")
+def hidden_node(head, tmp_path_factory):
+    """A worker node that sees none of the tests' folders (an empty tmpfs over pytest's temporary root, in a mount
+    namespace of its own), or None where that needs what this machine lacks (root, `unshare`)."""
+    if not HIDE:
+        yield None
+        return
+    k = head.add_node(hide=[tmp_path_factory.getbasetemp()])
+    yield k
+    head.kill_node(k)
+
+
+@pytest.fixture
+def worker_node(head):
+    """Add worker nodes to the head: worker_node(hide=[folders]) -> its number; each is killed after the test."""
+    added = []
+
+    def add(hide=None) -> int:
+        added.append(head.add_node(hide))
+        return added[-1]
+
+    yield add
+    for k in added:
+        head.kill_node(k)
+
+
+def _args(package, *extra):
+    model, tex, acc = package
+    return ["render-dataset", model, "--textures", tex, "--accessories", acc, "--size", str(SIZE), "--samples", "4",
+            *extra]
+
+
+def _cli(args, timeout=RUN_TIMEOUT_S) -> subprocess.CompletedProcess:
+    """The command in a process of its own (a Ray driver, as a user runs it)."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    env.pop("RAY_ADDRESS", None)
+    return subprocess.run([sys.executable, "-m", "darthand.cli", *args], env=env, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def _local(args, out) -> dict:
+    assert main([*args, "--processes", "1", "--out", str(out)]) == 0
+    return files_of(out)
+
+
+def _three_texture_catalogue(package, folder: Path) -> str:
+    """The fixture's texture catalogue with three entries, each with an albedo file of its own."""
+    tex = Path(package[1])
+    doc = json.loads((tex / "catalog.json").read_text())
+    folder.mkdir()
+    entries = []
+    for k, tid in enumerate(["light_moles_00", "dark_moles_01", "light_scars_02"]):
+        (folder / f"{tid}.png").write_bytes((tex / "skin.png").read_bytes())
+        entries.append({**doc["entries"][0], "id": tid, "index": k,
+                        "files": {"albedo": f"{tid}.png", "roughness": "rough.png", "tx": None}})
+    (folder / "rough.png").write_bytes((tex / "rough.png").read_bytes())
+    (folder / "catalog.json").write_text(json.dumps({**doc, "entries": entries}))
+    return str(folder)
+
+
+def test_a_two_node_cluster_without_a_shared_filesystem_writes_a_local_runs_bytes(package, head, hidden_node,
+                                                                                  worker_node, tmp_path):
+    """Head (sees everything) + a node that sees none of the test's folders: the node gets the inputs through Ray
+    (only the textures the plan uses) and returns its frames; every byte equals a local run's. Where no node can be
+    started without the filesystem, a shared node with --ray-files ship takes the same paths through Ray."""
+    if hidden_node is None:
+        worker_node()
+    textures = _three_texture_catalogue(package, tmp_path / "textures")
+    args = _args((package[0], textures, package[2]), "--count", "12", "--seed", "5", "--shard-size", "4",
+                 "--texture-ids", "light_moles_00,dark_moles_01", "--accessory-share", "0.5")
+    ship = [] if HIDE else ["--ray-files", "ship"]
+    done = _cli([*args, "--ray", head.address, *ship, "--out", str(tmp_path / "ray")])
+    assert done.returncode == 0, done.stderr
+    assert "Ray workers on 2 nodes" in done.stdout and "node " in done.stdout
+    assert files_of(tmp_path / "ray") == _local(args, tmp_path / "local")
+    doc = json.loads((tmp_path / "ray" / "dataset.json").read_text())
+    runner = doc["runner"]
+    assert runner["kind"] == "ray" and runner["actors"] == 2 and runner["actors_lost"] == 0
+    modes = sorted((n["inputs"], n["outputs"]) for n in runner["nodes"].values())
+    assert modes == ([("shared", "direct")] if HIDE else [("shipped", "returned")]) + [("shipped", "returned")]
+    assert all(n["frames"] > 0 for n in doc["timings"]["nodes"].values())         # both nodes rendered
+    shipped = {Path(p).name for p in runner["shipped"]["paths"]}
+    assert {"right.npz", "catalog.json", "light_moles_00.png", "dark_moles_01.png", "rough.png"} <= shipped
+    assert "light_scars_02.png" not in shipped                                        # not used by the plan
+    assert not [p for p in (tmp_path / "ray").rglob(".*") if p.is_file()]            # no probe or temporary left
+
+
+@pytest.mark.skipif(not HIDE, reason=NO_HIDE)
+def test_a_node_without_the_files_is_a_one_line_error_when_files_must_be_shared(package, head, hidden_node,
+                                                                                tmp_path):
+    args = _args(package, "--count", "4", "--ray", head.address, "--ray-files", "shared")
+    strict = _cli([*args, "--out", str(tmp_path / "strict")])
+    err = strict.stderr.strip().splitlines()
+    assert strict.returncode == 2 and len(err) == 1, strict.stderr
+    assert re.search(r"--ray-files shared: node \S+ \([0-9a-f]{8}\) does not see (the output folder )?/tmp/",
+                     err[0]), err
+    assert not list((tmp_path / "strict" / "labels").glob("*"))
+
+
+class RenameWatch:
+    """Counts renames into folders (inotify IN_MOVED_TO), by 'folder/name': every atomic write ends in one."""
+
+    IN_MOVED_TO = 0x80
+
+    def __init__(self, folders):
+        self.libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        self.fd = self.libc.inotify_init1(os.O_NONBLOCK)
+        assert self.fd >= 0
+        self.names = {}
+        for folder in folders:
+            folder.mkdir(parents=True, exist_ok=True)
+            wd = self.libc.inotify_add_watch(self.fd, str(folder).encode(), self.IN_MOVED_TO)
+            assert wd >= 0
+            self.names[wd] = folder.name
+        self.counts: Counter = Counter()
+
+    def read(self) -> Counter:
+        while True:
+            try:
+                data = os.read(self.fd, 1 << 16)
+            except BlockingIOError:
+                return self.counts
+            k = 0
+            while k < len(data):
+                wd, mask, _, length = struct.unpack_from("iIII", data, k)
+                name = data[k + 16:k + 16 + length].rstrip(b"\0").decode()
+                if mask & self.IN_MOVED_TO and not name.startswith("."):
+                    self.counts[f"{self.names[wd]}/{name}"] += 1
+                k += 16 + length
+
+    def close(self) -> None:
+        os.close(self.fd)
+
+
+def test_a_node_lost_mid_run_the_run_finishes_with_nothing_lost_or_written_twice(package, head, worker_node,
+                                                                                 tmp_path):
+    node = worker_node()
+    args = _args(package, "--count", "32", "--seed", "8", "--shard-size", "8", "--size", "64")
+    out = tmp_path / "ray"
+    watch = RenameWatch([out / k for k in ("images", "masks", "labels", "meshes", "shards")])
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "darthand.cli", *args, "--ray", head.address, "--out", str(out)],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + RUN_TIMEOUT_S
+        while time.monotonic() < deadline and proc.poll() is None and len(list((out / "labels").glob("0*"))) < 8:
+            time.sleep(0.05)
+        assert proc.poll() is None, "the run ended before the node could be lost"
+        head.kill_node(node)
+        stdout, stderr = proc.communicate(timeout=RUN_TIMEOUT_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, stderr
+    counts = watch.read()
+    watch.close()
+    local = _local(args, tmp_path / "local")
+    assert files_of(out) == local                                              # nothing lost, same bytes
+    frames = [k for k in local if not k.startswith("shards/")]
+    assert all(counts[k] == 1 for k in local if k.startswith(("labels/", "shards/"))), counts   # each frame once
+    twice = [k for k in frames if counts[k] != 1]
+    assert len(twice) <= 3 and all(counts[k] == 2 for k in twice), twice      # the frame being written, at most
+    doc = json.loads((out / "dataset.json").read_text())
+    assert doc["runner"]["actors_lost"] >= 1 and doc["rendered"] == 32
+    assert any(n.get("lost") for n in doc["runner"]["nodes"].values())
+
+
+@pytest.mark.slow
+def test_an_interrupted_cluster_run_resumes_by_shards_to_a_local_runs_bytes(package, head, tmp_path):
+    """The driver killed mid-run: a rerun renders only the shards and frames missing, and the whole equals a local
+    run byte for byte."""
+    args = _args(package, "--count", "24", "--seed", "4", "--shard-size", "4", "--size", "96")
+    out = tmp_path / "ray"
+    proc = subprocess.Popen([sys.executable, "-m", "darthand.cli", *args, "--ray", head.address, "--out", str(out)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + RUN_TIMEOUT_S
+        while time.monotonic() < deadline and proc.poll() is None and len(list((out / "shards").glob("0*"))) < 2:
+            time.sleep(0.05)
+    finally:
+        proc.kill()
+        proc.wait()
+    finished = len(list((out / "shards").glob("0*")))
+    assert 2 <= finished < 6
+    again = _cli([*args, "--ray", head.address, "--out", str(out)])
+    assert again.returncode == 0, again.stderr
+    doc = json.loads((out / "dataset.json").read_text())
+    assert doc["skipped"] >= 4 * finished and doc["rendered"] == 24 - doc["skipped"]
+    assert files_of(out) == _local(args, tmp_path / "local")
+
+
+@pytest.mark.parametrize("ray_args, expected", [
+    (["--ray", f"127.0.0.1:{free_port()}"], "no Ray cluster answers there"),
+    (["--ray", "no-port-here"], "not an address of the form HOST:PORT"),
+])
+def test_bad_cluster_options_are_one_line_errors(package, tmp_path, capsys, ray_args, expected):
+    rc = main([*_args(package, "--count", "2"), *ray_args, "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and expected in err, err
+    assert not list((tmp_path / "out" / "labels").glob("*"))
+
+
+def test_ray_not_installed_is_a_one_line_error(package, tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)                  # `import ray` raises ImportError
+    rc = main([*_args(package, "--count", "2"), "--ray", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "Ray is not installed (pip install 'darthand[cluster]'" in err
+

@@ -1,0 +1,158 @@
+"""A throwaway Ray cluster of several nodes on this machine, for the Ray runner's tests and benchmark: a head and
+worker nodes as separate `ray start --block` processes on 127.0.0.1, each with its own CPUs, every port chosen
+free, one temporary folder for the lot.
+
+Several such clusters (other test sessions, a user's own) can run on one machine at once, so nothing here uses
+`ray stop` (it stops every Ray process of the user): a node is stopped by killing exactly its own process tree
+(the `ray start` process, its raylet, GCS and agents, the raylet's workers), found through /proc.
+
+    with LocalRayCluster(nodes=2, cpus=1) as cluster:      # head + one worker node, one CPU each
+        render_dataset(..., cluster={"address": cluster.address})
+        cluster.kill_node(1)                               # a node lost: SIGKILL of its whole tree
+
+`hide=[paths]` starts a worker node in its own mount namespace with an empty tmpfs over those folders (root and
+util-linux `unshare` needed): a node without the shared filesystem, on one machine.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from darthand.errors import InputError
+
+START_TIMEOUT_S = 180.0          # a loaded 2-core machine takes 10-30 s per node
+READY_LINE = "block forever"     # what `ray start --block` prints once its node runs
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 now (the OS's choice)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def can_hide_folders() -> bool:
+    """Whether worker nodes can be started with folders hidden (root, `unshare` and tmpfs mounts allowed)."""
+    if os.geteuid() != 0 or shutil.which("unshare") is None:
+        return False
+    probe = tempfile.mkdtemp(prefix="dh-unshare-")
+    try:
+        return subprocess.run(["unshare", "--mount", "--propagation", "private", "sh", "-c",
+                               f"mount -t tmpfs tmpfs {probe}"], capture_output=True, timeout=30).returncode == 0
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    finally:
+        os.rmdir(probe)
+
+
+class LocalRayCluster:
+    """A head node and `nodes - 1` worker nodes (module docstring); `address` is the head's GCS address."""
+
+    def __init__(self, nodes: int = 2, cpus: int = 1, object_store_mb: int = 200, hide: dict | None = None):
+        self.cpus, self.object_store_mb = int(cpus), int(object_store_mb)
+        self.root = Path(tempfile.mkdtemp(prefix="dh-ray-"))     # short: Ray's socket paths must stay < 108 bytes
+        self.ray = str(Path(sys.executable).with_name("ray"))
+        self.port = free_port()
+        self.address = f"127.0.0.1:{self.port}"
+        self.procs: list[subprocess.Popen | None] = []
+        self._n, self._hide = int(nodes), dict(hide or {})
+
+    def __enter__(self) -> "LocalRayCluster":
+        try:
+            self.start()
+        except BaseException:
+            self.stop()
+            raise
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def start(self) -> "LocalRayCluster":
+        """Start the head, then the worker nodes (worker node k hides the folders of hide[k], if any)."""
+        if not Path(self.ray).is_file():
+            raise InputError(f"{self.ray}: Ray's command line is not installed (pip install 'darthand[cluster]')")
+        self._start_node(["--head", "--port", str(self.port), "--include-dashboard", "false",
+                          "--dashboard-port", str(free_port()), "--temp-dir", str(self.root / "t")])
+        for k in range(1, self._n):
+            self.add_node(self._hide.get(k))
+        return self
+
+    def add_node(self, hide=None) -> int:
+        """Start one more worker node (hide: folders it must not see); returns its number."""
+        return self._start_node(["--address", self.address], hide)
+
+    def _start_node(self, role: list[str], hide=None) -> int:
+        k = len(self.procs)
+        log = self.root / f"node{k}.log"
+        cmd = [self.ray, "start", *role, "--num-cpus", str(self.cpus), "--node-ip-address", "127.0.0.1",
+               "--object-store-memory", str(self.object_store_mb << 20), "--disable-usage-stats",
+               "--include-log-monitor", "false", "--node-manager-port", str(free_port()),
+               "--object-manager-port", str(free_port()), "--dashboard-agent-listen-port", str(free_port()),
+               "--dashboard-agent-grpc-port", str(free_port()), "--runtime-env-agent-port", str(free_port()),
+               "--metrics-export-port", str(free_port()), "--block"]
+        if hide:
+            mounts = " && ".join(f"mount -t tmpfs tmpfs '{Path(p)}'" for p in hide)
+            cmd = ["unshare", "--mount", "--propagation", "private", "sh", "-c",
+                   f"{mounts} && exec " + " ".join(f"'{c}'" for c in cmd)]
+        env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
+        env.pop("RAY_ADDRESS", None)
+        with open(log, "w") as out:
+            proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, process_group=0, env=env,
+                                    cwd=self.root)
+        self.procs.append(proc)
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while READY_LINE not in log.read_text(errors="replace"):
+            if proc.poll() is not None or time.monotonic() > deadline:
+                tail = log.read_text(errors="replace").strip().splitlines()[-3:]
+                raise InputError(f"ray start (node {k}) did not come up: {' | '.join(tail) or 'no output'}")
+            time.sleep(0.2)
+        return k
+
+    def kill_node(self, k: int) -> None:
+        """SIGKILL node k's whole process tree at once (a lost machine) and reap it."""
+        proc = self.procs[k]
+        if proc is None:
+            return
+        for pid in process_tree(proc.pid):
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            pass
+        self.procs[k] = None
+
+    def stop(self) -> None:
+        """Kill every node (workers first) and remove the temporary folder."""
+        for k in reversed(range(len(self.procs))):
+            self.kill_node(k)
+        shutil.rmtree(self.root, ignore_errors=True)
+
+
+def process_tree(pid: int) -> list[int]:
+    """pid and all its descendants (by /proc parent links), parents first."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            children.setdefault(ppid, []).append(int(entry.name))
+    tree, todo = [], [pid]
+    while todo:
+        p = todo.pop(0)
+        tree.append(p)
+        todo += children.get(p, [])
+    return tree

@@ -1,0 +1,64 @@
+"""Worker processes that behave on interruption: Ctrl-C is their parent's to handle (the parent stops them cleanly,
+so no worker prints a KeyboardInterrupt traceback or leaks a semaphore), and a worker never outlives its parent (a
+SIGKILL of the parent ends its workers at once instead of leaving them to finish, or to wait, alone).
+
+    with deaf_to_ctrl_c():                      # workers start while they import: Ctrl-C must not reach them then
+        pool = ProcessPoolExecutor(..., initializer=init_worker)    # or call init_worker() in your initializer
+        futures = [pool.submit(...) ...]        # (spawned workers are started by submit)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+
+PR_SET_PDEATHSIG = 1     # linux/prctl.h
+
+
+WATCHDOG_S = 0.5        # where the kernel cannot be asked, how often a worker looks for its parent
+
+
+def init_worker(parent: int | None = None) -> None:
+    """In a worker process: ignore SIGINT, and end when the parent process (`parent`, default this process's
+    parent) dies: killed by the kernel on Linux, else by a watchdog thread that notices the re-parenting."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = os.getppid() if parent is None else parent
+    if not die_with_parent():
+        import threading
+
+        threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="darthand-watchdog").start()
+    if os.getppid() != parent:        # the parent died before any of this took effect
+        os._exit(1)
+
+
+def _watch_parent(parent: int) -> None:
+    import time
+
+    while os.getppid() == parent:
+        time.sleep(WATCHDOG_S)
+    os._exit(3)
+
+
+def die_with_parent(sig: int = signal.SIGKILL) -> bool:
+    """Ask the kernel to send `sig` to this process when its parent exits; False where prctl is not available.
+    The worker's partial outputs are temporaries (fileio.atomic_path), which the next run removes."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+@contextlib.contextmanager
+def deaf_to_ctrl_c():
+    """Block SIGINT in this thread while worker processes are started: they inherit the blocked signal, so a Ctrl-C
+    arriving while they import (before `init_worker` runs) cannot interrupt them; this process gets it when the
+    block ends."""
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)

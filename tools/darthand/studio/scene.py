@@ -1,0 +1,208 @@
+"""The page's scene (schemas/studio_scene.schema.json) as darthand's own files, and its render.
+
+A scene becomes a one-frame dataset job (schemas/dataset_jobs.schema.json) and renders through the dataset's own
+frame path (dataset/frames.render_job), so `darthand render-dataset BUILD/model/<side>.npz --jobs SCENE.json --size N`
+renders the exported scene with the same pixels as the studio's Render. Joint angles turn into MANO poses with
+model/anatomy.py here, on the server: the page's own conversion (which poses the live view) is checked against it
+by the browser tests.
+"""
+
+from __future__ import annotations
+
+import base64
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+
+from darthand.errors import InputError
+from darthand.model.anatomy import angles_to_axis_angle
+from darthand.model.layout import NUM_JOINTS
+from darthand.studio.build import RequestError, StudioBuild
+
+SCENE_SCHEMA = "studio_scene.schema.json"
+SAMPLES, AA_SHADING = 8, "triangle"          # render-dataset's defaults: the exported jobs render alike
+MAX_POSES = 10_000                           # poses in one exported pose list
+NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+
+
+# ------------------------------------------------------------------------------------------------ checking
+
+
+def check_scene(build: StudioBuild, scene) -> dict:
+    """The scene checked (schema, ids from the build's catalogues, a square camera with a rotation R, lights);
+    RequestError 400/404 naming the field otherwise."""
+    from darthand.render.camera import Camera
+    from darthand.render.lights import load_lighting
+    from darthand.schemas import check_schema
+
+    _checked(lambda: check_schema(scene, SCENE_SCHEMA, "scene"))
+    side = build.side(scene["side"])
+    if "texture" in scene:
+        build.texture(side, scene["texture"])
+    if "accessory" in scene:
+        build.accessory(side, scene["accessory"])
+    camera = scene.get("camera")
+    if camera is not None:
+        if camera["width"] != camera["height"]:
+            raise RequestError(400, f"scene: field 'camera' is {camera['width']}x{camera['height']}: the studio "
+                                    "renders square images, as render-dataset does")
+        _checked(lambda: Camera(np.asarray(camera["K"]), np.asarray(camera["R"]), np.asarray(camera["t"]),
+                                camera["width"], camera["height"]))
+    if scene.get("lights") is not None:
+        _checked(lambda: load_lighting(scene["lights"], "scene: lights"))
+    background = scene.get("background")
+    if isinstance(background, dict) and "image" in background:
+        build.background_file(background["image"])
+    return scene
+
+
+def _checked(check) -> None:
+    try:
+        check()
+    except RequestError:
+        raise
+    except InputError as e:
+        raise RequestError(400, str(e)) from None
+
+
+def scene_pose(build: StudioBuild, scene: dict) -> np.ndarray:
+    """(48,) MANO axis-angle pose of the scene's hand from its joint angles (degrees)."""
+    model = build.side(scene["side"]).model
+    angles = np.deg2rad(np.asarray(scene["angles_deg"], np.float64))
+    return angles_to_axis_angle(model, angles).reshape(3 * NUM_JOINTS)
+
+
+def scene_job(build: StudioBuild, scene: dict, index: int = 0) -> dict:
+    """The checked scene as a dataset job (schemas/dataset_jobs.schema.json)."""
+    job = {"index": index, "side": scene["side"], "pose": [float(x) for x in scene_pose(build, scene)],
+           "texture": scene.get("texture"), "skin_tone_offset": float(scene.get("skin_tone_offset", 0.0)),
+           "accessory": scene.get("accessory", "none"), "camera": scene.get("camera") or "three_quarter",
+           "lights": scene.get("lights"), "background": _job_background(build, scene.get("background"))}
+    return {k: v for k, v in job.items() if v is not None}
+
+
+def _job_background(build: StudioBuild, background):
+    if not background:
+        return None
+    if "image" in background:
+        path = build.background_file(background["image"])
+        return {"folder": str(path.parent), "files": [path.name], "builtin": 0}
+    return dict(background)
+
+
+# ------------------------------------------------------------------------------------------------ rendering
+
+
+def render_scene(build: StudioBuild, scene: dict) -> dict:
+    """Render the scene as its dataset job would be: {'image', 'mask' (PNG bytes, base64), 'labels', 'job',
+    'seconds'}."""
+    from darthand.dataset.frames import render_job
+    from darthand.render.image import encode_mask8
+    from darthand.render.api import Renderer
+
+    check_scene(build, scene)
+    job = scene_job(build, scene)
+    side = build.side(scene["side"])
+    size = int(scene["camera"]["width"]) if scene.get("camera") else 512
+    t = time.perf_counter()
+    with side.lock:
+        if side.renderer is None:
+            side.renderer = Renderer(side.source)
+        try:
+            frame, background = render_job(side.renderer, job, {"size": size, "samples": SAMPLES,
+                                                           "aa_shading": AA_SHADING})
+        except InputError as e:
+            raise RequestError(400, f"render: {e}") from None
+    labels = frame.labels
+    if background is not None:
+        labels["render"] = {**labels.get("render", {}), "background": background}
+    return {"image": _png64(frame.rgba), "mask": _png64(encode_mask8(frame.alpha), srgb=False), "labels": labels,
+            "job": job, "size": size, "seconds": round(time.perf_counter() - t, 3)}
+
+
+def _png64(pixels: np.ndarray, srgb: bool = True) -> str:
+    """Base64 PNG bytes of (H, W[, C]) uint8 pixels (render/image.write_png's encoding)."""
+    import tempfile
+
+    from darthand.render.image import write_png
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "frame.png"
+        write_png(path, pixels, srgb=srgb)
+        return base64.b64encode(path.read_bytes()).decode()
+
+
+# ------------------------------------------------------------------------------------------------ exports
+
+
+def pose_document(pose: np.ndarray) -> dict:
+    """A pose file (schemas/pose.schema.json): one or more MANO vectors relative to the flat hand."""
+    pose = np.asarray(pose, np.float64)
+    vectors = pose.reshape(-1, 3 * NUM_JOINTS).tolist()
+    return {"pose": vectors[0] if pose.ndim == 1 else vectors, "flat_hand_mean": True}
+
+
+def right_hand_poses(build: StudioBuild, angles_deg) -> np.ndarray:
+    """(N, 48) right-hand MANO poses of joint angles (N, 16, 3) degrees: the reference poses `render-dataset
+    --poses` samples for right hands (and mirrors for left frames). The angles are mirror-symmetric
+    (model/anatomy.py), so a pose authored on a left hand gives its right-hand twin."""
+    from darthand.model.mirror import mirror_pose
+
+    angles = np.deg2rad(np.asarray(angles_deg, np.float64))
+    if "right" in build.sides:
+        return angles_to_axis_angle(build.sides["right"].model, angles).reshape(-1, 3 * NUM_JOINTS)
+    left = angles_to_axis_angle(build.sides["left"].model, angles).reshape(-1, 3 * NUM_JOINTS)
+    return mirror_pose(left)
+
+
+def check_pose_list(doc) -> list:
+    """The 'poses' list of an export request: 1..MAX_POSES arrays of 16 x 3 finite angles (degrees)."""
+    poses = doc.get("poses") if isinstance(doc, dict) else None
+    if not isinstance(poses, list) or not 1 <= len(poses) <= MAX_POSES:
+        raise RequestError(400, f"poses: field 'poses' must be a list of 1..{MAX_POSES} joint-angle arrays")
+    a = None
+    try:
+        a = np.asarray(poses, np.float64)
+    except (TypeError, ValueError):
+        pass
+    if a is None or a.shape != (len(poses), NUM_JOINTS, 3) or not np.isfinite(a).all() or np.abs(a).max() > 180:
+        raise RequestError(400, "poses: field 'poses' must hold arrays of 16 x 3 finite angles within +-180 degrees")
+    return poses
+
+
+def export_name(doc, default: str) -> str:
+    name = doc.get("name", default) if isinstance(doc, dict) else default
+    if not isinstance(name, str) or not NAME.match(name):
+        raise RequestError(400, f"export: field 'name' {name!r} must match {NAME.pattern}")
+    return name
+
+
+def write_export(build: StudioBuild, kind: str, name: str, doc) -> Path:
+    """Write an export atomically as BUILD/studio/<kind>/<name>.json (kind: poses, pose_lists, scenes); returns its
+    path. The document is checked against its schema first."""
+    from darthand.fileio import write_json
+    from darthand.schemas import check_schema
+
+    schema = {"poses": "pose.schema.json", "pose_lists": "pose.schema.json",
+              "scenes": "dataset_jobs.schema.json"}[kind]
+    check_schema(doc, schema, f"{kind} export")
+    path = build.out_dir / kind / f"{name}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_json(path, doc)
+    return path
+
+
+def scene_export(build: StudioBuild, scene: dict, path_hint: str) -> dict:
+    """The one-frame jobs file of a scene, with how to render it."""
+    from darthand.dataset.jobs import check_jobs
+
+    job = scene_job(build, scene)
+    size = int(scene["camera"]["width"]) if scene.get("camera") else 512
+    model = build.side(scene["side"]).source.source
+    doc = {"frames": [job], "studio": {
+        "size": size, "samples": SAMPLES, "aa_shading": AA_SHADING,
+        "command": f"darthand render-dataset {model} --jobs {path_hint} --size {size} --out OUT"}}
+    check_jobs(doc, "scene export")
+    return doc

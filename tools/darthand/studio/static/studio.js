@@ -1,0 +1,750 @@
+// darthand studio: the page. It shows the build's glTF package with three.js and poses it from JavaScript as
+// darthand poses the model (rig.js): joint-node rotations from the joint angles, corrective blend-shape weights from
+// the MANO rotations. The server (tools/darthand/studio/server.py) serves the package, thumbnails, accessories and
+// backgrounds, and renders, frames and exports scenes. `window.studio` is the page's interface for its tests.
+import * as THREE from "three";
+import { GLTFLoader } from "three/addons/loaders/GLTFLoader.js";
+import { OrbitControls } from "three/addons/controls/OrbitControls.js";
+import * as R from "./rig.js";
+
+const $ = (id) => document.getElementById(id);
+const PI = Math.PI;
+const OPENPOSE_BONES = [[0, 1], [1, 2], [2, 3], [3, 4], [0, 5], [5, 6], [6, 7], [7, 8], [0, 9], [9, 10], [10, 11],
+  [11, 12], [0, 13], [13, 14], [14, 15], [15, 16], [0, 17], [17, 18], [18, 19], [19, 20]];
+const FINGER_COLOURS = ["#ff5a5a", "#ffb14a", "#f5e04a", "#5ad65a", "#4aa8ff"];
+
+const state = {
+  side: null, angles: R.zeroAngles(), texture: null, skinTone: 0, accessory: "none",
+  ambient: { color: [1, 1, 1], intensity: 0.25 }, key: { color: [1, 1, 1], intensity: 0.9, azimuth: -30, elevation: 35 },
+  background: { kind: "none" }, renderSize: 512, poseList: [],
+};
+const history = { undo: [], redo: [], committed: null };
+const anim = { playing: false, phase: 0, from: null, to: null, speed: 0.5, last: 0 };
+const metrics = { usable_ms: null, redraw_ms: [], draw_ms: [], texture_ms: [], render_ms: [] };
+const pending = new Set();
+let catalogue, renderer, scene, camera, controls, ambient, key;
+let hand = null;                     // the shown side: {side, root, meshes, bones, rig, table, morph, variants, ...}
+const hands = {};                    // side -> promise of its loaded hand
+let accessory = null;                // {id, object, skinned}
+let drawRequested = false, inputTime = null;
+const skinTone = { value: 0 };
+const loader = new GLTFLoader();
+
+// -------------------------------------------------------------------------------------------------- start-up
+
+async function start() {
+  catalogue = await getJSON("/api/catalogue");
+  const side = catalogue.sides[0];
+  // the package, the rig and the first camera load while the panels are built
+  const loading = loadHand(side);
+  const framing = postJSON("/api/camera", { side, angles_deg: state.angles, view: "three_quarter", size: state.renderSize });
+  loading.catch(() => {});
+  framing.catch(() => {});
+  setupThree();
+  buildPanels();
+  await showSide(side);
+  setCamera(await framing);
+  if (catalogue.default_texture) await selectTexture(catalogue.default_texture);
+  commit();
+  draw();
+  metrics.usable_ms = performance.now();
+  setStatus(`ready in ${(metrics.usable_ms / 1000).toFixed(2)} s`);
+  requestAnimationFrame(loop);
+}
+
+function setupThree() {
+  const canvas = $("view");
+  renderer = new THREE.WebGLRenderer({ canvas, antialias: true });
+  renderer.setPixelRatio(1);
+  renderer.setSize(canvas.width, canvas.height, false);
+  renderer.outputColorSpace = THREE.SRGBColorSpace;
+  renderer.setClearColor(0x202326, 1);
+  scene = new THREE.Scene();
+  camera = new THREE.PerspectiveCamera(30, 1, 0.005, 20);
+  ambient = new THREE.AmbientLight(0xffffff, 1);
+  key = new THREE.DirectionalLight(0xffffff, 1);
+  scene.add(ambient, key, key.target);
+}
+
+// -------------------------------------------------------------------------------------------------- the hand
+
+/** The side's package, rig and corrective table, loaded once (the promise is kept, so concurrent callers share it). */
+function loadHand(side) {
+  if (!hands[side]) hands[side] = fetchHand(side);
+  return hands[side];
+}
+
+async function fetchHand(side) {
+  const [gltf, rig] = await Promise.all([loader.loadAsync(`/gltf/${side}/${side}.gltf`), getJSON(`/api/rig/${side}`)]);
+  const extras = gltf.parser.json.asset?.extras?.darthand || {};
+  const meshes = [], bones = {};
+  gltf.scene.traverse((o) => {
+    if (o.isSkinnedMesh) { meshes.push(o); o.frustumCulled = false; }
+    if (o.isBone) bones[o.name] = o;
+  });
+  const variants = (gltf.parser.json.extensions?.KHR_materials_variants?.variants || []).map((v) => v.name);
+  const table = extras.blend_shapes?.shapes || [];
+  const h = { side, gltf, root: gltf.scene, meshes, bones, rig, table, variants, materials: new Map(),
+    unparsed: table.filter((s) => !/^pose_[a-z]+[0-9]_r[0-2][0-2]$/.test(s.channel)).length };
+  for (const m of meshes) prepareSkin(m.material);
+  return h;
+}
+
+async function showSide(side) {
+  const h = await loadHand(side);
+  if (hand) scene.remove(hand.root);
+  hand = h;
+  state.side = side;
+  scene.add(h.root);
+  $("side-label").textContent = `${side} hand`;
+  $("mirror").textContent = `mirror to ${side === "right" ? "left" : "right"}`;
+  $("mirror").disabled = catalogue.sides.length < 2;
+  fillGestures();
+  if (state.texture) await selectTexture(state.texture);
+  if (state.accessory !== "none") await selectAccessory(state.accessory);
+  applyPose();
+  if (h.unparsed) setStatus(`${h.unparsed} corrective shapes are not per-entry channels: the live view shows them at 0`);
+}
+
+/** Pose the shown hand (and a glove) from state.angles: bone rotations and corrective weights. */
+function applyPose() {
+  if (!hand) return;
+  const rotations = R.manoRotations(hand.rig, state.angles);
+  const quats = R.nodeQuaternions(hand.rig, rotations);
+  hand.rig.joints.forEach((name, i) => hand.bones[name]?.quaternion.fromArray(quats[i]));
+  const weights = R.correctiveWeights(hand.rig, hand.table, rotations);
+  for (const mesh of morphMeshes()) setMorphWeights(mesh, hand.table, weights);
+  requestDraw();
+}
+
+function morphMeshes() {
+  const out = hand.meshes.slice();
+  if (accessory?.skinned) out.push(...accessory.meshes);
+  return out.filter((m) => m.morphTargetInfluences);
+}
+
+function setMorphWeights(mesh, table, weights) {
+  const dict = mesh.morphTargetDictionary || {};
+  const infl = mesh.morphTargetInfluences;
+  for (let k = 0; k < table.length; k++) {
+    const i = dict[table[k].name] ?? k;
+    if (i < infl.length) infl[i] = weights[k];
+  }
+}
+
+function setAngles(angles, { record = true } = {}) {
+  state.angles = angles.map((a) => a.slice());
+  syncSliders();
+  applyPose();
+  if (record) commit();
+}
+
+// -------------------------------------------------------------------------------------------------- materials
+
+/** Skin-tone offset as the renderer applies it: added to the sRGB albedo, clamped, decoded (the texture unit has
+ * already decoded the sRGB texel, so it is encoded again here). */
+function prepareSkin(material) {
+  if (!material || material.userData.skinTone) return;
+  material.userData.skinTone = true;
+  material.onBeforeCompile = (shader) => {
+    shader.uniforms.skinToneOffset = skinTone;
+    shader.fragmentShader = "uniform float skinToneOffset;\n" + shader.fragmentShader.replace("#include <map_fragment>", `
+      #ifdef USE_MAP
+        vec4 sampledDiffuseColor = texture2D( map, vMapUv );
+        vec3 skinSrgb = clamp( sRGBTransferOETF( vec4( sampledDiffuseColor.rgb, 1.0 ) ).rgb + skinToneOffset, 0.0, 1.0 );
+        sampledDiffuseColor.rgb = sRGBTransferEOTF( vec4( skinSrgb, 1.0 ) ).rgb;
+        diffuseColor *= sampledDiffuseColor;
+      #endif`);
+  };
+  material.customProgramCacheKey = () => "darthand-skin-tone";
+}
+
+async function selectTexture(id) {
+  const t0 = performance.now();
+  state.texture = id;
+  markSelected("textures", id);
+  const v = hand.variants.indexOf(id);
+  if (v >= 0) {
+    await track((async () => {
+      for (const mesh of hand.meshes) {
+        const mappings = mesh.userData.gltfExtensions?.KHR_materials_variants?.mappings || [];
+        const mapping = mappings.find((m) => m.variants.includes(v));
+        if (!mapping) continue;
+        let material = hand.materials.get(mapping.material);
+        if (!material) {
+          material = await hand.gltf.parser.getDependency("material", mapping.material);
+          prepareSkin(material);
+          hand.materials.set(mapping.material, material);
+        }
+        mesh.material = material;
+      }
+    })());
+  }
+  requestDraw();
+  metrics.texture_ms.push(performance.now() - t0);
+}
+
+// -------------------------------------------------------------------------------------------------- accessories
+
+async function selectAccessory(id) {
+  state.accessory = id;
+  markSelected("accessories", id);
+  if (accessory) { accessory.object.removeFromParent(); accessory = null; }
+  if (id === "none") { applyPose(); return; }
+  const side = state.side;
+  const gltf = await track(loader.loadAsync(`/media/accessory/${side}/${id}.glb`));
+  if (state.accessory !== id || state.side !== side) return;
+  let node = null;
+  gltf.scene.traverse((o) => { if (!node && o.userData?.darthand?.accessory === id) node = o; });
+  if (!node) throw new Error(`accessory ${id}: no node in its glTF`);
+  const meshes = [];
+  node.traverse((o) => { if (o.isMesh) { meshes.push(o); o.frustumCulled = false; } });
+  const skinned = meshes.some((m) => m.isSkinnedMesh);
+  if (skinned) {
+    // A glove: bind it to the hand's skeleton (same joints, same bind matrices) and drive its correctives.
+    const handMesh = hand.meshes[0];
+    for (const m of meshes) if (m.isSkinnedMesh) m.bind(handMesh.skeleton, handMesh.bindMatrix);
+    node.removeFromParent();
+    hand.root.add(node);
+  } else {
+    // A rigid accessory: its mesh sits in its joint's bone frame, so it goes under the hand's joint node as it is.
+    const parent = node.parent;
+    node.removeFromParent();
+    hand.bones[parent.name].add(node);
+  }
+  accessory = { id, object: node, skinned, meshes };
+  applyPose();
+}
+
+// -------------------------------------------------------------------------------------------------- lights
+
+function updateLights() {
+  const a = state.ambient, k = state.key;
+  // darthand's intensities have pi folded in (schemas/lights.schema.json); three.js's Lambert term divides by pi.
+  ambient.color.setRGB(...a.color);
+  ambient.intensity = a.intensity * PI;
+  key.color.setRGB(...k.color);
+  key.intensity = k.intensity * PI;
+  const d = keyDirectionCamera();
+  camera.updateMatrixWorld();
+  // camera frame (OpenCV: x right, y down, z forward) -> three.js camera axes (x right, y up, z back) -> world
+  const world = new THREE.Vector3(d[0], -d[1], -d[2]).applyQuaternion(camera.quaternion);
+  key.target.position.copy(controls ? controls.target : new THREE.Vector3());
+  key.position.copy(key.target.position).addScaledVector(world, -1);
+  key.target.updateMatrixWorld();
+}
+
+/** The key light's travel direction in the camera frame, from azimuth (toward the image's right) and elevation. */
+function keyDirectionCamera() {
+  const az = state.key.azimuth * PI / 180, el = state.key.elevation * PI / 180;
+  const toward = [Math.sin(az) * Math.cos(el), -Math.sin(el), -Math.cos(az) * Math.cos(el)];
+  return toward.map((x) => -x);
+}
+
+function lightsDoc() {
+  const r = (v) => v.map((x) => +x.toFixed(5));
+  return {
+    ambient: { color: r(state.ambient.color), intensity: +state.ambient.intensity },
+    lights: [{ type: "directional", direction: r(keyDirectionCamera()), color: r(state.key.color),
+      intensity: +state.key.intensity, shadows: true, frame: "camera" }],
+  };
+}
+
+// -------------------------------------------------------------------------------------------------- background
+
+const backgroundTextures = {};
+async function updateBackground() {
+  const bg = state.background;
+  if (bg.kind === "color") scene.background = new THREE.Color().setRGB(...bg.color);
+  else if (bg.kind === "builtin" || bg.kind === "image") {
+    const url = `/media/background/${bg.kind}/${bg.kind === "builtin" ? bg.builtin : bg.image}.png`;
+    if (!backgroundTextures[url]) {
+      const tex = await track(new THREE.TextureLoader().loadAsync(url));
+      tex.colorSpace = THREE.SRGBColorSpace;
+      backgroundTextures[url] = tex;
+    }
+    scene.background = backgroundTextures[url];
+  } else scene.background = null;
+  requestDraw();
+}
+
+function backgroundDoc() {
+  const bg = state.background;
+  if (bg.kind === "color") return { color: bg.color.map((x) => +x.toFixed(5)) };
+  if (bg.kind === "builtin") return { builtin: bg.builtin };
+  if (bg.kind === "image") return { image: bg.image };
+  return null;
+}
+
+// -------------------------------------------------------------------------------------------------- camera
+
+async function setView(view) {
+  const doc = await postJSON("/api/camera", { side: state.side, angles_deg: state.angles, view, size: state.renderSize,
+    ...(state.accessory !== "none" ? { accessory: state.accessory } : {}) });
+  setCamera(doc);
+}
+
+/** Place the three.js camera where a darthand camera (K, R world -> OpenCV camera, t) is. */
+function setCamera(doc) {
+  const Rm = doc.R, t = doc.t;
+  const centre = [0, 1, 2].map((j) => -(Rm[0][j] * t[0] + Rm[1][j] * t[1] + Rm[2][j] * t[2]));
+  const x = new THREE.Vector3(...Rm[0]), y = new THREE.Vector3(...Rm[1]).negate(), z = new THREE.Vector3(...Rm[2]).negate();
+  camera.position.fromArray(centre);
+  camera.quaternion.setFromRotationMatrix(new THREE.Matrix4().makeBasis(x, y, z));
+  camera.up.copy(y);
+  camera.fov = 2 * Math.atan(0.5 * doc.height / doc.K[1][1]) * 180 / PI;
+  camera.updateProjectionMatrix();
+  if (controls) controls.dispose();
+  controls = new OrbitControls(camera, renderer.domElement);     // made again: it keeps the camera's up from here
+  controls.target.fromArray(doc.target);
+  controls.enableDamping = false;
+  controls.addEventListener("change", requestDraw);
+  controls.update();
+  requestDraw();
+}
+
+/** The live camera as a darthand camera document for a square image of `size` pixels. */
+function cameraDoc(size) {
+  camera.updateMatrixWorld();
+  const e = camera.matrixWorldInverse.elements;      // column-major; rows: camera x, y, z axes (three.js)
+  const s = [1, -1, -1];                             // three.js camera axes -> OpenCV's (y down, z forward)
+  const Rm = [0, 1, 2].map((i) => [0, 1, 2].map((j) => s[i] * e[j * 4 + i]));
+  const t = [0, 1, 2].map((i) => s[i] * e[12 + i]);
+  const f = 0.5 * size / Math.tan(camera.fov * PI / 360);
+  return { width: size, height: size, K: [[f, 0, size / 2], [0, f, size / 2], [0, 0, 1]], R: Rm, t };
+}
+
+// -------------------------------------------------------------------------------------------------- scene, render
+
+function sceneDoc(extra = {}) {
+  const doc = { side: state.side, angles_deg: state.angles, skin_tone_offset: +state.skinTone,
+    accessory: state.accessory, camera: cameraDoc(state.renderSize), lights: lightsDoc(), background: backgroundDoc(),
+    ...extra };
+  if (state.texture) doc.texture = state.texture;
+  return doc;
+}
+
+async function renderReference() {
+  setStatus("rendering...");
+  const t0 = performance.now();
+  const result = await postJSON("/api/render", sceneDoc());
+  await showRender(result);
+  metrics.render_ms.push(performance.now() - t0);
+  setStatus(`rendered ${result.size} px in ${result.seconds.toFixed(2)} s (round trip ${((performance.now() - t0) / 1000).toFixed(2)} s)`);
+  return result;
+}
+
+async function showRender(result) {
+  const image = await loadImage(`data:image/png;base64,${result.image}`);
+  $("render-mask").src = `data:image/png;base64,${result.mask}`;
+  const canvas = $("render-image"), ctx = canvas.getContext("2d");
+  ctx.clearRect(0, 0, canvas.width, canvas.height);
+  ctx.drawImage(image, 0, 0, canvas.width, canvas.height);
+  const labels = result.labels;
+  if ($("show-keypoints").checked && labels.keypoints_2d) {
+    const k = canvas.width / result.size, p = labels.keypoints_2d;
+    ctx.lineWidth = 2;
+    OPENPOSE_BONES.forEach(([a, b], n) => {
+      ctx.strokeStyle = FINGER_COLOURS[Math.floor(n / 4)];
+      ctx.beginPath(); ctx.moveTo(p[a][0] * k, p[a][1] * k); ctx.lineTo(p[b][0] * k, p[b][1] * k); ctx.stroke();
+    });
+    p.forEach(([u, v], i) => {
+      ctx.fillStyle = labels.visibility?.[i] ? "#ffffff" : "#777777";
+      ctx.beginPath(); ctx.arc(u * k, v * k, 3, 0, 2 * PI); ctx.fill();
+    });
+  }
+  const shown = { ...labels };
+  for (const big of ["keypoints_3d_world", "joints_3d_world"]) delete shown[big];
+  $("render-labels").textContent = JSON.stringify(shown, null, 1);
+  state.lastRender = result;
+}
+
+// -------------------------------------------------------------------------------------------------- exports
+
+async function exportKind(kind, body) {
+  const result = await postJSON(`/api/export/${kind}`, body);
+  const blob = new Blob([JSON.stringify(result.document, null, 2)], { type: "application/json" });
+  const name = result.path.split("/").pop();
+  $("export-result").innerHTML = "";
+  const a = Object.assign(document.createElement("a"), { href: URL.createObjectURL(blob), download: name,
+    textContent: `download ${name}` });
+  $("export-result").append(`written ${result.path} `, a);
+  return result;
+}
+
+// -------------------------------------------------------------------------------------------------- undo, mirror
+
+function snapshot() { return state.angles.map((a) => a.slice()); }
+
+function commit() {
+  const now = snapshot();
+  if (history.committed && JSON.stringify(history.committed) === JSON.stringify(now)) return;
+  if (history.committed) history.undo.push(history.committed);
+  history.committed = now;
+  history.redo = [];
+  updateUndoButtons();
+}
+
+function undo() {
+  if (!history.undo.length) return;
+  history.redo.push(snapshot());
+  history.committed = history.undo.pop();
+  setAngles(history.committed, { record: false });
+  updateUndoButtons();
+}
+
+function redo() {
+  if (!history.redo.length) return;
+  history.undo.push(snapshot());
+  history.committed = history.redo.pop();
+  setAngles(history.committed, { record: false });
+  updateUndoButtons();
+}
+
+function updateUndoButtons() {
+  $("undo").disabled = !history.undo.length;
+  $("redo").disabled = !history.redo.length;
+}
+
+/** The other hand in the mirror-image pose: the anatomical angles are mirror-symmetric (model/anatomy.py), so
+ * they carry over unchanged. */
+async function mirror() {
+  const other = state.side === "right" ? "left" : "right";
+  if (!catalogue.sides.includes(other)) return;
+  await showSide(other);
+  await setView("three_quarter");
+}
+
+// -------------------------------------------------------------------------------------------------- animation
+
+function startAnimation() {
+  const g = hand.rig.gestures;
+  anim.from = R.manoRotations(hand.rig, g[$("anim-from").value]);
+  anim.to = R.manoRotations(hand.rig, g[$("anim-to").value]);
+  anim.playing = true;
+  anim.last = performance.now();
+}
+
+function animationPose(t) {
+  if (!anim.from) {
+    const g = hand.rig.gestures;
+    anim.from = R.manoRotations(hand.rig, g[$("anim-from").value]);
+    anim.to = R.manoRotations(hand.rig, g[$("anim-to").value]);
+  }
+  $("anim-t").value = t;
+  $("anim-t").nextElementSibling.value = (+t).toFixed(2);
+  setAngles(R.anglesOf(hand.rig, R.slerpRotations(anim.from, anim.to, t)), { record: false });
+}
+
+function loop(now) {
+  if (anim.playing) {
+    anim.phase = (anim.phase + (now - anim.last) / 1000 * anim.speed) % 2;
+    anim.last = now;
+    animationPose(1 - Math.abs(1 - anim.phase));            // there and back
+  }
+  if (drawRequested) draw();
+  requestAnimationFrame(loop);
+}
+
+// -------------------------------------------------------------------------------------------------- drawing
+
+function requestDraw() { drawRequested = true; }
+
+function draw() {
+  drawRequested = false;
+  const t0 = performance.now();
+  updateLights();
+  renderer.render(scene, camera);
+  if (inputTime !== null && window.studio.measure) {
+    const gl = renderer.getContext();
+    gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));   // wait for the frame to be drawn
+    const now = performance.now();
+    metrics.redraw_ms.push(now - inputTime);      // input event to finished frame (includes waiting for the frame)
+    metrics.draw_ms.push(now - t0);               // the draw itself
+  }
+  inputTime = null;
+}
+
+/** The live view's silhouette at the live camera: (size x size) 0/1 bytes, rows top to bottom, base64. */
+function silhouette(size) {
+  const target = new THREE.WebGLRenderTarget(size, size);
+  const background = scene.background;
+  scene.background = new THREE.Color(0, 0, 0);
+  scene.overrideMaterial = new THREE.MeshBasicMaterial({ color: 0xffffff, side: THREE.DoubleSide });
+  renderer.setRenderTarget(target);
+  renderer.render(scene, camera);
+  const pixels = new Uint8Array(4 * size * size);
+  renderer.readRenderTargetPixels(target, 0, 0, size, size, pixels);
+  renderer.setRenderTarget(null);
+  scene.overrideMaterial = null;
+  scene.background = background;
+  target.dispose();
+  const mask = new Uint8Array(size * size);
+  for (let r = 0; r < size; r++) for (let c = 0; c < size; c++) {
+    mask[r * size + c] = pixels[4 * ((size - 1 - r) * size + c)] > 127 ? 1 : 0;
+  }
+  requestDraw();
+  return bytesToBase64(mask);
+}
+
+/** Vertex positions three.js computes for the hand primitive (morph targets, then skinning) and their model
+ * vertex ids (_VERTEX_ID). */
+function livePositions() {
+  scene.updateMatrixWorld(true);
+  const mesh = hand.meshes.find((m) => m.geometry.attributes._vertex_id && m.geometry.attributes.position.count) || hand.meshes[0];
+  mesh.skeleton.update();
+  const n = mesh.geometry.attributes.position.count, v = new THREE.Vector3(), out = new Array(3 * n);
+  for (let i = 0; i < n; i++) {
+    mesh.getVertexPosition(i, v).applyMatrix4(mesh.matrixWorld);
+    out[3 * i] = v.x; out[3 * i + 1] = v.y; out[3 * i + 2] = v.z;
+  }
+  const ids = mesh.geometry.attributes._vertex_id;
+  return { positions: out, ids: ids ? Array.from(ids.array) : null };
+}
+
+// -------------------------------------------------------------------------------------------------- panels
+
+function buildPanels() {
+  buildTextures();
+  buildAccessories();
+  buildLights();
+  buildBackground();
+  for (const view of catalogue.views) addButton($("views"), view, () => setView(view));
+  $("render-size").addEventListener("change", (e) => { state.renderSize = +e.target.value; });
+  buildSliders();
+  $("undo").addEventListener("click", undo);
+  $("redo").addEventListener("click", redo);
+  $("mirror").addEventListener("click", () => guarded(mirror()));
+  $("reset").addEventListener("click", () => setAngles(R.zeroAngles()));
+  document.addEventListener("keydown", (e) => {
+    if (!(e.ctrlKey || e.metaKey)) return;
+    if (e.key === "z") { e.preventDefault(); undo(); }
+    if (e.key === "y") { e.preventDefault(); redo(); }
+  });
+  $("anim-play").addEventListener("click", startAnimation);
+  $("anim-pause").addEventListener("click", () => { anim.playing = false; commit(); });
+  bindRange("anim-speed", (v) => { anim.speed = v; });
+  bindRange("anim-t", (v) => { anim.playing = false; animationPose(v); }, () => commit());
+  for (const id of ["anim-from", "anim-to"]) $(id).addEventListener("change", () => { anim.from = null; });
+  $("export-pose").addEventListener("click", () => guarded(exportKind("pose", { side: state.side, angles_deg: state.angles })));
+  $("add-pose").addEventListener("click", () => { state.poseList.push(snapshot()); $("pose-count").textContent = state.poseList.length; });
+  $("export-poses").addEventListener("click", () => state.poseList.length && guarded(exportKind("poses", { poses: state.poseList })));
+  $("export-scene").addEventListener("click", () => guarded(exportKind("scene", sceneDoc())));
+  $("render").addEventListener("click", () => guarded(renderReference()));
+  $("show-keypoints").addEventListener("change", () => state.lastRender && showRender(state.lastRender));
+}
+
+function buildTextures() {
+  const cats = [...new Set(catalogue.textures.map((t) => t.category))].sort();
+  const tones = [...new Set(catalogue.textures.map((t) => t.tone))].sort();
+  for (const c of cats) $("tex-category").append(new Option(c, c));
+  for (const t of tones) $("tex-tone").append(new Option(t, t));
+  const grid = $("textures");
+  for (const t of catalogue.textures) {
+    const fig = figure(`/media/texture/${catalogue.sides[0]}/${t.id}.png`, t.id, () => guarded(selectTexture(t.id)));
+    fig.dataset.category = t.category;
+    fig.dataset.tone = t.tone;
+    grid.append(fig);
+  }
+  const filter = () => {
+    const c = $("tex-category").value, tone = $("tex-tone").value;
+    for (const fig of grid.children) fig.hidden = (c && fig.dataset.category !== c) || (tone && fig.dataset.tone !== tone);
+  };
+  $("tex-category").addEventListener("change", filter);
+  $("tex-tone").addEventListener("change", filter);
+  bindRange("skin-tone", (v) => { state.skinTone = v; skinTone.value = v; requestDraw(); });
+}
+
+function buildAccessories() {
+  const grid = $("accessories");
+  const none = figure(null, "none", () => guarded(selectAccessory("none")));
+  none.classList.add("selected");
+  grid.append(none);
+  for (const a of catalogue.accessories) {
+    grid.append(figure(`/media/accessory/${catalogue.sides[0]}/${a.id}.png`, a.id, () => guarded(selectAccessory(a.id))));
+  }
+}
+
+function figure(src, id, onClick) {
+  const fig = document.createElement("figure");
+  fig.dataset.id = id;
+  fig.title = id;
+  const img = document.createElement(src ? "img" : "div");
+  img.className = "thumb";
+  if (src) Object.assign(img, { loading: "lazy", alt: id, src });
+  fig.append(img, Object.assign(document.createElement("figcaption"), { textContent: id }));
+  fig.addEventListener("click", onClick);
+  return fig;
+}
+
+function markSelected(gridId, id) {
+  for (const fig of $(gridId).children) fig.classList.toggle("selected", fig.dataset.id === id);
+}
+
+function buildLights() {
+  for (const [which, target] of [["ambient", state.ambient], ["key", state.key]]) {
+    const select = $(`${which}-palette`), input = $(`${which}-color`);
+    select.append(new Option("white", "1,1,1"));
+    for (const p of catalogue.palette) select.append(new Option(`${p.name} (${p.kelvin} K)`, p.rgb.join(",")));
+    const setColour = (rgb) => { target.color = rgb; input.value = "#" + new THREE.Color().setRGB(...rgb).getHexString(); requestDraw(); };
+    select.addEventListener("change", () => setColour(select.value.split(",").map(Number)));
+    input.addEventListener("input", () => { const c = new THREE.Color(input.value); target.color = [c.r, c.g, c.b]; requestDraw(); });
+    setColour(target.color);
+    bindRange(`${which}-intensity`, (v) => { target.intensity = v; requestDraw(); });
+  }
+  bindRange("key-azimuth", (v) => { state.key.azimuth = v; requestDraw(); });
+  bindRange("key-elevation", (v) => { state.key.elevation = v; requestDraw(); });
+}
+
+function buildBackground() {
+  for (let k = 0; k < catalogue.backgrounds.builtin; k++) $("bg-builtin").append(new Option(`built-in ${k}`, k));
+  catalogue.backgrounds.images.forEach((name, k) => $("bg-image").append(new Option(name, k)));
+  const update = () => {
+    const kind = document.querySelector("input[name=bg]:checked").value;
+    const c = new THREE.Color($("bg-color").value);
+    state.background = kind === "color" ? { kind, color: [c.r, c.g, c.b] }
+      : kind === "builtin" ? { kind, builtin: +$("bg-builtin").value }
+        : kind === "image" && catalogue.backgrounds.images.length ? { kind, image: +$("bg-image").value } : { kind: "none" };
+    guarded(updateBackground());
+  };
+  for (const el of document.querySelectorAll("input[name=bg]")) el.addEventListener("change", update);
+  for (const id of ["bg-color", "bg-builtin", "bg-image"]) $(id).addEventListener("input", update);
+}
+
+function buildSliders() {
+  const box = $("sliders");
+  const head = document.createElement("div");
+  head.className = "joint";
+  head.innerHTML = "<span></span><span class='axis-head'>twist</span><span class='axis-head'>spread</span><span class='axis-head'>bend</span>";
+  box.append(head);
+  for (let j = 0; j < R.NUM_JOINTS; j++) {
+    const row = document.createElement("div");
+    row.className = "joint";
+    row.append(Object.assign(document.createElement("span"), { className: "joint-name" }));
+    for (let a = 0; a < 3; a++) {
+      const input = Object.assign(document.createElement("input"), { type: "range", step: "0.5", value: "0" });
+      input.id = `slider-${j}-${a}`;
+      input.dataset.joint = j;
+      input.dataset.axis = a;
+      input.addEventListener("input", () => {
+        inputTime = performance.now();
+        anim.playing = false;
+        state.angles[j][a] = +input.value;
+        input.title = `${input.value} deg`;
+        applyPose();
+      });
+      input.addEventListener("change", commit);
+      row.append(input);
+    }
+    box.append(row);
+  }
+}
+
+/** Slider ranges, names and values for the shown hand's rig. */
+function syncSliders() {
+  const rig = hand.rig;
+  document.querySelectorAll(".joint-name").forEach((el, j) => { el.textContent = rig.joints[j]; });
+  for (let j = 0; j < R.NUM_JOINTS; j++) for (let a = 0; a < 3; a++) {
+    const input = $(`slider-${j}-${a}`);
+    input.min = rig.limits_deg[j][a][0];
+    input.max = rig.limits_deg[j][a][1];
+    input.value = state.angles[j][a];
+    input.title = `${rig.joints[j]} ${rig.axes[a]} ${(+state.angles[j][a]).toFixed(1)} deg`;
+  }
+}
+
+function fillGestures() {
+  const box = $("gestures");
+  box.innerHTML = "";
+  const names = hand.rig.gesture_order;
+  for (const name of names) addButton(box, name, () => { anim.playing = false; setAngles(hand.rig.gestures[name]); });
+  for (const id of ["anim-from", "anim-to"]) {
+    const select = $(id), keep = select.value;
+    select.innerHTML = "";
+    for (const name of names) select.append(new Option(name, name));
+    select.value = names.includes(keep) ? keep : names[id === "anim-from" ? 0 : Math.min(2, names.length - 1)];
+  }
+  anim.from = null;
+  syncSliders();
+}
+
+function addButton(parent, label, onClick) {
+  const b = Object.assign(document.createElement("button"), { textContent: label });
+  b.dataset.name = label;
+  b.addEventListener("click", () => guarded(Promise.resolve(onClick())));
+  parent.append(b);
+  return b;
+}
+
+function bindRange(id, onInput, onChange) {
+  const input = $(id), out = input.nextElementSibling;
+  const show = () => { if (out?.tagName === "OUTPUT") out.value = (+input.value).toFixed(2); };
+  input.addEventListener("input", () => { show(); onInput(+input.value); });
+  if (onChange) input.addEventListener("change", onChange);
+  show();
+}
+
+// -------------------------------------------------------------------------------------------------- plumbing
+
+async function getJSON(url) {
+  const r = await fetch(url);
+  const doc = await r.json();
+  if (!r.ok) throw new Error(doc.error || `${url}: HTTP ${r.status}`);
+  return doc;
+}
+
+async function postJSON(url, body) {
+  const r = await track(fetch(url, { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) }));
+  const doc = await r.json();
+  if (!r.ok) throw new Error(doc.error || `${url}: HTTP ${r.status}`);
+  return doc;
+}
+
+function track(promise) {
+  pending.add(promise);
+  const done = () => pending.delete(promise);
+  promise.then(done, done);
+  return promise;
+}
+
+async function idle() {
+  while (pending.size) await Promise.allSettled([...pending]);
+  draw();
+}
+
+/** Run a user action: tracked (idle() waits for it), its failure shown in the status line. */
+function guarded(promise) {
+  return track(promise).catch((e) => { setStatus(e.message, true); window.studio.errors.push(e.message); });
+}
+
+function setStatus(text, error = false) {
+  $("status").textContent = text;
+  $("status").classList.toggle("error", error);
+}
+
+function loadImage(src) {
+  return new Promise((resolve, reject) => {
+    const img = new Image();
+    img.onload = () => resolve(img);
+    img.onerror = () => reject(new Error("image did not decode"));
+    img.src = src;
+  });
+}
+
+function bytesToBase64(bytes) {
+  let s = "";
+  for (let i = 0; i < bytes.length; i += 0x8000) s += String.fromCharCode(...bytes.subarray(i, i + 0x8000));
+  return btoa(s);
+}
+
+function capture() {
+  renderer.render(scene, camera);
+  return renderer.domElement.toDataURL("image/png");
+}
+
+window.studio = {
+  state, metrics, measure: false, errors: [], idle, capture, silhouette, livePositions, sceneDoc, cameraDoc,
+  manoPose: () => R.axisAngles(R.manoRotations(hand.rig, state.angles)),
+  selectTexture, selectAccessory, setView, renderReference, mirror, undo, redo,
+};
+window.studio.ready = start().catch((e) => { setStatus(`could not start: ${e.message}`, true); throw e; });
