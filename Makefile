@@ -2,10 +2,11 @@
 # Each target bootstraps .venv from pyproject.toml on first use (idempotent); Node tooling (the Khronos glTF
 # validator, three.js) comes from package-lock.json when npm is on the machine.
 #
-# Variables: MANO=path/to/MANO_RIGHT.pkl (source model; default: the open CC0 hand), RES (texture size, default
-# 2048), TX=1 (also the tiled, mip-mapped .tx textures for offline renderers: about 0.2 s of CPU per variant),
-# SIDE (right, left or both), TEXTURE / ACCESSORY (catalogue ids for `make usdz`; default: the package's default
-# texture and no accessory).
+# Variables: MANO=path/to/MANO_RIGHT.pkl (source model; default: the open CC0 hand), BETAS="b1 b2 ..." (build the
+# hand of that shape: every package, texture and accessory fits it; default the mean shape), RES (texture size,
+# default 2048), TX=1 (also the tiled, mip-mapped .tx textures for offline renderers: about 0.2 s of CPU per
+# variant), SIDE (right, left or both), TEXTURE / ACCESSORY (catalogue ids for `make usdz`; default: the package's
+# default texture and no accessory).
 
 PYTHON ?= python3
 # Steps whose inputs are ready run JOBS at a time: on two cores the single-threaded steps (gestures, the USD and
@@ -27,6 +28,7 @@ STAMP  := $(VENV)/.installed-stamp
 BENCH_STAMP := $(VENV)/.bench-stamp
 NODE_STAMP := node_modules/.installed-stamp
 MANO   ?=
+BETAS  ?=
 RES    ?= 2048
 TX     ?= 0
 SIDE   ?= both
@@ -77,24 +79,26 @@ chromium:
 	  else echo "chromium is not installed (needs root and apt): the studio's browser tests will skip"; fi; }
 
 # ------------------------------------------------------------------ assets
-# The source model is recorded so that switching MANO=... rebuilds everything that depends on it.
+# The source model and shape are recorded so that switching MANO=... or BETAS=... rebuilds everything that depends
+# on them.
 build/model/source.txt: FORCE | $(STAMP)
 	@mkdir -p build/model
-	@echo '$(SOURCE_MODEL)' | cmp -s - $@ || echo '$(SOURCE_MODEL)' > $@
+	@echo '$(SOURCE_MODEL) $(strip $(BETAS))' | cmp -s - $@ || echo '$(SOURCE_MODEL) $(strip $(BETAS))' > $@
 
 # The model carries its gestures fitted to it (model/gesture_fit), so the gesture files are its inputs too.
 build/model/right.npz build/model/left.npz &: build/model/source.txt $(SOURCE_DEPS) $(POSES) $(call src,model) $(STAMP)
-	@$(STEP) model -- $(DH) model build $(SOURCE_MODEL) --out-dir build/model --atlas-res $(RES)
+	@$(STEP) model -- $(DH) model build $(SOURCE_MODEL) --out-dir build/model --atlas-res $(RES) \
+	    $(if $(strip $(BETAS)),--betas '$(strip $(BETAS))')
 
 build/template/gestures.json build/template/gestures.png &: build/model/right.npz $(POSES) $(call src,template)
 	@$(STEP) gestures -- $(DH) template gestures build/model/right.npz --out-dir build/template
 
-# The shape space: extreme shapes at rest and through every gesture, hand sizes against ANSUR II (`make shapes`; not
-# part of `make assets` while the named gestures are authored for the mean hand only: on the largest and broadest
-# shapes the thumb passes through the index and middle fingers until gestures are fitted per shape).
+# The shape space: extreme shapes at rest and through every gesture (fitted to each shape, as `model build` fits them
+# to the hand it builds), hand sizes against ANSUR II (`make shapes`: about 2.5 min of CPU for the 21 gesture fits,
+# so not part of `make assets`).
 shapes: build/template/shapes.json
 
-build/template/shapes.json build/template/shapes.png &: build/model/right.npz $(POSES) $(call src,template)
+build/template/shapes.json build/template/shapes.png build/template/shape_gestures.png &: build/model/right.npz $(POSES) $(call src,template)
 	@$(STEP) shapes -- $(DH) template shapes build/model/right.npz --out-dir build/template
 
 build/textures/res.txt: FORCE | $(STAMP)

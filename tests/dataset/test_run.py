@@ -41,7 +41,7 @@ def test_labels_match_the_forward_pass_in_the_camera_frame(small_dataset, source
         check_schema(labels, "labels.schema.json", path.name)
         model = opened[labels["side"]].model
         mano = labels["mano"]
-        posed = forward(model, np.concatenate([mano["global_orient"], mano["hand_pose"]])[None], None,
+        posed = forward(model, np.concatenate([mano["global_orient"], mano["hand_pose"]])[None], mano["betas"],
                         trans=np.asarray(mano["trans"])[None], keypoint_order="openpose")
         assert np.abs(posed.keypoints[0] - labels["keypoints_3d"]).max() < 2e-6     # float32 render vs float64
         assert np.abs(posed.joints[0] - labels["joints_3d"]).max() < 2e-6

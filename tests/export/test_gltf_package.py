@@ -362,10 +362,13 @@ def test_command_writes_and_validates(model, textures, tmp_path, capsys):
                                         all_textures=True, correctives="pca:8", influences="8", validate=True))
     printed = capsys.readouterr().out
     assert code == 0 and "0 errors" in printed
-    assert "8 influences" in printed and "16 morph targets (pca:8)" in printed and "3 textures" in printed
+    assert "8 influences" in printed and "16 morph targets (pca:8) + 8 shape dials" in printed
+    assert "3 textures" in printed
     doc = json.loads(out.read_text())
     assert len(doc["extensions"]["KHR_materials_variants"]["variants"]) == 3
-    assert all(len(p["targets"]) == 16 for m in doc["meshes"] for p in m["primitives"] if "targets" in p)
+    # correctives (16) then the shape dials (2 per shape direction of the model)
+    assert all(len(p["targets"]) == 16 + 2 * model.num_betas for m in doc["meshes"] for p in m["primitives"]
+               if "targets" in p)
     assert (out.parent / "right.bin").is_file() and len(list((out.parent / "textures").glob("*.png"))) == 3
 
 

@@ -114,7 +114,7 @@ def test_four_influences_skin_with_the_four_strongest_renormalised(model, tmp_pa
 def test_pca_correctives_are_the_rank_k_projection(model, tmp_path, k):
     names, poses = gestures(model)
     out = tmp_path / f"pca{k}.glb"
-    report = export_gltf(model, out, options=GltfOptions(influences=None, correctives=f"pca:{k}"),
+    report = export_gltf(model, out, options=GltfOptions(influences=None, correctives=f"pca:{k}", shape_dials=0),
                          gestures=(names, poses))
     assert report.morph_targets == 2 * k                 # a positive and a negative shape per direction
     V = model.num_vertices
@@ -138,7 +138,7 @@ def test_pose_pca_correctives_are_the_pose_weighted_rank_k_projection(model, tmp
     k = 8
     names, poses = gestures(model)
     out = tmp_path / "pose_pca.glb"
-    report = export_gltf(model, out, options=GltfOptions(influences=None, correctives=f"pose-pca:{k}"),
+    report = export_gltf(model, out, options=GltfOptions(influences=None, correctives=f"pose-pca:{k}", shape_dials=0),
                          gestures=(names, poses))
     assert report.morph_targets == 2 * k and report.correctives == f"pose-pca:{k}"
     sample = sample_poses(model, POSE_PCA_SAMPLES, np.random.default_rng(POSE_PCA_SEED))
@@ -161,7 +161,8 @@ def test_pose_pca_correctives_are_the_pose_weighted_rank_k_projection(model, tmp
 def test_no_correctives_is_plain_skinning(model, tmp_path):
     names, poses = gestures(model)
     out = tmp_path / "none.glb"
-    export_gltf(model, out, options=GltfOptions(influences=None, correctives="none"), gestures=(names, poses))
+    export_gltf(model, out, options=GltfOptions(influences=None, correctives="none", shape_dials=0),
+                gestures=(names, poses))
     engine, ids, f = engine_vertices(out, names)
     assert not f.doc.meshes[0].primitives[0].targets
     assert max_error(engine, ids, forward(model, poses, correctives=False).vertices, names) <= TOL
@@ -248,7 +249,8 @@ def test_local_correctives_are_stored_sparse_and_stay_exact(model, tmp_path):
     local = model.replace(posedirs=posedirs)
     names, poses = gestures(local)
     out = tmp_path / "sparse.glb"
-    export_gltf(local, out, options=GltfOptions(influences=None), gestures=(names, poses))
+    # without the (dense) shape dials: this checks the correctives' storage
+    export_gltf(local, out, options=GltfOptions(influences=None, shape_dials=0), gestures=(names, poses))
     engine, ids, f = engine_vertices(out, names)
     targets = f.doc.meshes[0].primitives[0].targets
     accessors = [f.doc.accessors[t["POSITION"] if isinstance(t, dict) else t.POSITION] for t in targets]

@@ -287,7 +287,8 @@ def test_commands_export_check_and_usdz(model, tmp_path, capsys):
                               influences="8", correctives="pca:16", texture_size=None, name=None, atlas_res=2048)
     assert commands_usd.usd(args) == 0
     info = json.loads((tmp_path / "usd" / "right" / "asset.json").read_text())
-    assert info["rig"]["influences"] == 8 and info["rig"]["blend_shapes"] == 32
+    # 16 PCA directions, a _pos and a _neg shape each, then the shape dials (two per shape direction)
+    assert info["rig"]["influences"] == 8 and info["rig"]["blend_shapes"] == 32 + 2 * model.num_betas
     assert commands_usd.check(argparse.Namespace(package=str(tmp_path / "usd" / "right"), all_variants=True)) == 0
     assert "0 errors" in capsys.readouterr().out
     usdz_args = argparse.Namespace(package=str(tmp_path / "usd" / "right"), out=str(tmp_path / "h.usdz"),
@@ -309,8 +310,8 @@ def test_rewrite_is_seen_by_a_process_that_had_the_old_package_open(model, gestu
     out = tmp_path / "right"
     export_usd(model, out, gestures=gestures)
     held = Usd.Stage.Open(str(out / "right.usda"), Usd.Stage.LoadAll)        # keeps the old layers registered
-    assert len(blend_shape_names(held)) == 225
-    export_usd(model, out, gestures=gestures, options=ExportOptions(correctives="pca:8"))
+    assert len(blend_shape_names(held)) == 225 + 2 * model.num_betas                     # correctives, shape dials
+    export_usd(model, out, gestures=gestures, options=ExportOptions(correctives="pca:8", shape_dials=0))
     assert len(blend_shape_names(Usd.Stage.Open(str(out / "right.usda"), Usd.Stage.LoadAll))) == 16
 
 

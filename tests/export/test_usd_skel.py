@@ -75,7 +75,8 @@ def test_usdskel_equals_forward_with_pruned_influences(model, tmp_path):
 @pytest.mark.parametrize("correctives", ["pca:16", "none"])
 def test_usdskel_equals_forward_with_reduced_correctives(model, tmp_path, correctives):
     gestures = poses_for(3)
-    info, stage, points = export_and_pose(model, tmp_path / "right", gestures, correctives=correctives)
+    info, stage, points = export_and_pose(model, tmp_path / "right", gestures, correctives=correctives,
+                                          shape_dials=0)
     rig = exported_model(model, export_correctives(model, correctives))
     assert max_dist(points["/RightHand/RightHandMesh"], forward(rig, gestures[1]).vertices) < 1e-6
     mesh = stage.GetPrimAtPath("/RightHand/RightHandMesh")
@@ -209,7 +210,8 @@ def test_blend_shapes_named_bound_and_sparse(model, tmp_path):
     binding = UsdSkel.BindingAPI(stage.GetPrimAtPath("/RightHand/RightHandMesh"))
     names = list(binding.GetBlendShapesAttr().Get())
     targets = binding.GetBlendShapeTargetsRel().GetTargets()
-    assert len(names) == 225 == len(set(names)) and "pose_index1_r21_neg" in names
+    assert len(names) == 225 + 2 * m.num_betas == len(set(names)) and "pose_index1_r21_neg" in names
+    assert all(n.startswith("shape_beta") for n in names[225:])       # the shape dials follow the correctives
     assert [t.name for t in targets] == names
     k = names.index("pose_index1_r21_neg")                 # channel 7 (joint 1, entry (2, 1)), scale -1
     shape = UsdSkel.BlendShape(stage.GetPrimAtPath(targets[k]))

@@ -57,6 +57,24 @@ def test_build_writes_both_sides(capsys, model_file, tmp_path):
     np.testing.assert_allclose(left.v_template, right.v_template * [-1, 1, 1])
 
 
+def test_build_of_a_shape(capsys, model_file, tmp_path):
+    """`--betas` bakes the shape: each side's rest surface is the wrist-enhanced source posed at rest with those
+    betas (its mirror for the left), joints regressed from it, the betas recorded."""
+    code, out, _ = run(capsys, "model", "build", model_file, "--out-dir", tmp_path / "out", "--betas", "1.5, -2 0.5")
+    assert code == 0 and "shape betas 1.5 -2 0.5" in out
+    right, left = load_npz(tmp_path / "out/right.npz"), load_npz(tmp_path / "out/left.npz")
+    source = add_wrist(tube_hand(seed=5))
+    truth = forward(source, np.zeros(48), [1.5, -2.0, 0.5])
+    np.testing.assert_allclose(forward(right, np.zeros(48)).vertices, truth.vertices, atol=1e-12)
+    np.testing.assert_allclose(forward(right, np.zeros(48)).joints, truth.joints, atol=1e-12)
+    np.testing.assert_allclose(left.v_template, truth.vertices[0] * [-1, 1, 1], atol=1e-12)
+    assert right.meta["betas"] == pytest.approx([1.5, -2.0, 0.5, 0.0]) == left.meta["betas"]
+    code, _, err = run(capsys, "model", "build", model_file, "--out-dir", tmp_path / "bad", "--betas", "1 x")
+    assert code == 2 and "--betas: 'x' is not a number" in err and not (tmp_path / "bad").exists()
+    code, _, err = run(capsys, "model", "build", model_file, "--out-dir", tmp_path / "bad", "--betas", "1 2 3 4 5")
+    assert code == 2 and "betas: 5 given but the model has 4" in err
+
+
 def test_pose(capsys, model_file, tmp_path):
     poses = np.random.default_rng(0).normal(size=(3, 48))
     (tmp_path / "p.json").write_text(json.dumps({"pose": poses.tolist(), "flat_hand_mean": True}))

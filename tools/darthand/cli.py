@@ -185,6 +185,8 @@ def _add_model_commands(sub) -> None:
     p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for right.npz and left.npz")
     p.add_argument("--atlas-res", type=number(int, 16, 16384), default=2048, metavar="PX",
                    help="texture size the xatlas UV atlas is padded for, when the model has no UVs (default 2048)")
+    p.add_argument("--betas", metavar="B", help="build the hand of this shape: shape coefficients separated by spaces "
+                   "or commas, missing trailing ones 0 (e.g. '1.5 -0.5'; default the mean shape)")
     p.set_defaults(run=commands.build)
 
 
@@ -299,6 +301,18 @@ def _add_accessories_commands(sub) -> None:
     p.add_argument("--jobs", type=int, default=1, metavar="N", help="worker processes for the pose sweeps (default 1)")
     p.set_defaults(run=commands.build)
 
+    p = g.add_parser("shapes", help="refit the catalogue to sampled hand shapes: refit time, penetration over the "
+                                    "shapes and the named gestures, with and without refitting")
+    p.add_argument("model", metavar="MODEL", help="the model the catalogue was built on (build/model/right.npz)")
+    p.add_argument("--catalog", required=True, metavar="CATALOG", help="build/accessories/catalog.json")
+    p.add_argument("--out", required=True, metavar="FILE.json", help="where to write the figures")
+    p.add_argument("--shapes", type=int, default=50, metavar="N", help="sampled shapes, the first the built one "
+                   "(default 50)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the shape draws (default 0)")
+    p.add_argument("--limit", type=float, default=3.0, help="largest |beta| drawn (default 3)")
+    p.add_argument("--no-compare", action="store_true", help="skip the sweep without refitting")
+    p.set_defaults(run=commands.shapes)
+
 
 # ---------------------------------------------------------------- export
 def _add_export_commands(sub) -> None:
@@ -312,6 +326,9 @@ def _add_export_commands(sub) -> None:
                         "pose-pca weights them by how anatomical poses use them, a smaller error for the same K), "
                         "none (default full)")
     size_help = "downsize textures so that their longer side is at most PX pixels (default: use the files unchanged)"
+    dials_help = ("the shape directions as blend shapes a user can dial, each reaching |delta beta| = R from the built "
+                  "shape at weight 1; the joints stay the built shape's (the dial error is reported); 0 for none "
+                  "(default 3)")
 
     p = g.add_parser("usd", help="write a USD asset package: interface .usda, payload, texture and accessory variants")
     p.add_argument("model", metavar="MODEL", help=model_help)
@@ -325,6 +342,7 @@ def _add_export_commands(sub) -> None:
     p.add_argument("--correctives", default="full", metavar="MODE", help=correctives_help)
     p.add_argument("--texture-size", type=number(int, 1, 16384), metavar="PX", help=size_help)
     p.add_argument("--name", metavar="NAME", help="name of the interface layer NAME.usda (default: the model's side)")
+    p.add_argument("--shape-dials", type=float, default=3.0, metavar="R", help=dials_help)
     p.set_defaults(run=commands_usd.usd)
 
     p = g.add_parser("usdz", help="write one variant combination of a USD package as a flattened .usdz")
@@ -361,6 +379,7 @@ def _add_export_commands(sub) -> None:
     p.add_argument("--correctives", default="full", metavar="MODE", help=correctives_help)
     p.add_argument("--validate", action="store_true",
                    help="run the Khronos glTF validator on the result (exit 1 on errors)")
+    p.add_argument("--shape-dials", type=float, default=3.0, metavar="R", help=dials_help)
     p.set_defaults(run=commands_gltf.gltf)
 
     p = g.add_parser("blend", help="write the Blender-native rig (.blend, through bpy in .venv-blender): bones along "
@@ -495,6 +514,16 @@ def _add_dataset_arguments(p) -> None:
                    help="comma-separated accessory ids to draw from, 'all' (default) or 'none' (no accessories)")
     p.add_argument("--accessory-share", type=float, default=d["accessory_share"], metavar="X",
                    help="share of the frames with an accessory (default 0.25, DART's)")
+    p.add_argument("--shapes", default=d["shapes"]["mode"], choices=("normal", "uniform", "none"),
+                   help="hand shape per frame: betas ~ N(0, sigma^2) truncated at +-limit (normal, the default: the "
+                        "open hand's shape space is calibrated so that N(0, I) spans adult hands), uniform in "
+                        "+-limit, or none (the model's own shape, as DART); a USD package renders its baked shape")
+    p.add_argument("--shape-sigma", type=float, default=d["shapes"]["sigma"], metavar="S",
+                   help="standard deviation of the normal shape distribution (default 1)")
+    p.add_argument("--shape-limit", type=float, default=d["shapes"]["limit"], metavar="L",
+                   help="largest |beta| drawn (default 3, the extreme shapes `make shapes` checks)")
+    p.add_argument("--shape-dims", type=int, default=None, metavar="N",
+                   help="draw only the first N shape directions, the rest 0 (default all)")
     p.add_argument("--views", default="random", metavar="random|VIEWS",
                    help=f"'random' (directions uniform over the sphere by equal-area cells, not along the forearm) "
                         f"and/or views ({', '.join(VIEWS)}), comma-separated, one drawn per frame (default random)")

@@ -28,3 +28,61 @@ def build(args) -> int:
           "contact anywhere on the hand)")
     return 0
 
+
+
+def shapes(args) -> int:
+    """`darthand accessories shapes MODEL --catalog CATALOG --out FILE.json [--shapes N] [--seed S]
+    [--limit L] [--no-compare]`: the catalogue refitted to N sampled shapes (accessories.reshape), penetration over
+    the shapes and the named gestures, with and without the refit (accessories.shape_sweep)."""
+    import time
+
+    import numpy as np
+
+    from darthand.accessories.loader import load_accessory_catalog
+    from darthand.accessories.reshape import ShapeRefitter
+    from darthand.accessories.shape_sweep import penetration_over_shapes, sample_shapes, summary
+    from darthand.errors import InputError
+    from darthand.fileio import write_json
+    from darthand.model.gestures import model_gestures
+
+    model = load_npz(args.model)
+    if model.num_betas == 0:
+        raise InputError(f"{args.model}: the model has no shape directions")
+    if not 1 <= args.shapes <= 10000:
+        raise InputError(f"--shapes: {args.shapes} is outside 1..10000")
+    accessories = load_accessory_catalog(args.catalog, side=model.side)
+    gestures = model_gestures(model)           # as fitted to the built hand: what a dataset poses every shape in
+    names, poses = list(gestures.names), gestures.poses
+    betas = sample_shapes(model, args.shapes, args.seed, args.limit)
+    t = time.perf_counter()
+    refitter = ShapeRefitter(model, accessories).prepare()
+    prepare = time.perf_counter() - t
+    timings = [time.perf_counter()]
+    for b in betas:                                   # all 50 (gloves included), as a dataset frame would
+        refitter.refit(b)
+        timings.append(time.perf_counter())
+    all_seconds = np.diff(timings)
+
+    def progress(n, total):
+        print(f"  shape {n + 1}/{total}", flush=True)
+
+    refit = penetration_over_shapes(model, accessories, betas, poses, refitter=refitter, progress=progress)
+    out = {"model": str(args.model), "catalog": str(args.catalog), "shapes": int(len(betas)), "seed": args.seed,
+           "limit": args.limit, "gestures": names, "items": len(refit["ids"]), "accessories": len(accessories),
+           "betas": np.round(betas, 4).tolist(),
+           "refit_seconds": {"prepare": round(prepare, 3), "all_items_mean": round(float(all_seconds.mean()), 4),
+                             "all_items_max": round(float(all_seconds.max()), 4)},
+           "refit": summary(refit, names)}
+    if not args.no_compare:
+        out["without_refit"] = summary(penetration_over_shapes(model, accessories, betas, poses, refit=False,
+                                                               refitter=refitter), names)
+    write_json(args.out, out)
+    r = out["refit"]
+    line = (f"{args.out}: {len(accessories)} accessories refitted to {len(betas)} shapes in "
+            f"{out['refit_seconds']['all_items_mean'] * 1000:.0f} ms each (after {prepare:.1f} s once); rigid items "
+            f"over the shapes x {len(names)} gestures: fit penetration max {r['fit_max_mm']:.2f} mm, "
+            f"p99 {r['fit_p99_mm']:.2f} mm")
+    if "without_refit" in out:
+        line += f" (without refitting: max {out['without_refit']['fit_max_mm']:.2f} mm)"
+    print(line)
+    return 0

@@ -27,7 +27,9 @@ class Accessory:
     (skinned: (N, 16)) is set; `posedirs` (N, 3, 135) optional correctives of a skinned accessory. material:
     base_color (RGB or RGBA, linear), metallic, roughness; base_color_png / metallic_roughness_png (glTF channel
     layout: G roughness, B metallic): texture files or None. kind: the catalogue's type (ring, watch, bracelet,
-    glove).
+    glove). rest_transform (4, 4): a rigid item's local frame in the hand's rest frame (its fit: x along the
+    bone, origin on the bore's centre) or None; shapedirs (N, 3, S): a skinned item's shape directions (the hand
+    vertices' it follows) or None. Both let accessories/reshape.py refit the item to another hand shape.
     """
 
     id: str
@@ -42,6 +44,8 @@ class Accessory:
     base_color_png: Path | None = None
     metallic_roughness_png: Path | None = None
     kind: str = ""
+    rest_transform: np.ndarray | None = None
+    shapedirs: np.ndarray | None = None
 
     @property
     def skinned(self) -> bool:
@@ -100,17 +104,30 @@ def check_accessory(acc: Accessory, source: str = "accessory") -> None:
         raise InputError(f"{where}: uvs and faces_uv must be given together")
     if acc.faces_uv is not None and acc.faces_uv.shape != acc.faces.shape:
         raise InputError(f"{where}: faces_uv has shape {acc.faces_uv.shape}, expected {acc.faces.shape}")
+    if acc.rest_transform is not None and acc.rest_transform.shape != (4, 4):
+        raise InputError(f"{where}: rest_transform has shape {acc.rest_transform.shape}, expected (4, 4)")
+    if acc.shapedirs is not None and (acc.shapedirs.ndim != 3 or acc.shapedirs.shape[:2] != (N, 3)):
+        raise InputError(f"{where}: shapedirs have shape {acc.shapedirs.shape}, expected ({N}, 3, S)")
 
 
 def mirror_accessory(acc: Accessory) -> Accessory:
-    """The accessory for the mirror-image hand (x -> -x, winding reversed, correctives as in mirror_model)."""
+    """The accessory for the mirror-image hand (x -> -x, winding reversed, correctives and shape directions as in
+    mirror_model). A rest frame [R | t] becomes [S R D | S t], S = diag(-1, 1, 1), D = diag(1, 1, -1): the
+    mirrored bone frame, still right-handed (x along the bone, y dorsal, z = x cross y)."""
     from darthand.model.mirror import mirror_points, mirror_posedirs
 
     flip = [0, 2, 1]
+    S = np.diag([-1.0, 1.0, 1.0])
+    rest = None
+    if acc.rest_transform is not None:
+        rest = np.eye(4)
+        rest[:3, :3] = S @ acc.rest_transform[:3, :3] @ np.diag([1.0, 1.0, -1.0])
+        rest[:3, 3] = S @ acc.rest_transform[:3, 3]
     return dataclasses.replace(
         acc, vertices=mirror_points(acc.vertices), faces=acc.faces[:, flip],
         faces_uv=None if acc.faces_uv is None else acc.faces_uv[:, flip],
-        posedirs=None if acc.posedirs is None else mirror_posedirs(acc.posedirs))
+        posedirs=None if acc.posedirs is None else mirror_posedirs(acc.posedirs), rest_transform=rest,
+        shapedirs=None if acc.shapedirs is None else acc.shapedirs * np.array([-1.0, 1.0, 1.0])[None, :, None])
 
 
 def _entry_accessory(path: Path, entry: dict) -> Accessory:
@@ -135,6 +152,8 @@ def _entry_accessory(path: Path, entry: dict) -> Accessory:
         faces=np.asarray(arrays["faces"], np.int64), uvs=opt("uvs", np.float64), faces_uv=opt("faces_uv", np.int64),
         parent_joint=entry["parent_joint"], weights=opt("weights", np.float64), posedirs=opt("posedirs", np.float64),
         material=dict(entry["material"]), base_color_png=file_in(path.parent, files["base_color"], "texture", False),
-        metallic_roughness_png=file_in(path.parent, files["metallic_roughness"], "texture", False), kind=entry["type"])
+        metallic_roughness_png=file_in(path.parent, files["metallic_roughness"], "texture", False), kind=entry["type"],
+        rest_transform=opt("rest_transform", np.float64) if entry["parent_joint"] is not None else None,
+        shapedirs=opt("shapedirs", np.float64))
     check_accessory(acc, str(path))
     return acc

@@ -34,6 +34,7 @@ from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import FINGER_JOINTS, MANO_PARENTS
 from darthand.model.topology import face_joints, vertex_normals
+from darthand.processes import deaf_to_ctrl_c, init_worker
 
 CHUNK = 16               # poses posed at once
 MIN_POSES_PER_WORKER = 24
@@ -115,16 +116,21 @@ def measure(model: HandModel, built, poses: np.ndarray, workers: int = 1) -> dic
     chunks = -(-len(poses) // CHUNK)
     bounds = np.minimum(np.linspace(0, chunks, workers + 1).astype(int) * CHUNK, len(poses))
     ctx = multiprocessing.get_context("spawn")
-    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_single_thread) as pool:
-        parts = list(pool.map(measure_probes, [model] * workers, [items] * workers,
-                              [poses[a:b] for a, b in zip(bounds[:-1], bounds[1:])]))
+    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
+                                initargs=(os.getpid(),)) as pool:
+        with deaf_to_ctrl_c():                  # map starts the workers; Ctrl-C is ours, even while they import
+            shares = pool.map(measure_probes, [model] * workers, [items] * workers,
+                              [poses[a:b] for a, b in zip(bounds[:-1], bounds[1:])])
+        parts = list(shares)
     return {i.id: {"fit": np.concatenate([p[i.id]["fit"] for p in parts]),
                    "depth": np.concatenate([p[i.id]["depth"] for p in parts]),
                    "through": np.concatenate([p[i.id]["through"] for p in parts]),
                    "drift": max(p[i.id]["drift"] for p in parts)} for i in items}
 
 
-def _single_thread() -> None:
+def _init_worker(parent: int) -> None:
+    """A sweep worker: single-threaded BLAS, Ctrl-C left to the parent, ends when the parent dies."""
+    init_worker(parent)
     for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(name, "1")
 

@@ -44,6 +44,8 @@ def render_dataset(args) -> int:
             skin_tone_range=_numbers("--skin-tone-range", args.skin_tone_range, 2),
             skin_tone_steps=args.skin_tone_steps, accessories=_accessory_ids(args.accessory_ids),
             accessory_share=args.accessory_share, views=_names(args.views),
+            shapes={"mode": getattr(args, "shapes", None), "sigma": getattr(args, "shape_sigma", None),
+                    "limit": getattr(args, "shape_limit", None), "dims": getattr(args, "shape_dims", None)},
             roll_range_deg=_numbers("--roll-range", args.roll_range, 2),
             fov_range_deg=_numbers("--fov-range", args.fov_range, 2),
             margin_range=_numbers("--margin-range", args.margin_range, 2),

@@ -62,7 +62,7 @@ def render_job(renderer, job: dict, settings: dict):
     frame = renderer.render(pose, texture=job.get("texture"), skin_tone_offset=float(job.get("skin_tone_offset", 0)),
                             accessory=job.get("accessory"), camera=job.get("camera") or "three_quarter",
                             lights=job.get("lights"), background=background, width=size, height=size,
-                            samples=settings["samples"], aa_shading=settings["aa_shading"])
+                            samples=settings["samples"], aa_shading=settings["aa_shading"], betas=job.get("betas"))
     frame.timings["background"] = t
     return frame, info
 
@@ -87,12 +87,33 @@ def dataset_labels(frame, job: dict, digest: str, source, background: dict | Non
                       "faces": "the model's faces (build/model/<side>.npz)", "frame": "camera", "units": "m"}
     labels["files"] = {**labels.get("files", {}), "vertices": "../" + names["vertices"]}
     if model is not None and not hasattr(source, "gestures"):
-        labels["mano"] = mano_camera_parameters(model, frame.subject.pose, frame.camera.R, frame.camera.t)
+        labels["mano"] = mano_camera_parameters(model, frame.subject.pose, frame.camera.R, frame.camera.t,
+                                                job.get("betas"))
     labels["split"] = job.get("split", "none")
     labels["sample"] = {**job.get("sample", {}), "side": labels["side"], "skin_tone_offset":
                         job.get("skin_tone_offset", 0.0), "texture_id": labels["texture"]["id"],
                         "accessory_id": labels["accessory"]["id"]}
+    if model is not None:
+        labels["sample"]["shape"] = {**labels["sample"].get("shape", {}), **shape_record(model, job.get("betas"))}
     return labels
+
+
+def shape_record(model, betas) -> dict:
+    """The frame's hand shape: betas relative to the source model (as labels.mano), the betas the model was built
+    with, their sum (the shape in the model's shape space), and the shaped hand's length and breadth (mm, the
+    anthropometric landmarks of template/anthropometry.py)."""
+    from darthand.model.shape import shaped_vertices
+    from darthand.template.anthropometry import hand_sizes
+
+    b = np.zeros(model.num_betas)
+    given = np.asarray(betas if betas is not None else [], np.float64)
+    b[:len(given)] = given
+    baked = np.zeros(model.num_betas)
+    built = np.asarray(model.meta.get("betas", []), np.float64)[:model.num_betas]
+    baked[:len(built)] = built
+    sizes = {k: round(float(v[0]), 2) for k, v in hand_sizes(model, shaped_vertices(model, b)[None]).items()}
+    return {"betas": b.round(6).tolist(), "model_betas": baked.round(6).tolist(),
+            "absolute_betas": (b + baked).round(6).tolist(), **sizes}
 
 
 def write_dataset_frame(frame, job: dict, digest: str, out_dir, source, background: dict | None) -> dict:

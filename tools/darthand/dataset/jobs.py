@@ -122,6 +122,12 @@ def validate_jobs(sources: dict, jobs: list[dict], where: str = "jobs") -> None:
         if isinstance(pose, str) and pose not in gestures and (model is None or not Path(pose).is_file()):
             raise InputError(f"{at}: pose {pose!r} is not a gesture ({', '.join(sorted(gestures))})"
                              + (" nor a pose file" if model is not None else " of the package"))
+        if job.get("betas") is not None:
+            if model is None:
+                raise InputError(f"{at}: betas: a USD package renders its baked shape")
+            if len(job["betas"]) > model.num_betas:
+                raise InputError(f"{at}: betas: {len(job['betas'])} given but the model has {model.num_betas} "
+                                 "shape directions")
         if model is None and isinstance(pose, list):
             raise InputError(f"{at}: pose: a USD package renders its gestures (names or time codes), not vectors")
         if model is not None and isinstance(pose, int) and not isinstance(pose, bool):

@@ -7,6 +7,8 @@ A plan's options are one JSON document (`plan_spec`), recorded in dataset.json a
 - pose: DART's grid-and-slerp sampler ('dart', the default for a model), reference poses with jitter ('jitter'),
   or as they are ('gestures', the only mode of a USD package, which renders its baked gestures) (dataset/poses.py);
   the mirror image for a left hand;
+- shape: betas drawn per frame (dataset/shapes.py; default N(0, I) truncated at |beta| <= 3), the same betas for
+  either side (a left model's shape directions are the right's mirrored); none for a USD package;
 - appearance: texture uniform over the catalogue, skin-tone offset uniform in [-0.15, 0.15] (DART's range) or one
   of `skin_tone_steps` levels, an accessory on `accessory_share` (25 %, DART's rate) of the frames, uniform over the
   catalogue, the hand's side uniform over `sides`;
@@ -27,7 +29,7 @@ import math
 
 import numpy as np
 
-from darthand.dataset import backgrounds, lighting, poses, views
+from darthand.dataset import backgrounds, lighting, poses, shapes, views
 from darthand.errors import InputError
 
 PLAN_VERSION = 2
@@ -54,6 +56,7 @@ DEFAULTS = {
     "lights": "random",
     "backgrounds": "builtin",
     "split": [0.8, 0.1, 0.1],
+    "shapes": dict(shapes.DEFAULTS),
 }
 
 
@@ -63,12 +66,14 @@ def plan_spec(**options) -> dict:
     for key, value in options.items():
         if key not in spec:
             raise InputError(f"plan: unknown option {key!r} (known: {', '.join(spec)})")
-        if key == "poses":
+        if key in ("poses", "shapes"):
+            if isinstance(value, str):                  # a shape distribution given by its name
+                value = {"mode": value}
             for k, v in (value or {}).items():
-                if k not in spec["poses"]:
-                    raise InputError(f"plan: unknown pose option {k!r} (known: {', '.join(spec['poses'])})")
+                if k not in spec[key]:
+                    raise InputError(f"plan: unknown {key[:-1]} option {k!r} (known: {', '.join(spec[key])})")
                 if v is not None:
-                    spec["poses"][k] = v
+                    spec[key][k] = v
         elif value is not None:
             spec[key] = list(value) if isinstance(value, tuple) else value
     return spec
@@ -141,6 +146,8 @@ class Planner:
         self.hand_centre = _hand_centre(self.model)
         self.poses = _pose_sampler(spec["poses"], self.model, first)
         self.group_size = self.poses.steps if isinstance(self.poses, poses.GridSlerp) else 1
+        self.shapes = _shape_sampler(spec["shapes"], self.model)
+        spec["shapes"] = self.shapes.spec()
 
     def describe(self) -> dict:
         """What the plan draws from (for dataset.json and the report)."""
@@ -181,13 +188,18 @@ class Planner:
         camera, view_record = self.views.sample(self.seed, i, u[VIEW:VIEW + 6])
         lights, lights_record = self._lights(u[LIGHTS:LIGHTS + lighting.UNIFORMS], side)
         background = self.backgrounds.sample(u[BACKGROUND:BACKGROUND + backgrounds.UNIFORMS])
+        betas = self.shapes.sample(self.seed, i)
         sample = {"pose": pose_record, "view": view_record, "lights": lights_record,
                   "texture": texture_tags(texture),
-                  "accessory": self.accessory_kinds.get(accessory, "none")}
-        return {"index": i, "side": side, "pose": pose, "gesture": gesture, "texture": texture,
-                "skin_tone_offset": tone, "accessory": accessory, "camera": camera, "lights": lights,
-                "background": background, "split": split_of(i // self.group_size, self.seed, self.split),
-                "sample": sample}
+                  "accessory": self.accessory_kinds.get(accessory, "none"),
+                  "shape": {"distribution": self.shapes.mode if betas is not None else "none"}}
+        job = {"index": i, "side": side, "pose": pose, "gesture": gesture, "texture": texture,
+               "skin_tone_offset": tone, "accessory": accessory, "camera": camera, "lights": lights,
+               "background": background, "split": split_of(i // self.group_size, self.seed, self.split),
+               "sample": sample}
+        if betas is not None:
+            job["betas"] = betas
+        return job
 
     def _lights(self, u, side: str):
         if self.lights == "random":
@@ -218,6 +230,15 @@ def _pose_sampler(opts: dict, model, first):
     if mode in ("auto", "dart"):
         return poses.GridSlerp(model, reference, levels=opts["levels"], draws=opts["draws"], steps=opts["steps"])
     return poses.GestureJitter(model, reference, 0.0 if mode == "gestures" else opts["jitter_deg"])
+
+
+def _shape_sampler(opts: dict, model) -> shapes.ShapeSampler:
+    """The plan's shape sampler; a USD package (no model) renders its baked shape only."""
+    if model is None:
+        if opts.get("mode") != "none" and opts != shapes.DEFAULTS:
+            raise InputError("shapes: a USD package renders its baked shape (use a model, or --shapes none)")
+        return shapes.ShapeSampler({"mode": "none"}, 0)
+    return shapes.ShapeSampler(opts, model.num_betas)
 
 
 def _right_model(sources: dict):

@@ -16,6 +16,7 @@ util-linux `unshare` needed): a node without the shared filesystem, on one machi
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
@@ -34,9 +35,17 @@ READY_LINE = "block forever"     # what `ray start --block` prints once its node
 
 def free_port() -> int:
     """A TCP port free on 127.0.0.1 now (the OS's choice)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    return free_ports(1)[0]
+
+
+def free_ports(n: int) -> list[int]:
+    """n different TCP ports free on 127.0.0.1 now: all held open until all are chosen (one at a time, the OS may
+    hand out the same port twice, and Ray refuses a node whose components share a port)."""
+    with contextlib.ExitStack() as stack:
+        socks = [stack.enter_context(socket.socket()) for _ in range(n)]
+        for s in socks:
+            s.bind(("127.0.0.1", 0))
+        return [s.getsockname()[1] for s in socks]
 
 
 def can_hide_folders() -> bool:
@@ -93,12 +102,13 @@ class LocalRayCluster:
     def _start_node(self, role: list[str], hide=None) -> int:
         k = len(self.procs)
         log = self.root / f"node{k}.log"
+        ports = [str(p) for p in free_ports(6)]
         cmd = [self.ray, "start", *role, "--num-cpus", str(self.cpus), "--node-ip-address", "127.0.0.1",
                "--object-store-memory", str(self.object_store_mb << 20), "--disable-usage-stats",
-               "--include-log-monitor", "false", "--node-manager-port", str(free_port()),
-               "--object-manager-port", str(free_port()), "--dashboard-agent-listen-port", str(free_port()),
-               "--dashboard-agent-grpc-port", str(free_port()), "--runtime-env-agent-port", str(free_port()),
-               "--metrics-export-port", str(free_port()), "--block"]
+               "--include-log-monitor", "false", "--node-manager-port", ports[0],
+               "--object-manager-port", ports[1], "--dashboard-agent-listen-port", ports[2],
+               "--dashboard-agent-grpc-port", ports[3], "--runtime-env-agent-port", ports[4],
+               "--metrics-export-port", ports[5], "--block"]
         if hide:
             mounts = " && ".join(f"mount -t tmpfs tmpfs '{Path(p)}'" for p in hide)
             cmd = ["unshare", "--mount", "--propagation", "private", "sh", "-c",

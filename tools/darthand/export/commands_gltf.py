@@ -10,6 +10,7 @@ from pathlib import Path
 from darthand.errors import InputError
 from darthand.accessories.loader import load_accessory_catalog
 from darthand.export.influences import parse_influences
+from darthand.export.shape_dials import DIAL_RANGE, dial_summary
 from darthand.textures.loader import load_texture_catalog, select_textures
 
 
@@ -30,12 +31,14 @@ def gltf(args) -> int:
     accessories = load_accessory_catalog(args.accessories, args.accessory, side=model.side) \
         if args.accessories else []
     options = GltfOptions(influences=parse_influences(args.influences), correctives=args.correctives,
-                          texture_size=args.texture_size)
+                          texture_size=args.texture_size, shape_dials=getattr(args, "shape_dials", DIAL_RANGE))
     r = export_gltf(model, args.out, options=options, textures=textures, accessories=accessories)
     size = sum(Path(f).stat().st_size for f in r.files if Path(f).is_file())
     print(f"{args.out}: {model.side} hand, {r.vertices} glTF vertices ({r.model_vertices} model), "
-          f"{r.influence_slots} influences (max error {1000 * r.influence_error_m:.2f} mm), {r.morph_targets} morph "
-          f"targets ({r.correctives}), {len(r.animations)} animations, {max(1, len(r.variants))} textures, "
+          f"{r.influence_slots} influences (max error {1000 * r.influence_error_m:.2f} mm), "
+          f"{r.morph_targets} morph "
+          f"targets ({r.correctives}){dial_summary(r.shape_dials)}, {len(r.animations)} animations, "
+          f"{max(1, len(r.variants))} textures, "
           f"{len(r.accessories)} accessories, {size / 1e6:.1f} MB")
     if not args.validate:
         return 0

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from darthand.accessories.loader import load_accessory_catalog
 from darthand.export.influences import parse_influences
+from darthand.export.shape_dials import DIAL_RANGE, dial_summary
 from darthand.export.usd_asset import ExportOptions, export_usd
 from darthand.export.usd_validate import errors, validate_file, validate_variants
 from darthand.export.usdz import export_usdz, interface_layer
@@ -23,12 +24,13 @@ def usd(args) -> int:
     textures = load_texture_catalog(args.textures) if args.textures else []
     accessories = load_accessory_catalog(args.accessories, side=model.side) if args.accessories else []
     options = ExportOptions(influences=parse_influences(args.influences), correctives=args.correctives,
-                            texture_size=args.texture_size)
+                            texture_size=args.texture_size, shape_dials=getattr(args, "shape_dials", DIAL_RANGE))
     info = export_usd(model, args.out, textures=textures, accessories=accessories, options=options, name=args.name)
     rig = info["rig"]
     size = sum(info["files"].values())
     print(f"{Path(args.out) / info['interface']}: {model.side} hand, {info['model']['vertices']} vertices, "
-          f"{rig['influences']} influences, {rig['blend_shapes']} blend shapes ({options.correctives}), "
+          f"{rig['influences']} influences, {rig['blend_shapes']} blend shapes "
+          f"({options.correctives}{dial_summary(info['shape_dials'], ' incl.')}), "
           f"{len(rig['gestures'])} gestures, {len(info['variants']['texture'])} textures, "
           f"{len(info['variants']['accessory']) - 1} accessories, {size / 1e6:.1f} MB, {info['write_seconds']} s")
     return 0

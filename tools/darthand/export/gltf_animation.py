@@ -20,9 +20,12 @@ KEYS = 2   # keyframes per clip, both the gesture
 
 
 def add_gesture_animation(doc: GltfDocument, name: str, pose: np.ndarray, skeleton: Skeleton, joint_nodes: list[int],
-                          morph_nodes: list[int], correctives: Correctives, times: int) -> int:
+                          morph_nodes: list[int], correctives: Correctives, times: int,
+                          extra_targets: dict[int, int] | None = None) -> int:
     """An animation named `name` holding one gesture pose (48,) (MANO axis-angle); `times` is the accessor of the key
-    times (shared by all gestures). Returns the animation index."""
+    times (shared by all gestures). extra_targets: {node: n} nodes whose mesh has n morph targets after the
+    correctives (the hand's shape dials), held at weight 0 (a glTF weights channel keys every target). Returns the
+    animation index."""
     keys = doc.gltf.accessors[times].count
     quats = np.repeat(skeleton.local_quaternions(pose).astype(np.float32), keys, axis=0)      # (keys, 16, 4)
     anim = gl.Animation(name=name)
@@ -32,11 +35,16 @@ def add_gesture_animation(doc: GltfDocument, name: str, pose: np.ndarray, skelet
         anim.channels.append(gl.AnimationChannel(sampler=len(anim.samplers) - 1,
                                                  target=gl.AnimationChannelTarget(node=node, path="rotation")))
     if correctives.count and morph_nodes:
-        weights = np.repeat(correctives.weights_of_poses(pose).astype(np.float32), keys, axis=0).reshape(-1)
-        out = doc.accessor(weights, target=None, name=f"{name}_weights")
-        anim.samplers.append(gl.AnimationSampler(input=times, output=out, interpolation=gl.ANIM_LINEAR))
+        weights = np.repeat(correctives.weights_of_poses(pose).astype(np.float32), keys, axis=0)     # (keys, S)
+        samplers: dict[int, int] = {}
         for node in morph_nodes:
-            anim.channels.append(gl.AnimationChannel(sampler=len(anim.samplers) - 1,
+            extra = (extra_targets or {}).get(node, 0)
+            if extra not in samplers:
+                padded = np.concatenate([weights, np.zeros((keys, extra), np.float32)], axis=1).reshape(-1)
+                out = doc.accessor(padded, target=None, name=f"{name}_weights" + (f"_{extra}" if extra else ""))
+                anim.samplers.append(gl.AnimationSampler(input=times, output=out, interpolation=gl.ANIM_LINEAR))
+                samplers[extra] = len(anim.samplers) - 1
+            anim.channels.append(gl.AnimationChannel(sampler=samplers[extra],
                                                      target=gl.AnimationChannelTarget(node=node, path="weights")))
     return doc.add("animations", anim)
 

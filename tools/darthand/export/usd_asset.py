@@ -7,11 +7,13 @@
                                  `accessory` and `gesture`, and a payload to payload.usdc
       payload.usdc               the rig (usd_skel.py): Skeleton with oriented joints, a SkelAnimation per gesture
                                  and one of all gestures in turn, the hand Mesh (skin, UVs, normals, pose-corrective
-                                 BlendShapes with weights in [0, 1]) and the forearm cap Mesh, bound to the skin
+                                 BlendShapes with weights in [0, 1], then the shape dials of shape_dials.py) and
+                                 the forearm cap Mesh, bound to the skin
                                  material </RightHand/RightHandSkin>
       texture/<id>.usda, texture/<id>/*.png        one skin material per texture variant
       accessory/<id>.usdc, accessory/<id>/*.png    one accessory per accessory variant
-      asset.json                 what was written: options, counts, gesture names by time code, error bounds
+      asset.json                 what was written: options, counts, gesture names by time code, error bounds,
+                                 the built shape's betas and the shape dials' error (shape_dials)
 
 Every asset path is relative. The package is written into a temporary folder next to <out> and renamed into place,
 so an interrupted export never leaves a half-written package.
@@ -35,6 +37,7 @@ from darthand.export.conventions import asset_conventions
 from darthand.export.correctives import Correctives, export_correctives
 from darthand.export.gestures import gesture_poses
 from darthand.export.options import check_export_options
+from darthand.export.shape_dials import DIAL_RANGE, ShapeDials, dial_error, shape_dials
 from darthand.export.texture_files import check_textures_fit
 from darthand.export.usd_materials import MaterialSpec, bind_material
 from darthand.export.usd_skel import ALL_GESTURES, SPARSE_TOL, RigNames, define_rig
@@ -53,12 +56,14 @@ class ExportOptions:
     """influences: joints per vertex, at most (None: as many as any vertex has non-zero weights, lossless);
     correctives: 'full' | 'pca:K' | 'pose-pca:K' | 'none' (correctives.export_correctives); texture_size: downsize
     every texture so its longer side is at most this many pixels (texture_files.place_texture; None: link the files
-    unchanged); sparse_tol: blend-shape offsets shorter than this (metres) are left out."""
+    unchanged); sparse_tol: blend-shape offsets shorter than this (metres) are left out; shape_dials: the range of
+    delta beta the shape-direction blend shapes reach (shape_dials.py; 0: none)."""
 
     influences: int | None = None
     correctives: str = "full"
     texture_size: int | None = None
     sparse_tol: float = SPARSE_TOL
+    shape_dials: float = DIAL_RANGE
 
     def check(self) -> None:
         check_export_options(self.influences, self.correctives, self.texture_size)
@@ -97,7 +102,8 @@ def export_usd(model: HandModel, out: str | os.PathLike, *, textures: list[Textu
     try:
         t0 = time.perf_counter()
         correctives = export_correctives(model, options.correctives)
-        stats = write_payload(tmp / "payload.usdc", root, model, correctives, options, names, poses)
+        dials = shape_dials(model, options.shape_dials)
+        stats = write_payload(tmp / "payload.usdc", root, model, correctives, options, names, poses, dials)
         texture_layers = {vid: write_texture_variant(tmp, vid, spec, options.texture_size)
                           for vid, spec in materials.items()}
         accessory_layers = {a.id: write_accessory_variant(tmp, a, correctives, options.influences,
@@ -114,10 +120,12 @@ def export_usd(model: HandModel, out: str | os.PathLike, *, textures: list[Textu
             "prims": stats.prims,
             "conventions": asset_conventions(model),
             "blend_shapes": correctives.encoding.as_dict(),
+            "shape_dials": {**dials.as_dict(dial_error(model, dials, poses)), "blend_shapes": dials.encoding.as_dict()},
             "model": {"source": model.meta.get("source"), "vertices": model.num_vertices,
                       "faces": model.num_faces, "tip_ids": model.tip_ids.tolist()},
             "options": {"influences": options.influences or "all", "correctives": options.correctives,
-                        "texture_size": options.texture_size, "sparse_tol_m": options.sparse_tol},
+                        "texture_size": options.texture_size, "sparse_tol_m": options.sparse_tol,
+                        "shape_dials": options.shape_dials},
             "rig": stats.as_dict(),
             "gestures": {"names": names, "time_codes": list(range(len(names))), "variant_set": "gesture",
                          "timeline_variant": ALL_GESTURES,
@@ -137,12 +145,12 @@ def export_usd(model: HandModel, out: str | os.PathLike, *, textures: list[Textu
 
 
 def write_payload(path: Path, root: Sdf.Path, model: HandModel, correctives: Correctives, options: ExportOptions,
-                  names: list[str], poses: np.ndarray):
+                  names: list[str], poses: np.ndarray, dials: ShapeDials | None = None):
     """payload.usdc: the SkelRoot `root` with the rig; the hand and the cap bound to the texture variant's material
     (composed in by the interface's `texture` variant)."""
     stage = new_layer_stage(path, root.name)
     _time_metadata(stage.GetRootLayer(), len(names))
-    stats = define_rig(stage, root, model, correctives, names, poses, options.influences, options.sparse_tol)
+    stats = define_rig(stage, root, model, correctives, names, poses, options.influences, options.sparse_tol, dials)
     for role in ("hand", "forearm_cap"):
         bind_material(stage.GetPrimAtPath(stats.prims[role]), Sdf.Path(stats.prims["material"]))
     stage.GetRootLayer().Save()

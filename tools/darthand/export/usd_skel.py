@@ -12,6 +12,8 @@ How MANO maps onto UsdSkel (so that UsdSkel's own maths reproduces `forward` exa
   [0, 1] (export/blendshapes.py), so importers that clamp weights (Blender) need no fix-up. Offsets below
   `sparse_tol` are left out (sparse pointIndices); the largest dropped magnitude and the worst-case position error
   it can cause are returned.
+- Shape dials (shape_dials.py): the shape directions as more blend shapes after the correctives, not driven by the
+  animations (weight 0, the built shape), for a user to dial; the joints stay the built shape's.
 - Gestures: one SkelAnimation per gesture (the pose at the default time, no time samples) and one with every
   gesture in turn (time code k = gesture k); the interface's `gesture` variant set points the skeleton's
   animationSource at one of them.
@@ -30,6 +32,7 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
 
 from darthand.export.correctives import Correctives, channel_offsets
 from darthand.export.influences import influences_needed, top_k_influences
+from darthand.export.shape_dials import ShapeDials
 from darthand.export.skeleton import Skeleton, export_skeleton
 from darthand.model.cap import forearm_cap
 from darthand.model.hand_model import HandModel
@@ -153,22 +156,31 @@ def sparse_offsets(offsets: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndar
 
 
 def define_blend_shapes(stage: Usd.Stage, mesh: UsdGeom.Mesh, correctives: Correctives, channel_offsets: np.ndarray,
-                        max_weights: np.ndarray | None = None,
-                        sparse_tol: float = SPARSE_TOL) -> tuple[int, float, float]:
+                        max_weights: np.ndarray | None = None, sparse_tol: float = SPARSE_TOL,
+                        dials: ShapeDials | None = None,
+                        shapedirs: np.ndarray | None = None) -> tuple[int, float, float]:
     """One BlendShape prim per exported shape under `mesh`, bound with skel:blendShapes / skel:blendShapeTargets.
 
     channel_offsets (N, 3, K): the mesh's corrective channels, encoded here into the S shapes of `correctives`.
     max_weights (S,): the largest weight each shape takes (in the animations), used to bound the error of the
-    dropped offsets (None: not bounded, nan). Returns (points written, longest dropped offset, dropped error
-    bound) in metres.
+    dropped offsets (None: not bounded, nan). dials, shapedirs (N, 3, B): the shape dials (shape_dials.py) and the
+    mesh's shape directions, written after the correctives (their weights bounded by 1). Returns (points written,
+    longest dropped offset, dropped error bound) in metres.
     """
-    if correctives.count == 0:
+    names = list(correctives.names)
+    offsets = correctives.shape_offsets(channel_offsets) if correctives.count else \
+        np.zeros((len(channel_offsets), 3, 0))
+    if dials is not None and dials.count:
+        names += dials.encoding.names
+        offsets = np.concatenate([offsets, dials.shape_offsets(shapedirs)], axis=2)
+        if max_weights is not None:
+            max_weights = np.concatenate([np.asarray(max_weights, dtype=np.float64).reshape(-1), np.ones(dials.count)])
+    if not names:
         return 0, 0.0, 0.0
-    offsets = correctives.shape_offsets(channel_offsets)
     binding = UsdSkel.BindingAPI(mesh.GetPrim())
     targets, written, dropped_max = [], 0, 0.0
     bound = np.zeros(offsets.shape[0])
-    for k, name in enumerate(correctives.names):
+    for k, name in enumerate(names):
         idx, off, dropped = sparse_offsets(offsets[:, :, k], sparse_tol)
         shape = UsdSkel.BlendShape.Define(stage, mesh.GetPath().AppendChild(name))
         shape.CreateOffsetsAttr(vec3f(off))
@@ -178,7 +190,7 @@ def define_blend_shapes(stage: Usd.Stage, mesh: UsdGeom.Mesh, correctives: Corre
         dropped_max = max(dropped_max, float(dropped.max(initial=0.0)))
         if max_weights is not None:
             bound += abs(max_weights[k]) * dropped
-    binding.CreateBlendShapesAttr(Vt.TokenArray(list(correctives.names)))
+    binding.CreateBlendShapesAttr(Vt.TokenArray(names))
     binding.CreateBlendShapeTargetsRel().SetTargets(targets)
     return written, dropped_max, float(bound.max(initial=0.0)) if max_weights is not None else float("nan")
 
@@ -260,7 +272,7 @@ ALL_GESTURES = "all"   # the `gesture` variant whose animation holds every gestu
 
 def define_rig(stage: Usd.Stage, root: Sdf.Path, model: HandModel, correctives: Correctives,
                names: list[str], poses: np.ndarray, influences: int | None = None,
-               sparse_tol: float = SPARSE_TOL) -> RigStats:
+               sparse_tol: float = SPARSE_TOL, dials: ShapeDials | None = None) -> RigStats:
     """Under the SkelRoot at `root`: the Skeleton, one SkelAnimation per gesture and one of all gestures in turn,
     the hand Mesh with its blend shapes and the forearm cap Mesh (RigNames give the prim names).
 
@@ -287,15 +299,17 @@ def define_rig(stage: Usd.Stage, root: Sdf.Path, model: HandModel, correctives: 
                        model.faces_uv)
     mesh.GetPrim().SetCustomDataByKey("darthand:role", "hand")
     k = bind_skin(mesh.GetPrim(), model.weights, influences)
-    written, dropped_max, bound = define_blend_shapes(stage, mesh, correctives, correctives.offsets, max_w, sparse_tol)
+    written, dropped_max, bound = define_blend_shapes(stage, mesh, correctives, correctives.offsets, max_w, sparse_tol,
+                                                      dials, model.shapedirs)
 
     cap = forearm_cap(model)
     cap_mesh = define_mesh(stage, root.AppendChild(rig_names.cap), cap.vertices, cap.faces, cap.uvs, cap.faces_uv)
     cap_mesh.GetPrim().SetCustomDataByKey("darthand:role", "forearm_cap")
     bind_skin(cap_mesh.GetPrim(), cap.weights, influences)
     define_blend_shapes(stage, cap_mesh, correctives, channel_offsets(cap.posedirs, correctives, len(cap.vertices)),
-                        max_w, sparse_tol)
+                        max_w, sparse_tol, dials, cap.shapedirs)
     prims = {"skeleton": str(skel.GetPath()), "hand": str(mesh.GetPath()), "forearm_cap": str(cap_mesh.GetPath()),
              "material": str(root.AppendChild(rig_names.material)),
              "animations": {n: str(a.GetPath()) for n, a in anims.items()}}
-    return RigStats(k, correctives.count, written, dropped_max, bound, tuple(names), prims)
+    shapes = correctives.count + (dials.count if dials is not None else 0)
+    return RigStats(k, shapes, written, dropped_max, bound, tuple(names), prims)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.model.atlas import ensure_uvs
 from darthand.model.forward import forward
@@ -96,6 +97,9 @@ def build(args) -> int:
     source = load_model(args.model)
     enhanced = ensure_uvs(add_wrist(source), args.atlas_res)
     right = enhanced if enhanced.side == "right" else mirror_model(enhanced)
+    betas = parse_betas(getattr(args, "betas", None))
+    if betas is not None:               # the shape first: gestures are fitted to the hand they will pose
+        right = right.shaped(betas)
     right = with_fitted_gestures(ensure_face_labels(right))
     out = Path(args.out_dir)
     for model in (right, mirror_model(right)):
@@ -106,6 +110,20 @@ def build(args) -> int:
     labels = "derived face labels" if source.face_labels is None else "the template's face labels"
     status = [g["status"] for g in right.meta["gestures"]["gestures"].values()]
     fits = ", ".join(f"{status.count(s)} {s}" for s in ("kept", "fitted", "unresolved") if s in status)
+    shape = f"; shape betas {' '.join(f'{b:g}' for b in betas)}" if betas is not None else ""
     print(f"{out}/right.npz, left.npz: {right.num_vertices} vertices, {right.num_faces} faces "
-          f"(from {args.model}, {source.num_vertices} vertices; {uv}; {labels}); gestures: {fits}")
+          f"(from {args.model}, {source.num_vertices} vertices; {uv}; {labels}{shape}); gestures: {fits}")
     return 0
+
+
+def parse_betas(text: str | None) -> np.ndarray | None:
+    """'1.5 -0.5' or '1.5,-0.5' -> array([1.5, -0.5]); None or blank -> None; InputError naming a bad entry."""
+    if text is None or not str(text).strip():
+        return None
+    values = []
+    for item in str(text).replace(",", " ").split():
+        try:
+            values.append(float(item))
+        except ValueError:
+            raise InputError(f"--betas: {item!r} is not a number") from None
+    return np.asarray(values)

@@ -86,17 +86,18 @@ class Renderer:
     def render(self, pose=None, *, texture: str | None = None, skin_tone_offset: float = 0.0,
                accessory: str | None = None, camera="three_quarter", lights=None, background=None,
                width: int = 512, height: int = 512, samples: int = DEFAULT_SAMPLES, aa_shading: str = "triangle",
-               shading=None, labels: bool = True, keypoint_order: str = "openpose") -> Frame:
+               shading=None, labels: bool = True, keypoint_order: str = "openpose", betas=None) -> Frame:
         """One frame. pose: None (flat), a gesture name, a pose file or (48,) MANO axis-angle (flat-hand relative).
         camera: a Camera, a view name, a camera JSON path or dict (camera.load_camera), framed on the posed hand.
         lights: a Lighting, a lights JSON path or dict, or None (lights.default_lighting). background: image path or
         (H, W, 3) linear array, or None (transparent). samples: sub-samples per edge pixel (1, 4, 8, 16);
         aa_shading: shade them once per pixel per triangle ('triangle') or each ('sample') (see aa.py). shading: a
-        shade.ShadingOptions or a dict of its fields (ambient occlusion, skin model), None for the defaults."""
+        shade.ShadingOptions or a dict of its fields (ambient occlusion, skin model), None for the defaults. betas:
+        the hand's shape (S,) for a model source (None: the model's own)."""
         with single_threaded_blas():
             prepared = self._prepare(pose, texture=texture, skin_tone_offset=skin_tone_offset, accessory=accessory,
                                      camera=camera, lights=lights, width=width, height=height,
-                                     keypoint_order=keypoint_order)
+                                     keypoint_order=keypoint_order, betas=betas)
             return self._finish(prepared, background=background, samples=samples, aa_shading=aa_shading,
                                 shading=shading, labels=labels)
 
@@ -122,13 +123,14 @@ class Renderer:
                 yield self._finish(prepared, **finish)
 
     def _prepare(self, pose, *, texture=None, skin_tone_offset=0.0, accessory=None, camera="three_quarter",
-                 lights=None, width=512, height=512, keypoint_order="openpose") -> tuple:
+                 lights=None, width=512, height=512, keypoint_order="openpose", betas=None) -> tuple:
         """(subject, scene, camera, lighting, timings): the frame's work before tracing."""
         check_skin_tone_offset(skin_tone_offset)
         timings: dict = {}
         t = time.perf_counter()
+        shape = {} if betas is None else {"betas": betas}      # a USD package has no shape to change
         subject = self.source.subject(pose, texture=texture, skin_tone_offset=skin_tone_offset, accessory=accessory,
-                                      keypoint_order=keypoint_order)
+                                      keypoint_order=keypoint_order, **shape)
         timings["pose"] = _lap(t)
         t = time.perf_counter()
         points = subject.all_vertices()

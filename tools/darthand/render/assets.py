@@ -3,7 +3,9 @@ forward pass.
 
 Per frame only what moved is recomputed: the hand's vertices and normals when the pose changes; a rigid accessory is
 its fixed rest mesh moved by its joint's transform (its rest normals are computed once); a glove is skinned like the
-hand. Textures are decoded once per file pair; a skin-tone offset is a decode table on the shared pyramid
+hand. Given betas (a dataset's shape per frame), the hand is that shape and an accessory is refitted to it
+(accessories/reshape.py: ring bores, watch and bracelet sizes, glove surfaces), its arrays kept per shape while the
+shape stays. Textures are decoded once per file pair; a skin-tone offset is a decode table on the shared pyramid
 (texture.load_maps).
 """
 
@@ -42,6 +44,8 @@ class HandAssets:
     _last_accessory: tuple | None = field(default=None, repr=False)
     _gestures: dict = field(default_factory=dict, repr=False)
     _face_joints: dict = field(default_factory=dict, repr=False)    # also float32 glove arrays, ("f32", id)
+    _refitter: object = field(default=None, repr=False)          # accessories.reshape.ShapeRefitter, made once
+    _refits: tuple | None = field(default=None, repr=False)       # (shape key, {id: refitted Accessory})
 
     @classmethod
     def load(cls, model, textures=None, accessories=None) -> "HandAssets":
@@ -108,7 +112,8 @@ class HandAssets:
         surfaces = [hand]
         if accessory != NONE:
             if self._last_accessory is None or self._last_accessory[0] != (key, accessory):
-                self._last_accessory = ((key, accessory), self.posed_accessory(self.accessories[accessory], posed))
+                acc, acc_key = self.fitted_accessory(accessory, betas)
+                self._last_accessory = ((key, accessory), self.posed_accessory(acc, posed, acc_key))
             surfaces.append(self._last_accessory[1])
         surfaces.append(self.posed_cap(posed, betas, hand.material))      # last: surface indices 0 hand, 1 accessory
         info = {"source": self.source, "texture": texture, "skin_tone_offset": float(skin_tone_offset),
@@ -158,29 +163,53 @@ class HandAssets:
         return Surface("forearm_cap", v, faces, vertex_normals(v, faces), material, uvs, faces_uv, cap.vertices,
                        "cap", joints)
 
-    def posed_accessory(self, acc: Accessory, posed) -> Surface:
+    def fitted_accessory(self, accessory: str, betas) -> tuple[Accessory, object]:
+        """(the accessory fitted to the hand of `betas`, the key its rest arrays are kept under): the catalogue's
+        own for no betas, else refitted (accessories.reshape). One shape's refits are kept at a time, so a dataset
+        that changes shape every frame holds no more than one frame's."""
+        acc = self.accessories[accessory]
+        b = None if betas is None else np.asarray(betas, np.float64).reshape(-1)
+        if b is None or not b.any():
+            return acc, acc.id
+        if self._refits is None or self._refits[0] != b.tobytes():
+            for cache in (self._rest_normals, self._face_joints):
+                for k in [k for k in cache if isinstance(k, tuple) and isinstance(k[1], tuple) and k[1][0] == "refit"]:
+                    del cache[k]
+            self._refits = (b.tobytes(), {})
+        fitted = self._refits[1]
+        if accessory not in fitted:
+            from darthand.accessories.reshape import ShapeRefitter
+
+            if self._refitter is None:
+                self._refitter = ShapeRefitter(self.model, list(self.accessories.values()))
+            fitted[accessory] = self._refitter.refit(b, [accessory])[0]
+        return fitted[accessory], ("refit", accessory)
+
+    def posed_accessory(self, acc: Accessory, posed, key=None) -> Surface:
         """The accessory placed for a forward-pass result: rigid ones by their joint's skinning transform,
-        gloves skinned with their own correctives."""
+        gloves skinned with their own correctives. key: what its rest arrays are kept under (default its id; a
+        refitted accessory's includes the shape)."""
+        key = acc.id if key is None else key
         if acc.parent_joint is not None:
             G = posed.transforms[0, acc.parent_joint].astype(np.float64)
-            rest_n = self._rest_normals.get(acc.id)
+            rest_n = self._rest_normals.get(("normals", key))
             if rest_n is None:
-                rest_n = self._rest_normals[acc.id] = vertex_normals(acc.vertices, acc.faces)
+                rest_n = self._rest_normals["normals", key] = vertex_normals(acc.vertices, acc.faces)
             v = (acc.vertices @ G[:3, :3].T + G[:3, 3]).astype(np.float32)
             n = (rest_n @ G[:3, :3].T.astype(np.float32)).astype(np.float32)
-            local = self._rest_normals.get(("f32", acc.id))
+            local = self._rest_normals.get(("f32", key))
             if local is None:
-                local = self._rest_normals["f32", acc.id] = np.ascontiguousarray(acc.vertices, np.float32)
+                local = self._rest_normals["f32", key] = np.ascontiguousarray(acc.vertices, np.float32)
         else:
             from darthand.accessories.attach import pose_skinned
             from darthand.model.layout import NUM_POSE_FEATURES
 
             posedirs = acc.posedirs if acc.posedirs is not None else np.zeros((len(acc.vertices), 3,
                                                                                  NUM_POSE_FEATURES))
-            if ("f32", acc.id) not in self._face_joints:
-                self._face_joints["f32", acc.id] = tuple(np.ascontiguousarray(a, np.float32)
-                                                         for a in (acc.vertices, acc.weights, posedirs))
-            v = pose_skinned(*self._face_joints["f32", acc.id], posed.rotations, posed.transforms)[0]
+            if ("f32", key) not in self._face_joints:
+                self._face_joints["f32", key] = tuple(np.ascontiguousarray(a, np.float32)
+                                                      for a in (acc.vertices, acc.weights, posedirs))
+            v = pose_skinned(*self._face_joints["f32", key], posed.rotations, posed.transforms)[0]
             v = v.astype(np.float32)
             n = vertex_normals(v, acc.faces)
             if acc.id not in self._face_joints:

@@ -5,7 +5,8 @@ Checks per package (each {"ok", figures..., "failures": [...]} in the report):
     finite          no NaN or infinity in any render (colour, coverage, depth)
     coverage        every gesture render covers a plausible share of the frame (COVERAGE_RANGE)
     keypoints       every keypoint inside the image lies on the mask or within KEYPOINT_SLACK_PX of it
-    accessories     every accessory variant is seen (at least MIN_ACCESSORY_PIXELS in the dorsal or palmar view)
+    accessories     every accessory variant is seen (at least MIN_ACCESSORY_PIXELS in the dorsal or palmar view, at
+                    the tile size or else twice it)
                     and lies next to its bone: a rigid one's centroid within NEXT_TO_BONE_M of its parent joint's
                     bone, a glove over most of the hand (GLOVE_COVER of the hand's silhouette)
     uv_seams        a UV-checker render, and the same view looked up in a texture that stores each texel's rest-pose
@@ -114,16 +115,22 @@ def check_package(package, *, size: int = 256, all_accessories: bool = True) -> 
     accessory_tiles = []
     acc = checks["accessories"]
     acc.update(checked=len(chosen), rigid_max_distance_m=0.0, glove_min_cover=None)
+    pose = "flat" if not gestures or "flat" in gestures else None
     for acc_id in chosen:
         best, seen = None, 0
-        for view in ("dorsal", "palmar"):
-            frame = renderer.render("flat" if not gestures or "flat" in gestures else None, texture=textures[0],
-                                    accessory=acc_id, camera=view, width=acc_size, height=acc_size)
-            renders += 1
-            _check_frame(frame, f"{acc_id} {view}", checks, coverage=False)
-            pixels = int((frame.geom == 1).sum())
-            if pixels >= seen:
-                best, seen = frame, pixels
+        # A thin band on a large hand may cover fewer pixels than the threshold at the tile size: such an item is
+        # looked at again at twice the size before it counts as unseen (hidden inside the hand, or missing).
+        for res in (acc_size, 2 * acc_size):
+            for view in ("dorsal", "palmar"):
+                frame = renderer.render(pose, texture=textures[0], accessory=acc_id, camera=view, width=res,
+                                        height=res)
+                renders += 1
+                _check_frame(frame, f"{acc_id} {view}", checks, coverage=False)
+                pixels = int((frame.geom == 1).sum())
+                if pixels >= seen:
+                    best, seen = frame, pixels
+            if seen >= MIN_ACCESSORY_PIXELS:
+                break
         accessory_tiles.append((best, acc_id[:20]))
         _check_accessory(best, acc_id, seen, acc)
     for c in checks.values():
@@ -291,7 +298,9 @@ def write_sheet(path: Path, tiles: list, cols: int) -> None:
     images = []
     for frame, _ in tiles:
         img = annotated(frame)
+        if img.shape[0] > h:                    # a tile looked at again at a multiple of the size
+            img = img[::-(-img.shape[0] // h), ::-(-img.shape[1] // w)]
         if img.shape[:2] != (h, w):
-            img = np.repeat(np.repeat(img, h // img.shape[0], axis=0), w // img.shape[1], axis=1)[:h, :w]
+            img = np.repeat(np.repeat(img, -(-h // img.shape[0]), axis=0), -(-w // img.shape[1]), axis=1)[:h, :w]
         images.append(img)
     write_png(path, contact_sheet(images, [label for _, label in tiles], cols))

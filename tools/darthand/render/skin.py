@@ -29,6 +29,7 @@ Not modelled: the softening of cast shadow edges (a shadow ray per point decides
 from __future__ import annotations
 
 import functools
+import weakref
 
 import numpy as np
 import scipy.sparse as sp
@@ -105,17 +106,18 @@ _WIDTHS: dict = {}
 def skin_width(material) -> np.ndarray:
     """(3,) float32 profile width d (metres) of a skin material: `profile_width` at the median albedo of its texture
     (a coarse mip level: the skin tone, moles and tattoos aside) and its mean free paths. Remembered per texture
-    storage, decode table (skin-tone offset) and mean free paths."""
+    storage, decode table (skin-tone offset) and mean free paths. The storage is held weakly: a texture the
+    pyramid cache (render/texture.py) lets go of must be freed, not kept alive here."""
     maps = material.maps
     key = (id(maps.flat), None if maps.decode is None else maps.decode.tobytes(), tuple(material.mfp_mm))
     entry = _WIDTHS.get(key)
-    if entry is None or entry[0] is not maps.flat:
+    if entry is None or entry[0]() is not maps.flat:
         levels = maps.levels
         level = levels[max(0, len(levels) - 5)][..., :3].reshape(-1, 3)
         tone = np.median(level, axis=0)[:, None]
         if len(_WIDTHS) > 256:
             _WIDTHS.clear()
-        entry = _WIDTHS[key] = (maps.flat, profile_width(tone, np.asarray(material.mfp_mm, np.float32) * 1e-3)[:, 0])
+        entry = _WIDTHS[key] = (weakref.ref(maps.flat), profile_width(tone, np.asarray(material.mfp_mm, np.float32) * 1e-3)[:, 0])
     return entry[1]
 
 

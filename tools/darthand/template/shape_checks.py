@@ -18,12 +18,13 @@ from pathlib import Path
 import numpy as np
 
 from darthand.fileio import atomic_path, write_json
+from darthand.model.gesture_fit import with_fitted_gestures
 from darthand.model.hand_model import HandModel
-from darthand.model.preview import BACKGROUND, contact_sheet, render_mesh, write_png
+from darthand.model.preview import BACKGROUND, HIGHLIGHT, SKIN, contact_sheet, render_mesh, write_png
 from darthand.model.topology import boundary_loops
 from darthand.template import anthropometry
 from darthand.template.decimate import closest_surface_points
-from darthand.template.gesture_checks import face_normals, gesture_problems, gesture_report
+from darthand.template.gesture_checks import checked_gestures, face_normals, gesture_problems
 
 MIN_DEPTH_RATIO = 0.5
 GESTURE_FIGURES = ("finite", "inverted_faces", "degenerate_faces", "between_fingers_faces", "finger_palm_faces")
@@ -78,12 +79,18 @@ def _closed(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.nda
 
 
 def check_shape(model: HandModel, template_depth: np.ndarray, betas: np.ndarray,
-                max_between_fingers: int = 10) -> dict:
-    """Rest-surface, joint and gesture checks of one shape; `template_depth` (16,) the template's joint depths."""
-    shaped = model.shaped(betas)
+                max_between_fingers: int = 10, posed: dict | None = None) -> dict:
+    """Rest-surface, joint and gesture checks of one shape; `template_depth` (16,) the template's joint depths.
+
+    The gestures are fitted to the shaped hand first (model/gesture_fit, as `model build` fits them to the hand it
+    builds), so the checks see the gestures that hand's package would carry. posed: if given, gets the shape's
+    (gesture names, posed vertices (G, V, 3), crossing faces (G, F)) for the gesture sheet."""
+    shaped = with_fitted_gestures(model.shaped(betas))
     v = shaped.v_template
     depth, inside = joint_depths(model, v)
-    gestures = gesture_report(shaped)
+    names, vertices, crossing, gestures = checked_gestures(shaped)
+    if posed is not None:
+        posed.update(names=names, vertices=vertices, crossing=crossing)
     summary = {name: {k: g.get(k) for k in GESTURE_FIGURES} for name, g in gestures.items()}
     sizes = anthropometry.hand_sizes(model, v[None])
     return {
@@ -135,11 +142,13 @@ def size_summary(sizes: dict, survey: dict = anthropometry.ANSUR_II) -> dict:
 
 
 def shape_checks(model: HandModel, magnitude: float = 3.0, max_between_fingers: int = 10, samples: int = 2000,
-                 seed: int = 0) -> dict:
+                 seed: int = 0, posed: dict | None = None) -> dict:
     """The report written to shapes.json: per extreme shape its checks, the sampled hand sizes' summary, and the
-    shape space's own figures when the model records them (the open hand's `meta['shape_space']`)."""
+    shape space's own figures when the model records them (the open hand's `meta['shape_space']`). posed: if
+    given, gets {shape label: its posed gestures} (`check_shape`)."""
     template_depth, _ = joint_depths(model, model.v_template)
-    shapes = {label: check_shape(model, template_depth, betas, max_between_fingers)
+    shapes = {label: check_shape(model, template_depth, betas, max_between_fingers, posed.setdefault(label, {})
+                                 if posed is not None else None)
               for label, betas in extreme_shapes(model, magnitude)}
     return {"model": model.meta.get("source"), "shape_dims": model.num_betas, "magnitude": magnitude,
             "shapes": shapes, "hand_sizes": size_summary(hand_size_sample(model, samples, seed)),
@@ -151,10 +160,12 @@ def write_shape_checks(model: HandModel, out_dir: str | Path, magnitude: float =
                        max_between_fingers: int = 10) -> dict:
     """shapes.json, shapes.png, hand_sizes.png (and shape_variance.png) into `out_dir`; return the report."""
     out_dir = Path(out_dir)
-    report = shape_checks(model, magnitude, max_between_fingers)
+    posed: dict = {}
+    report = shape_checks(model, magnitude, max_between_fingers, posed=posed)
     report["problems"] = shape_problems(report)
     write_json(out_dir / "shapes.json", report)
     write_shape_sheet(model, extreme_shapes(model, magnitude), out_dir / "shapes.png")
+    write_gesture_sheet(model, posed, out_dir / "shape_gestures.png")
     write_size_chart(hand_size_sample(model), out_dir / "hand_sizes.png")
     explained = (report["shape_space"] or {}).get("explained_variance")
     if explained:
@@ -181,6 +192,28 @@ def write_shape_sheet(model: HandModel, shapes: list[tuple[str, np.ndarray]], ou
             images.append(blank)
             labels.append("")
     write_png(out_png, contact_sheet(images, labels, cols=2 * len(SHEET_VIEWS)))
+
+
+SHEET_GESTURES = ("fist", "grasp", "ok", "pinch")   # the gestures whose digits meet (where shape shows first)
+
+
+def write_gesture_sheet(model: HandModel, posed: dict, out_png: str | Path, gestures=SHEET_GESTURES,
+                        size: int = 180) -> None:
+    """Contact sheet: one row per extreme shape, its fitted `gestures` (three-quarter view), faces that pass
+    through another part of the hand in red."""
+    images, labels = [], []
+    for label, p in posed.items():
+        for name in gestures:
+            if name not in p["names"]:
+                continue
+            g = p["names"].index(name)
+            colours = np.tile(np.asarray(SKIN, np.float32), (len(model.faces), 1))
+            colours[p["crossing"][g]] = HIGHLIGHT
+            images.append(render_mesh(p["vertices"][g], model.faces, view="three_quarter", size=size,
+                                      face_colors=colours, side=model.side))
+            labels.append(f"{label} {name} ({int(p['crossing'][g].sum())})")
+    if images:
+        write_png(out_png, contact_sheet(images, labels, cols=len(gestures)))
 
 
 SAMPLES_COLOUR = "#8c9ec0"

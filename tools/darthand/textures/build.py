@@ -160,9 +160,10 @@ def _files_intact(out_dir: Path, record: dict) -> bool:
 _WORKER_BAKE: Bake | None = None
 
 
-def _init_worker(bake_path: str) -> None:
+def _init_worker(bake_path: str, parent: int) -> None:
     global _WORKER_BAKE
-    init_worker()         # Ctrl-C is the parent's to handle; the worker ends with its parent
+    init_worker(parent)   # Ctrl-C is the parent's to handle; the worker ends with its parent (even one that died
+                          # while this worker was starting: the pid is the parent's, not whoever adopted us)
     keep_freed_memory()   # every variant makes and drops the same few-MB arrays: reuse them, not fresh pages
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import OpenImageIO as oiio
@@ -189,7 +190,7 @@ def _render_all(todo, bake, bake_path, out_dir, res, tx, roughness, workers, pro
         return
     ctx = multiprocessing.get_context("spawn")  # no forked copies of OpenImageIO's threads
     with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
-                                initargs=(str(bake_path),)) as pool:
+                                initargs=(str(bake_path), os.getpid())) as pool:
         with deaf_to_ctrl_c():                  # submit starts the workers; Ctrl-C is ours, even while they import
             futures = [pool.submit(_render_one, job) for job in jobs]
         try:
