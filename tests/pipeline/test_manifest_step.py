@@ -115,3 +115,28 @@ def test_manifest_check_exits_1_while_a_recorded_check_fails(tmp_path, capsys):
     assert main(cli) == 0 and capsys.readouterr().out == ""
     (build / "manifest.json").write_text("{")
     assert main(cli) == 2 and "manifest.json: " in capsys.readouterr().err
+
+
+def test_step_record_says_when_it_started(tmp_path):
+    import time
+
+    before = time.time()
+    assert run_step("demo", [sys.executable, "-c", "pass"], steps_dir=tmp_path / "steps") == 0
+    record = json.loads((tmp_path / "steps" / "demo.json").read_text())
+    assert before - 0.01 <= record["started"] <= time.time()
+    assert record["started"] + record["seconds"] <= time.time() + 0.01
+
+
+def test_make_assets_per_run_commands_import_no_stage(tmp_path):
+    """`verify` and `manifest` (run by every `make assets`, a no-op rebuild included) parse their arguments without
+    importing the stages' heavy dependencies (OpenUSD, SciPy's optimiser), which cost about 1.3 s per command."""
+    import subprocess
+
+    code = ("import sys; from darthand.cli import main; "
+            f"rc = main(['verify', '--build', {str(tmp_path)!r}, '--repair']); "
+            "rc |= main(['manifest', '--build', " + repr(str(tmp_path)) + "]); "
+            "heavy = [m for m in ('pxr', 'scipy.optimize', 'darthand.export.usd_asset') if m in sys.modules]; "
+            "print(heavy); sys.exit(rc or bool(heavy))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert (tmp_path / "manifest.json").is_file()

@@ -1,4 +1,4 @@
-"""Rasterisation and baking against closed-form cases; the padding map; the bake cache."""
+"""Rasterisation and baking against closed-form cases; padding a baked image; the bake cache."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,7 @@ import scipy.sparse as sp
 
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import FACE_LABEL_IDS, MANO_PARENTS, NUM_POSE_FEATURES
-from darthand.textures.bake import bake, bake_key, cached_bake, fill_map, load_bake, save_bake
+from darthand.textures.bake import bake, bake_key, cached_bake, load_bake, save_bake
 from darthand.textures.raster import rasterize
 from texture_hand import fixture_bake, fixture_model
 
@@ -106,24 +106,6 @@ def test_bake_flat_quad_positions_normals_labels_closed_form():
     assert (b.position[g, 0] >= -1e-9).all() and (b.position[g, 0] <= 0.1 + 1e-9).all()
 
 
-def test_fill_map_points_every_texel_to_the_smallest_stored_block_around_it():
-    """Brute force: for every texel, the smallest aligned 2^L block (L = 0, 1, ...) holding a stored texel; its
-    row in the pyramid (level 0: the texel itself; level L >= 1: offset by the sizes of the levels below)."""
-    res = 32
-    rng = np.random.default_rng(0)
-    texel = np.sort(rng.choice(res * res, 40, replace=False))
-    fill = fill_map(texel, res)
-    stored = np.zeros((res, res), bool)
-    stored.flat[texel] = True
-    sizes = [res >> L for L in range(6)]
-    for idx in range(res * res):
-        r, c = divmod(idx, res)
-        L = next(L for L in range(6) if stored[(r >> L) << L:((r >> L) + 1) << L,
-                                            (c >> L) << L:((c >> L) + 1) << L].any())
-        offset = sum(s * s for s in sizes[:L])
-        assert fill[idx] == offset + (r >> L) * sizes[L] + (c >> L), idx
-
-
 def test_padding_keeps_every_mip_block_within_its_own_stored_colours():
     """Push-pull on the pyramid's blocks: a 2 x 2 box mipmap (what engines build from a PNG) of the padded image,
     at every level, lies within the range of the stored texels of that block; the nearest-texel dilation it
@@ -178,7 +160,7 @@ def test_bake_cache_round_trip_and_key(tmp_path):
     assert path == tmp_path / "bake_64.npz" and path.is_file()
     again = load_bake(path)
     assert again.key == b.key == bake_key(model, 64)
-    for name in ("texel", "face", "inside", "position", "normal", "label", "fill"):
+    for name in ("texel", "face", "inside", "position", "normal", "label"):
         assert np.array_equal(getattr(again, name), getattr(b, name)), name
     for k, v in b.fields.items():
         assert np.array_equal(again.fields[k], v), k

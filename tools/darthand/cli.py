@@ -20,8 +20,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         from darthand.processes import deaf_to_ctrl_c
 
+        argv = sys.argv[1:] if argv is None else list(argv)
         with deaf_to_ctrl_c():     # a Ctrl-C during the imports is taken after them (OpenUSD's module loader would
-            parser = build_parser()     # print it as a warning with a traceback and go on)
+            parser = build_parser(argv[0] if argv else None)    # print it as a warning with a traceback and go on)
             try:
                 args = parser.parse_args(argv)
             except SystemExit as e:     # --help, or a bad option (its one line already printed): an exit code, so
@@ -63,20 +64,21 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"darthand: error: {where}{message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command; with `command` (the first argument) one of the names below, only its group's,
+    so that `make assets`' own per-run commands (verify, manifest) do not import every stage (OpenUSD, SciPy, ...):
+    about 1.3 s each, most of a no-op rebuild."""
     parser = _Parser(prog="darthand", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(title="commands", metavar="COMMAND")
-    _add_model_commands(sub)
-    # -- stage command groups are added here (one function per stage, below) --
-    _add_template_commands(sub)
-    _add_textures_commands(sub)
-    _add_accessories_commands(sub)
-    _add_export_commands(sub)
-    _add_render_commands(sub)
-    _add_dataset_commands(sub)
-    _add_validate_command(sub)
-    _add_manifest_command(sub)
-    _add_studio_command(sub)
+    # -- stage command groups are added here (one function per stage, below), with the names they add --
+    groups = [(("model",), _add_model_commands), (("template",), _add_template_commands),
+              (("textures",), _add_textures_commands), (("accessories",), _add_accessories_commands),
+              (("export",), _add_export_commands), (("render", "render-checks", "render-dataset"), _add_render_commands),
+              (("dataset", "eval"), _add_dataset_commands), (("validate",), _add_validate_command),
+              (("manifest", "verify"), _add_manifest_command), (("studio",), _add_studio_command)]
+    chosen = [add for names, add in groups if command in names]
+    for add in chosen or [add for _, add in groups]:
+        add(sub)
     for leaf in _leaf_parsers(parser):
         leaf.add_argument("--max-memory", type=_memory_size, default=None, metavar="SIZE",
                           help="memory this command may plan to use, e.g. 64G (default: $DARTHAND_MAX_MEMORY or "

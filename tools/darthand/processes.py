@@ -14,6 +14,7 @@ import os
 import signal
 
 PR_SET_PDEATHSIG = 1     # linux/prctl.h
+M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD = -1, -2, -3      # glibc malloc.h
 
 
 WATCHDOG_S = 0.5        # where the kernel cannot be asked, how often a worker looks for its parent
@@ -48,6 +49,22 @@ def die_with_parent(sig: int = signal.SIGKILL) -> bool:
 
         libc = ctypes.CDLL(None, use_errno=True)
         return libc.prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def keep_freed_memory(largest: int = 32 << 20) -> bool:
+    """Ask glibc's malloc to serve blocks up to `largest` bytes (its ceiling is 32 MB) from the heap and to keep
+    freed memory for reuse, instead of mapping every large array afresh and unmapping it when freed: a worker that
+    makes and drops many arrays of a few MB per job (one per texel field of a 2048^2 texture) otherwise pays the
+    kernel for fresh zeroed pages each time (measured: 1.96 s of system time down to 0.55 s over 42 texture
+    variants; the process keeps its peak size). False where glibc is not there."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None)
+        return all(libc.mallopt(param, value) == 1 for param, value in (
+            (M_MMAP_THRESHOLD, largest), (M_TRIM_THRESHOLD, 1 << 30), (M_TOP_PAD, 64 << 20)))
     except (OSError, AttributeError):
         return False
 

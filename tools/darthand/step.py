@@ -2,7 +2,8 @@
 
     python -m darthand.step NAME -- COMMAND [ARGS...]
 
-writes build/steps/NAME.json ({"name", "seconds", "cpu_seconds", "command", "exit_code"}) atomically and exits with
+writes build/steps/NAME.json ({"name", "started", "seconds", "cpu_seconds", "command", "exit_code"}; started: Unix
+time, so the steps of one build can be laid out on a time line to see how they overlap) atomically and exits with
 the command's code, so a failing step stops make and leaves no record that a later run would trust. cpu_seconds
 (user + system of the command and its children) is the figure to compare on a machine other work shares.
 
@@ -35,7 +36,7 @@ def run_step(name: str, command: list[str], steps_dir: Path = STEPS_DIR) -> int:
     print(f"[{name}] ...", file=sys.stderr, flush=True)
     if steps_dir.parent.is_dir():
         remove_stale_temporaries(steps_dir.parent)
-    t0, cpu0 = time.perf_counter(), _children_cpu()
+    started, t0, cpu0 = time.time(), time.perf_counter(), _children_cpu()
     record = steps_dir / f"{name}.json"
     try:
         proc = subprocess.Popen(command, env=dict(os.environ, **{STEP_ENV: name}))
@@ -52,7 +53,8 @@ def run_step(name: str, command: list[str], steps_dir: Path = STEPS_DIR) -> int:
         return INTERRUPTED
     seconds, cpu = time.perf_counter() - t0, _children_cpu() - cpu0
     if code == 0:
-        write_json(record, {"name": name, "seconds": round(seconds, 3), "cpu_seconds": round(cpu, 3),
+        write_json(record, {"name": name, "started": round(started, 3), "seconds": round(seconds, 3),
+                            "cpu_seconds": round(cpu, 3),
                             "command": command, "exit_code": code})
         print(f"[{name}] done in {seconds:.1f} s", file=sys.stderr, flush=True)
     else:

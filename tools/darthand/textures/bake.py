@@ -8,8 +8,8 @@ either side of a seam see the same surface). Every other texel is filled by push
 coverage-weighted average pyramid of the stored texels is pulled back down, so empty space holds smooth averages of
 the islands around it. Engines that build their own mipmaps from the PNGs (Blender's EEVEE, three.js, game
 engines) then average islands with that smooth fill instead of with the sharp colour edges a nearest-texel
-(Voronoi) dilation leaves where the regions of two islands meet, which showed as bright specks along UV seams.
-`fill` maps every image texel to its row of that pyramid, so a padded image is one pyramid and one gather.
+(Voronoi) dilation leaves where the regions of two islands meet, which showed as bright specks along UV seams
+(see `padding`; its block structure is built once per bake and shared by every image).
 
 Cached in `bake_<res>.npz` next to the textures, keyed by a hash of the model's geometry, UVs and labels.
 """
@@ -27,11 +27,11 @@ from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.model.hand_model import HandModel
 from darthand.model.topology import vertex_normals
-from darthand.textures import anatomy, noise
+from darthand.textures import anatomy, noise, padding
 from darthand.textures.raster import rasterize
 from darthand.model.regions import ensure_face_labels, face_geometry, skeleton
 
-BAKE_VERSION = 6
+BAKE_VERSION = 7  # 7: no stored fill map (padding.Layout is built from `texel` on load)
 # The modules whose code decides what a bake holds: their source is part of the cache key, so editing them
 # invalidates cached bakes by itself.
 BAKE_MODULES = ("anatomy", "bake", "curves", "noise", "raster", "model/regions")
@@ -58,7 +58,6 @@ class Bake:
     position  (N, 3) float32, rest-pose surface point, metres
     normal    (N, 3) float32, interpolated unit vertex normal
     label     (N,) int8, layout.FACE_LABELS index: the face's label, nails refined to the smooth nail plates
-    fill      (res * res,) int64, the row of the block-mean pyramid each image texel takes (`fill_map`)
     fields    name -> (N,) arrays: anatomy fields (see anatomy.anatomy_fields) and noise bank fields
               'noise_<band><k>' (unit standard deviation; float16 on disk, float32 once loaded)
     mesh      vertices (V, 3), faces (F, 3), face_labels (F,), uvs (T, 2), faces_uv (F, 3), joints (16, 3),
@@ -73,7 +72,6 @@ class Bake:
     position: np.ndarray
     normal: np.ndarray
     label: np.ndarray
-    fill: np.ndarray
     fields: dict = field(default_factory=dict)
     mesh: dict = field(default_factory=dict)
     key: str = ""
@@ -95,29 +93,17 @@ class Bake:
         return img.reshape(self.res, self.res)
 
     def image(self, values: np.ndarray) -> np.ndarray:
-        """Per-texel values (N,) or (N, C) -> (res, res[, C]) image of the same dtype: the stored texels exact, every
-        other texel the mean of the stored texels in the smallest aligned 2^L x 2^L block around it (push-pull
-        on the mip pyramid's own blocks: a box mipmap of the result mixes, in each block, only that block's
-        stored texels, never colours from outside it). Integer images are rounded."""
+        """Per-texel uint8 values (N,) or (N, C) -> (res, res[, C]) uint8 image: the stored texels exact, every other
+        texel the rounded mean of the stored texels in the smallest aligned 2^L x 2^L block around it (push-pull on
+        the mip pyramid's own blocks: a box mipmap of the result mixes, in each block, only that block's stored
+        texels, never colours from outside it; see `padding`)."""
         v = np.asarray(values)
-        flat = v.reshape(len(v), -1)
-        n = self.res * self.res
-        means = pyramid_means(self.texel, flat, self.res)
-        if np.issubdtype(v.dtype, np.integer):
-            info = np.iinfo(v.dtype)
-            means = np.clip(np.rint(means), info.min, info.max)
-        out = np.empty((n, flat.shape[1]), v.dtype)
-        out[self.texel] = flat
-        empty, source = self.padding
-        out[empty] = means.astype(v.dtype)[source]
-        return out.reshape((self.res, self.res) + v.shape[1:])
+        return padding.pad(self.layout, v.reshape(len(v), -1)).reshape((self.res, self.res) + v.shape[1:])
 
     @functools.cached_property
-    def padding(self) -> tuple[np.ndarray, np.ndarray]:
-        """(texels not stored, their rows in `pyramid_means`' output), from `fill`."""
-        n = self.res * self.res
-        empty = np.flatnonzero(self.fill >= n)
-        return empty, self.fill[empty] - n
+    def layout(self) -> padding.Layout:
+        """The stored texels' block structure, shared by every image of this bake."""
+        return padding.Layout.of(self.texel, self.res)
 
     def noise(self, band: str, rng: np.random.Generator) -> np.ndarray:
         """A random unit-variance mix of two of a band's noise fields, cos(a) F_i + sin(a) F_j (independent
@@ -191,68 +177,10 @@ def bake(model: HandModel, res: int) -> Bake:
     return Bake(
         res=res, texel=frags.pixel, face=frags.face.astype(np.int32), inside=frags.inside,
         position=position.astype(np.float32), normal=normal.astype(np.float32),
-        label=label, fill=fill_map(frags.pixel, res), fields=fields,
+        label=label, fields=fields,
         mesh={"vertices": verts, "faces": faces, "face_labels": model.face_labels, "uvs": model.uvs,
               "faces_uv": model.faces_uv, "joints": skel.joints, "tips": skel.tips, "vertex_normals": vnormals},
         key=key)
-
-
-def fill_map(texel: np.ndarray, res: int) -> np.ndarray:
-    """(res * res,) int64: for every image texel, the row of `pyramid_means`' output whose value it takes: itself
-    (level 0) when stored, else the smallest aligned 2^L x 2^L block around it that holds stored texels (push-pull
-    with the pyramid's block structure; see `Bake.image`)."""
-    covered = np.zeros(res * res, bool)
-    covered[texel] = True
-    weights = weight_pyramid(covered.reshape(res, res))
-    rows, cols = np.divmod(np.arange(res * res, dtype=np.int64), res)
-    out = np.full(res * res, -1, np.int64)
-    offset = 0
-    for level, w in enumerate(weights):
-        todo = out < 0
-        r, c = rows[todo] >> level, cols[todo] >> level
-        hit = w[r, c] > 0
-        idx = np.flatnonzero(todo)[hit]
-        out[idx] = offset + r[hit] * w.shape[1] + c[hit]
-        offset += w.size
-        if not (out < 0).any():
-            break
-    return out
-
-
-def weight_pyramid(covered: np.ndarray) -> list[np.ndarray]:
-    """Stored-texel counts of the aligned 2^L blocks, level 0 (the coverage itself) up to one texel; odd sizes
-    padded with empty texels."""
-    levels = [covered.astype(np.float32)]
-    while max(levels[-1].shape) > 1:
-        levels.append(halve(levels[-1][..., None])[..., 0])
-    return levels
-
-
-def halve(a: np.ndarray) -> np.ndarray:
-    """(H, W, C) -> (ceil(H/2), ceil(W/2), C): sums of 2 x 2 blocks (zeros past an odd edge)."""
-    if a.shape[0] % 2 or a.shape[1] % 2:
-        a = np.pad(a, ((0, a.shape[0] % 2), (0, a.shape[1] % 2), (0, 0)))
-    return a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2]
-
-
-def pyramid_means(texel: np.ndarray, values: np.ndarray, res: int) -> np.ndarray:
-    """(sum of level sizes above level 0, C) float32: the mean of the stored texels in every aligned block at levels
-    1, 2, ... (levels concatenated, row-major), for values (N, C) at flat texel indices `texel` (N,) of a res x res
-    image. Level 0 is the image itself (`fill` rows of level 0 are texel indices, those of the levels above are
-    offset by res * res). Level 1 is summed straight from the texels (np.bincount), so no full-size float image is
-    made."""
-    rows, cols = np.divmod(texel, res)
-    half = (res + 1) // 2
-    block = (rows >> 1) * half + (cols >> 1)
-    weight = np.bincount(block, minlength=half * half).astype(np.float32).reshape(half, half, 1)
-    total = np.stack([np.bincount(block, weights=values[:, c], minlength=half * half)
-                      for c in range(values.shape[1])], axis=-1).astype(np.float32).reshape(half, half, -1)
-    means = []
-    while True:
-        means.append((total / np.maximum(weight, 1e-30)).reshape(-1, total.shape[2]))
-        if max(total.shape[:2]) == 1:
-            return np.concatenate(means)
-        total, weight = halve(total), halve(weight)
 
 
 def noise_bank(position: np.ndarray) -> dict[str, np.ndarray]:
@@ -271,7 +199,7 @@ def noise_bank(position: np.ndarray) -> dict[str, np.ndarray]:
 def save_bake(b: Bake, path: str | Path) -> None:
     """Write a bake to `path` (uncompressed .npz: it is a cache, read often) atomically."""
     arrays = {"key": np.array(b.key), "res": np.array(b.res), "texel": b.texel, "face": b.face, "inside": b.inside,
-              "position": b.position, "normal": b.normal, "label": b.label, "fill": b.fill}
+              "position": b.position, "normal": b.normal, "label": b.label}
     arrays.update({f"field_{k}": v.astype(np.float16) if k.startswith("noise_") else v for k, v in b.fields.items()})
     arrays.update({f"mesh_{k}": v for k, v in b.mesh.items()})
     with atomic_path(path) as tmp:
@@ -286,8 +214,7 @@ def load_bake(path: str | Path) -> Bake:
     fields = {k[6:]: v.astype(np.float32) if v.dtype == np.float16 else v
               for k, v in data.items() if k.startswith("field_")}
     return Bake(res=int(data["res"]), texel=data["texel"], face=data["face"], inside=data["inside"],
-                position=data["position"], normal=data["normal"], label=data["label"], fill=data["fill"],
-                fields=fields,
+                position=data["position"], normal=data["normal"], label=data["label"], fields=fields,
                 mesh={k[5:]: v for k, v in data.items() if k.startswith("mesh_")}, key=str(data["key"]))
 
 

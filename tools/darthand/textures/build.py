@@ -35,7 +35,7 @@ from darthand.budget import check_memory
 from darthand.errors import InputError
 from darthand.fileio import file_in, read_json, sha256_file, write_json
 from darthand.model.hand_model import HandModel
-from darthand.processes import deaf_to_ctrl_c, init_worker
+from darthand.processes import deaf_to_ctrl_c, init_worker, keep_freed_memory
 from darthand.textures import sheet as sheet_mod
 from darthand.model.atlas import ensure_uvs
 from darthand.textures.bake import Bake, cached_bake, load_bake, source_digest
@@ -47,8 +47,8 @@ CATALOG_FORMAT = "darthand-texture-catalog"
 CATALOG_VERSION = 1
 # Every module of the stage can change an image: their source is part of each entry's fingerprint.
 RENDER_MODULES = ("anatomy", "bake", "canvas", "catalog", "color", "curves", "imageio", "motifs", "noise",
-                  "overlays", "raster", "model/regions", "sampling", "skin", "surface", "variant")
-THUMB_SOURCE = 512  # size of the albedo copy a worker hands back for the contact sheet
+                  "overlays", "padding", "raster", "model/regions", "sampling", "skin", "surface", "variant")
+THUMB_SOURCE = 512  # size of the albedo copy a contact-sheet tile samples
 # Peak memory per texel of each process (the bake and one variant's layers; measured about 92 bytes from 1024 to 2048).
 BYTES_PER_TEXEL = 100
 
@@ -83,10 +83,10 @@ def build_textures(model: HandModel, spec: dict, out_dir: str | Path, res: int =
             records[e.id] = old
         else:
             todo.append(e)
-    thumbs = {}
-    for record, thumb in _render_all(todo, bake, bake_path, out_dir, res, tx, roughness, workers, progress):
+    tiles = {}
+    for record, tile in _render_all(todo, bake, bake_path, out_dir, res, tx, roughness, workers, progress):
         records[record["id"]] = record
-        thumbs[record["id"]] = thumb
+        tiles[record["id"]] = tile
     # Keep earlier entries that are still valid; list everything in catalogue order.
     for e in entries:
         old = previous.get(e.id)
@@ -106,7 +106,7 @@ def build_textures(model: HandModel, spec: dict, out_dir: str | Path, res: int =
     if spec.get("default") in {r["id"] for r in listed}:
         catalog["default"] = spec["default"]
     if sheet and listed:
-        make_contact_sheet(out_dir, catalog, bake, thumbs)
+        make_contact_sheet(out_dir, catalog, bake, tiles)
     write_json(out_dir / "catalog.json", catalog)
     return catalog
 
@@ -164,6 +164,7 @@ def _init_worker(bake_path: str, parent: int) -> None:
     global _WORKER_BAKE
     init_worker(parent)   # Ctrl-C is the parent's to handle; the worker ends with its parent (even one that died
                           # while this worker was starting: the pid is the parent's, not whoever adopted us)
+    keep_freed_memory()   # every variant makes and drops the same few-MB arrays: reuse them, not fresh pages
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import OpenImageIO as oiio
 
@@ -172,7 +173,7 @@ def _init_worker(bake_path: str, parent: int) -> None:
 
 
 def _render_all(todo, bake, bake_path, out_dir, res, tx, roughness, workers, progress):
-    """Yield (record, thumbnail source) for every entry in `todo`, rendering in `workers` processes (in this
+    """Yield (record, contact-sheet tile) for every entry in `todo`, rendering in `workers` processes (in this
     process when workers <= 1)."""
     bar = Progress(len(todo), enabled=progress)
     if not todo:
@@ -204,7 +205,8 @@ def _render_all(todo, bake, bake_path, out_dir, res, tx, roughness, workers, pro
 
 
 def _render_one(job) -> tuple[dict, np.ndarray]:
-    """Render one entry and write its files; return its catalog record and a small copy for the sheet."""
+    """Render one entry and write its files; return its catalog record and its contact-sheet tile (made here, in
+    the worker, rather than all at the end in the parent)."""
     entry_json, out_dir, res, bake_key, tx, roughness = job
     entry = Entry(**entry_json)
     out_dir = Path(out_dir)
@@ -228,31 +230,41 @@ def _render_one(job) -> tuple[dict, np.ndarray]:
     record.update(resolution=res, sha256=sha256_file(out_dir / files["albedo"]), files=files,
                   params=entry_json["params"], fingerprint=fingerprint(entry, res, bake_key, tx, roughness))
     thumb = next((lv for lv in levels if lv.shape[1] <= THUMB_SOURCE), None) if levels else None
-    return record, block_mean(v.albedo, THUMB_SOURCE) if thumb is None else thumb
+    return record, sheet_mod.thumbnail(block_mean(v.albedo, THUMB_SOURCE) if thumb is None else thumb,
+                                       _preview_maps(_WORKER_BAKE))
+
+
+_PREVIEW_MAPS: tuple = (None, None)
+
+
+def _preview_maps(bake: Bake) -> sheet_mod.PreviewMaps:
+    """The contact sheet's preview lookups of `bake`'s mesh, made once per process and bake."""
+    global _PREVIEW_MAPS
+    if _PREVIEW_MAPS[0] is not bake:
+        _PREVIEW_MAPS = (bake, sheet_mod.preview_maps(bake.mesh))
+    return _PREVIEW_MAPS[1]
 
 
 # ------------------------------------------------------------------------------------------ contact sheet
 def make_contact_sheet(out_dir: str | Path, catalog: dict, bake: Bake | None = None,
-                       thumbs: dict | None = None) -> Path:
-    """Write out_dir/contact_sheet.png from the catalog's entries, grouped by category: in-memory copies where
-    given, else the files on disk (the .tx's matching MIP level when there is one)."""
+                       tiles: dict | None = None) -> Path:
+    """Write out_dir/contact_sheet.png from the catalog's entries, grouped by category: the tiles given (by id,
+    made by the workers), else tiles made here from the files on disk (the .tx's matching MIP level when there is
+    one)."""
     out_dir = Path(out_dir)
-    if bake is None:
+    tiles = tiles or {}
+    missing = [r for r in catalog["entries"] if r["id"] not in tiles]
+    if missing and bake is None:
         bake_path = out_dir / f"bake_{catalog['resolution']}.npz"
         if not bake_path.is_file():
             raise InputError(f"{bake_path}: no baked maps for the contact sheet; run 'darthand textures build' first")
         bake = load_bake(bake_path)
-    maps = sheet_mod.preview_maps(bake.mesh)
-    thumbs = thumbs or {}
-    tiles = []
-    for record in catalog["entries"]:
-        src = thumbs.get(record["id"])
-        if src is None:
-            f = record["files"].get("tx") or record["files"]["albedo"]
-            src = read_small(out_dir / f, THUMB_SOURCE)
-        tiles.append((sheet_mod.group_name(record), sheet_mod.describe(record), sheet_mod.thumbnail(src, maps)))
+    for record in missing:
+        f = record["files"].get("tx") or record["files"]["albedo"]
+        tiles[record["id"]] = sheet_mod.thumbnail(read_small(out_dir / f, THUMB_SOURCE), _preview_maps(bake))
     path = out_dir / "contact_sheet.png"
-    sheet_mod.contact_sheet(tiles, path)
+    sheet_mod.contact_sheet([(sheet_mod.group_name(r), sheet_mod.describe(r), tiles[r["id"]])
+                             for r in catalog["entries"]], path)
     return path
 
 

@@ -6,6 +6,7 @@ paint layers composited in order over the skin colour. `finish()` turns it all i
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -16,11 +17,14 @@ from darthand.textures.bake import Bake
 SKIN_ROUGHNESS = 0.5  # back of the hand; palms and pads are rougher (see `base_roughness`)
 
 
+@functools.lru_cache(maxsize=2)   # the same for every variant of a bake: computed once per worker, copied per canvas
 def base_roughness(bake: Bake) -> np.ndarray:
-    """Skin roughness (N,) float32: a function of anatomy only (rougher palm side, fine variation from the fixed
-    noise bank), so every variant whose overlays leave roughness alone shares one roughness map."""
+    """Skin roughness (N,) float32, read-only: a function of anatomy only (rougher palm side, fine variation from
+    the fixed noise bank), so every variant whose overlays leave roughness alone shares one roughness map."""
     r = SKIN_ROUGHNESS + 0.12 * bake.fields["palmar"] + 0.03 * bake.fields["noise_fine0"]
-    return np.clip(r, 0.3, 0.8).astype(np.float32)
+    r = np.clip(r, 0.3, 0.8).astype(np.float32)
+    r.setflags(write=False)
+    return r
 
 
 @dataclass
@@ -53,7 +57,7 @@ class Canvas:
         self.dm = np.zeros(n, np.float32)
         self.dh = np.zeros(n, np.float32)
         self.dv = np.zeros(n, np.float32)
-        self.roughness = base_roughness(self.bake)
+        self.roughness = base_roughness(self.bake).copy()
 
     @property
     def n(self) -> int:

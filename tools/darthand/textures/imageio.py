@@ -67,16 +67,23 @@ def mip_pyramid(img: np.ndarray, smallest: int = 1) -> list[np.ndarray]:
     h, w = img.shape[:2]
     if h & (h - 1) or w & (w - 1):
         raise ValueError(f"mip_pyramid: {w}x{h} is not a power of two on both sides")
-    sums = img.astype(np.uint32 if h * w * 255 < 2 ** 32 else np.uint64)
-    levels, rows, cols = [img], 1, 1
+    sums = img
+    levels, area = [img], 1
     while max(sums.shape[:2]) > smallest:
         if sums.shape[0] > 1:
-            sums, rows = sums[0::2] + sums[1::2], 2 * rows
+            sums, area = _pair_sums(sums[0::2], sums[1::2], 2 * area), 2 * area
         if sums.shape[1] > 1:
-            sums, cols = sums[:, 0::2] + sums[:, 1::2], 2 * cols
-        shift = (rows * cols).bit_length() - 1          # the block's area is a power of two
+            sums, area = _pair_sums(sums[:, 0::2], sums[:, 1::2], 2 * area), 2 * area
+        shift = area.bit_length() - 1                   # the block's area is a power of two
         levels.append(((sums + (1 << shift >> 1)) >> shift).astype(np.uint8))
     return levels
+
+
+def _pair_sums(a: np.ndarray, b: np.ndarray, area: int) -> np.ndarray:
+    """a + b, exact, in the narrowest unsigned type that holds a sum of `area` 8-bit codes (and the rounding half
+    `mip_pyramid` adds): most of the work is on the finest level, in 16 bits."""
+    dtype = np.uint16 if area * 255 + area < 2 ** 16 else np.uint32 if area * 255 + area < 2 ** 32 else np.uint64
+    return np.add(a, b, dtype=dtype)
 
 
 def _pixels(img) -> np.ndarray:

@@ -1,7 +1,7 @@
 """One catalogue variant: a pure function of (baked maps, catalogue entry) -> sRGB albedo and roughness images.
 
-Maths in linear light on the N baked texels; the sRGB offset and 8-bit quantisation come last; padding is one
-gather through the bake's fill map.
+Maths in linear light on the N baked texels; the sRGB offset and 8-bit quantisation come last, then the padding
+(push-pull through the bake's shared block layout).
 """
 
 from __future__ import annotations
