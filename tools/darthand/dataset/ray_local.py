@@ -69,7 +69,7 @@ class LocalRayCluster:
         self.cpus, self.object_store_mb = int(cpus), int(object_store_mb)
         self.root = Path(tempfile.mkdtemp(prefix="dh-ray-"))     # short: Ray's socket paths must stay < 108 bytes
         self.ray = str(Path(sys.executable).with_name("ray"))
-        self.port = free_port()
+        self.port, self.dashboard_port = free_ports(2)
         self.address = f"127.0.0.1:{self.port}"
         self.procs: list[subprocess.Popen | None] = []
         self._n, self._hide = int(nodes), dict(hide or {})
@@ -90,7 +90,7 @@ class LocalRayCluster:
         if not Path(self.ray).is_file():
             raise InputError(f"{self.ray}: Ray's command line is not installed (pip install 'darthand[cluster]')")
         self._start_node(["--head", "--port", str(self.port), "--include-dashboard", "false",
-                          "--dashboard-port", str(free_port()), "--temp-dir", str(self.root / "t")])
+                          "--dashboard-port", str(self.dashboard_port), "--temp-dir", str(self.root / "t")])
         for k in range(1, self._n):
             self.add_node(self._hide.get(k))
         return self
@@ -102,7 +102,8 @@ class LocalRayCluster:
     def _start_node(self, role: list[str], hide=None) -> int:
         k = len(self.procs)
         log = self.root / f"node{k}.log"
-        ports = [str(p) for p in free_ports(6)]
+        # the head's port was chosen earlier and is not held: a node's own ports must not take it again
+        ports = [str(p) for p in free_ports(8) if p not in (self.port, self.dashboard_port)][:6]
         cmd = [self.ray, "start", *role, "--num-cpus", str(self.cpus), "--node-ip-address", "127.0.0.1",
                "--object-store-memory", str(self.object_store_mb << 20), "--disable-usage-stats",
                "--include-log-monitor", "false", "--node-manager-port", ports[0],
