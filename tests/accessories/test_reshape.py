@@ -7,7 +7,6 @@ tracked points), a glove generated on the shaped hand, and for clearance an inde
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np

@@ -62,19 +62,24 @@ def copy_tree(dst: Path) -> Path:
     return dst
 
 
-def make(tree: Path, *targets: str, **variables) -> subprocess.CompletedProcess:
+def tree_env(tree: Path) -> dict:
+    """The environment of a command run in the copy: its own tools first, no make variables of a calling make."""
     env = dict(os.environ, PYTHONPATH=str(tree / "tools"))
     for key in ("MAKEFLAGS", "MFLAGS", "MAKELEVEL"):
         env.pop(key, None)
+    return env
+
+
+def make(tree: Path, *targets: str, **variables) -> subprocess.CompletedProcess:
+    env = tree_env(tree)
     args = ["make", "--no-print-directory", *targets, *(f"{k}={v}" for k, v in variables.items())]
     return subprocess.run(args, cwd=tree, env=env, capture_output=True, text=True, timeout=3600)
 
 
 def record_manifest(tree: Path) -> None:
     """Write the copy's build/manifest.json again from what its build/ holds now."""
-    env = dict(os.environ, PYTHONPATH=str(tree / "tools"))
-    subprocess.run([str(tree / ".venv" / "bin" / "darthand"), "manifest", "--build", "build"], cwd=tree, env=env,
-                   check=True, capture_output=True, timeout=600)
+    subprocess.run([str(tree / ".venv" / "bin" / "darthand"), "manifest", "--build", "build"], cwd=tree,
+                   env=tree_env(tree), check=True, capture_output=True, timeout=600)
 
 
 @pytest.fixture(scope="module")

@@ -20,7 +20,7 @@ import pickle
 import shutil
 import struct
 import zipfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 

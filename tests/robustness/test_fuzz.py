@@ -17,14 +17,13 @@ import importlib
 import io
 import json
 import os
-import pickle
 import shutil
 import zipfile
 from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from probe import Watch
 

@@ -36,7 +36,6 @@ import numpy as np
 from darthand.model.layout import FACE_LABEL_IDS
 from darthand.model.topology import close_loops
 from darthand.render.lights import world_lights
-from darthand.render.skin import SKIN_MFP_MM
 from darthand.render.subject import SKIN_F0
 
 VARIANT = "scalar_rgb"

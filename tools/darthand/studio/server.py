@@ -19,7 +19,6 @@ import mimetypes
 import sys
 import threading
 import time
-from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
@@ -293,8 +292,6 @@ POST_ROUTES = {"api": StudioHandler.post_api}
 def view_camera(build: StudioBuild, body) -> dict:
     """A named view framed on the posed hand (render/camera.py, as a job's view camera is): {side, angles_deg,
     view, size, accessory?} -> the camera's K, R, t, width, height and the point it frames."""
-    import numpy as np
-
     from darthand.model.preview import VIEWS
     from darthand.render.camera import load_camera
     from darthand.studio.scene import check_scene, scene_pose

@@ -385,18 +385,14 @@ function commit() {
   updateUndoButtons();
 }
 
-function undo() {
-  if (!history.undo.length) return;
-  history.redo.push(snapshot());
-  history.committed = history.undo.pop();
-  setAngles(history.committed, { record: false });
-  updateUndoButtons();
-}
+function undo() { travel(history.undo, history.redo); }
+function redo() { travel(history.redo, history.undo); }
 
-function redo() {
-  if (!history.redo.length) return;
-  history.undo.push(snapshot());
-  history.committed = history.redo.pop();
+// Undo and redo: the current pose goes onto one stack, the pose popped from the other becomes current.
+function travel(from, to) {
+  if (!from.length) return;
+  to.push(snapshot());
+  history.committed = from.pop();
   setAngles(history.committed, { record: false });
   updateUndoButtons();
 }
