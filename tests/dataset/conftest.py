@@ -90,5 +90,26 @@ def small_dataset(planner, sources, tmp_path_factory):
     return out, doc
 
 
+@pytest.fixture(scope="session")
+def mano_dataset(tmp_path_factory):
+    """(dataset folder, MANO_RIGHT.pkl, MANO_LEFT.pkl): 12 frames of both hands rendered from the MANO-format fixture
+    (tests/model/mano_fixture.py), each side's model read from its own pickle and given DART's wrist, as
+    `make assets MANO=...` builds them; plain skin, no accessories."""
+    from darthand.dataset.plan import Planner
+    from darthand.dataset.sources import source_specs
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "model"))
+    from mano_fixture import write_mano_like
+
+    root = tmp_path_factory.mktemp("mano_dataset")
+    pkls = write_mano_like(root / "mano")
+    for side, pkl in zip(("right", "left"), pkls):
+        save_npz(add_wrist(load_model(str(pkl))), root / "model" / f"{side}.npz")
+    specs = source_specs(str(root / "model" / "right.npz"), ("right", "left"))
+    opened = {side: spec.open() for side, spec in specs.items()}
+    render(Planner({"seed": 5, "accessory_share": 0.0}, opened), (opened, specs), root / "dataset", 12)
+    return root / "dataset", pkls[0], pkls[1]
+
+
 def _write(path, doc) -> None:
     path.write_text(json.dumps(doc))

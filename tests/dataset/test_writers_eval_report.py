@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+from scipy.ndimage import binary_dilation
 from scipy.spatial.transform import Rotation
 
 from darthand.cli import main
@@ -16,41 +17,145 @@ from darthand.errors import InputError
 from darthand.model.forward import forward
 
 
-def test_freihand_layout_rebuilds_its_keypoints_by_freihands_recipe(small_dataset, sources, tmp_path, capsys):
-    out, _ = small_dataset
+def freihand_sets(folder):
+    """{set name: {kind: list}} of a FreiHAND export (K, xyz, verts, mano, frames)."""
+    return {name: {k: json.loads((folder / f"{name}_{k}.json").read_text())
+                   for k in ("K", "xyz", "verts", "mano", "frames")}
+            for name in ("training", "validation", "evaluation") if (folder / f"{name}_xyz.json").is_file()}
+
+
+def freihand_pose(model, theta, K, betas=None):
+    """FreiHAND's toolbox recipe: (keypoints (21, 3) openpose order, vertices) of `model` posed from a 61-value row:
+    the root = [(uv - pp), focal] / scale, MANO posed with its mean hand added (flat_hand_mean false) and moved so
+    that its keypoint 9 lands on the root. betas: instead of the row's shape slots."""
+    theta, K = np.asarray(theta, float), np.asarray(K, float)
+    focal, pp = 0.5 * (K[0, 0] + K[1, 1]), K[:2, 2]
+    root = np.append(theta[58:60] - pp, focal) / theta[60]
+    b = theta[48:58] if betas is None else np.asarray(betas, float)
+    posed = forward(model, theta[:48][None], b[None], flat_hand_mean=False, keypoint_order="openpose")
+    shift = root - posed.keypoints[0, 9]
+    return posed.keypoints[0] + shift, posed.vertices[0] + shift
+
+
+def test_freihand_of_a_mano_model_is_manos_convention(mano_dataset, tmp_path, capsys):
+    """Every row, of a right frame or a mirrored left one, posed through MANO_RIGHT (read from the pickle: 778
+    vertices, no wrist) the way FreiHAND's toolbox does gives the written keypoints and vertices."""
+    from darthand.model.load import load_model
+
+    out, right_pkl, _ = mano_dataset
     assert main(["dataset", "export", str(out), "--format", "freihand", "--out", str(tmp_path)]) == 0
+    assert "left-hand frames mirrored" in capsys.readouterr().out
+    mano = load_model(str(right_pkl))
+    rows, mirrored = 0, 0
+    for name, s in freihand_sets(tmp_path).items():
+        for k, frame in enumerate(s["frames"]):
+            labels = json.loads((out / "labels" / f"{frame:06d}.json").read_text())
+            theta = np.asarray(s["mano"][k][0])
+            assert theta.shape == (61,) and np.allclose(theta[48:58], labels["mano"]["betas"])   # MANO's betas
+            kp, verts = freihand_pose(mano, theta, s["K"][k])
+            assert len(s["verts"][k]) == mano.num_vertices == 778
+            assert np.abs(kp - s["xyz"][k]).max() < 1e-6 and np.abs(verts - s["verts"][k]).max() < 1e-6
+            rows += 1
+            mirrored += labels["side"] == "left"
+    assert rows == 12 and 0 < mirrored < 12
+    assert "values 48-57: MANO's betas" in (tmp_path / "README.md").read_text()
+
+
+def test_freihand_mirrors_left_frames_onto_the_flipped_image(mano_dataset, tmp_path):
+    """A left frame's row: its keypoints are the left hand's mirrored (x -> -x), project through the written K onto
+    darthand's 2-D keypoints flipped left-right (u -> W - u) and onto the flipped mask; the image is flipped."""
+    from darthand.render.image import read_png
+
+    out, _, _ = mano_dataset
+    main(["dataset", "export", str(out), "--format", "freihand", "--out", str(tmp_path)])
+    checked, least = 0, 1.0
+    for name, s in freihand_sets(tmp_path).items():
+        for k, frame in enumerate(s["frames"]):
+            labels = json.loads((out / "labels" / f"{frame:06d}.json").read_text())
+            if labels["side"] != "left":
+                continue
+            W = labels["image_size"][0]
+            assert np.allclose(s["xyz"][k], np.asarray(labels["keypoints_3d"]) * [-1, 1, 1], atol=1e-12)
+            uv = np.asarray(s["xyz"][k]) @ np.asarray(s["K"][k]).T
+            flipped = np.asarray(labels["keypoints_2d"]) * [-1, 1] + [W, 0]         # pixel-corner origin
+            assert np.allclose(uv[:, :2] / uv[:, 2:] + 0.5, flipped, atol=1e-6)
+            # every vertex projects into the flipped mask (grown by a pixel: 48-pixel frames, rounding at the edge)
+            png = read_png(out / "masks" / f"{frame:06d}.png")[..., 0]
+            grown = binary_dilation(png > 0)
+            p = np.asarray(s["verts"][k]) @ np.asarray(s["K"][k]).T
+            px = np.rint(p[:, :2] / p[:, 2:]).astype(int)                            # OpenCV: centres at integers
+            inside = (px >= 0).all(1) & (px[:, 0] < W) & (px[:, 1] < len(png))
+            assert inside.mean() > 0.9 and grown[:, ::-1][px[inside, 1], px[inside, 0]].all()
+            hits_unflipped = grown[px[inside, 1], px[inside, 0]].mean()
+            jpeg = read_jpeg(tmp_path / name / "mask" / f"{k:08d}.jpg")[..., 0].astype(int)
+            assert np.abs(jpeg - png[:, ::-1]).mean() < 3                          # the mask and image flipped too
+            rgba = read_png(out / "images" / f"{frame:06d}.png").astype(float)
+            rgb = read_jpeg(tmp_path / name / "rgb" / f"{k:08d}.jpg").astype(float)
+            over_black = rgba[..., :3] * rgba[..., 3:] / 255                    # JPEG of a busy 48-pixel frame
+            assert np.abs(rgb - over_black[:, ::-1]).mean() < 0.5 * np.abs(rgb - over_black).mean()
+            least = min(least, hits_unflipped)
+            checked += 1
+    assert checked > 0 and least < 0.8          # the unflipped mask would not do: the check can fail
+
+
+def test_mirrored_labels_project_onto_the_flipped_image_off_centre():
+    """A principal point off the image centre (a crop): the mirrored points through the mirrored K land on the
+    flipped pixel columns u -> W - u; the MANO rotations are conjugated by diag(-1, 1, 1)."""
+    from darthand.dataset.freihand import mirror_labels
+
+    rng = np.random.default_rng(2)
+    points = rng.normal(size=(21, 3)) * 0.03 + [0.01, -0.02, 0.5]
+    K = np.array([[300.0, 0.0, 70.0], [0.0, 310.0, 40.0], [0, 0, 1]])
+    rot = Rotation.from_rotvec(rng.normal(size=(16, 3)))
+    labels = {"K": K.tolist(), "image_size": [128, 96], "keypoints_3d": points.tolist(),
+              "mano": {"global_orient": rot[0].as_rotvec().tolist(), "hand_pose": rot[1:].as_rotvec().ravel().tolist(),
+                       "betas": [0.5] * 10, "trans": [0.1, 0.2, 0.3]}}
+    m = mirror_labels(labels)
+    uv, uv_m = points @ K.T, np.asarray(m["keypoints_3d"]) @ np.asarray(m["K"]).T
+    assert np.allclose(uv_m[:, :2] / uv_m[:, 2:], np.c_[128 - uv[:, 0] / uv[:, 2], uv[:, 1] / uv[:, 2]])
+    M = np.diag([-1.0, 1, 1])
+    got = Rotation.from_rotvec(np.r_[[m["mano"]["global_orient"]], np.reshape(m["mano"]["hand_pose"], (15, 3))])
+    assert np.allclose(got.as_matrix(), M @ rot.as_matrix() @ M) and m["mano"]["betas"] == [0.5] * 10
+
+
+def read_jpeg(path):
+    import OpenImageIO as oiio
+
+    buf = oiio.ImageBuf(str(path))
+    return buf.get_pixels(oiio.UINT8)
+
+
+def test_freihand_of_the_open_hand_is_refused_unless_asked(small_dataset, sources, tmp_path, capsys):
+    """The open hand is not MANO: the export says so (exit 2, nothing written); with --allow-non-mano the shape
+    slots are 0, README.md says why, and the rest of each row is exact for this hand (its own betas from the labels,
+    FreiHAND's recipe)."""
+    out, _ = small_dataset
+    assert main(["dataset", "export", str(out), "--format", "freihand", "--out", str(tmp_path / "no")]) == 2
+    assert "is not a MANO model" in capsys.readouterr().err and not (tmp_path / "no").exists()
+    assert main(["dataset", "export", str(out), "--format", "freihand", "--out", str(tmp_path),
+                 "--allow-non-mano"]) == 0
+    assert "values 48-57: ZERO" in (tmp_path / "README.md").read_text()
     right = sources[0]["right"].model
     total = 0
-    for name in ("training", "validation", "evaluation"):
-        if not (tmp_path / f"{name}_xyz.json").is_file():
-            continue
-        K, xyz, verts, mano, frames = (json.loads((tmp_path / f"{name}_{k}.json").read_text())
-                                       for k in ("K", "xyz", "verts", "mano", "frames"))
-        assert len(K) == len(xyz) == len(verts) == len(mano) == len(frames)
-        total += len(frames)
-        for k in range(len(xyz)):
-            theta = np.asarray(mano[k][0])
-            assert theta.shape == (61,)
-            # FreiHAND's toolbox: root = [(uv - pp), focal] / scale; MANO posed with the mean hand added
-            # (flat_hand_mean false) and translated so its keypoint 9 lands on the root
-            Kk = np.asarray(K[k])
-            focal, pp = 0.5 * (Kk[0, 0] + Kk[1, 1]), Kk[:2, 2]
-            root = np.append(theta[58:60] - pp, focal) / theta[60]
-            posed = forward(right, theta[:48][None], theta[48:48 + right.num_betas][None] if right.num_betas
-                            else None, flat_hand_mean=False, keypoint_order="openpose")
-            kp = posed.keypoints[0] - posed.keypoints[0, 9] + root
-            assert np.abs(kp - np.asarray(xyz[k])).max() < 2e-6
-            assert len(verts[k]) == right.meta["wrist"]["base_vertices"]
-            v = posed.vertices[0, :len(verts[k])] - posed.keypoints[0, 9] + root
-            assert np.abs(v - np.asarray(verts[k])).max() < 5e-6
-            # K in OpenCV's convention: the projection is darthand's keypoints_2d minus half a pixel
-            labels = json.loads((out / "labels" / f"{frames[k]:06d}.json").read_text())
-            uv = np.asarray(xyz[k]) @ Kk.T
-            assert np.allclose(uv[:, :2] / uv[:, 2:], np.asarray(labels["keypoints_2d"]) - 0.5, atol=1e-6)
-        assert len(list((tmp_path / name / "rgb").glob("*.jpg"))) == len(frames)
-    right_frames = sum(1 for p in (out / "labels").iterdir() if json.loads(p.read_text())["side"] == "right")
-    assert total == right_frames > 0
-    assert "left-hand frames left out" in capsys.readouterr().out
+    for name, s in freihand_sets(tmp_path).items():
+        for k, frame in enumerate(s["frames"]):
+            labels = json.loads((out / "labels" / f"{frame:06d}.json").read_text())
+            theta = np.asarray(s["mano"][k][0])
+            assert not theta[48:58].any()
+            kp, verts = freihand_pose(right, theta, s["K"][k], labels["mano"]["betas"])
+            assert len(s["verts"][k]) == right.meta["wrist"]["base_vertices"]
+            assert np.abs(kp - s["xyz"][k]).max() < 1e-5
+            assert np.abs(verts[:len(s["verts"][k])] - s["verts"][k]).max() < 1e-5
+            if labels["side"] == "right":     # K in OpenCV's convention: darthand's keypoints_2d minus half a pixel
+                uv = np.asarray(s["xyz"][k]) @ np.asarray(s["K"][k]).T
+                assert np.allclose(uv[:, :2] / uv[:, 2:], np.asarray(labels["keypoints_2d"]) - 0.5, atol=1e-6)
+        assert len(list((tmp_path / name / "rgb").glob("*.jpg"))) == len(s["frames"])
+        total += len(s["frames"])
+    assert total == 16
+    assert main(["dataset", "export", str(out), "--format", "freihand", "--out", str(tmp_path / "r"),
+                 "--allow-non-mano", "--left", "skip"]) == 0
+    rights = sum(1 for p in (out / "labels").iterdir() if json.loads(p.read_text())["side"] == "right")
+    assert sum(len(s["frames"]) for s in freihand_sets(tmp_path / "r").values()) == rights < 16
 
 
 def test_webdataset_shards_read_back_with_the_webdataset_package(small_dataset, tmp_path):

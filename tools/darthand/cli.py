@@ -564,9 +564,22 @@ def _add_dataset_arguments(p) -> None:
                    help=f"frame budget of one run (default {run.DEFAULT_MAX_FRAMES})")
     p.add_argument("--formats", default=None, metavar="freihand,webdataset",
                    help="also write these layouts after rendering (as `darthand dataset export`)")
+    _add_layout_options(p)
     p.add_argument("--no-resume", dest="resume", action="store_false",
                    help="render every frame again (default: skip frames whose files exist from the same job)")
     _add_source_options(p)
+
+
+def _add_layout_options(p) -> None:
+    from darthand.dataset.freihand import LEFT_MODES
+
+    p.add_argument("--left", default="mirror", choices=LEFT_MODES,
+                   help="freihand: left-hand frames mirrored into right hands (image, mask, K, points and MANO "
+                        "parameters; the default: FreiHAND is right-handed) or skipped")
+    p.add_argument("--allow-non-mano", action="store_true",
+                   help="freihand: also for a hand that is not a MANO model (the open hand): training_mano.json's "
+                        "shape slots are then 0 and MANO posed from its rows is not the rendered hand (README.md in "
+                        "the output says so); keypoints and vertices are exact either way")
 
 
 def _add_dataset_commands(sub) -> None:
@@ -583,6 +596,7 @@ def _add_dataset_commands(sub) -> None:
     p.add_argument("dataset", metavar="DIR", help="a render-dataset output folder")
     p.add_argument("--format", required=True, choices=("freihand", "webdataset"))
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default DIR/<format>)")
+    _add_layout_options(p)
     p.set_defaults(run=commands.export)
     text = ("evaluate predictions against ground truth as FreiHAND does: PA-MPJPE, PA-MPVPE (Procrustes with scale), "
             "F-scores at 5 and 15 mm, AUC of PCK over 0-50 mm")

@@ -33,6 +33,7 @@ def render_dataset(args) -> int:
                          model=args.model, opened=first)
     sources = {side: (first if spec.package == str(args.package) and not spec.mirror else spec.open())
                for side, spec in specs.items()}
+    formats = _check_formats(args, sources)
     planner = None
     if jobs is None:
         spec = plan_spec(
@@ -81,24 +82,47 @@ def render_dataset(args) -> int:
     if skipped["count"]:
         print(f"[render-dataset] {skipped['count']} background images did not decode and were skipped "
               f"(listed in dataset.json): {', '.join(skipped['files'][:3])}")
-    for fmt in _names(args.formats) or ():
-        export_format(args.out, fmt, None)
+    for fmt in formats:
+        export_format(args.out, fmt, None, **_layout_options(args))
     return 0
 
 
-def export_format(dataset, fmt: str, out) -> Path:
-    """Write a dataset in another layout (freihand or webdataset); returns where."""
+def _check_formats(args, sources: dict) -> list[str]:
+    """The --formats asked for, checked before anything renders: a FreiHAND layout of a hand that is not MANO is
+    refused (unless --allow-non-mano) now, not after a long run."""
+    from darthand.dataset import writers
+
+    formats = _names(args.formats) or []
+    for fmt in formats:
+        if fmt not in writers.FORMATS:
+            raise InputError(f"--formats: {fmt!r} is not one of {', '.join(writers.FORMATS)}")
+    if "freihand" in formats:
+        from darthand.dataset.freihand import check_mano
+        from darthand.dataset.run import model_info
+
+        check_mano({side: model_info(s) for side, s in sources.items()}, "--formats freihand",
+                   args.allow_non_mano)
+    return formats
+
+
+def _layout_options(args) -> dict:
+    return {"left": args.left, "allow_non_mano": args.allow_non_mano}
+
+
+def export_format(dataset, fmt: str, out, **options) -> Path:
+    """Write a dataset in another layout (freihand or webdataset; options: the FreiHAND writer's left=,
+    allow_non_mano=); returns where."""
     from darthand.dataset import writers
 
     if fmt not in writers.FORMATS:
         raise InputError(f"--format: {fmt!r} is not one of {', '.join(writers.FORMATS)}")
-    where = writers.FORMATS[fmt](dataset, out)
+    where = writers.FORMATS[fmt](dataset, out, **options)
     print(f"[dataset] {fmt}: {where}")
     return where
 
 
 def export(args) -> int:
-    export_format(args.dataset, args.format, args.out)
+    export_format(args.dataset, args.format, args.out, **_layout_options(args))
     return 0
 
 

@@ -6,15 +6,28 @@
                            camera frame, metres
     OUT/<set>_verts.json   per frame the hand's vertices without DART's wrist rings (MANO's 778 for MANO), metres
     OUT/<set>_mano.json    per frame [[61 numbers]]: 48 pose values (global rotation in the camera frame, then the
-                           finger pose with MANO's mean hand left out, flat_hand_mean false), 10 betas, the root
-                           keypoint's (index 9, middle-finger MCP) image position (u, v), and scale = focal / root
-                           depth, focal the mean of fx and fy: FreiHAND's toolbox recovers the root as
+                           finger pose with the model's mean hand left out, flat_hand_mean false), 10 shape values,
+                           the root keypoint's (index 9, middle-finger MCP) image position (u, v), and scale = focal /
+                           root depth, focal the mean of fx and fy: FreiHAND's toolbox recovers the root as
                            [(u, v) - (cx, cy), focal] / scale and poses MANO from it
-    OUT/<set>_frames.json  per row, the darthand frame index it came from
+    OUT/<set>_frames.json  per row, the darthand frame index it came from (its labels say which side was rendered)
     OUT/<set>/rgb/%08d.jpg, OUT/<set>/mask/%08d.jpg   image (over black where the frame has no background), mask
+    OUT/README.md          what the files hold for this dataset: the model, what the 61 values mean, mirrored rows
 
-Sets by split: train -> training, val -> validation, test -> evaluation. FreiHAND is right-handed (its MANO is
-MANO_RIGHT), so left-hand frames are left out (their number is printed and returned).
+Sets by split: train -> training, val -> validation, test -> evaluation.
+
+What the 61 values are worth depends on the hand the dataset was rendered with. For a model read from a MANO file
+(`make assets MANO=...`) they are MANO's own parameters: MANO_RIGHT posed from them the FreiHAND way reproduces the
+written keypoints and vertices. The open CC0 hand is not MANO: its 10 betas live in its own shape space and its
+skeleton is not MANO's, so MANO posed from any row is a different hand. Its export is refused unless asked for
+(`allow_non_mano`); the shape slots are then written as zeros, and README.md says so.
+
+FreiHAND is right-handed (its MANO is MANO_RIGHT). A left-hand frame is mirrored into a right one (`left="mirror"`,
+the default; `"skip"` leaves it out): image and mask flipped left-right, the camera-frame points x -> -x, K's
+principal point cx -> W - cx (pixel-corner origin), the MANO rotations conjugated by diag(-1, 1, 1) (axis-angle
+(x, y, z) -> (x, -y, -z) per joint, the global rotation too), the betas kept. With a left model that is the right
+one mirrored (darthand's, or MANO_LEFT, which is MANO_RIGHT's mirror image), the right model posed from the
+mirrored row is the mirrored hand; its translation, left out of FreiHAND's row, follows from (u, v) and scale.
 """
 
 from __future__ import annotations
@@ -25,11 +38,13 @@ from pathlib import Path
 import numpy as np
 
 from darthand.errors import InputError
-from darthand.fileio import atomic_path, read_json
+from darthand.fileio import atomic_path, read_json, write_bytes
 
 SETS = {"train": "training", "val": "validation", "test": "evaluation"}
 ROOT = 9
 JPEG_QUALITY = 95
+LEFT_MODES = ("mirror", "skip")
+MANO_FORMAT = "MANO pickle"       # model.meta["format"] of a model read from a MANO file (model/mano_pkl.py)
 
 
 class _JsonList:
@@ -52,13 +67,16 @@ class _JsonList:
         self._ctx.__exit__(None, None, None)
 
 
-def freihand_mano_row(labels: dict, hands_mean) -> list[float]:
-    """The 61 numbers of FreiHAND's training_mano.json for a frame's labels (module docstring)."""
+def freihand_mano_row(labels: dict, hands_mean, shape: bool = True) -> list[float]:
+    """The 61 numbers of FreiHAND's training_mano.json for a (right-hand) frame's labels (module docstring).
+    hands_mean (45,): the model's mean hand, left out of the finger pose; shape False writes the 10 shape slots as
+    zeros (a model whose betas mean nothing to MANO)."""
     mano = labels["mano"]
     pose = np.concatenate([mano["global_orient"], np.asarray(mano["hand_pose"]) - np.asarray(hands_mean)])
     betas = np.zeros(10)
-    b = np.asarray(mano["betas"], float)[:10]
-    betas[:len(b)] = b
+    if shape:
+        b = np.asarray(mano["betas"], float)[:10]
+        betas[:len(b)] = b
     K = freihand_K(labels["K"])
     root = np.asarray(labels["keypoints_3d"][ROOT], float)
     uv = (K @ root)[:2] / root[2]
@@ -73,56 +91,143 @@ def freihand_K(K) -> np.ndarray:
     return K
 
 
-def write_freihand(dataset, out=None) -> Path:
-    """Write the FreiHAND layout of a rendered dataset folder into `out` (default DATASET/freihand)."""
-    from darthand.dataset.run import read_shard_records
-    from darthand.dataset.frames import frame_names
+def mirror_labels(labels: dict) -> dict:
+    """The labels FreiHAND's writer reads (K, keypoints_3d, mano) of a frame mirrored left-right: the right hand
+    that is the mirror image of the frame's left hand, seen in the image flipped left-right."""
+    from darthand.model.mirror import mirror_points, mirror_pose
 
+    K = np.array(labels["K"], float)
+    K[0, 2] = labels["image_size"][0] - K[0, 2]         # pixel column u -> W - u (pixel-corner origin)
+    K[0, 1] = -K[0, 1]                                    # (a skew, were there one)
+    mano = dict(labels["mano"])
+    mano["global_orient"] = mirror_pose(mano["global_orient"]).tolist()
+    mano["hand_pose"] = mirror_pose(mano["hand_pose"]).tolist()
+    mano["trans"] = mirror_points(mano["trans"]).tolist()
+    return {**labels, "K": K.tolist(), "mano": mano, "side": "right",
+            "keypoints_3d": mirror_points(np.asarray(labels["keypoints_3d"], float)).tolist()}
+
+
+def model_kinds(models: dict) -> dict:
+    """{side: True when the side's model was read from a MANO file} for a dataset.json's `models`."""
+    return {side: info.get("format") == MANO_FORMAT for side, info in models.items()}
+
+
+def check_mano(models: dict, where, allow_non_mano: bool) -> bool:
+    """Whether every model of a dataset is MANO (its FreiHAND rows then carry MANO's shape); raises InputError for
+    a model that is not, unless allow_non_mano."""
+    kinds = model_kinds(models)
+    if all(kinds.values()) and kinds:
+        return True
+    if not allow_non_mano:
+        other = next((models[s].get("source", s) for s, k in kinds.items() if not k), "unknown")
+        raise InputError(f"{where}: FreiHAND export: the hand ({other}) is not a MANO model, so training_mano.json's "
+                         f"shape and pose values would pose a different hand in MANO; render from MANO "
+                         f"(make assets MANO=MANO_RIGHT.pkl), or --allow-non-mano to write them anyway (shape "
+                         f"slots 0, said in README.md)")
+    return False
+
+
+def right_hands_mean(models: dict) -> np.ndarray:
+    """(45,) the right model's mean hand: its own, else the left model's mirrored (a left-only dataset)."""
+    from darthand.model.mirror import mirror_pose
+
+    if "hands_mean" in models.get("right", {}):
+        return np.asarray(models["right"]["hands_mean"], float)
+    if "hands_mean" in models.get("left", {}):
+        return mirror_pose(np.asarray(models["left"]["hands_mean"], float))
+    return np.zeros(45)
+
+
+def write_freihand(dataset, out=None, *, left: str = "mirror", allow_non_mano: bool = False) -> Path:
+    """Write the FreiHAND layout of a rendered dataset folder into `out` (default DATASET/freihand); left: "mirror"
+    (left-hand frames become right ones) or "skip". Refuses a dataset whose hand is not MANO unless
+    allow_non_mano (module docstring)."""
+    from darthand.dataset.frames import frame_names
+    from darthand.dataset.run import read_shard_records
+
+    if left not in LEFT_MODES:
+        raise InputError(f"--left: {left!r} is not one of {', '.join(LEFT_MODES)}")
     root = Path(dataset)
     doc = read_json(root / "dataset.json", "dataset.json")
     models = doc.get("models") or {}
-    out = Path(out) if out is not None else root / "freihand"
     frames = read_shard_records(root)
     if not frames:
         raise InputError(f"{root}: no rendered frames (shards/*.json)")
+    is_mano = check_mano(models, root, allow_non_mano)
+    hands_mean = right_hands_mean(models)
+    out = Path(out) if out is not None else root / "freihand"
     writers: dict = {}
-    left_out = 0
+    counts = {"right": 0, "mirrored": 0, "skipped_left": 0}
     try:
         for frame in frames:
             if frame["split"] not in SETS:
                 continue
-            if frame["side"] != "right":
-                left_out += 1
+            flip = frame["side"] != "right"
+            if flip and left == "skip":
+                counts["skipped_left"] += 1
                 continue
             names = frame_names(frame["index"])
             labels = read_json(root / names["labels"], "labels")
             if labels.get("keypoint_order") != "openpose" or "mano" not in labels:
                 raise InputError(f"{root / names['labels']}: needs openpose keypoints and MANO parameters")
+            vertices = np.asarray(np.load(root / names["vertices"])[:labels["mesh"]["base_vertices"]], np.float64)
+            if flip:
+                from darthand.model.mirror import mirror_points
+
+                labels, vertices = mirror_labels(labels), mirror_points(vertices)
             name = SETS[frame["split"]]
             if name not in writers:
                 writers[name] = {kind: _JsonList(out / f"{name}_{kind}.json")
                                  for kind in ("K", "xyz", "verts", "mano", "frames")}
-                for sub in ("rgb", "mask"):
-                    (out / name / sub).mkdir(parents=True, exist_ok=True)
             w = writers[name]
             row = w["K"].count
-            vertices = np.load(root / names["vertices"])[:labels["mesh"]["base_vertices"]]
             w["K"].add(freihand_K(labels["K"]).tolist())
             w["xyz"].add(labels["keypoints_3d"])
-            w["verts"].add(np.asarray(vertices, np.float64).tolist())
-            w["mano"].add([freihand_mano_row(labels, models.get("right", {}).get("hands_mean", np.zeros(45)))])
+            w["verts"].add(vertices.tolist())
+            w["mano"].add([freihand_mano_row(labels, hands_mean, shape=is_mano)])
             w["frames"].add(frame["index"])
-            _write_jpegs(root / names["image"], root / names["mask"], out / name, row)
+            _write_jpegs(root / names["image"], root / names["mask"], out / name, row, flip)
+            counts["mirrored" if flip else "right"] += 1
     finally:
         for w in writers.values():
             for writer in w.values():
                 writer.close()
-    if left_out:
-        print(f"[dataset] freihand: {left_out} left-hand frames left out (FreiHAND is right-handed)")
+    write_bytes(out / "README.md", _readme(models, is_mano, counts, left).encode())
+    if counts["mirrored"]:
+        print(f"[dataset] freihand: {counts['mirrored']} left-hand frames mirrored into right hands")
+    if counts["skipped_left"]:
+        print(f"[dataset] freihand: {counts['skipped_left']} left-hand frames left out (--left skip)")
     return out
 
 
-def _write_jpegs(image_png: Path, mask_png: Path, folder: Path, row: int) -> None:
+def _readme(models: dict, is_mano: bool, counts: dict, left: str) -> str:
+    """README.md of a FreiHAND export: where its rows came from and what each of the 61 values holds."""
+    sources = "; ".join(f"{side}: {info.get('source', '?')}" for side, info in models.items())
+    if is_mano:
+        shape = ("values 48-57: MANO's betas. The models are MANO files: MANO_RIGHT posed from a row "
+                 "(flat_hand_mean false, root from (u, v) and scale) is the hand in the images.")
+    else:
+        shape = ("values 48-57: ZERO. The hand is not a MANO model (it has its own shape space and skeleton): the "
+                 "betas it was rendered with are in the darthand labels (labels/<frame>.json, mano.betas; rows map "
+                 "to frames through <set>_frames.json), and MANO posed from a row is NOT the hand in the images. "
+                 "Use the keypoints (<set>_xyz.json) and vertices (<set>_verts.json, this model's own topology), "
+                 "which are exact. Values 0-47 are this model's joint rotations in MANO's layout (its mean hand left "
+                 "out), values 58-60 the root's image position and scale: both exact for this hand.")
+    if left == "mirror":
+        sides = (f"{counts['right']} right-hand frames; {counts['mirrored']} left-hand frames mirrored into right "
+                 "hands (image and mask flipped left-right, x -> -x in the camera frame, cx -> W - cx, MANO "
+                 "rotations (x, y, z) -> (x, -y, -z) per joint).")
+    else:
+        sides = f"{counts['right']} right-hand frames; {counts['skipped_left']} left-hand frames left out."
+    return (f"# FreiHAND layout of a darthand dataset\n\nModels: {sources}.\n\nRows: {sides}\n\n"
+            f"<set>_mano.json, per row [[61 values]]: values 0-2 the global rotation (axis-angle, camera frame), "
+            f"3-47 the finger pose with the model's mean hand left out (flat_hand_mean false); {shape} Values "
+            f"58-59: the root keypoint's (index 9) pixel position, 60: focal / root depth (FreiHAND's toolbox: root "
+            f"= [(u, v) - (cx, cy), focal] / scale, focal the mean of fx and fy).\n\nK is in OpenCV's pixel "
+            f"convention (pixel centres at integers); points are in metres.\n")
+
+
+def _write_jpegs(image_png: Path, mask_png: Path, folder: Path, row: int, flip: bool = False) -> None:
     import OpenImageIO as oiio
 
     from darthand.render.image import read_png
@@ -131,6 +236,8 @@ def _write_jpegs(image_png: Path, mask_png: Path, folder: Path, row: int) -> Non
     rgb = rgba[..., :3] * (rgba[..., 3:4] if rgba.shape[2] == 4 else 1)    # over black (sRGB, like FreiHAND's gs)
     mask = read_png(mask_png)[..., :1]
     for pixels, sub in ((np.rint(rgb * 255).astype(np.uint8), "rgb"), (mask, "mask")):
+        if flip:
+            pixels = pixels[:, ::-1]
         buf = oiio.ImageBuf(oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], oiio.UINT8))
         buf.set_pixels(oiio.ROI(), np.ascontiguousarray(pixels))
         buf.specmod().attribute("compression", f"jpeg:{JPEG_QUALITY}")

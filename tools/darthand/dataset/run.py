@@ -403,12 +403,14 @@ def _progress_printer(stats: RunStats | None = None, every_s: float = 5.0):
 
 
 def model_info(source) -> dict:
-    """What the writers need of a side's model without opening it: hands_mean (45,), betas, vertex counts."""
+    """What the writers need of a side's model without opening it: hands_mean (45,), betas, vertex counts, the
+    file format it was read from ("MANO pickle" for a MANO file: its parameters are MANO's)."""
     model = getattr(source, "model", None)
     if model is None or hasattr(source, "gestures"):
         return {"source": str(getattr(source, "source", "usd"))}
     wrist = model.meta.get("wrist") or {}
-    return {"source": str(getattr(source, "source", "model")), "hands_mean": np.asarray(model.hands_mean).tolist(),
+    return {"source": str(getattr(source, "source", "model")), "format": str(model.meta.get("format", "darthand")),
+            "hands_mean": np.asarray(model.hands_mean).tolist(),
             "num_betas": model.num_betas, "vertices": model.num_vertices,
             "base_vertices": int(wrist.get("base_vertices", model.num_vertices))}
 

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 
-def _freihand(dataset, out):
+def _freihand(dataset, out, **options):
     from darthand.dataset.freihand import write_freihand
 
-    return write_freihand(dataset, out)
+    return write_freihand(dataset, out, **options)
 
 
-def _webdataset(dataset, out):
+def _webdataset(dataset, out, **_):
     from darthand.dataset.webdataset import write_webdataset
 
     return write_webdataset(dataset, out)
