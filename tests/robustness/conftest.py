@@ -1,9 +1,8 @@
-"""The fixture folder of the hostile-input corpus (probe_fixtures.py), built once per test session and shared by the
-xdist workers (a file lock: the first worker builds it, the others wait for it)."""
+"""The fixture folder of the hostile-input corpus: the session's small real build (tests/conftest.py,
+probe_fixtures.py)."""
 
 from __future__ import annotations
 
-import fcntl
 import sys
 from pathlib import Path
 
@@ -14,10 +13,5 @@ sys.path[:0] = [str(HERE), str(HERE.parent), str(HERE.parent / "model")]
 
 
 @pytest.fixture(scope="session")
-def fx(tmp_path_factory) -> Path:
-    from probe_fixtures import build_fixtures
-
-    shared = tmp_path_factory.getbasetemp().parent      # the same folder for every xdist worker of this session
-    with open(shared / "hostile-fixtures.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        return build_fixtures(shared / "hostile-fixtures")
+def fx(small_build) -> Path:
+    return small_build
