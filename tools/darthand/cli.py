@@ -121,6 +121,25 @@ def number(kind=float, lo: float | None = None, hi: float | None = None, *, lo_o
     return parse
 
 
+def numbers(n: int, kind=float, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
+            ordered: bool = False):
+    """An argparse `type` for n comma-separated numbers, each checked as `number(kind, lo, hi)` checks one;
+    ordered: none larger than the next (a LO,HI range). Returns a list."""
+    one = number(kind, lo, hi, lo_open=lo_open)
+
+    def parse(text: str) -> list:
+        parts = [p.strip() for p in text.split(",")]
+        if len(parts) != n or not all(parts):
+            raise argparse.ArgumentTypeError(f"{text[:40]!r} is not {n} comma-separated numbers")
+        values = [one(p) for p in parts]
+        if ordered and any(a > b for a, b in zip(values, values[1:])):
+            raise argparse.ArgumentTypeError(f"{text[:40]} is not ordered (LO <= HI)")
+        return values
+
+    parse.__name__ = "numbers"
+    return parse
+
+
 def _range(lo, hi, lo_open) -> str:
     def show(x) -> str:
         return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f"{x:g}"
@@ -468,10 +487,10 @@ def _add_dataset_arguments(p) -> None:
     p.add_argument("--out", required=True, metavar="DIR",
                    help="output folder: images/, masks/, labels/, meshes/ (NNNNNN.png/.json/.npy), shards/, "
                         "dataset.json")
-    p.add_argument("--count", type=int, default=100, metavar="N", help="frames to plan (default 100)")
-    p.add_argument("--seed", type=int, default=0, metavar="S",
+    p.add_argument("--count", type=COUNT, default=100, metavar="N", help="frames to plan (default 100)")
+    p.add_argument("--seed", type=SEED, default=0, metavar="S",
                    help="seed of the plan: frame i depends only on (seed, i) (default 0)")
-    p.add_argument("--start", type=int, default=0, metavar="K",
+    p.add_argument("--start", type=number(int, 0, 10 ** 12), default=0, metavar="K",
                    help="first frame index: frames K .. K+N-1 (to extend a dataset or split it over machines)")
     p.add_argument("--jobs", default=None, metavar="JOBS.json",
                    help="render the frames of a jobs file (schemas/dataset_jobs.schema.json) instead of planning")
@@ -490,50 +509,50 @@ def _add_dataset_arguments(p) -> None:
                         "or FreiHAND's training_mano.json")
     p.add_argument("--gestures", default=None, metavar="NAMES",
                    help="comma-separated gesture names: the gesture library restricted to them")
-    p.add_argument("--grid-levels", type=int, default=d["poses"]["levels"], metavar="L",
+    p.add_argument("--grid-levels", type=number(int, 2, 16), default=d["poses"]["levels"], metavar="L",
                    help=f"dart: values per joint axis of the base-pose grid (default {poses.DEFAULT_LEVELS})")
-    p.add_argument("--reference-draws", type=int, default=d["poses"]["draws"], metavar="K",
+    p.add_argument("--reference-draws", type=number(int, 1, 100_000), default=d["poses"]["draws"], metavar="K",
                    help=f"dart: reference poses drawn per base pose, the most different kept "
                         f"(default {poses.DEFAULT_DRAWS}, DART's)")
-    p.add_argument("--slerp-steps", type=int, default=d["poses"]["steps"], metavar="S",
+    p.add_argument("--slerp-steps", type=number(int, 1, 1000), default=d["poses"]["steps"], metavar="S",
                    help=f"dart: frames per slerp path from a base pose to its reference pose "
                         f"(default {poses.DEFAULT_STEPS}, DART's)")
-    p.add_argument("--pose-jitter", type=float, default=d["poses"]["jitter_deg"], metavar="DEG",
+    p.add_argument("--pose-jitter", type=number(float, 0, 45), default=d["poses"]["jitter_deg"], metavar="DEG",
                    help="jitter: std of a random change to each finger joint's twist, spread and bend, kept within "
                         f"the joint limits (default {poses.DEFAULT_JITTER_DEG:g})")
-    p.add_argument("--max-reference-mb", type=float, default=d["poses"]["max_reference_mb"], metavar="MB",
+    p.add_argument("--max-reference-mb", type=number(float, 0, 10 ** 6, lo_open=True), default=d["poses"]["max_reference_mb"], metavar="MB",
                    help=f"largest reference pose file read (default {poses.DEFAULT_MAX_REFERENCE_MB})")
     p.add_argument("--texture-ids", default="all", metavar="IDS|all",
                    help="comma-separated texture ids to draw from, or 'all' (default: every catalogue texture)")
-    p.add_argument("--skin-tone-range", default="-0.15,0.15", metavar="LO,HI",
+    p.add_argument("--skin-tone-range", type=numbers(2, float, -0.5, 0.5, ordered=True), default="-0.15,0.15", metavar="LO,HI",
                    help="range of the sRGB skin-tone offset; write --skin-tone-range=-0.2,0.1 when LO is negative "
                         "(default -0.15,0.15, DART's)")
-    p.add_argument("--skin-tone-steps", type=int, default=None, metavar="N",
+    p.add_argument("--skin-tone-steps", type=number(int, 1, 1000), default=None, metavar="N",
                    help="draw the offset from N evenly spaced levels of the range (default: uniform in the range)")
     p.add_argument("--accessory-ids", default="all", metavar="IDS|all|none",
                    help="comma-separated accessory ids to draw from, 'all' (default) or 'none' (no accessories)")
-    p.add_argument("--accessory-share", type=float, default=d["accessory_share"], metavar="X",
+    p.add_argument("--accessory-share", type=number(float, 0, 1), default=d["accessory_share"], metavar="X",
                    help="share of the frames with an accessory (default 0.25, DART's)")
     p.add_argument("--shapes", default=d["shapes"]["mode"], choices=("normal", "uniform", "none"),
                    help="hand shape per frame: betas ~ N(0, sigma^2) truncated at +-limit (normal, the default: the "
                         "open hand's shape space is calibrated so that N(0, I) spans adult hands), uniform in "
                         "+-limit, or none (the model's own shape, as DART); a USD package renders its baked shape")
-    p.add_argument("--shape-sigma", type=float, default=d["shapes"]["sigma"], metavar="S",
+    p.add_argument("--shape-sigma", type=number(float, 0, 100, lo_open=True), default=d["shapes"]["sigma"], metavar="S",
                    help="standard deviation of the normal shape distribution (default 1)")
-    p.add_argument("--shape-limit", type=float, default=d["shapes"]["limit"], metavar="L",
+    p.add_argument("--shape-limit", type=number(float, 0, 100, lo_open=True), default=d["shapes"]["limit"], metavar="L",
                    help="largest |beta| drawn (default 3, the extreme shapes `make shapes` checks)")
-    p.add_argument("--shape-dims", type=int, default=None, metavar="N",
+    p.add_argument("--shape-dims", type=number(int, 0, 300), default=None, metavar="N",
                    help="draw only the first N shape directions, the rest 0 (default all)")
     p.add_argument("--views", default="random", metavar="random|VIEWS",
                    help=f"'random' (directions uniform over the sphere by equal-area cells, not along the forearm) "
                         f"and/or views ({', '.join(VIEWS)}), comma-separated, one drawn per frame (default random)")
-    p.add_argument("--roll-range", default="-45,45", metavar="LO,HI",
+    p.add_argument("--roll-range", type=numbers(2, float, -180, 180, ordered=True), default="-45,45", metavar="LO,HI",
                    help="camera roll about its axis, degrees; write --roll-range=-90,90 (default -45,45)")
-    p.add_argument("--fov-range", default="30,60", metavar="LO,HI",
+    p.add_argument("--fov-range", type=numbers(2, float, 1, 120, ordered=True), default="30,60", metavar="LO,HI",
                    help="field of view across the image, degrees (default 30,60)")
-    p.add_argument("--margin-range", default="0.03,0.15", metavar="LO,HI",
+    p.add_argument("--margin-range", type=numbers(2, float, 0, 0.45, ordered=True), default="0.03,0.15", metavar="LO,HI",
                    help="free border around the hand, fraction of the image: the hand's size (default 0.03,0.15)")
-    p.add_argument("--distance-range", default=None, metavar="LO,HI",
+    p.add_argument("--distance-range", type=numbers(2, float, 0.01, 100, ordered=True), default=None, metavar="LO,HI",
                    help="camera distance in metres instead of --margin-range (the hand kept in frame)")
     p.add_argument("--lights", default="random", metavar="random|default|LIGHTS.json",
                    help="random: ambient, a key light and sometimes a second light, colours from real light "
@@ -541,14 +560,15 @@ def _add_dataset_arguments(p) -> None:
     p.add_argument("--backgrounds", default="builtin", metavar="builtin|none|DIR|IMAGE",
                    help="backgrounds composited under the hand with random crop, zoom and flip: the built-in "
                         "procedural set (default), none (transparent), a folder of images (e.g. COCO's) or one image")
-    p.add_argument("--split", default="0.8,0.1,0.1", metavar="TRAIN,VAL,TEST",
+    p.add_argument("--split", type=numbers(3, float, 0, 1), default="0.8,0.1,0.1", metavar="TRAIN,VAL,TEST",
                    help="deterministic split fractions (by pose group) (default 0.8,0.1,0.1)")
-    p.add_argument("--size", type=int, default=512, metavar="N", help="square image size in pixels (default 512)")
+    p.add_argument("--size", type=number(int, 8, run.MAX_SIZE), default=512, metavar="N",
+                   help="square image size in pixels (default 512)")
     _add_antialiasing_options(p)
-    p.add_argument("--processes", type=int, default=None, metavar="N",
+    p.add_argument("--processes", type=number(int, 1, 100_000), default=None, metavar="N",
                    help="worker processes, each rendering whole frames (default: the number of cores; 1 renders "
                         "in this process)")
-    p.add_argument("--threads", type=int, default=None, metavar="N",
+    p.add_argument("--threads", type=number(int, 1, 256), default=None, metavar="N",
                    help="render threads per process (default 1 with workers, all cores with --processes 1)")
     p.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
                    help="render on a Ray cluster: the head node's HOST:PORT, 'auto', or nothing (RAY_ADDRESS, else "
@@ -558,9 +578,9 @@ def _add_dataset_arguments(p) -> None:
                    help="how inputs reach the Ray nodes and frames the output folder: auto (a shared filesystem "
                         "where a node sees it, else through Ray, only the files its frames use), shared (every "
                         "node must see them), ship (always through Ray) (default auto)")
-    p.add_argument("--shard-size", type=int, default=run.DEFAULT_SHARD_SIZE, metavar="N",
+    p.add_argument("--shard-size", type=number(int, 1, 10 ** 7), default=run.DEFAULT_SHARD_SIZE, metavar="N",
                    help=f"frames per shard, the unit of planning and resume records (default {run.DEFAULT_SHARD_SIZE})")
-    p.add_argument("--max-frames", type=int, default=run.DEFAULT_MAX_FRAMES, metavar="N",
+    p.add_argument("--max-frames", type=COUNT, default=run.DEFAULT_MAX_FRAMES, metavar="N",
                    help=f"frame budget of one run (default {run.DEFAULT_MAX_FRAMES})")
     p.add_argument("--formats", default=None, metavar="freihand,webdataset",
                    help="also write these layouts after rendering (as `darthand dataset export`)")
@@ -590,7 +610,7 @@ def _add_dataset_commands(sub) -> None:
                                     "visibility rates, pose coverage against the reference set")
     p.add_argument("dataset", metavar="DIR", help="a render-dataset output folder")
     p.add_argument("--out", default=None, metavar="DIR", help="report folder (default DIR/report)")
-    p.add_argument("--sheet", type=int, default=24, metavar="N", help="frames on the contact sheet (default 24)")
+    p.add_argument("--sheet", type=number(int, 0, 1000), default=24, metavar="N", help="frames on the contact sheet (default 24)")
     p.set_defaults(run=commands.report)
     p = g.add_parser("export", help="write a dataset in another layout: FreiHAND's or WebDataset tar shards")
     p.add_argument("dataset", metavar="DIR", help="a render-dataset output folder")

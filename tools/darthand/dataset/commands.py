@@ -42,17 +42,14 @@ def render_dataset(args) -> int:
                    "levels": args.grid_levels, "draws": args.reference_draws, "steps": args.slerp_steps,
                    "jitter_deg": args.pose_jitter, "max_reference_mb": args.max_reference_mb},
             textures=None if args.texture_ids == "all" else _names(args.texture_ids),
-            skin_tone_range=_numbers("--skin-tone-range", args.skin_tone_range, 2),
+            skin_tone_range=args.skin_tone_range,
             skin_tone_steps=args.skin_tone_steps, accessories=_accessory_ids(args.accessory_ids),
             accessory_share=args.accessory_share, views=_names(args.views),
             shapes={"mode": getattr(args, "shapes", None), "sigma": getattr(args, "shape_sigma", None),
                     "limit": getattr(args, "shape_limit", None), "dims": getattr(args, "shape_dims", None)},
-            roll_range_deg=_numbers("--roll-range", args.roll_range, 2),
-            fov_range_deg=_numbers("--fov-range", args.fov_range, 2),
-            margin_range=_numbers("--margin-range", args.margin_range, 2),
-            distance_range=None if args.distance_range is None else _numbers("--distance-range",
-                                                                              args.distance_range, 2),
-            lights=args.lights, backgrounds=args.backgrounds, split=_numbers("--split", args.split, 3))
+            roll_range_deg=args.roll_range, fov_range_deg=args.fov_range, margin_range=args.margin_range,
+            distance_range=args.distance_range,
+            lights=args.lights, backgrounds=args.backgrounds, split=args.split)
         planner = Planner(spec, sources)
         origin = {"plan": planner.spec, "start": args.start, "count": args.count}
         if args.plan:
@@ -144,17 +141,6 @@ def evaluate(args) -> int:
 
 def _names(text: str | None) -> list[str] | None:
     return None if text is None else [t for t in str(text).replace(" ", ",").split(",") if t]
-
-
-def _numbers(option: str, text: str, n: int) -> list[float]:
-    parts = _names(text) or []
-    try:
-        values = [float(p) for p in parts]
-    except ValueError:
-        values = []
-    if len(values) != n:
-        raise InputError(f"{option}: {text!r} is not {n} comma-separated numbers")
-    return values
 
 
 def _accessory_ids(text: str):
