@@ -5,9 +5,10 @@
   keypoints not visible);
 - counts per texture category, texture tone, accessory type, side and split; the skin-tone offsets;
 - the visibility rate of each keypoint and the share of keypoints inside the image;
-- pose coverage: the dataset's finger poses and the plan's reference set in one 2-D embedding (principal components
-  of the finger joints' quaternions, sign-fixed, both sets together; DART shows a t-SNE), and how far each reference
-  pose is from its nearest dataset pose (mean rotation angle over the 15 finger joints).
+- pose coverage: the dataset's finger poses and the plan's reference set in one 2-D t-SNE embedding, as DART's
+  figure (dataset/embedding.py; the distance between two poses is the mean rotation angle over the 15 finger joints,
+  both sets embedded together, up to EMBED_DATASET + EMBED_REFERENCE poses evenly spread), and how far each
+  reference pose is from its nearest dataset pose (the same distance).
 
 Poses are read from up to MAX_POSES frames' labels (evenly spread), so a report of a large dataset stays quick.
 """
@@ -18,11 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.dataset.embedding import PERPLEXITY
 from darthand.errors import InputError
 from darthand.fileio import read_json, write_json
 
 MAX_POSES = 3000
 MAX_REFERENCE = 3000
+EMBED_DATASET = 800      # poses of each set in the t-SNE picture: exact t-SNE is O(N^2), ~2-5 s for 1200 points
+EMBED_REFERENCE = 400
 BONES = [(0, 1), (1, 2), (2, 3), (3, 4), (0, 5), (5, 6), (6, 7), (7, 8), (0, 9), (9, 10), (10, 11), (11, 12),
          (0, 13), (13, 14), (14, 15), (15, 16), (0, 17), (17, 18), (18, 19), (19, 20)]      # openpose order
 FINGER_COLOURS = ["#e6194b", "#f58231", "#3cb44b", "#4363d8", "#911eb4"]                  # thumb .. pinky
@@ -48,6 +52,9 @@ def write_report(dataset, out=None, sheet: int = 24) -> Path:
     poses, reference, ref_name = pose_sets(root, doc, frames)
     embedding = pose_embedding(poses, reference)
     figures["pose_coverage"] = coverage_figures(poses, reference)
+    (n, _), (m, _) = embedding["poses"]
+    figures["pose_coverage"]["embedding"] = {"method": "t-SNE", "perplexity": PERPLEXITY, "distance":
+                                             "mean finger-joint angle", "dataset_poses": n, "reference_poses": m}
     figures["reference"] = ref_name
 
     shown = min(sheet, len(frames))
@@ -141,41 +148,60 @@ def _features(quats: np.ndarray) -> np.ndarray:
     return q.reshape(len(q), -1)
 
 
+def pose_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n, m) distances in degrees between finger poses a (n, 15, 4) and b (m, 15, 4) (unit quaternions): the mean
+    over the 15 joints of the angle of the rotation taking one to the other."""
+    out = np.empty((len(a), len(b)))
+    for k in range(0, len(a), 256):
+        dots = np.abs(np.einsum("ajc,bjc->abj", a[k:k + 256], b))
+        out[k:k + 256] = np.degrees(2 * np.arccos(np.minimum(dots, 1))).mean(-1)
+    return out
+
+
 def pose_embedding(poses: np.ndarray, reference: np.ndarray) -> dict:
-    """2-D principal-component coordinates of both sets, fitted on them together."""
-    both = np.concatenate([_features(poses), _features(reference)]) if len(reference) else _features(poses)
-    centre = both.mean(0)
-    _, s, vt = np.linalg.svd(both - centre, full_matrices=False)
-    axes = vt[:2]
-    explained = (s[:2] ** 2 / (s ** 2).sum()).tolist() if s.sum() else [0.0, 0.0]
-    return {"dataset": (_features(poses) - centre) @ axes.T,
-            "reference": (_features(reference) - centre) @ axes.T if len(reference) else np.zeros((0, 2)),
-            "explained": explained}
+    """2-D t-SNE coordinates of (an evenly spread subsample of) both sets, embedded together: {"dataset" (n, 2),
+    "reference" (m, 2), "poses": [n of len(poses), m of len(reference)]}. Starts from both sets' first two
+    principal components of the sign-fixed quaternions (deterministic)."""
+    from darthand.dataset.embedding import tsne
+
+    data, ref = _spread(poses, EMBED_DATASET), _spread(reference, EMBED_REFERENCE)
+    both = np.concatenate([data, ref])
+    features = _features(both)
+    features = features - features.mean(0)
+    axes = np.linalg.svd(features, full_matrices=False)[2][:2] if len(both) > 1 else np.eye(2, features.shape[1])
+    y = tsne(pose_distances(both, both), features @ axes.T)
+    return {"dataset": y[:len(data)], "reference": y[len(data):],
+            "poses": [[len(data), len(poses)], [len(ref), len(reference)]]}
+
+
+def _spread(items: np.ndarray, most: int) -> np.ndarray:
+    """Up to `most` of `items`, evenly spread over them."""
+    if len(items) <= most:
+        return items
+    return items[np.unique(np.linspace(0, len(items) - 1, most).round().astype(int))]
 
 
 def coverage_figures(poses: np.ndarray, reference: np.ndarray) -> dict:
     """How well the dataset's poses cover the reference set: per reference pose, the mean rotation angle (degrees)
     over the 15 finger joints to its nearest dataset pose; and the dataset's own spread (the same to the nearest
     other dataset pose)."""
-    def nearest(a: np.ndarray, b: np.ndarray, skip_self: bool) -> np.ndarray:
-        out = np.empty(len(a))
-        for k in range(0, len(a), 256):
-            dots = np.abs(np.einsum("ajc,bjc->abj", a[k:k + 256], b))
-            d = np.degrees(2 * np.arccos(np.minimum(dots, 1))).mean(-1)
-            if skip_self:
-                d[np.arange(len(d)), np.arange(k, k + len(d))] = np.inf
-            out[k:k + 256] = d.min(1)
-        return out
-
     result = {"dataset_poses": int(len(poses)), "reference_poses": int(len(reference))}
     if len(reference):
-        d = nearest(reference, poses, False)
+        d = pose_distances(reference, poses).min(1)
         result.update({"reference_to_dataset_deg": d.round(3).tolist(),
                        "median_deg": round(float(np.median(d)), 3), "within_10deg": round(float((d <= 10).mean()), 4),
                        "within_20deg": round(float((d <= 20).mean()), 4)})
     if len(poses) > 1:
-        result["dataset_nearest_median_deg"] = round(float(np.median(nearest(poses, poses, True))), 3)
+        own = np.concatenate([_nearest_other(poses, k) for k in range(0, len(poses), 256)])
+        result["dataset_nearest_median_deg"] = round(float(np.median(own)), 3)
     return result
+
+
+def _nearest_other(poses: np.ndarray, k: int) -> np.ndarray:
+    """Distance from each of poses[k:k + 256] to its nearest other pose of the set."""
+    d = pose_distances(poses[k:k + 256], poses)
+    d[np.arange(len(d)), np.arange(k, k + len(d))] = np.inf
+    return d.min(1)
 
 
 # ------------------------------------------------------------------------------------------------ panels
@@ -237,14 +263,16 @@ def _visibility(ax, figures: dict) -> None:
 
 def _embedding(ax, embedding: dict, ref_name: str) -> None:
     ref, data = embedding["reference"], embedding["dataset"]
-    if len(ref):
-        ax.scatter(ref[:, 0], ref[:, 1], s=14, c="#bbbbbb", label=f"reference set ({ref_name}, {len(ref)})")
-    ax.scatter(data[:, 0], data[:, 1], s=5, c="#d62728", alpha=0.6, label=f"dataset ({len(data)})")
-    ex = embedding["explained"]
-    ax.set_xlabel(f"PC 1 ({ex[0]:.0%})")
-    ax.set_ylabel(f"PC 2 ({ex[1]:.0%})")
+    ax.scatter(data[:, 0], data[:, 1], s=5, c="#d62728", alpha=0.6, label="dataset")
+    if len(ref):                                         # on top: a few reference poses among many dataset ones
+        ax.scatter(ref[:, 0], ref[:, 1], s=28, marker="D", c="#1f1f1f", edgecolors="white", linewidths=0.6,
+                   label=f"reference set ({ref_name})")
+    (n, total), (m, ref_total) = embedding["poses"]
+    ax.set_xticks([])
+    ax.set_yticks([])
     ax.legend(loc="best", fontsize=9)
-    ax.set_title("pose coverage: finger poses, first two principal components of both sets")
+    ax.set_title(f"pose coverage: t-SNE of finger poses ({n} of {total} dataset"
+                 + (f", {m} of {ref_total} reference)" if ref_total else ")"))
 
 
 def _nearest(ax, cov: dict) -> None:
