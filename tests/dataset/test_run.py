@@ -239,12 +239,13 @@ def test_an_interrupted_run_leaves_no_orphans_and_resumes_to_the_same_bytes(pack
     assert not [p for p in out.rglob(".*") if p.is_file()]
 
 
-def test_chunks_group_frames_by_side_and_texture():
+def test_chunks_group_frames_by_texture_across_sides():
     items = [({"index": i, "side": "lr"[i % 3 == 0], "texture": "ab"[i % 2], "accessory": "none"}, str(i))
              for i in range(40)]
     chunks = run.make_chunks(items, processes=2, chunk_size=4)
     assert sorted(j["index"] for c in chunks for j, _ in c) == list(range(40))
-    assert all(len({(j["side"], j["texture"]) for j, _ in c}) == 1 and len(c) <= 4 for c in chunks)
+    assert all(len({j["texture"] for j, _ in c}) == 1 and len(c) <= 4 for c in chunks)
+    assert len(chunks) == 10                       # 20 frames per texture, both sides together: 5 chunks of 4 each
     assert [len(c) for c in chunks] == sorted((len(c) for c in chunks), reverse=True)
 
 

@@ -255,19 +255,20 @@ def _prepare_folders(out: Path) -> None:
 
 
 def make_chunks(items: list, processes: int, chunk_size: int | None = None) -> list[list]:
-    """Items [(job, digest)] in tasks for the workers: grouped by (side, texture), each group split into chunks of at
-    most `chunk_size` frames (default: a quarter of an even share per process, at most MAX_CHUNK), sorted by
-    accessory inside; largest chunks first."""
+    """Items [(job, digest)] in tasks for the workers: grouped by texture (a model's left and right hands read the
+    same texture files, and loading one costs as much as rendering a frame: a worker loads it once per chunk), each
+    group split into chunks of at most `chunk_size` frames (default: a quarter of an even share per process, at most
+    MAX_CHUNK), sorted by side and accessory inside; largest chunks first."""
     if not items:
         return []
     size = chunk_size or min(MAX_CHUNK, max(1, math.ceil(len(items) / (4 * processes))))
     groups: dict = {}
     for item in items:
-        job = item[0]
-        groups.setdefault((str(job.get("side")), str(job.get("texture"))), []).append(item)
+        groups.setdefault(str(item[0].get("texture")), []).append(item)
     chunks = []
     for key in sorted(groups):
-        group = sorted(groups[key], key=lambda it: (str(it[0].get("accessory")), it[0]["index"]))
+        group = sorted(groups[key], key=lambda it: (str(it[0].get("side")), str(it[0].get("accessory")),
+                                                    it[0]["index"]))
         chunks += [group[k:k + size] for k in range(0, len(group), size)]
     return sorted(chunks, key=len, reverse=True)
 
