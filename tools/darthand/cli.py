@@ -520,11 +520,13 @@ def _add_dataset_arguments(p) -> None:
     p.add_argument("--pose-jitter", type=number(float, 0, 45), default=d["poses"]["jitter_deg"], metavar="DEG",
                    help="jitter: std of a random change to each finger joint's twist, spread and bend, kept within "
                         f"the joint limits (default {poses.DEFAULT_JITTER_DEG:g})")
-    p.add_argument("--max-reference-mb", type=number(float, 0, 10 ** 6, lo_open=True), default=d["poses"]["max_reference_mb"], metavar="MB",
+    p.add_argument("--max-reference-mb", type=number(float, 0, 10 ** 6, lo_open=True),
+                   default=d["poses"]["max_reference_mb"], metavar="MB",
                    help=f"largest reference pose file read (default {poses.DEFAULT_MAX_REFERENCE_MB})")
     p.add_argument("--texture-ids", default="all", metavar="IDS|all",
                    help="comma-separated texture ids to draw from, or 'all' (default: every catalogue texture)")
-    p.add_argument("--skin-tone-range", type=numbers(2, float, -0.5, 0.5, ordered=True), default="-0.15,0.15", metavar="LO,HI",
+    p.add_argument("--skin-tone-range", type=numbers(2, float, -0.5, 0.5, ordered=True), default="-0.15,0.15",
+                   metavar="LO,HI",
                    help="range of the sRGB skin-tone offset; write --skin-tone-range=-0.2,0.1 when LO is negative "
                         "(default -0.15,0.15, DART's)")
     p.add_argument("--skin-tone-steps", type=number(int, 1, 1000), default=None, metavar="N",
@@ -537,22 +539,27 @@ def _add_dataset_arguments(p) -> None:
                    help="hand shape per frame: betas ~ N(0, sigma^2) truncated at +-limit (normal, the default: the "
                         "open hand's shape space is calibrated so that N(0, I) spans adult hands), uniform in "
                         "+-limit, or none (the model's own shape, as DART); a USD package renders its baked shape")
-    p.add_argument("--shape-sigma", type=number(float, 0, 100, lo_open=True), default=d["shapes"]["sigma"], metavar="S",
+    p.add_argument("--shape-sigma", type=number(float, 0, 100, lo_open=True), default=d["shapes"]["sigma"],
+                   metavar="S",
                    help="standard deviation of the normal shape distribution (default 1)")
-    p.add_argument("--shape-limit", type=number(float, 0, 100, lo_open=True), default=d["shapes"]["limit"], metavar="L",
+    p.add_argument("--shape-limit", type=number(float, 0, 100, lo_open=True), default=d["shapes"]["limit"],
+                   metavar="L",
                    help="largest |beta| drawn (default 3, the extreme shapes `make shapes` checks)")
     p.add_argument("--shape-dims", type=number(int, 0, 300), default=None, metavar="N",
                    help="draw only the first N shape directions, the rest 0 (default all)")
     p.add_argument("--views", default="random", metavar="random|VIEWS",
                    help=f"'random' (directions uniform over the sphere by equal-area cells, not along the forearm) "
                         f"and/or views ({', '.join(VIEWS)}), comma-separated, one drawn per frame (default random)")
-    p.add_argument("--roll-range", type=numbers(2, float, -180, 180, ordered=True), default="-45,45", metavar="LO,HI",
+    p.add_argument("--roll-range", type=numbers(2, float, -180, 180, ordered=True), default="-45,45",
+                   metavar="LO,HI",
                    help="camera roll about its axis, degrees; write --roll-range=-90,90 (default -45,45)")
     p.add_argument("--fov-range", type=numbers(2, float, 1, 120, ordered=True), default="30,60", metavar="LO,HI",
                    help="field of view across the image, degrees (default 30,60)")
-    p.add_argument("--margin-range", type=numbers(2, float, 0, 0.45, ordered=True), default="0.03,0.15", metavar="LO,HI",
+    p.add_argument("--margin-range", type=numbers(2, float, 0, 0.45, ordered=True), default="0.03,0.15",
+                   metavar="LO,HI",
                    help="free border around the hand, fraction of the image: the hand's size (default 0.03,0.15)")
-    p.add_argument("--distance-range", type=numbers(2, float, 0.01, 100, ordered=True), default=None, metavar="LO,HI",
+    p.add_argument("--distance-range", type=numbers(2, float, 0.01, 100, ordered=True), default=None,
+                   metavar="LO,HI",
                    help="camera distance in metres instead of --margin-range (the hand kept in frame)")
     p.add_argument("--lights", default="random", metavar="random|default|LIGHTS.json",
                    help="random: ambient, a key light and sometimes a second light, colours from real light "
@@ -610,7 +617,8 @@ def _add_dataset_commands(sub) -> None:
                                     "visibility rates, pose coverage against the reference set")
     p.add_argument("dataset", metavar="DIR", help="a render-dataset output folder")
     p.add_argument("--out", default=None, metavar="DIR", help="report folder (default DIR/report)")
-    p.add_argument("--sheet", type=number(int, 0, 1000), default=24, metavar="N", help="frames on the contact sheet (default 24)")
+    p.add_argument("--sheet", type=number(int, 1, 1000), default=24, metavar="N",
+                   help="frames on the contact sheet (default 24)")
     p.set_defaults(run=commands.report)
     p = g.add_parser("export", help="write a dataset in another layout: FreiHAND's or WebDataset tar shards")
     p.add_argument("dataset", metavar="DIR", help="a render-dataset output folder")

@@ -26,8 +26,9 @@ FreiHAND is right-handed (its MANO is MANO_RIGHT). A left-hand frame is mirrored
 the default; `"skip"` leaves it out): image and mask flipped left-right, the camera-frame points x -> -x, K's
 principal point cx -> W - cx (pixel-corner origin), the MANO rotations conjugated by diag(-1, 1, 1) (axis-angle
 (x, y, z) -> (x, -y, -z) per joint, the global rotation too), the betas kept. With a left model that is the right
-one mirrored (darthand's, or MANO_LEFT, which is MANO_RIGHT's mirror image), the right model posed from the
-mirrored row is the mirrored hand; its translation, left out of FreiHAND's row, follows from (u, v) and scale.
+one mirrored (darthand's mirrored twin; MANO_LEFT is meant to be MANO_RIGHT's mirror image, which the tests check on
+the MANO-format fixture only), the right model posed from the mirrored row is the mirrored hand; its translation,
+left out of FreiHAND's row, follows from (u, v) and scale.
 """
 
 from __future__ import annotations
@@ -119,7 +120,8 @@ def check_mano(models: dict, where, allow_non_mano: bool) -> bool:
     if all(kinds.values()) and kinds:
         return True
     if not allow_non_mano:
-        other = next((models[s].get("source", s) for s, k in kinds.items() if not k), "unknown")
+        other = next((models[s].get("source", s) for s in sorted(kinds, reverse=True)  # right first
+                      if not kinds[s]), "unknown")
         raise InputError(f"{where}: FreiHAND export: the hand ({other}) is not a MANO model, so training_mano.json's "
                          f"shape and pose values would pose a different hand in MANO; render from MANO "
                          f"(make assets MANO=MANO_RIGHT.pkl), or --allow-non-mano to write them anyway (shape "
@@ -144,6 +146,7 @@ def write_freihand(dataset, out=None, *, left: str = "mirror", allow_non_mano: b
     allow_non_mano (module docstring)."""
     from darthand.dataset.frames import frame_names
     from darthand.dataset.run import read_shard_records
+    from darthand.model.mirror import mirror_points
 
     if left not in LEFT_MODES:
         raise InputError(f"--left: {left!r} is not one of {', '.join(LEFT_MODES)}")
@@ -172,8 +175,6 @@ def write_freihand(dataset, out=None, *, left: str = "mirror", allow_non_mano: b
                 raise InputError(f"{root / names['labels']}: needs openpose keypoints and MANO parameters")
             vertices = np.asarray(np.load(root / names["vertices"])[:labels["mesh"]["base_vertices"]], np.float64)
             if flip:
-                from darthand.model.mirror import mirror_points
-
                 labels, vertices = mirror_labels(labels), mirror_points(vertices)
             name = SETS[frame["split"]]
             if name not in writers:

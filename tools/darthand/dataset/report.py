@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from darthand.dataset.embedding import PERPLEXITY
+from darthand.dataset.embedding import PERPLEXITY, tsne
 from darthand.errors import InputError
 from darthand.fileio import read_json, write_json
 
@@ -162,8 +162,6 @@ def pose_embedding(poses: np.ndarray, reference: np.ndarray) -> dict:
     """2-D t-SNE coordinates of (an evenly spread subsample of) both sets, embedded together: {"dataset" (n, 2),
     "reference" (m, 2), "poses": [n of len(poses), m of len(reference)]}. Starts from both sets' first two
     principal components of the sign-fixed quaternions (deterministic)."""
-    from darthand.dataset.embedding import tsne
-
     data, ref = _spread(poses, EMBED_DATASET), _spread(reference, EMBED_REFERENCE)
     both = np.concatenate([data, ref])
     features = _features(both)
