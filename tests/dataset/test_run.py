@@ -93,14 +93,17 @@ def _cli(package, *args):
 def test_cli_plans_renders_and_a_written_plan_renders_the_same(package, tmp_path, capsys):
     common = _cli(package, "--processes", "1", "--count", "3", "--seed", "11", "--pose-mode", "jitter",
                   "--gestures", "fist,point", "--views", "dorsal,random", "--skin-tone-range=-0.05,0.05")
-    assert main(["render-dataset", *common, "--out", str(tmp_path / "a")]) == 0
+    assert main(["render-dataset", *common, "--out", str(tmp_path / "a"), "--formats", "freihand",
+                 "--allow-non-mano"]) == 0
     assert "3 frames rendered" in capsys.readouterr().out
+    assert "ZERO" in (tmp_path / "a" / "freihand" / "README.md").read_text()    # the open hand: no MANO shape
     assert main(["render-dataset", *common, "--out", str(tmp_path / "unused"), "--plan",
                  str(tmp_path / "jobs.json")]) == 0
     assert not (tmp_path / "unused").exists()
     assert main(["render-dataset", *_cli(package, "--processes", "1", "--jobs", str(tmp_path / "jobs.json"),
                                          "--out", str(tmp_path / "b"))]) == 0
-    frames = lambda d: {k: v for k, v in files_of(d).items() if not k.startswith("shards")}  # noqa: E731
+    frames = lambda d: {k: v for k, v in files_of(d).items()  # noqa: E731
+                        if not k.startswith(("shards", "freihand"))}
     assert frames(tmp_path / "a") == frames(tmp_path / "b")
     doc = json.loads((tmp_path / "a" / "dataset.json").read_text())
     assert doc["jobs"]["plan"]["seed"] == 11 and doc["count"] == 3 and doc["rendered"] == 3
