@@ -58,9 +58,10 @@ def write_report(dataset, out=None, sheet: int = 24) -> Path:
     figures["reference"] = ref_name
 
     shown = min(sheet, len(frames))
-    sheet_height = 4.0 * -(-shown // min(8, shown)) / min(8, shown)
+    sheet_height = 5.6 * -(-shown // min(8, shown)) / min(8, shown)     # in units of the rows below: the full width
     fig = plt.figure(figsize=(20, 4 * (sheet_height + 4.9)), dpi=90)
-    grid = fig.add_gridspec(5, 4, height_ratios=[sheet_height, 1, 1, 1, 1.9], hspace=0.45, wspace=0.3)
+    grid = fig.add_gridspec(5, 4, height_ratios=[sheet_height, 1, 1, 1, 1.9], hspace=0.45, wspace=0.3, top=0.96,
+                            bottom=0.03)
     fig.suptitle(f"{root.name}: {len(frames)} frames, {doc.get('size')} px, package {doc.get('package')}",
                  fontsize=18, y=0.995)
     _contact_sheet(fig.add_subplot(grid[0, :]), root, frames, sheet)
