@@ -111,6 +111,21 @@ def test_cli_plans_renders_and_a_written_plan_renders_the_same(package, tmp_path
     assert {lab["gesture"] for lab in labels} <= {"fist", "point"}
 
 
+def test_shading_options_reach_the_frames_and_their_resume_digest(package, tmp_path, capsys):
+    args = _cli(package, "--processes", "1", "--count", "1", "--out", str(tmp_path))
+    assert main(["render-dataset", *args, "--ao-rays", "0", "--skin", "lambert"]) == 0
+    labels = json.loads((tmp_path / "labels" / "000000.json").read_text())
+    expected = {"ao_rays": 0, "interreflection": True, "skin": "lambert"}
+    assert labels["render"]["shading"] == expected
+    assert json.loads((tmp_path / "dataset.json").read_text())["shading"] == expected
+    unblocked = (tmp_path / "images" / "000000.png").read_bytes()
+    assert main(["render-dataset", *args, "--ao-rays", "0", "--skin", "lambert"]) == 0
+    assert "0 frames rendered, 1 already there" in capsys.readouterr().out
+    assert main(["render-dataset", *args, "--ao-rays", "8", "--skin", "lambert"]) == 0     # another digest
+    assert "1 frames rendered" in capsys.readouterr().out
+    assert (tmp_path / "images" / "000000.png").read_bytes() != unblocked
+
+
 @pytest.mark.parametrize("args, expected", [
     # numeric options: the CLI's shared `number` type (cli.number / cli.numbers), as every command's
     (["--count", "-1"], "argument --count: -1 is outside [0, 2147483647]"),
