@@ -16,13 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.dataset.run import DEFAULT_SAMPLES
 from darthand.errors import InputError
 from darthand.model.anatomy import angles_to_axis_angle
 from darthand.model.layout import NUM_JOINTS
 from darthand.studio.build import RequestError, StudioBuild
 
 SCENE_SCHEMA = "studio_scene.schema.json"
-SAMPLES, AA_SHADING = 8, "triangle"          # render-dataset's defaults: the exported jobs render alike
+SAMPLES, AA_SHADING = DEFAULT_SAMPLES, "triangle"   # render-dataset's defaults: the exported jobs render alike
 MAX_POSES = 10_000                           # poses in one exported pose list
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 
