@@ -108,6 +108,21 @@ def test_cli_plans_renders_and_a_written_plan_renders_the_same(package, tmp_path
     assert {lab["gesture"] for lab in labels} <= {"fist", "point"}
 
 
+def test_shading_options_reach_the_frames_and_their_resume_digest(package, tmp_path, capsys):
+    args = _cli(package, "--processes", "1", "--count", "1", "--out", str(tmp_path))
+    assert main(["render-dataset", *args, "--ao-rays", "0", "--skin", "lambert"]) == 0
+    labels = json.loads((tmp_path / "labels" / "000000.json").read_text())
+    expected = {"ao_rays": 0, "interreflection": True, "skin": "lambert"}
+    assert labels["render"]["shading"] == expected
+    assert json.loads((tmp_path / "dataset.json").read_text())["shading"] == expected
+    unblocked = (tmp_path / "images" / "000000.png").read_bytes()
+    assert main(["render-dataset", *args, "--ao-rays", "0", "--skin", "lambert"]) == 0
+    assert "0 frames rendered, 1 already there" in capsys.readouterr().out
+    assert main(["render-dataset", *args, "--ao-rays", "8", "--skin", "lambert"]) == 0     # another digest
+    assert "1 frames rendered" in capsys.readouterr().out
+    assert (tmp_path / "images" / "000000.png").read_bytes() != unblocked
+
+
 @pytest.mark.parametrize("args, expected", [
     (["--count", "-1"], "count: -1 frames is outside 0.."),
     (["--count", "2000000"], "frame budget; --max-frames raises it"),
@@ -222,12 +237,13 @@ def test_an_interrupted_run_leaves_no_orphans_and_resumes_to_the_same_bytes(pack
     assert not [p for p in out.rglob(".*") if p.is_file()]
 
 
-def test_chunks_group_frames_by_side_and_texture():
+def test_chunks_group_frames_by_texture_across_sides():
     items = [({"index": i, "side": "lr"[i % 3 == 0], "texture": "ab"[i % 2], "accessory": "none"}, str(i))
              for i in range(40)]
     chunks = run.make_chunks(items, processes=2, chunk_size=4)
     assert sorted(j["index"] for c in chunks for j, _ in c) == list(range(40))
-    assert all(len({(j["side"], j["texture"]) for j, _ in c}) == 1 and len(c) <= 4 for c in chunks)
+    assert all(len({j["texture"] for j, _ in c}) == 1 and len(c) <= 4 for c in chunks)
+    assert len(chunks) == 10                       # 20 frames per texture, both sides together: 5 chunks of 4 each
     assert [len(c) for c in chunks] == sorted((len(c) for c in chunks), reverse=True)
 
 

@@ -544,7 +544,8 @@ def _add_dataset_arguments(p) -> None:
     p.add_argument("--split", default="0.8,0.1,0.1", metavar="TRAIN,VAL,TEST",
                    help="deterministic split fractions (by pose group) (default 0.8,0.1,0.1)")
     p.add_argument("--size", type=int, default=512, metavar="N", help="square image size in pixels (default 512)")
-    _add_antialiasing_options(p)
+    _add_antialiasing_options(p, run.DEFAULT_SAMPLES)
+    _add_shading_options(p, run.DEFAULT_SHADING)
     p.add_argument("--processes", type=int, default=None, metavar="N",
                    help="worker processes, each rendering whole frames (default: the number of cores; 1 renders "
                         "in this process)")
@@ -596,27 +597,29 @@ def _add_dataset_commands(sub) -> None:
     p.set_defaults(run=commands.evaluate)
 
 
-def _add_antialiasing_options(p) -> None:
+def _add_antialiasing_options(p, samples: int = 8) -> None:
     from darthand.render.aa import PATTERNS, SHADING
 
-    p.add_argument("--samples", type=int, default=8, choices=sorted(PATTERNS),
-                   help="sub-samples per silhouette or material-edge pixel (default 8)")
+    p.add_argument("--samples", type=int, default=samples, choices=sorted(PATTERNS),
+                   help=f"sub-samples per silhouette or material-edge pixel (default {samples})")
     p.add_argument("--aa-shading", default="triangle", choices=SHADING,
                    help="shade the sub-samples once per pixel per triangle, as GPU multisampling does (triangle, "
                         "default), or each one (sample: slower, exact supersampling)")
 
 
-def _add_shading_options(p) -> None:
-    from darthand.render.shade import DEFAULT_AO_RAYS, DEFAULT_SKIN, SKIN_MODELS
+def _add_shading_options(p, defaults: dict | None = None) -> None:
+    """--ao-rays, --no-interreflection, --skin; `defaults` overrides the renderer's (shade.ShadingOptions)."""
+    from darthand.render.shade import SKIN_MODELS, ShadingOptions
 
-    p.add_argument("--ao-rays", type=number(int, 0, 4096), default=DEFAULT_AO_RAYS, metavar="N",
+    d = ShadingOptions(**(defaults or {}))
+    p.add_argument("--ao-rays", type=number(int, 0, 4096), default=d.ao_rays, metavar="N",
                    help="rays per vertex for the ambient light's occlusion and light reflected between surfaces; "
-                        f"0: ambient light reaches everything, nothing is interreflected (default {DEFAULT_AO_RAYS})")
+                        f"0: ambient light reaches everything, nothing is interreflected (default {d.ao_rays})")
     p.add_argument("--no-interreflection", dest="interreflection", action="store_false",
-                   help="ambient occlusion only, without light reflected between surfaces")
-    p.add_argument("--skin", default=DEFAULT_SKIN, choices=SKIN_MODELS,
-                   help="the skin's diffuse model: subsurface scattering pre-integrated over curvature (default), "
-                        "wrap lighting (the earlier look) or lambert")
+                   default=d.interreflection, help="ambient occlusion only, without light reflected between surfaces")
+    p.add_argument("--skin", default=d.skin, choices=SKIN_MODELS,
+                   help="the skin's diffuse model: subsurface scattering pre-integrated over curvature, wrap "
+                        f"lighting (the earlier look) or lambert (default {d.skin})")
 
 
 def _add_source_options(p) -> None:

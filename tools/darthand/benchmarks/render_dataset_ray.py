@@ -192,13 +192,13 @@ def _unit_costs(model, textures, accessories, plan, tmp: Path) -> dict:
     (the albedo and roughness of three textures, no cache); MB of a texture's files."""
     from darthand.dataset.frames import job_digest
     from darthand.dataset.plan import Planner, plan_spec
-    from darthand.dataset.run import DEFAULT_SHARD_SIZE
+    from darthand.dataset.run import DEFAULT_SAMPLES, DEFAULT_SHARD_SIZE
     from darthand.render.api import open_source
     from darthand.render.texture import load_maps
 
     source = open_source(str(model), textures=str(textures), accessories=str(accessories))
     planner = Planner({**plan_spec(**plan), "sides": ["right"]}, {"right": source})
-    settings = {"size": SIZE, "samples": 8, "aa_shading": "triangle"}
+    settings = {"size": SIZE, "samples": DEFAULT_SAMPLES, "aa_shading": "triangle"}
     t = time.perf_counter()
     digests = [job_digest(job, settings) for job in planner.jobs(10_000, 10_000 + DEFAULT_SHARD_SIZE)]
     shard_ms = 1000 * (time.perf_counter() - t)

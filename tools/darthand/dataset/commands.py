@@ -64,7 +64,9 @@ def render_dataset(args) -> int:
             return 0
     doc = run(args.package, args.out, jobs, planner=planner, start=args.start, count=args.count, specs=specs,
               sources=sources, processes=args.processes, threads=args.threads, size=args.size,
-              samples=args.samples, aa_shading=args.aa_shading, resume=args.resume, progress=True,
+              samples=args.samples, aa_shading=args.aa_shading,
+              shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin},
+              resume=args.resume, progress=True,
               shard_size=args.shard_size, max_frames=args.max_frames, jobs_source=origin,
               cluster=None if args.ray is None else {"address": args.ray or None, "files": args.ray_files})
     t = doc["timings"]

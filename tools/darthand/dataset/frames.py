@@ -34,16 +34,18 @@ def frame_names(index: int) -> dict:
 
 def job_digest(job: dict, settings: dict) -> str:
     """sha256 (hex, 16 digits) of what a frame's files depend on: the job and the render settings (with the
-    renderer's shading defaults: frames rendered before they changed are rendered again)."""
-    from darthand.render.shade import ShadingOptions
+    shading options in full, the renderer's defaults filled in: frames rendered before a default changed are
+    rendered again)."""
+    from darthand.render.api import shading_options
 
     key = {"job": job, **{k: settings[k] for k in ("size", "samples", "aa_shading")},
-           "shading": ShadingOptions().to_json()}
+           "shading": shading_options(settings.get("shading")).to_json()}
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
 
 
 def render_job(renderer, job: dict, settings: dict):
-    """(api.Frame, background info or None) of one job."""
+    """(api.Frame, background info or None) of one job. settings: size, samples, aa_shading, and optionally
+    shading (api.shading_options' dict; None: the renderer's defaults)."""
     from darthand.dataset.backgrounds import background_pixels
 
     pose = job.get("pose")
@@ -62,7 +64,8 @@ def render_job(renderer, job: dict, settings: dict):
     frame = renderer.render(pose, texture=job.get("texture"), skin_tone_offset=float(job.get("skin_tone_offset", 0)),
                             accessory=job.get("accessory"), camera=job.get("camera") or "three_quarter",
                             lights=job.get("lights"), background=background, width=size, height=size,
-                            samples=settings["samples"], aa_shading=settings["aa_shading"], betas=job.get("betas"))
+                            samples=settings["samples"], aa_shading=settings["aa_shading"],
+                            shading=settings.get("shading"), betas=job.get("betas"))
     frame.timings["background"] = t
     return frame, info
 

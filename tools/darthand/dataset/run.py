@@ -37,6 +37,12 @@ from darthand.fileio import read_json, write_json
 DATASET_FORMAT = "darthand-dataset"
 DATASET_VERSION = 2
 DEFAULT_SHARD_SIZE = 8192
+# Dataset render settings, chosen from benchmarks/dataset_settings.py (CPU per 512^2 frame against error, 24 frames
+# of the default plan, against 16 sub-samples shaded each and 64 indirect rays): 4 edge sub-samples instead of the
+# renderer's 8 save 4.4 of 81 ms a frame for +0.05 sRGB codes of mean error (0.62 -> 0.67); 8 indirect rays instead
+# of 16 save nothing measurable for +0.18, so the renderer's shading defaults stay.
+DEFAULT_SAMPLES = 4
+DEFAULT_SHADING: dict = {}                # shade.ShadingOptions' defaults
 MAX_CHUNK = 32                    # frames per task: ~1-2 s of work, so progress and Ctrl-C stay responsive
 DEFAULT_MAX_FRAMES = 1_000_000    # a budget: more needs max_frames= (--max-frames)
 MAX_SIZE = 4096
@@ -45,8 +51,8 @@ FOLDERS = ("images", "masks", "labels", "meshes", "shards")
 
 def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0, count: int | None = None,
                    specs: dict | None = None, sources: dict | None = None, processes: int | None = None,
-                   threads: int | None = None, size: int = 512, samples: int = 8, aa_shading: str = "triangle",
-                   resume: bool = True, progress=True, shard_size: int = DEFAULT_SHARD_SIZE,
+                   threads: int | None = None, size: int = 512, samples: int = DEFAULT_SAMPLES,
+                   aa_shading: str = "triangle", shading: dict | None = None, resume: bool = True, progress=True, shard_size: int = DEFAULT_SHARD_SIZE,
                    chunk_size: int | None = None, max_frames: int = DEFAULT_MAX_FRAMES,
                    jobs_source: dict | None = None, cluster: dict | None = None) -> dict:
     """Render frames into out_dir (module docstring); returns the dataset.json document.
@@ -57,7 +63,7 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
     processes: worker processes (default: the cores available; 1 renders in this process); threads: render threads
         per process (default 1 with workers, all cores with processes=1).
     resume: skip what is already rendered from the same jobs (module docstring). samples, aa_shading: edge
-        anti-aliasing (api.Renderer.render). progress: False, True (a line at most every 5 s) or a
+        anti-aliasing (api.Renderer.render); shading: api.shading_options' fields (None: DEFAULT_SHADING). progress: False, True (a line at most every 5 s) or a
         callable(done, total, seconds).
     cluster: render on a Ray cluster instead of local processes (dataset/ray_runner.RayRunner: {'address': ...,
         'files': 'auto'|'shared'|'ship'}); processes, when given, is then the number of Ray workers.
@@ -65,9 +71,11 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
     """
     from darthand.dataset.jobs import check_jobs, load_jobs, validate_jobs
     from darthand.render import aa
+    from darthand.render.api import shading_options
 
     t_start = time.monotonic()
     aa.check_options(samples, aa_shading)
+    shading = shading_options({**DEFAULT_SHADING, **(shading or {})}).to_json()
     size = _bounded_int(size, "size", 8, MAX_SIZE, "pixels")
     if cluster is None:
         processes = _bounded_int(len(os.sched_getaffinity(0)) if processes is None else processes, "processes", 1,
@@ -94,7 +102,8 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
         raise InputError(f"jobs: {total} frames are over the frame budget of {max_frames} (--max-frames raises it)")
     out = Path(out_dir)
     _prepare_folders(out)
-    settings = {"out_dir": str(out), "size": size, "samples": int(samples), "aa_shading": aa_shading}
+    settings = {"out_dir": str(out), "size": size, "samples": int(samples), "aa_shading": aa_shading,
+                "shading": shading}
     stats = RunStats(t_start)
     report = _progress_printer(stats) if progress is True else (progress or None)
     if cluster is not None:
@@ -255,19 +264,20 @@ def _prepare_folders(out: Path) -> None:
 
 
 def make_chunks(items: list, processes: int, chunk_size: int | None = None) -> list[list]:
-    """Items [(job, digest)] in tasks for the workers: grouped by (side, texture), each group split into chunks of at
-    most `chunk_size` frames (default: a quarter of an even share per process, at most MAX_CHUNK), sorted by
-    accessory inside; largest chunks first."""
+    """Items [(job, digest)] in tasks for the workers: grouped by texture (a model's left and right hands read the
+    same texture files, and loading one costs as much as rendering a frame: a worker loads it once per chunk), each
+    group split into chunks of at most `chunk_size` frames (default: a quarter of an even share per process, at most
+    MAX_CHUNK), sorted by side and accessory inside; largest chunks first."""
     if not items:
         return []
     size = chunk_size or min(MAX_CHUNK, max(1, math.ceil(len(items) / (4 * processes))))
     groups: dict = {}
     for item in items:
-        job = item[0]
-        groups.setdefault((str(job.get("side")), str(job.get("texture"))), []).append(item)
+        groups.setdefault(str(item[0].get("texture")), []).append(item)
     chunks = []
     for key in sorted(groups):
-        group = sorted(groups[key], key=lambda it: (str(it[0].get("accessory")), it[0]["index"]))
+        group = sorted(groups[key], key=lambda it: (str(it[0].get("side")), str(it[0].get("accessory")),
+                                                    it[0]["index"]))
         chunks += [group[k:k + size] for k in range(0, len(group), size)]
     return sorted(chunks, key=len, reverse=True)
 
@@ -420,7 +430,7 @@ def _write_dataset(out: Path, package, jobs_source, planner, total, settings, st
            "jobs": jobs_source or ({"plan": planner.spec} if planner is not None else {"given": "list"}),
            "plan": planner.describe() if planner is not None else None,
            "count": total, "size": settings["size"], "samples": settings["samples"],
-           "aa_shading": settings["aa_shading"],
+           "aa_shading": settings["aa_shading"], "shading": settings["shading"],
            "files": {kind: name.replace("000000", "<index>") for kind, name in frame_names(0).items()},
            "models": models, "rendered": stats.rendered, "skipped": stats.skipped,
            "summary": stats.summary(), "timings": stats.timings(processes), "runner": runner}
