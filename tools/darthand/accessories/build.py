@@ -97,7 +97,8 @@ def build_accessories(model: HandModel, spec: dict, out_dir: str | Path, ids=Non
 
 # The penetration table's columns (catalogue fields, mm): rigid items into the part they are fitted to and contact
 # anywhere on the hand; gloves into their inner surface and through their outer one.
-TABLE_COLUMNS = {"rigid": {"fit": "fit_poses", "contact": "poses"}, "glove": {"fit": "poses", "through": "through_poses"}}
+TABLE_COLUMNS = {"rigid": {"fit": "fit_poses", "contact": "poses"},
+                 "glove": {"fit": "poses", "through": "through_poses"}}
 
 
 def penetration_table(entries: list[dict]) -> dict:

@@ -12,8 +12,8 @@ crease does. The hand rig stays as its source made it (a MANO file's weights are
    circle around the section, plus the catalogue clearance);
 2. each candidate is measured against its digit over training poses -- the rest pose, the named gestures and
    `TRAINING_POSES` anatomical samples (self-crossing ones included), drawn from their own random stream, so the
-   verification sweep afterwards sees poses the placement never saw. The usual place is tried first; the other positions only for the rings
-   it does not suit (the sweeps are what costs);
+   verification sweep afterwards sees poses the placement never saw. The usual place is tried first; the other
+   positions only for the rings it does not suit (the sweeps are what costs);
 3. per ring, the candidate needing the least extra room wins: its clearance grows by how far its worst training
    pose exceeds `TARGET` (for skin pressing on the bore, penetration falls one for one with its radius), at most
    `MAX_GROWTH`; what growth cannot fix -- the next phalanx folding onto a ring near the PIP joint, the palm onto

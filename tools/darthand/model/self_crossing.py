@@ -10,7 +10,7 @@ names a crossing of a digit's base by the part its faces are labelled with, the 
 out, as in the gesture checks: a bent finger folds its skin into the palm's.
 
 The distances are measured only between digit pairs whose posed sample regions overlap (bounding boxes), and the
-first crossing found ends the test: most poses cost a few pairs (about 10 ms a pose with MeshLab's test).
+first crossing found ends the test: most poses cost a few pairs (about 20 ms of CPU a pose, MeshLab's test included).
 """
 
 from __future__ import annotations
