@@ -18,6 +18,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 from embreex.rtcore import EmbreeDevice
 
+from darthand.render.camera import point_bounds
 from darthand.render.subject import Subject, Surface
 
 _DEVICE = None
@@ -105,7 +106,7 @@ class Scene:
                 baked.append(i)
         self.baked = np.array(baked + [-1], np.int32)     # geomID of the baked scene -> surface index (-1 -> -1)
         pts = subject.all_vertices()
-        self.lo, self.hi = pts.min(0), pts.max(0)
+        self.lo, self.hi = point_bounds(pts)
         self.extent = float(np.linalg.norm(self.hi - self.lo))
         _commit(self.embree)
 

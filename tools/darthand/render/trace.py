@@ -19,7 +19,7 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from darthand.model.layout import FACE_LABEL_IDS
-from darthand.render.camera import Camera
+from darthand.render.camera import Camera, point_bounds
 from darthand.render.indirect import VertexLight
 from darthand.render.scene import Scene, interpolate
 from darthand.render.shade import DEFAULT_SKIN, shade, surface_hits
@@ -110,8 +110,9 @@ def scene_bounds(camera: Camera, points: np.ndarray, pad: float = 1.0) -> tuple[
     uv, z = camera.project(points)
     if (z <= 1e-9).any() or not np.isfinite(uv).all():
         return 0, camera.height, 0, camera.width
-    lo = np.floor(uv.min(0) - pad).astype(int)
-    hi = np.ceil(uv.max(0) + pad).astype(int)
+    lo, hi = point_bounds(uv)
+    lo = np.floor(lo - pad).astype(int)
+    hi = np.ceil(hi + pad).astype(int)
     c0, r0 = np.maximum(lo, 0)
     c1, r1 = np.minimum(hi, [camera.width, camera.height])
     return int(r0), int(max(r0, r1)), int(c0), int(max(c0, c1))
