@@ -1,12 +1,11 @@
 """The pose sweep's penetration figures against an independent computation (inside: trimesh's ray parity; depth:
-MeshLab's distance to the surface, through pymeshlab; surfaces closed by the test's own fans), the same figures
+the brute-force distance to every triangle; surfaces closed by the test's own fans), the same figures
 for any number of workers, the ring placement's choice, and the catalogue's rings on the open hand over the
 sampled poses (slow)."""
 
 from pathlib import Path
 
 import numpy as np
-import pymeshlab
 import pytest
 import trimesh
 
@@ -29,15 +28,13 @@ def open_hand():
 
 
 def distance(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """MeshLab's distance from points (K, 3) to the mesh's surface (its sign, taken from the nearest face's
-    normal, is unreliable in the creases of a posed hand, so inside-ness comes from ray parity)."""
-    ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.asarray(points, np.float64)))
-    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.asarray(vertices, np.float64), face_matrix=np.asarray(faces)))
-    ms.compute_scalar_by_distance_from_another_mesh_per_vertex(measuremesh=0, refmesh=1, signeddist=False,
-                                                               maxdist=pymeshlab.PureValue(1.0))
-    ms.set_current_mesh(0)
-    return ms.current_mesh().vertex_scalar_array()
+    """Exact distance from each point (K, 3) to the mesh's surface: the nearest point of every one of its triangles
+    (brute force, trimesh's point-triangle routine; no candidate pruning as the sweep does). MeshLab's per-vertex
+    distance filter was used here before: it under-reports on the rings' meshes (0.019 mm where the surface is
+    0.188 mm away, for points 0.5 mm around ring_02), so it was no independent truth."""
+    tris = vertices[faces]
+    return np.array([np.linalg.norm(trimesh.triangles.closest_point(tris, np.broadcast_to(p, tris.shape[::2]))
+                                    - p, axis=1).min() for p in np.asarray(points, float)])
 
 
 def depth_inside(points: np.ndarray, mesh: trimesh.Trimesh) -> float:
@@ -82,9 +79,10 @@ def digit_faces(model, digit: int) -> np.ndarray:
 
 def test_ring_figures_match_an_independent_measure():
     """A ring on the open hand in the rest pose, a gesture and sampled poses that press skin into it: the sweep's
-    fit figure (against the digit) is the deepest point inside, both ways, by ray parity and MeshLab's distance,
-    within 0.02 mm; so is its depth figure (against the whole hand) in the rest pose and the gesture (the sampled
-    poses may cross fingers, where the sweep counts a point inside two fingers as inside and parity does not)."""
+    fit figure (against the digit) is the deepest point inside, both ways, by ray parity and the brute-force
+    distance, within 0.02 mm; so is its depth figure (against the whole hand) in every one of those poses (the sweep
+    leaves out the samples where the hand crosses itself, where parity would count a point inside two fingers as
+    outside)."""
     model = open_hand()
     spec = cat.load_spec()
     entry = cat.entries(spec, ["ring_02_flat_silver"])[0]
@@ -103,12 +101,10 @@ def test_ring_figures_match_an_independent_measure():
         part = closed(hand, digit)
         own = np.unique(digit)
         fit = overlap(ring, apply(placed, item.inner), part, to_local(placed, hand[own]))
-        if p < 2:
-            whole = closed(hand, model.faces)
-            depth = overlap(ring, apply(placed, item.inner), whole, to_local(placed, hand))
+        whole = closed(hand, model.faces)
+        depth = overlap(ring, apply(placed, item.inner), whole, to_local(placed, hand))
         assert figures["fit"][p] == pytest.approx(fit, abs=2e-5), names[p]
-        if p < 2:
-            assert figures["depth"][p] == pytest.approx(depth, abs=2e-5), names[p]
+        assert figures["depth"][p] == pytest.approx(depth, abs=2e-5), names[p]
 
 
 @pytest.mark.slow
@@ -141,15 +137,108 @@ def test_placement_prefers_the_usual_place_and_grows_the_bore_by_the_excess():
 
 
 @pytest.mark.slow
-def test_catalogue_rings_sit_within_a_millimetre_in_every_sampled_pose():
-    """The issue's figure: every ring of the catalogue, placed and sized by the stage on the open hand, cuts at
-    most 1 mm into its finger over the rest pose, the gestures and 300 poses sampled within the joint limits."""
+def test_catalogue_rings_and_gloves_sit_within_a_millimetre_in_every_sampled_pose():
+    """The issue's figures: every ring of the catalogue, placed and sized by the stage on the open hand, cuts at
+    most 1 mm into its finger, and no hand vertex is more than 1 mm into a glove, over the rest pose, the gestures
+    and the poses sampled within the joint limits where the hand does not cross itself; the catalogue's table is
+    the largest of its items' figures, and says how many samples were left out."""
     from darthand.accessories.build import build_accessories
 
     model = open_hand()
     catalog = build_accessories(model, cat.load_spec(), Path(pytest.importorskip("tempfile").mkdtemp()),
-                                types=["ring"], sheet=False, workers=2)
+                                types=["ring", "glove"], sheet=False, workers=2)
+    sweep = catalog["pose_sweep"]
+    assert 0 < sweep["rejected_self_crossing"] < sweep["sampled"] == 300
+    assert sweep["measured"] == 1 + len(sweep["gestures"]) + 300 - sweep["rejected_self_crossing"]
     for a in catalog["accessories"]:
         pen = a["max_penetration_mm"]
-        assert pen["fit_rest"] == 0.0 and pen["fit_poses"] <= 1.0, (a["id"], pen)
-        assert 8.0 < a["fitted_size"]["inner_radius_mm"] < 13.5
+        if a["type"] == "ring":
+            assert pen["fit_rest"] == 0.0 and pen["fit_poses"] <= 1.0, (a["id"], pen)
+            assert 8.0 < a["fitted_size"]["inner_radius_mm"] < 13.5
+        else:
+            assert pen["rest"] == 0.0 and pen["poses"] <= 1.0 and pen["through_poses"] <= 1.0, (a["id"], pen)
+    for kind, field, column in (("ring", "fit_poses", "fit"), ("ring", "poses", "contact"), ("glove", "poses", "fit"),
+                                ("glove", "through_poses", "through")):
+        worst = max(a["max_penetration_mm"][field] for a in catalog["accessories"] if a["type"] == kind)
+        assert sweep["table_mm"][kind][column]["max"] == pytest.approx(worst, abs=1e-4)
+
+
+def test_sweep_leaves_out_hands_that_cross_themselves():
+    """The sweep's sampled poses on the open hand: a pose is left out exactly where an independent test finds two
+    digits inside each other -- at least 8 vertices of one digit inside the other's surface closed by the test's own
+    fans, by trimesh's ray parity (fewer can be skin at the web between two fingers, inside the neighbour's cap) --
+    allowing a few poses the sweep leaves out on smaller crossings; the named gestures are never left out; the kept
+    samples keep their draw's name."""
+    from darthand.model.anatomy import sample_poses
+    from darthand.model.self_crossing import SelfCrossing
+
+    model = open_hand()
+    seed, n = int(cat.load_spec()["seed"]), 24
+    names, poses = sweep_poses(model, seed, n, gestures=["fist", "pinch"])
+    drawn = sample_poses(model, n, cat.item_rng(seed, "pose-sweep"))
+    kept = [int(name.removeprefix("sample_")) for name in names[3:]]
+    assert names[:3] == ["rest", "fist", "pinch"] and np.array_equal(poses[3:], drawn[kept])
+    assert SelfCrossing(model).crossing_poses(poses[:3]) == [None] * 3
+    crossing = []
+    for v in forward(model, drawn).vertices:
+        digits = [digit_faces(model, d) for d in range(5)]
+        inside = [closed(v, digits[q]).ray.contains_points(v[np.unique(digits[p])]).sum()
+                  for q in range(5) for p in range(5) if p != q]
+        crossing.append(max(inside) >= 8)
+    left_out = set(range(n)) - set(kept)
+    truth = set(np.flatnonzero(crossing))
+    assert truth <= left_out and len(left_out - truth) <= n // 8, (sorted(truth), sorted(left_out))
+    assert 0 < len(truth) < n
+
+
+def winding_numbers(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, chunk: int = 64) -> np.ndarray:
+    """(K,) generalised winding number of a closed triangle mesh at each point (Jacobson et al. 2013: the solid
+    angles of its triangles over 4 pi, by Van Oosterom and Strackee's formula): 1 inside, 0 outside, robust where
+    the surface folds through itself."""
+    out = []
+    for s in range(0, len(points), chunk):
+        a, b, c = (vertices[faces[:, i]][None] - points[s:s + chunk, None] for i in range(3))
+        la, lb, lc = (np.linalg.norm(x, axis=2) for x in (a, b, c))
+        det = np.einsum("pfi,pfi->pf", a, np.cross(b, c))
+        den = la * lb * lc + (a * b).sum(2) * lc + (b * c).sum(2) * la + (c * a).sum(2) * lb
+        out.append((2 * np.arctan2(det, den)).sum(1) / (4 * np.pi))
+    return np.concatenate(out)
+
+
+def test_glove_figures_match_winding_numbers():
+    """glove_06 on the open hand, in the fist and in the sampled pose whose thumb bends into a tight crease
+    (sample_209 of the catalogue's sweep, which read 2.41 mm into the glove before: a ray walked back along -n
+    reached the inner layer across the crease): the deepest covered hand vertex inside the glove's material by its
+    winding number, measured to the inner layer by brute force, is under half a millimetre, and the sweep's figure
+    into the glove is no larger (it can be smaller: a vertex inside a fold of its glove whose normal meets another
+    inner layer first counts as inside the hollow; 0.16 mm in the fist). Vertices inside the glove over another
+    part of the hand (a fist's finger in the palm's glove: contact, not a glove fault, which the sweep leaves out)
+    are left out: those whose nearest inner face is more than three edges away on the hand."""
+    from darthand.accessories.attach import pose_skinned
+    from darthand.accessories.collide import neighbourhood
+    from darthand.model.anatomy import sample_poses
+
+    model = open_hand()
+    spec = cat.load_spec()
+    seed = int(spec["seed"])
+    built = generate(model, cat.entries(spec, ["glove_06_leather"])[0], seed)
+    drawn = sample_poses(model, 300, cat.item_rng(seed, "pose-sweep"))
+    _, named = sweep_poses(model, seed, 0, gestures=["fist"])
+    poses = np.concatenate([named[1:], drawn[[209]]])
+    (glove,) = probes([built])
+    figures = measure_probes(model, [glove], poses)[glove.id]
+    posed = forward(model, poses)
+    worn = pose_skinned(glove.vertices, glove.weights, glove.posedirs, posed.rotations, posed.transforms)
+    near = neighbourhood(model.faces, model.num_vertices, rings=3)
+    inner = np.flatnonzero(glove.inner_faces)
+    for k in range(len(poses)):
+        hand = posed.vertices[k, glove.hand_ids]
+        tris = worn[k][glove.faces[inner]]
+        depth = np.zeros(len(hand))
+        for i in np.flatnonzero(winding_numbers(hand, worn[k], glove.faces) > 0.5):
+            d = np.linalg.norm(trimesh.triangles.closest_point(tris, np.broadcast_to(hand[i], (len(tris), 3)))
+                               - hand[i], axis=1)
+            nearest = int(np.argmin(d))
+            if near[glove.hand_ids[i], glove.face_source[inner[nearest]]]:
+                depth[i] = d[nearest]
+        assert figures["depth"][k] <= depth.max() + 2e-5 and depth.max() < 0.5e-3, (k, figures["depth"][k], depth.max())

@@ -140,3 +140,24 @@ def test_make_assets_per_run_commands_import_no_stage(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr
     assert (tmp_path / "manifest.json").is_file()
+
+
+def test_a_no_op_make_assets_imports_no_numerics(tmp_path):
+    """What every `make assets` runs on a finished build -- `verify --repair`, then `manifest --check` when the manifest
+    changed -- reads the manifest (its gesture report included) without importing NumPy, SciPy or MeshLab: their
+    imports were most of a no-op rebuild's second."""
+    import subprocess
+
+    (tmp_path / "template").mkdir()
+    report = {"gestures": {"fist": {"finite": True, "inverted_faces": 0, "between_fingers_faces": 0,
+                                    "finger_palm_faces": 3, "between": {"palm-index": 3}}}}
+    (tmp_path / "template" / "gestures.json").write_text(json.dumps(report))
+    (tmp_path / "manifest.json").write_text(json.dumps(
+        {"outputs": [], "checks": {"gestures": report}, "failed_checks": []}, indent=1))
+    code = ("import sys; from darthand.cli import main; "
+            f"rc = main(['verify', '--build', {str(tmp_path)!r}, '--repair']); "
+            f"rc |= main(['manifest', '--build', {str(tmp_path)!r}, '--check']); "
+            "heavy = [m for m in ('numpy', 'scipy', 'pymeshlab', 'pxr') if m in sys.modules]; "
+            "print(heavy); sys.exit(rc or bool(heavy))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stdout + out.stderr

@@ -17,8 +17,8 @@ from darthand.model.poses import POSES_DIR, gesture_angles, list_gestures, load_
 from darthand.model.preview import render_mesh
 from darthand.schemas import load_schema
 from darthand.model.intersections import face_parts, part_intersections, self_intersecting
-from darthand.template.gesture_checks import (gesture_problems, gesture_report, inverted_faces, write_gesture_checks,
-                                              write_gesture_sheet)
+from darthand.template.gesture_checks import gesture_report, inverted_faces, write_gesture_checks, write_gesture_sheet
+from darthand.template.gesture_problems import gesture_problems
 from synthetic import tube_hand, tube_mesh
 
 REQUIRED = {"flat", "relaxed", "fist", "point", "pinch", "ok", "spread", "thumbs_up"}

@@ -92,7 +92,7 @@ def test_accessory_gap_of_a_shell_around_the_octahedron():
     normals = np.cross(b - a, c - a)
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     for h in (0.001, 0.05):
-        gap = surface_distance(centres + h * normals, OCTA_V, OCTA_F, surface_trees(OCTA_V, OCTA_V[OCTA_F])).min()
+        gap = surface_distance(centres + h * normals, OCTA_V, OCTA_F, surface_trees(OCTA_V[OCTA_F])).min()
         assert gap == pytest.approx(h, abs=1e-12)
 
 

@@ -111,7 +111,7 @@ def write_manifest(build: str | Path = "build", out: str | Path | None = None) -
 def failed_checks(checks: dict) -> list[str]:
     """One line per check report that did not pass: the gesture guard's problems, render checks not ok,
     validation with errors or an unreadable package."""
-    from darthand.template.gesture_checks import gesture_problems
+    from darthand.template.gesture_problems import gesture_problems
 
     out = []
     if "gestures" in checks:

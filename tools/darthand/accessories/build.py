@@ -66,7 +66,8 @@ def build_accessories(model: HandModel, spec: dict, out_dir: str | Path, ids=Non
     names, poses = sweep_poses(model, seed, n_sampled, gestures)
     figures = measure(model, built, poses, workers)
     tol = tolerance_mm / 1000.0
-    n_named = len(names) - n_sampled                       # rest and gestures
+    n_named = sum(not n.startswith("sample_") for n in names)      # rest and gestures
+    n_kept = len(names) - n_named
     regrown = []
     for i, b in enumerate(built):
         worst = float(figures[b.id]["fit"][1:].max(initial=0.0))
@@ -85,12 +86,37 @@ def build_accessories(model: HandModel, spec: dict, out_dir: str | Path, ids=Non
         write_contact_sheet(model, built, out_dir / sheet_name, tile)
     catalog = {"format": "darthand-accessory-catalog", "format_version": 1, "seed": seed,
                "model": {"source": str(model.meta.get("source", "model")), "side": model.side},
-               "pose_sweep": {"gestures": names[1:len(names) - n_sampled], "sampled": int(n_sampled),
-                              "tolerance_mm": tolerance_mm},
+               "pose_sweep": {"gestures": names[1:n_named], "sampled": int(n_sampled),
+                              "rejected_self_crossing": int(n_sampled - n_kept), "measured": len(names),
+                              "tolerance_mm": tolerance_mm, "table_mm": penetration_table(entries_out)},
                "contact_sheet": sheet_name, "accessories": entries_out}
     cat.check_catalog(catalog, str(out_dir / "catalog.json"))
     write_json(out_dir / "catalog.json", catalog)
     return catalog
+
+
+# The penetration table's columns (catalogue fields, mm): rigid items into the part they are fitted to and contact
+# anywhere on the hand; gloves into their inner surface and through their outer one.
+TABLE_COLUMNS = {"rigid": {"fit": "fit_poses", "contact": "poses"},
+                 "glove": {"fit": "poses", "through": "through_poses"}}
+
+
+def penetration_table(entries: list[dict]) -> dict:
+    """Per accessory type, over the sweep's poses (mm): each column's largest value and its item, and the worst
+    item's 99th percentile over the poses and that item."""
+    table = {}
+    for kind in sorted({e["type"] for e in entries}):
+        pens = {e["id"]: e["max_penetration_mm"] for e in entries if e["type"] == kind}
+        row = {"items": len(pens)}
+        for column, field in TABLE_COLUMNS["glove" if kind == "glove" else "rigid"].items():
+            worst = {i: p[field] for i, p in pens.items() if p.get(field) is not None}
+            p99 = {i: p[field + "_p99"] for i, p in pens.items() if p.get(field + "_p99") is not None}
+            if worst and p99:
+                top, top99 = max(worst, key=worst.get), max(p99, key=p99.get)
+                row[column] = {"max": round(worst[top], 4), "item": top, "worst_p99": round(p99[top99], 4),
+                               "worst_p99_item": top99}
+        table[kind] = row
+    return table
 
 
 def write_accessory(out_dir: Path, b: Built, fig: dict, pose_names: list[str], n_named: int) -> dict:
@@ -125,6 +151,7 @@ def write_accessory(out_dir: Path, b: Built, fig: dict, pose_names: list[str], n
     else:
         through = fig["through"] * 1000.0
         pen.update(through_rest=float(through[0]), through_poses=float(through[1:].max()) if len(sweep) else None,
+                   through_poses_p99=float(np.percentile(through[1:], 99)) if len(sweep) else None,
                    through_gestures=float(through[1:n_named].max()) if n_named > 1 else None)
     joint = None if b.fit is None else int(b.fit.joint)
     entry = {"id": b.id, "type": b.entry["type"], "style": _style(b.entry), "parent_joint": joint,

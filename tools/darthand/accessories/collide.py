@@ -49,7 +49,7 @@ def surface_distance(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray
     """
     tris = vertices[faces]
     if trees is None:
-        trees = surface_trees(vertices, tris)
+        trees = surface_trees(tris)
     vtree, ctree, reach = trees
     d0, _ = vtree.query(points)
     cands = ctree.query_ball_point(points, d0 + reach + 1e-12)
@@ -63,11 +63,12 @@ def surface_distance(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray
     return out
 
 
-def surface_trees(vertices: np.ndarray, tris: np.ndarray):
-    """(vertex KD-tree, face-centroid KD-tree, reach) of a mesh, for repeated `surface_distance` queries."""
+def surface_trees(tris: np.ndarray):
+    """(vertex KD-tree, face-centroid KD-tree, reach) of a mesh, for repeated `surface_distance` queries. The vertex
+    tree holds the corners of `tris` (T, 3, 3) only: the faces may be a part of the mesh (a glove's inner layer)."""
     centroids = tris.mean(1)
     reach = float(np.linalg.norm(tris - centroids[:, None], axis=2).max())
-    return cKDTree(vertices), cKDTree(centroids), reach
+    return cKDTree(tris.reshape(-1, 3)), cKDTree(centroids), reach
 
 
 class Solid:
@@ -124,7 +125,7 @@ class Solid:
         """Every face met within `reach` metres by rays from `points` (K, 3) along unit `directions` (K, 3)
         (starting `eps` out): (ray index, face index, distance) arrays, nearest first per ray, by first-hit
         queries moved past each hit."""
-        rays, faces, dists = [], [], []
+        rays, faces, dists = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)], [np.zeros(0)]
         todo = np.arange(len(points))
         travelled = np.full(len(points), eps)
         while len(todo):
@@ -160,7 +161,7 @@ class Solid:
         if len(points) == 0:
             return 0.0
         if self._trees is None:
-            self._trees = surface_trees(self.vertices, self.vertices[self.faces])
+            self._trees = surface_trees(self.vertices[self.faces])
         bound, _ = self._trees[0].query(points)
         order = np.argsort(-bound)
         best = 0.0
@@ -213,6 +214,14 @@ def glove_penetration(glove_vertices: np.ndarray, glove_faces: np.ndarray, inner
     (ray ids (H,), face ids (H,)) -> (H,) bool keeping only the glove faces over the hand vertex's own
     neighbourhood, so a finger's glove pressed against the palm's glove (hand-on-hand contact, not a glove
     fault) is not read as the finger being through its own glove.
+
+    A vertex whose normal first meets the inner layer from the hollow is inside the glove. Any other is into the
+    glove when it lies inside the glove's material (the closed shell's inside test), and through it when, back
+    along -n within `reach` (m), its glove's outer layer comes before the inner one; into-depths are distances to
+    the inner surface, through-depths to the outer one along -n. Into-depths are not the distance back along -n to
+    the inner layer: in a tight crease (a fully bent thumb) the layers of the crease's two sides lie within a few
+    edges of each other, and that walk reaches the far side's inner layer, millimetres away (glove_06 read 2.41 mm
+    so, at a vertex 0.02 mm from the inner layer and outside the glove's material by its winding number).
     """
     glove = Solid(glove_vertices, glove_faces)
     fn = glove.face_normals
@@ -237,19 +246,22 @@ def glove_penetration(glove_vertices: np.ndarray, glove_faces: np.ndarray, inner
     bad = np.where(~hollow)[0]
     if len(bad) == 0:
         return 0.0, 0.0
-    # Back along -n from a vertex outside the hollow: the first inner-layer face is how far it is into the glove,
-    # an outer-layer face before it how far through.
-    rid, tri, d = glove.all_hits(hand_points[bad], -hand_normals[bad], reach, eps)
-    ok = keep(bad[rid], tri)
+    in_material = np.zeros(len(bad), bool)
+    in_material[glove.inside(hand_points[bad])] = True
+    # Out of the material, a vertex is through the glove when, back along -n, its glove's outer layer comes before
+    # the inner one.
+    rest = bad[~in_material]
+    rid, tri, d = glove.all_hits(hand_points[rest], -hand_normals[rest], reach, eps)
+    ok = keep(rest[rid], tri)
     rid, tri, d = rid[ok], tri[ok], d[ok]
-    into = through = 0.0
-    for k in np.unique(rid):
-        dk, tk = d[rid == k], tri[rid == k]
-        inner_hits, outer_hits = dk[inner_mask[tk]], dk[~inner_mask[tk]]
-        if len(inner_hits):
-            into = max(into, float(inner_hits[0]))
-        if len(outer_hits) and (not len(inner_hits) or outer_hits[0] < inner_hits[0]):
-            through = max(through, float(outer_hits[0]))
+    first_hit = np.r_[True, rid[1:] != rid[:-1]][:len(rid)]                   # hits come nearest first per ray
+    outer_first = first_hit & ~inner_mask[tri]
+    through_ids = rest[rid[outer_first]]
+    through = float(d[outer_first].max(initial=0.0))
+    beyond = np.concatenate([bad[in_material], through_ids])
+    into = 0.0
+    if len(beyond):
+        into = float(surface_distance(hand_points[beyond], glove.vertices, glove.faces[inner_mask]).max())
     return into, through
 
 

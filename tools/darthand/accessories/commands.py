@@ -23,9 +23,11 @@ def build(args) -> int:
     pens = [a["max_penetration_mm"] for a in catalog["accessories"]]
     worst = max((p["poses"] or 0.0 for p in pens), default=0.0)
     fit = max(((p["fit_poses"] if "fit_poses" in p else p["poses"]) or 0.0 for p in pens), default=0.0)
-    print(f"[accessories] {len(catalog['accessories'])} built into {args.out} (largest penetration across poses: "
-          f"{fit:.2f} mm into the part an item is fitted to, a glove's inside included; {worst:.2f} mm counting "
-          "contact anywhere on the hand)")
+    sweep = catalog["pose_sweep"]
+    print(f"[accessories] {len(catalog['accessories'])} built into {args.out} (largest penetration over "
+          f"{sweep['measured']} poses, {sweep.get('rejected_self_crossing', 0)} of {sweep['sampled']} samples left out "
+          f"as self-crossing: {fit:.2f} mm into the part an item is fitted to, a glove's inside included; "
+          f"{worst:.2f} mm counting contact anywhere on the hand)")
     return 0
 
 

@@ -11,9 +11,9 @@ crease does. The hand rig stays as its source made it (a MANO file's weights are
    place first; an item that names `t` in the catalogue keeps it) are each fitted at rest as before (smallest
    circle around the section, plus the catalogue clearance);
 2. each candidate is measured against its digit over training poses -- the rest pose, the named gestures and
-   `TRAINING_POSES` anatomical samples, drawn from their own random stream, so the verification sweep afterwards
-   sees poses the placement never saw. The usual place is tried first; the other positions only for the rings
-   it does not suit (the sweeps are what costs);
+   `TRAINING_POSES` anatomical samples (self-crossing ones included), drawn from their own random stream, so the
+   verification sweep afterwards sees poses the placement never saw. The usual place is tried first; the other
+   positions only for the rings it does not suit (the sweeps are what costs);
 3. per ring, the candidate needing the least extra room wins: its clearance grows by how far its worst training
    pose exceeds `TARGET` (for skin pressing on the bore, penetration falls one for one with its radius), at most
    `MAX_GROWTH`; what growth cannot fix -- the next phalanx folding onto a ring near the PIP joint, the palm onto
@@ -63,7 +63,9 @@ def place_rings(model: HandModel, entries: list[dict], seed: int, workers: int =
     rings = [e for e in entries if e["type"] == "ring"]
     if not rings:
         return {}
-    _, poses = sweep_poses(model, seed, n_poses, gestures, stream="ring-placement")
+    # Training keeps the samples where the hand crosses itself (the verification sweep leaves them out): a digit's
+    # own skin folds the same there, and the extra extremes make a safer bore.
+    _, poses = sweep_poses(model, seed, n_poses, gestures, stream="ring-placement", skip_crossing=False)
     worst = _worst_fit(model, [(e, positions(e)[0]) for e in rings], seed, poses, workers)
     unsuited = [e for e in rings if worst[e["id"]][positions(e)[0]] > TARGET]
     more = _worst_fit(model, [(e, t) for e in unsuited for t in positions(e)[1:]], seed, poses, workers)

@@ -41,16 +41,22 @@ MIN_POSES_PER_WORKER = 24
 
 
 def sweep_poses(model: HandModel, seed: int, n_sampled: int, gestures: list[str] | None = None,
-                stream: str = "pose-sweep"):
-    """(names, (P, 48) poses): the rest pose, the named gestures, then `n_sampled` anatomical samples drawn from
-    the generator of (seed, `stream`)."""
+                stream: str = "pose-sweep", skip_crossing: bool = True):
+    """(names, (P, 48) poses): the rest pose, the named gestures, then those of `n_sampled` anatomical samples drawn
+    from the generator of (seed, `stream`) in which the hand does not pass through itself (two digits inside each
+    other: model/self_crossing), unless `skip_crossing` is False. A sample keeps the name of its draw (`sample_017`),
+    so the names say which were left out."""
     from darthand.model.gestures import model_gestures
 
     g = model_gestures(model, gestures)
-    g_names, g_poses = g.names, g.poses
     sampled = sample_poses(model, n_sampled, cat.item_rng(seed, stream)) if n_sampled else np.zeros((0, 48))
-    names = ["rest"] + list(g_names) + [f"sample_{i:03d}" for i in range(n_sampled)]
-    return names, np.concatenate([np.zeros((1, 48)), g_poses, sampled])
+    kept = np.arange(n_sampled)
+    if skip_crossing and n_sampled:
+        from darthand.model.self_crossing import SelfCrossing
+
+        kept = np.flatnonzero([c is None for c in SelfCrossing(model).crossing_poses(sampled)])
+    names = ["rest"] + list(g.names) + [f"sample_{i:03d}" for i in kept]
+    return names, np.concatenate([np.zeros((1, 48)), g.poses, sampled[kept]])
 
 
 @dataclass(frozen=True)

@@ -25,10 +25,13 @@ def run(n_poses: int = 32) -> dict:
     t0 = time.perf_counter()
     built = [generate(model, e, int(spec["seed"])) for e in items]
     t_generate = time.perf_counter() - t0
+    t0 = time.process_time()
     names, poses = sweep_poses(model, int(spec["seed"]), n_poses, gestures=[])
+    t_crossing = time.process_time() - t0               # drawing, and the self-crossing test of every draw
     t0 = time.perf_counter()
+    c0 = time.process_time()
     measure(model, built, poses)
-    t_sweep = time.perf_counter() - t0
+    t_sweep, c_sweep = time.perf_counter() - t0, time.process_time() - c0
     from darthand.accessories.build import write_accessory
 
     t0 = time.perf_counter()
@@ -41,6 +44,9 @@ def run(n_poses: int = 32) -> dict:
     return {"model": name, "accessories": len(built), "generate_and_fit_s": round(t_generate, 3),
             "write_files_s": round(t_write, 3), "sweep_poses": len(poses), "sweep_s": round(t_sweep, 3),
             "sweep_s_per_pose_all_50": round(t_sweep / len(poses), 4),
+            "sweep_cpu_s_per_pose_all_50": round(c_sweep / len(poses), 4),
+            "samples_drawn": n_poses, "samples_left_out_self_crossing": n_poses - (len(poses) - 1),
+            "self_crossing_cpu_s_per_sample": round(t_crossing / n_poses, 4),
             "triangles_total": int(sum(len(b.mesh.faces) for b in built))}
 
 

@@ -38,7 +38,8 @@ def gestures_command(args) -> int:
     `model build`, else as authored) and of its mirror image: gestures.json and the contact sheet; 1 if a check
     fails, with one line per failure naming what to change."""
     from darthand.model.load import load_model
-    from darthand.template.gesture_checks import gesture_problems, write_gesture_checks
+    from darthand.template.gesture_checks import write_gesture_checks
+    from darthand.template.gesture_problems import gesture_problems
 
     report = write_gesture_checks(load_model(args.model), args.out_dir)
     problems = gesture_problems(report, max_between_fingers=args.max_between_fingers)

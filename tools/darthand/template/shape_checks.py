@@ -24,7 +24,8 @@ from darthand.model.preview import BACKGROUND, HIGHLIGHT, SKIN, contact_sheet, r
 from darthand.model.topology import boundary_loops
 from darthand.template import anthropometry
 from darthand.template.decimate import closest_surface_points
-from darthand.template.gesture_checks import checked_gestures, face_normals, gesture_problems
+from darthand.template.gesture_checks import checked_gestures, face_normals
+from darthand.template.gesture_problems import gesture_problems
 
 MIN_DEPTH_RATIO = 0.5
 GESTURE_FIGURES = ("finite", "inverted_faces", "degenerate_faces", "between_fingers_faces", "finger_palm_faces")

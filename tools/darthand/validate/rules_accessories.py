@@ -38,7 +38,7 @@ def hand_trees(hand: Mesh | None):
     if hand is None or not hand.faces.size or not np.isfinite(hand.points).all() or hand.faces.min() < 0 or \
             hand.faces.max() >= len(hand.points):
         return None
-    return surface_trees(hand.points, hand.points[hand.faces])
+    return surface_trees(hand.points[hand.faces])
 
 
 def check_binding(acc: Mesh, num_joints: int) -> list[Finding]:
