@@ -38,9 +38,9 @@ DATASET_FORMAT = "darthand-dataset"
 DATASET_VERSION = 2
 DEFAULT_SHARD_SIZE = 8192
 # Dataset render settings, chosen from benchmarks/dataset_settings.py (CPU per 512^2 frame against error, 24 frames
-# of the default plan, against 16 sub-samples shaded each and 64 indirect rays): 4 edge sub-samples instead of the
-# renderer's 8 save 4.4 of 81 ms a frame for +0.05 sRGB codes of mean error (0.62 -> 0.67); 8 indirect rays instead
-# of 16 save nothing measurable for +0.18, so the renderer's shading defaults stay.
+# of the default plan, against 16 sub-samples shaded each and 64 indirect rays; quiet machine): 4 edge sub-samples
+# instead of the renderer's 8 save 3.4 of 89.6 ms a frame for +0.05 sRGB codes of mean error (0.62 -> 0.67); 8
+# indirect rays instead of 16 would save 4.8 ms more for +0.18 codes (0.67 -> 0.85), so the shading defaults stay.
 DEFAULT_SAMPLES = 4
 DEFAULT_SHADING: dict = {}                # shade.ShadingOptions' defaults
 MAX_CHUNK = 32                    # frames per task: ~1-2 s of work, so progress and Ctrl-C stay responsive
