@@ -322,3 +322,65 @@ def test_float_textures_keep_float_storage(tmp_path):
     assert tex16.flat.dtype == np.float32
     want = srgb_decode64(values / 65535 * 255, -0.05)
     assert np.allclose(tex16.levels[0], want, atol=1e-5)
+
+
+# ------------------------------------------------------------------------------------------------ the compiled lookup
+
+
+def reference_sample(tex: MipTexture, u: float, v: float, lod: float) -> np.ndarray:
+    """(C,) float64 lookup of one sample written from the definition (module docstring, MipTexture.sample): the
+    level clamped to the pyramid, the nearer level read bilinearly at texel centres with the edge clamped, the other
+    level blended in across the band frac(lod) in [0.5 - BLEND, 0.5 + BLEND]."""
+    levels = [lv.astype(np.float64) for lv in tex.levels]
+    last = len(levels) - 1
+    lod = min(max(lod, 0.0), last)
+
+    def bilinear(k):
+        img = levels[k]
+        h, w = img.shape[:2]
+        x, y = u * w - 0.5, (1 - v) * h - 0.5
+        x0, y0 = np.floor(x), np.floor(y)
+        fx, fy = x - x0, y - y0
+        at = lambda r, c: img[int(np.clip(r, 0, h - 1)), int(np.clip(c, 0, w - 1))]
+        return ((1 - fy) * ((1 - fx) * at(y0, x0) + fx * at(y0, x0 + 1))
+                + fy * ((1 - fx) * at(y0 + 1, x0) + fx * at(y0 + 1, x0 + 1)))
+
+    base = int(np.floor(lod))
+    frac = lod - base
+    if base == last:
+        return bilinear(last)
+    w = np.clip((frac - (0.5 - texture_module.BLEND)) / (2 * texture_module.BLEND), 0, 1)
+    return (1 - w) * bilinear(base) + w * bilinear(base + 1)
+
+
+@pytest.mark.parametrize("shape,coded", [((37, 64, 4), True), ((64, 37, 4), False), ((1, 1, 3), True),
+                                          ((1, 9, 2), False), ((16, 16, 5), True)])
+def test_lookups_match_the_definition_on_random_uvs_and_levels(shape, coded):
+    """(MipTexture's lookup is a compiled loop, render/texture._lookup_kernel.) Random uv (outside [0, 1] too: edge clamping), random levels (below 0, past the last level, on and around
+    the blend band's edges) on non-square, 1-texel-high and 1 x 1 pyramids, 8-bit (with a skin-tone offset's
+    table) and float: the compiled lookup equals the per-sample float64 definition within float32 rounding."""
+    rng = np.random.default_rng(sum(shape))
+    h, w, c = shape
+    if coded:
+        tex = code_pyramid(random_codes(h, w, c, seed=7), colour=min(3, c))
+        tex = tex.with_decode(decode_tables(c, min(3, c), offset=-0.07))
+    else:
+        tex = MipTexture(mip_levels(rng.standard_normal((h, w, c)).astype(np.float32)))
+    n = 3000
+    uv = rng.uniform(-0.3, 1.3, (2, n)).astype(np.float32)
+    uv[:, :600] = (np.round(uv[:, :600] * 2 * max(h, w)) / (2 * max(h, w))).astype(np.float32)  # centres, edges
+    last = len(tex.levels) - 1
+    lod = rng.uniform(-1, last + 1, n).astype(np.float32)
+    lod[:400] = np.round(lod[:400] * 8) / 8                        # 0.25 and 0.75: the band's edges
+    got = tex.sample(uv, lod)
+    assert got.shape == (c, n) and got.dtype == np.float32
+    want = np.stack([reference_sample(tex, float(uv[0, i]), float(uv[1, i]), float(lod[i])) for i in range(n)], 1)
+    # float32 rounding: of the texel coordinate u * W - 0.5 (half an ulp of W moves a weight by that much, times the
+    # largest difference between texels) and of the blends
+    scale = max(1.0, np.abs(want).max())
+    assert np.abs(got - want).max() <= (2 * 2.0 ** -24 * max(h, w) * 2 + 4e-7) * 2 * scale
+    # bilinear at whole levels is sample without the blend
+    levels = rng.integers(0, last + 1, n)
+    assert np.array_equal(tex.bilinear(uv, levels), tex.sample(uv, levels.astype(np.float32)))
+    # NaN levels read level 0 rather than failing
+    assert np.isfinite(tex.sample(uv[:, :4], np.full(4, np.nan, np.float32))).all()

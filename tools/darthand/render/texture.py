@@ -36,6 +36,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from darthand.errors import InputError
+from darthand.jit import kernel
 from darthand.textures.color import encode_srgb8
 from darthand.textures.color import srgb_to_linear
 
@@ -121,58 +122,26 @@ class MipTexture:
     # ---------------------------------------------------------------------------------------------- lookups
 
     def bilinear(self, uv: np.ndarray, level=0) -> np.ndarray:
-        """(C, N) float32 bilinear lookup at uv (2, N) in mip level `level` (an int or (N,) ints). 8-bit textures
-        are decoded before the interpolation (linear light)."""
-        n = uv.shape[1]
-        rows, fx, fy = self._corners(uv, level)
-        if self.decode is None:
-            a, b, c, d = np.take(self.flat, rows.ravel(), axis=0, mode="clip").reshape(4, n, -1)
-            return np.ascontiguousarray(_bilerp(a, b, c, d, fx[:, None], fy[:, None]).T)
-        codes = np.take(self.flat, rows.ravel(), axis=0, mode="clip")          # (4N, C) uint8
-        values = np.empty((self.channels, 4 * n), np.float32)
-        for c in range(self.channels):
-            np.take(self.decode[c], codes[:, c], out=values[c], mode="clip")
-        a, b, c, d = values.reshape(self.channels, 4, n).transpose(1, 0, 2)
-        return _bilerp(a, b, c, d, fx, fy)
-
-    def _corners(self, uv: np.ndarray, level) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(4, N) flat rows of the texels around each uv (top-left, top-right, bottom-left, bottom-right, clamped
-        to the edge) and the (N,) weights fx, fy of the right and bottom ones."""
-        n = uv.shape[1]
-        level = np.broadcast_to(np.asarray(level, np.int64), (n,))
-        w, h = self.widths[level], self.heights[level]
-        x = uv[0] * w.astype(np.float32) - np.float32(0.5)
-        y = (np.float32(1.0) - uv[1]) * h.astype(np.float32) - np.float32(0.5)
-        x0, y0 = np.floor(x), np.floor(y)
-        fx, fy = (x - x0).astype(np.float32), (y - y0).astype(np.float32)
-        x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
-        xa, xb = np.clip(x0, 0, w - 1), np.clip(x0 + 1, 0, w - 1)
-        row_a = self.offsets[level] + np.clip(y0, 0, h - 1) * w
-        row_b = self.offsets[level] + np.clip(y0 + 1, 0, h - 1) * w
-        rows = np.empty((4, n), np.int64)
-        np.add(row_a, xa, out=rows[0])
-        np.add(row_a, xb, out=rows[1])
-        np.add(row_b, xa, out=rows[2])
-        np.add(row_b, xb, out=rows[3])
-        return rows, fx, fy
+        """(C, N) float32 bilinear lookup at uv (2, N) in mip level `level` (an int or (N,) ints, clamped to the
+        pyramid). 8-bit textures are decoded before the interpolation (linear light)."""
+        return self._lookup(uv, level, blend=False)
 
     def sample(self, uv: np.ndarray, lod: np.ndarray | float = 0.0) -> np.ndarray:
         """(C, N) float32 lookup at uv (2, N), mip level `lod` (N,): bilinear in the nearer level, blended with the
         other level around the middle between two levels (where frac(lod) is within BLEND of 0.5) -- trilinear
         filtering with a narrowed blend band ("brilinear"), half the texel reads of full trilinear."""
+        return self._lookup(uv, lod, blend=True)
+
+    def _lookup(self, uv: np.ndarray, lod, blend: bool) -> np.ndarray:
+        uv = np.ascontiguousarray(uv, np.float32)
         n = uv.shape[1]
-        last = len(self.offsets) - 1
-        lod = np.clip(np.broadcast_to(np.asarray(lod, np.float32), (n,)), 0, last)
-        base = np.floor(lod).astype(np.int64)
-        frac = lod - base
-        near = np.where(frac < 0.5, base, np.minimum(base + 1, last))
-        out = self.bilinear(uv, near)
-        w = np.clip((frac - (0.5 - BLEND)) / (2 * BLEND), 0, 1)          # weight of level base + 1
-        blend = np.flatnonzero((w > 0) & (w < 1) & (base < last))
-        if len(blend):
-            other = np.where(frac[blend] < 0.5, base[blend] + 1, base[blend])
-            t = np.where(frac[blend] < 0.5, w[blend], 1 - w[blend]).astype(np.float32)
-            out[:, blend] += (self.bilinear(uv[:, blend], other) - out[:, blend]) * t
+        lod = np.asarray(lod)
+        lod = (np.full(n, lod, np.float32) if lod.ndim == 0 else np.ascontiguousarray(lod, np.float32))
+        if lod.shape != (n,):
+            raise ValueError(f"texture lookup: {n} uvs and {lod.shape} levels")
+        out = np.empty((self.channels, n), np.float32)
+        _lookup_kernel(self.flat, self.decode, self.offsets, self.heights, self.widths, uv, lod,
+                       np.float32(BLEND if blend else 0.0), out)
         return out
 
     def lod_of_footprint(self, footprint: np.ndarray) -> np.ndarray:
@@ -248,19 +217,63 @@ def _check_decode(decode, channels: int) -> np.ndarray:
     return decode
 
 
-def _bilerp(a, b, c, d, fx, fy):
-    """Bilinear blend of corner values a (top-left), b (top-right), c (bottom-left), d (bottom-right) with weights
-    fx (toward b, d) and fy (toward c, d); a new array."""
-    top = b - a
-    top *= fx
-    top += a
-    bottom = d - c
-    bottom *= fx
-    bottom += c
-    bottom -= top
-    bottom *= fy
-    top += bottom
-    return top
+@kernel
+def _lookup_kernel(flat, decode, offsets, heights, widths, uv, lod, band, out):
+    """out (C, N) = the lookups of MipTexture.sample at uv (2, N) float32, levels lod (N,) float32, with the blend
+    band `band` (BLEND; 0: bilinear in the nearest level only). flat (texels, C) uint8 codes read through decode
+    (C, 256), or float32 values with decode None.
+
+    Per sample: the level is clamped to the pyramid; the nearer level (round half up) is read bilinearly, at texel
+    centres (c + 0.5) / W_k, 1 - (r + 0.5) / H_k, clamped to the edge; where frac(lod) is within `band` of 0.5 the
+    other level's bilinear value is blended in, with weight rising linearly across the band. Float32 arithmetic in
+    the order of the numpy lookup it replaced (uv * W - 0.5; top = a + (b - a) fx; ...), so the values are the
+    same to the bit."""
+    n = uv.shape[1]
+    channels = flat.shape[1]
+    last = len(offsets) - 1
+    half, one = np.float32(0.5), np.float32(1.0)
+    for i in range(n):
+        level = lod[i]
+        if not level > 0:                           # also NaN
+            level = np.float32(0.0)
+        if level > last:
+            level = np.float32(last)
+        base = int(np.floor(level))
+        frac = float(level) - base
+        near = base if frac < 0.5 else min(base + 1, last)
+        t = np.float32(0.0)
+        other = near
+        if band > 0 and base < last:
+            w = min(max((frac - (0.5 - band)) / (2 * band), 0.0), 1.0)
+            if 0 < w < 1:
+                other, t = (base + 1, np.float32(w)) if frac < 0.5 else (base, np.float32(1 - w))
+        for step in range(2 if t > 0 else 1):
+            k = near if step == 0 else other
+            w_k, h_k = widths[k], heights[k]
+            x = uv[0, i] * np.float32(w_k) - half
+            y = (one - uv[1, i]) * np.float32(h_k) - half
+            x0, y0 = np.floor(x), np.floor(y)
+            fx, fy = x - x0, y - y0
+            # clamp in float first: the int conversion of a NaN or huge coordinate is undefined
+            xi = int(min(max(x0, np.float32(-1)), np.float32(w_k)))
+            yi = int(min(max(y0, np.float32(-1)), np.float32(h_k)))
+            xa, xb = min(max(xi, 0), w_k - 1), min(max(xi + 1, 0), w_k - 1)
+            row_a = offsets[k] + min(max(yi, 0), h_k - 1) * w_k
+            row_b = offsets[k] + min(max(yi + 1, 0), h_k - 1) * w_k
+            for c in range(channels):
+                if decode is None:
+                    a, b = flat[row_a + xa, c], flat[row_a + xb, c]
+                    cc, d = flat[row_b + xa, c], flat[row_b + xb, c]
+                else:
+                    a, b = decode[c, flat[row_a + xa, c]], decode[c, flat[row_a + xb, c]]
+                    cc, d = decode[c, flat[row_b + xa, c]], decode[c, flat[row_b + xb, c]]
+                top = (b - a) * fx + a
+                bottom = (d - cc) * fx + cc
+                value = (bottom - top) * fy + top
+                if step == 0:
+                    out[c, i] = value
+                else:
+                    out[c, i] += (value - out[c, i]) * t
 
 
 def _linear_box_of_codes(codes: np.ndarray, table: np.ndarray, out: np.ndarray) -> None:

@@ -1,0 +1,52 @@
+"""Compiled loops: the one way darthand compiles a numpy chain into a single pass (numba), and why it is set up so.
+
+Some per-frame work is a chain of numpy passes over the same samples (a texture lookup is index arithmetic, four
+gathers, a decode and a blend: a dozen temporaries of the batch's size); a compiled loop does it in one pass, in
+registers. `kernel` marks such a loop. Rules the kernels follow:
+
+- Same numbers as the numpy they replace: float32 arithmetic in the same order (numba keeps float32 when every
+  operand is float32; a Python float literal is float64, so constants are written np.float32(...)), no fastmath
+  (it would let LLVM reorder and fuse operations: other bits, machine-dependent).
+- Serial and GIL-free (nogil): dataset workers are processes of one thread each; a renderer's own threads
+  (trace.in_chunks) and the frame writer's thread run alongside a kernel.
+- Arrays passed in contiguous and of fixed dtypes (callers normalise them), so each kernel compiles for one or two
+  signatures, not one per layout.
+- Self-contained: a kernel calls no other kernel (so `kernel` can stay lazy, below, and a cached kernel never
+  outlives a change in a function it inlined: numba's cache checks only the kernel's own source file).
+
+Compilation is lazy twice over: numba is imported at the first call of any kernel (importing it costs about 0.3 s
+of CPU, which commands that never run one, like `darthand validate`, should not pay), and each kernel is compiled
+at its first call for the argument types given. The machine code is cached on disk (numba's cache=True): in the
+`__pycache__` folder beside the source file when that folder is writable (an editable install, as `make` makes),
+otherwise in numba's per-user cache folder (NUMBA_CACHE_DIR overrides it). So a process pays the compilation only
+when no earlier process on the machine has (about a second per kernel), and otherwise loads the cached code (a few
+milliseconds). Processes compiling the same kernel at once (pytest-xdist workers, dataset workers) are safe:
+numba writes each cache file under a temporary name and renames it into place.
+"""
+
+from __future__ import annotations
+
+import functools
+import threading
+
+_LOCK = threading.Lock()
+
+
+def kernel(func):
+    """`func` as a numba kernel (njit, cache=True, nogil=True), compiled at its first call; `func` itself stays
+    available as `.py_func` (plain Python, for debugging)."""
+    compiled = None
+
+    @functools.wraps(func)
+    def call(*args):
+        nonlocal compiled
+        if compiled is None:
+            with _LOCK:
+                if compiled is None:
+                    import numba
+
+                    compiled = numba.njit(cache=True, nogil=True)(func)
+        return compiled(*args)
+
+    call.py_func = func
+    return call
