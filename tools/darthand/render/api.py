@@ -22,8 +22,7 @@ from darthand.errors import InputError
 from darthand.fileio import write_json
 from darthand.render import aa
 from darthand.render.camera import Camera, load_camera
-from darthand.render.image import (composite, encode_mask8, encode_rgba8, load_background,
-                                   straight_colour, write_exr, write_png)
+from darthand.render.image import compose, encode_mask8, load_background, write_exr, write_png
 from darthand.render.indirect import VertexLight
 from darthand.render.labels import frame_labels
 from darthand.render.lights import Lighting, load_lighting, world_lights
@@ -32,7 +31,6 @@ from darthand.render.shade import ShadingOptions
 from darthand.render.subject import Subject
 from darthand.render.trace import (TILE, Context, Samples, default_threads, pixel_centres, scene_bounds,
                                    single_threaded_blas, touched_tiles, trace_parallel)
-from darthand.textures.color import encode_srgb8
 
 DEFAULT_SAMPLES = 8
 # Peak memory per image pixel while rendering (measured about 115 bytes at 2048^2 with the hand filling the frame).
@@ -219,27 +217,19 @@ def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighti
 
     t = time.perf_counter()
     region = (slice(r0, r1), slice(c0, c1))
-    fg = np.ascontiguousarray(premult.transpose(1, 2, 0))
     full_alpha = np.zeros((H, W), np.float32)
     full_alpha[region] = alpha
     full_geom = np.full((H, W), -1, np.int8)
     full_geom[region] = geom
     full_depth = np.zeros((H, W), np.float32)
     full_depth[region] = np.where(geom >= 0, primary.depth.reshape(h, w), 0)
-    rgba = np.zeros((H, W, 4), np.uint8)
+    bg = None
     if background is not None:
         bg = (load_background(background, W, H) if isinstance(background, (str, Path))
               else np.asarray(background, np.float32))
         if bg.shape != (H, W, 3):
             raise InputError(f"background: shape {bg.shape} does not match the image ({H}, {W}, 3)")
-        colour = bg.copy()
-        colour[region] = composite(fg, alpha, bg[region])
-        rgba[..., :3] = encode_srgb8(colour)
-        rgba[..., 3] = 255
-    else:
-        colour = np.zeros((H, W, 3), np.float32)
-        colour[region] = fg
-        rgba[region] = encode_rgba8(straight_colour(fg, alpha), alpha)
+    colour, rgba = compose(premult, alpha, (r0, c0), bg, (H, W))
     timings["compose"] = _lap(t)
 
     t = time.perf_counter()

@@ -15,6 +15,8 @@ import functools
 
 import numpy as np
 
+from darthand.jit import kernel
+
 # Relative absorbance per unit density in linear R, G, B (melanin: fitted to the ramp of the tone scale itself,
 # so removing melanin walks back along the scale; haemoglobin mostly
 # green; deep veins show through as a loss of red).
@@ -87,16 +89,31 @@ def encode_srgb8(linear_rgb, offset: float = 0.0) -> np.ndarray:
     """Linear RGB -> 8-bit sRGB, after adding the global skin-tone `offset` to the sRGB-encoded values.
 
     Through a 65536-entry lookup table on the linear value (one step is far below an 8-bit sRGB step), so the
-    transfer function is evaluated 65536 times (once per offset) rather than per texel."""
-    idx = np.clip(np.asarray(linear_rgb, np.float32), 0.0, 1.0)
-    idx *= np.float32((1 << _LUT_BITS) - 1)
-    idx += np.float32(0.5)
-    return np.take(_srgb8_table(float(offset)), idx.astype(np.uint16))
+    transfer function is evaluated 65536 times (once per offset) rather than per texel; one compiled pass."""
+    values = np.asarray(linear_rgb, np.float32, order="C")
+    out = np.empty(values.shape, np.uint8)
+    encode_srgb8_into(values.reshape(-1), srgb8_table(float(offset)), out.reshape(-1))
+    return out
+
+
+@kernel
+def encode_srgb8_into(values, table, out):
+    """out (N,) uint8 = table[index of values (N,) float32 clipped to [0, 1] on the table's 65536 steps] (rounded to
+    the nearest step; NaN reads step 0): the sRGB codes of linear values through srgb8_table."""
+    top, half = np.float32((1 << _LUT_BITS) - 1), np.float32(0.5)
+    for i in range(values.size):
+        v = values[i]
+        if v > 1:
+            v = np.float32(1.0)
+        elif not v > 0:
+            v = np.float32(0.0)
+        out[i] = table[int(v * top + half)]
 
 
 @functools.lru_cache(maxsize=16)
-def _srgb8_table(offset: float) -> np.ndarray:
-    """(65536,) uint8 sRGB code of each linear value step, after the sRGB offset."""
+def srgb8_table(offset: float = 0.0) -> np.ndarray:
+    """(65536,) uint8 sRGB code of each linear value step k / 65535, after the sRGB offset (encode_srgb8_into reads
+    it)."""
     lin = np.linspace(0.0, 1.0, 1 << _LUT_BITS, dtype=np.float64)
     srgb = np.where(lin <= 0.0031308, lin * 12.92, 1.055 * lin ** (1 / 2.4) - 0.055) + offset
     return np.rint(np.clip(srgb, 0.0, 1.0) * 255.0).astype(np.uint8)
