@@ -102,6 +102,7 @@ def code_digest() -> str:
     """sha256 (16 hex digits) of darthand's Python sources and the versions of the libraries a frame's bytes depend
     on: nodes must agree on it for frames to be the same bytes on every node."""
     import embreex
+    import numba
     import numpy
     import OpenImageIO
 
@@ -111,7 +112,7 @@ def code_digest() -> str:
     root = Path(darthand.__file__).parent
     for path in sorted(root.rglob("*.py")):
         h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes())
-    for module in (numpy, embreex, OpenImageIO):
+    for module in (numpy, numba, embreex, OpenImageIO):     # numba compiles darthand/jit.py's kernels
         h.update(f"{module.__name__} {getattr(module, '__version__', '?')}".encode())
     return h.hexdigest()[:16]
 

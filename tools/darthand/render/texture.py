@@ -171,14 +171,13 @@ class MipTexture:
             return self
         if self.decode is None:
             for k in range(1, len(self.offsets)):
-                box_average(quarters(self.texels(k - 1)), self.texels(k))
+                box_filter(self.texels(k - 1), self.texels(k))
             return self
         # Linear values of levels >= 1 before quantisation, laid out as the tail of `flat`.
         tail = MipTexture.empty(int(self.heights[1]), int(self.widths[1]), self.channels, np.float32)
-        table = decode_tables(self.channels, colour)
-        _linear_box_of_codes(self.texels(0), table, tail.texels(0))
+        box_filter(self.texels(0), tail.texels(0), decode_tables(self.channels, colour))
         for k in range(1, len(tail.offsets)):
-            box_average(quarters(tail.texels(k - 1)), tail.texels(k))
+            box_filter(tail.texels(k - 1), tail.texels(k))
         stored = self.flat[int(self.offsets[1]):]
         stored[:, :colour] = encode_srgb8(tail.flat[:, :colour])
         data = tail.flat[:, colour:]
@@ -276,39 +275,6 @@ def _lookup_kernel(flat, decode, offsets, heights, widths, uv, lod, band, out):
                     out[c, i] += (value - out[c, i]) * t
 
 
-def _linear_box_of_codes(codes: np.ndarray, table: np.ndarray, out: np.ndarray) -> None:
-    """out (h, w, C) = the 2x2 box average of (H, W, C) codes decoded through the tables (C, 256): level 1 of a code
-    pyramid, in linear light, without a float copy of level 0.
-
-    When W is even, through tables of pair sums: with each channel's codes in a plane, a uint16 holds two
-    horizontally adjacent codes, and one gather in a 65536-entry table decodes and adds both (half the gathers of
-    decoding every texel; this step dominates building a pyramid)."""
-    h, w, channels = codes.shape
-    if w % 2 or w < 2:
-        parts = []
-        for q in quarters(codes):
-            part = np.empty(q.shape, np.float32)
-            for c in range(channels):
-                part[..., c] = np.take(table[c], q[..., c])
-            parts.append(part)
-        box_average(parts, out)
-        return
-    pair = np.arange(1 << 16, dtype=np.uint16).view(np.uint8).reshape(-1, 2)    # the two codes of each uint16
-    scale = np.float32(1 / 4 if h > 1 else 1 / 2)
-    for c in range(channels):
-        plane = np.ascontiguousarray(codes[..., c]).view(np.uint16)            # (H, W / 2) code pairs
-        sums = table[c][pair[:, 0]] + table[c][pair[:, 1]]
-        if h > 1:
-            if h % 2:
-                plane = np.concatenate([plane, plane[-1:]])
-            acc = np.take(sums, plane[0::2])
-            acc += np.take(sums, plane[1::2])
-        else:
-            acc = np.take(sums, plane)
-        acc *= scale
-        out[..., c] = acc
-
-
 # ------------------------------------------------------------------------------------------------ pyramids
 
 
@@ -321,27 +287,46 @@ def mip_sizes(height: int, width: int) -> list[tuple[int, int]]:
     return sizes
 
 
-def quarters(image: np.ndarray) -> list[np.ndarray]:
-    """The strided views of (H, W, C) whose sum is the 2x2 box sum: the four quarters (two when one side is 1),
-    after repeating an odd last row or column."""
-    h, w = image.shape[:2]
-    pad = ((0, h % 2 if h > 1 else 0), (0, w % 2 if w > 1 else 0), (0, 0))
-    if pad[0][1] or pad[1][1]:
-        image = np.pad(image, pad, mode="edge")
-    rows = [image[0::2], image[1::2]] if h > 1 else [image]
-    return [r[:, j::2] for r in rows for j in (0, 1)] if w > 1 else rows
-
-
-def box_average(parts: list[np.ndarray], out: np.ndarray) -> np.ndarray:
-    """out = mean of the equally shaped `parts` (the quarters of a level): the 2x2 box filter, written in place."""
-    if len(parts) == 1:
-        np.copyto(out, parts[0])
-    else:
-        np.add(parts[0], parts[1], out=out)
-    for p in parts[2:]:
-        out += p
-    out *= np.float32(1 / len(parts))
+def box_filter(level: np.ndarray, out: np.ndarray, decode: np.ndarray | None = None) -> np.ndarray:
+    """out (h, w, C) float32 = the 2x2 box average of level (H, W, C), h = ceil(H / 2), w = ceil(W / 2) (an odd
+    last row or column repeated; a side of 1 averaged along the other side only): the next mip level, written in
+    place. level: float32 values, or uint8 codes decoded through `decode` (C, 256) before averaging (linear
+    light), without a float copy of the level. One compiled pass (_box_kernel)."""
+    level = np.ascontiguousarray(level)
+    if decode is not None:
+        decode = np.ascontiguousarray(decode, np.float32)
+    _box_kernel(level, decode, decode is not None and level.shape[1] % 2 == 0, out)
     return out
+
+
+@kernel
+def _box_kernel(level, decode, pairs, out):
+    """`box_filter`, with the float32 sums in the order of the numpy filter it replaced, so the pyramids are the
+    same to the bit: ((a + b) + c) + d of the four quarters (top-left, top-right, bottom-left, bottom-right), times
+    1/4 (1/2 of two texels where a side is 1); with `pairs` (8-bit levels of even width) the sums of horizontal
+    pairs added, (a + b) + (c + d), as the pair-sum tables did."""
+    H, W = level.shape[0], level.shape[1]
+    quarter, half, whole = np.float32(0.25), np.float32(0.5), np.float32(1.0)
+    for i in range(out.shape[0]):
+        ra, rb = 2 * i, min(2 * i + 1, H - 1)
+        for j in range(out.shape[1]):
+            ca, cb = 2 * j, min(2 * j + 1, W - 1)
+            for c in range(out.shape[2]):
+                if decode is None:
+                    a, b, d, e = level[ra, ca, c], level[ra, cb, c], level[rb, ca, c], level[rb, cb, c]
+                else:
+                    a, b = decode[c, level[ra, ca, c]], decode[c, level[ra, cb, c]]
+                    d, e = decode[c, level[rb, ca, c]], decode[c, level[rb, cb, c]]
+                if pairs:
+                    out[i, j, c] = ((a + b) + (d + e)) * quarter if H > 1 else (a + b) * half
+                elif H > 1 and W > 1:
+                    out[i, j, c] = (((a + b) + d) + e) * quarter
+                elif H > 1:
+                    out[i, j, c] = (a + d) * half
+                elif W > 1:
+                    out[i, j, c] = (a + b) * half
+                else:
+                    out[i, j, c] = a * whole
 
 
 def mip_levels(image: np.ndarray) -> tuple:
