@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.jit import kernel
 from darthand.render.skin import skin_width, subsurface_diffuse
 from darthand.render.subject import Material
 
@@ -41,6 +42,7 @@ SHADOW_LIFT = 2e-3          # shadow-ray origin offset, relative to the scene's 
 MIN_ROUGHNESS = 0.045       # GGX is singular at alpha = 0
 DEFAULT_AO_RAYS = 16        # ambient-occlusion rays per vertex (benchmarks/render_reference.py: speed against error)
 SKIN_MODELS = ("subsurface", "wrap", "lambert")
+FACE_ROWS = (0, 9, 18, 21, 27)  # scene.FaceData's POSITION, NORMAL, GEOMETRIC, UV, UV_SCALE rows, as _hits_kernel reads them
 DEFAULT_SKIN = "subsurface"
 
 
@@ -103,26 +105,59 @@ def surface_hits(faces, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray, direct
     (1 - bu - bv, bu, bv). directions (3, M) float32 with camera z = 1 (so `depth` is the ray parameter);
     pixel_angle: the sample's footprint at unit depth (1 / focal length in pixels, times the sample's share of a
     pixel)."""
-    t = faces.gather(prim)
-    w0 = 1 - bu - bv
-    P, N, G = faces.POSITION, faces.NORMAL, faces.GEOMETRIC
-    position = w0 * t[P:P + 3] + bu * t[P + 3:P + 6] + bv * t[P + 6:P + 9]
-    ns = _normalize(w0 * t[N:N + 3] + bu * t[N + 3:N + 6] + bv * t[N + 6:N + 9])
-    ng = t[G:G + 3]
-    view = -_normalize(directions)
-    cos_g = _dot(ng, view)
-    ns *= np.where(cos_g < 0, np.float32(-1), np.float32(1))
-    # A shading normal turned away from the viewer (at silhouettes) is bent back into the visible hemisphere.
-    nv = _dot(ns, view)
-    bad = np.flatnonzero(nv < 1e-3)
-    if len(bad):
-        ns[:, bad] = _normalize(ns[:, bad] + (1e-3 - nv[bad]) * view[:, bad])
-    uv = footprint = None
-    if faces.has_uvs:
-        U = faces.UV
-        uv = np.stack([w0 * t[U] + bu * t[U + 2] + bv * t[U + 4], w0 * t[U + 1] + bu * t[U + 3] + bv * t[U + 5]])
-        footprint = t[faces.UV_SCALE] * depth * np.float32(pixel_angle) / np.maximum(np.abs(cos_g), 1e-3)
-    return Hits(position, ns, view, uv, footprint)
+    if (faces.POSITION, faces.NORMAL, faces.GEOMETRIC, faces.UV, faces.UV_SCALE) != FACE_ROWS:
+        raise AssertionError("scene.FaceData's rows moved: update shade.FACE_ROWS and _hits_kernel")
+    m = len(prim)
+    position, normal, view = (np.empty((3, m), np.float32) for _ in range(3))
+    uv = np.empty((2, m if faces.has_uvs else 0), np.float32)
+    footprint = np.empty(m if faces.has_uvs else 0, np.float32)
+    f32 = lambda a: np.ascontiguousarray(a, np.float32)
+    _hits_kernel(faces.table, np.ascontiguousarray(prim, np.int64), f32(bu), f32(bv), f32(directions), f32(depth),
+                 np.float32(pixel_angle), position, normal, view, uv, footprint)
+    if not faces.has_uvs:
+        uv = footprint = None
+    return Hits(position, normal, view, uv, footprint)
+
+
+@kernel
+def _hits_kernel(table, prim, bu, bv, directions, depth, pixel_angle, position, normal, view, uv, footprint):
+    """`surface_hits` per hit, one pass: the face's row of the FaceData table (K, F), barycentric interpolation
+    (w0 a + bu b + bv c, w0 = 1 - bu - bv), the shading normal normalised, turned to the viewer's side of the face
+    and bent back into the visible hemisphere where n.v < 1e-3 (silhouettes), the unit view vector, and with
+    UVs (uv, footprint non-empty) uv and the footprint's longer side (uv scale x depth x pixel angle / |cos|).
+    Float32 arithmetic in the order of the numpy version it replaced (dots summed x, y, z; v / max(|v|, 1e-30))."""
+    P, N, G, U, S = 0, 9, 18, 21, 27          # FACE_ROWS (literals: a cached kernel would not see a changed global)
+    tiny, small, one = np.float32(1e-30), np.float32(1e-3), np.float32(1.0)
+    with_uv = uv.shape[1] > 0
+    for i in range(prim.shape[0]):
+        f = prim[i]
+        b1, b2 = bu[i], bv[i]
+        b0 = one - b1 - b2
+        dx, dy, dz = directions[0, i], directions[1, i], directions[2, i]
+        length = max(np.sqrt(dx * dx + dy * dy + dz * dz), tiny)
+        vx, vy, vz = -(dx / length), -(dy / length), -(dz / length)
+        nx = b0 * table[N, f] + b1 * table[N + 3, f] + b2 * table[N + 6, f]
+        ny = b0 * table[N + 1, f] + b1 * table[N + 4, f] + b2 * table[N + 7, f]
+        nz = b0 * table[N + 2, f] + b1 * table[N + 5, f] + b2 * table[N + 8, f]
+        length = max(np.sqrt(nx * nx + ny * ny + nz * nz), tiny)
+        nx, ny, nz = nx / length, ny / length, nz / length
+        cos_g = table[G, f] * vx + table[G + 1, f] * vy + table[G + 2, f] * vz
+        if cos_g < 0:
+            nx, ny, nz = -nx, -ny, -nz
+        nv = nx * vx + ny * vy + nz * vz
+        if nv < small:
+            lift = small - nv
+            nx, ny, nz = nx + lift * vx, ny + lift * vy, nz + lift * vz
+            length = max(np.sqrt(nx * nx + ny * ny + nz * nz), tiny)
+            nx, ny, nz = nx / length, ny / length, nz / length
+        for c in range(3):
+            position[c, i] = b0 * table[P + c, f] + b1 * table[P + 3 + c, f] + b2 * table[P + 6 + c, f]
+        normal[0, i], normal[1, i], normal[2, i] = nx, ny, nz
+        view[0, i], view[1, i], view[2, i] = vx, vy, vz
+        if with_uv:
+            uv[0, i] = b0 * table[U, f] + b1 * table[U + 2, f] + b2 * table[U + 4, f]
+            uv[1, i] = b0 * table[U + 1, f] + b1 * table[U + 3, f] + b2 * table[U + 5, f]
+            footprint[i] = table[S, f] * depth[i] * pixel_angle / max(abs(cos_g), small)
 
 
 # ------------------------------------------------------------------------------------------------ materials
