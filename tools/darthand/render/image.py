@@ -65,7 +65,7 @@ def _compose_kernel(premult, alpha, r0, c0, background, over, table, colour, rgb
     the nearest of the table's 65536 steps; the mask: rint of alpha x 255), so the codes are the same."""
     H, W = colour.shape[0], colour.shape[1]
     h, w = alpha.shape
-    top, half, one, zero = np.float32(65535), np.float32(0.5), np.float32(1.0), np.float32(0.0)
+    top, half, one, zero = np.float32(len(table) - 1), np.float32(0.5), np.float32(1.0), np.float32(0.0)
     for r in range(H):
         for c in range(W):
             inside = r0 <= r < r0 + h and c0 <= c < c0 + w
@@ -87,8 +87,8 @@ def _compose_kernel(premult, alpha, r0, c0, background, over, table, colour, rgb
             if over:
                 rgba[r, c, 3] = 255
             else:
-                m = a if a < one else one
-                rgba[r, c, 3] = int(np.rint(m * np.float32(255))) if m > zero else 0
+                m = zero if not a > zero else (a if a < one else one)          # clipped; NaN as 0
+                rgba[r, c, 3] = int(np.rint(m * np.float32(255)))
 
 
 def read_image_buf(path: str | os.PathLike, what: str = "image") -> oiio.ImageBuf:

@@ -19,7 +19,7 @@ image files of more than 8 bits keep float32 storage: their values are not 8-bit
 outside [0, 1], 16-bit precision), so quantising them would change what they hold; none of them is loaded often.
 
 Written here rather than through OpenImageIO's TextureSystem because its Python binding samples one point per call;
-these lookups are numpy gathers over every shaded sample at once.
+these lookups are one compiled loop (darthand/jit.py) over every shaded sample of a batch.
 """
 
 from __future__ import annotations

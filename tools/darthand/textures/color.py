@@ -100,7 +100,7 @@ def encode_srgb8(linear_rgb, offset: float = 0.0) -> np.ndarray:
 def encode_srgb8_into(values, table, out):
     """out (N,) uint8 = table[index of values (N,) float32 clipped to [0, 1] on the table's 65536 steps] (rounded to
     the nearest step; NaN reads step 0): the sRGB codes of linear values through srgb8_table."""
-    top, half = np.float32((1 << _LUT_BITS) - 1), np.float32(0.5)
+    top, half = np.float32(len(table) - 1), np.float32(0.5)
     for i in range(values.size):
         v = values[i]
         if v > 1:
