@@ -14,7 +14,7 @@ registers. `kernel` marks such a loop. Rules the kernels follow:
 - Self-contained: a kernel calls no other kernel (so `kernel` can stay lazy, below, and a cached kernel never
   outlives a change in a function it inlined: numba's cache checks only the kernel's own source file).
 
-Compilation is lazy twice over: numba is imported at the first call of any kernel (importing it costs about 0.3 s
+Compilation is lazy twice over: numba is imported at the first call of any kernel (importing it costs about 0.2 s
 of CPU, which commands that never run one, like `darthand validate`, should not pay), and each kernel is compiled
 at its first call for the argument types given. The machine code is cached on disk (numba's cache=True): in the
 `__pycache__` folder beside the source file when that folder is writable (an editable install, as `make` makes),
