@@ -40,9 +40,9 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
                                    suffix=suffix if suffix is not None else path.suffix, dir=path.parent)
     except OSError as e:
         raise _write_error(path, e) from None
-    os.close(fd)
     tmp = Path(tmp)
-    try:
+    try:                               # from here on a Ctrl-C (KeyboardInterrupt) removes the temporary too
+        os.close(fd)
         yield tmp
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp creates 0600; outputs get the usual permissions
         try:
