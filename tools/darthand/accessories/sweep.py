@@ -6,10 +6,19 @@ Figures per accessory and pose (metres):
           accessory's inward-facing vertices inside the part's closed surface (a digit's skin capped where it meets
           the palm). A neighbouring finger or the palm pressed against a ring is contact, not fit: it counts in
           `depth` only.
-  depth   the same against the whole hand, so contact with any part of it counts (the larger of the two); for
-          gloves, how far the hand reaches beyond the glove's inner surface;
+  depth   the overlap with the whole hand, so contact with any part of it counts (the larger of the two): hand
+          vertices inside the accessory, and every accessory vertex inside the hand (a band's outside pressed into
+          a neighbouring finger as well as its bore); for gloves, how far the hand reaches beyond the glove's inner
+          surface;
   through gloves: how far the hand reaches beyond the glove's outer surface;
-  drift   rigid items: the largest change of the distance from the accessory's centre to its bone axis.
+  drift   rigid items: the largest change of the distance from the accessory's centre to its bone axis;
+  slide, turned, crossing  rings worn per pose (`worn`, accessories/wear): how far the ring slid along its bone
+          (m), the largest change of a joint angle made to give it room (degrees), and 1 where that change made two
+          digits pass through each other (model/self_crossing, tested on the turned poses only).
+
+With `worn` (the default), a ring is measured as a dataset frame shows it: in the pose accessories/wear gives
+(digits turned aside where the ring needs room) and slid along its bone; without, rigid on its bone at its fitted
+place, as a package (USD, glTF) poses it.
 
 The sweep is split over poses: each worker process measures every accessory on its share of the poses (whole
 batches of `CHUNK` poses), and a pose's figures depend only on its batch, so the result is the same, bit for bit,
@@ -29,10 +38,12 @@ from darthand.accessories import catalog as cat
 from darthand.accessories.attach import apply, axis_distance, pose_skinned, to_local
 from darthand.accessories.collide import ClosedHand, Solid, glove_penetration, inward_vertices, neighbourhood
 from darthand.accessories.fit import WRIST_JOINT, wrist_axis
+from darthand.accessories.wear import RingWear
 from darthand.model.anatomy import bone_ends, rest_joints, sample_poses
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import FINGER_JOINTS, MANO_PARENTS
+from darthand.model.self_crossing import SelfCrossing
 from darthand.model.topology import face_joints, vertex_normals
 from darthand.processes import deaf_to_ctrl_c, init_worker
 
@@ -52,8 +63,6 @@ def sweep_poses(model: HandModel, seed: int, n_sampled: int, gestures: list[str]
     sampled = sample_poses(model, n_sampled, cat.item_rng(seed, stream)) if n_sampled else np.zeros((0, 48))
     kept = np.arange(n_sampled)
     if skip_crossing and n_sampled:
-        from darthand.model.self_crossing import SelfCrossing
-
         kept = np.flatnonzero([c is None for c in SelfCrossing(model).crossing_poses(sampled)])
     names = ["rest"] + list(g.names) + [f"sample_{i:03d}" for i in kept]
     return names, np.concatenate([np.zeros((1, 48)), g.poses, sampled[kept]])
@@ -62,15 +71,21 @@ def sweep_poses(model: HandModel, seed: int, n_sampled: int, gestures: list[str]
 @dataclass(frozen=True)
 class RigidProbe:
     """What the sweep needs of a rigid accessory: its joint and rest placement, its local-frame mesh, the
-    inward-facing vertices (local) and the hand part it is fitted to (a digit index, or -1 for the whole hand)."""
+    inward-facing vertices (indices into vertices) and the hand part it is fitted to (a digit index, or -1 for the
+    whole hand)."""
 
     id: str
     joint: int
     rest: np.ndarray
     vertices: np.ndarray
     faces: np.ndarray
-    inner: np.ndarray
+    inner_ids: np.ndarray
     part: int
+
+    @property
+    def inner(self) -> np.ndarray:
+        """(K, 3) the inward-facing vertices (local)."""
+        return self.vertices[self.inner_ids]
 
 
 @dataclass(frozen=True)
@@ -100,7 +115,7 @@ def probes(built) -> list:
                                   sk["source_vertex"][interior], sk["source_vertex"][m.faces[:, 0]]))
         else:
             out.append(RigidProbe(b.id, int(b.fit.joint), b.fit.rest, m.vertices, m.faces,
-                                  m.vertices[inward_vertices(m.vertices, m.normals)], digit_of(b.fit.joint)))
+                                  inward_vertices(m.vertices, m.normals), digit_of(b.fit.joint)))
     return out
 
 
@@ -112,12 +127,14 @@ def digit_of(joint: int) -> int:
     return -1
 
 
-def measure(model: HandModel, built, poses: np.ndarray, workers: int = 1) -> dict:
-    """Per accessory id: {"fit", "depth", "through"} (P,) arrays (m) and "drift" (m) over `poses` (P, 48)."""
+def measure(model: HandModel, built, poses: np.ndarray, workers: int = 1, worn: bool = True) -> dict:
+    """Per accessory id: {"fit", "depth", "through", "slide", "turned", "crossing"} (P,) arrays (m; turned in
+    degrees; crossing 0/1) and "drift" (m) over `poses` (P, 48); rings `worn` per pose (see the module
+    docstring)."""
     items = probes(built)
     workers = max(1, min(int(workers), len(poses) // MIN_POSES_PER_WORKER))
     if workers == 1:
-        return measure_probes(model, items, poses)
+        return measure_probes(model, items, poses, worn)
     # Shares in whole chunks: each pose is posed in the same batch as in one process, so figures agree to the bit.
     chunks = -(-len(poses) // CHUNK)
     bounds = np.minimum(np.linspace(0, chunks, workers + 1).astype(int) * CHUNK, len(poses))
@@ -126,11 +143,9 @@ def measure(model: HandModel, built, poses: np.ndarray, workers: int = 1) -> dic
                                 initargs=(os.getpid(),)) as pool:
         with deaf_to_ctrl_c():                  # map starts the workers; Ctrl-C is ours, even while they import
             shares = pool.map(measure_probes, [model] * workers, [items] * workers,
-                              [poses[a:b] for a, b in zip(bounds[:-1], bounds[1:])])
+                              [poses[a:b] for a, b in zip(bounds[:-1], bounds[1:])], [worn] * workers)
         parts = list(shares)
-    return {i.id: {"fit": np.concatenate([p[i.id]["fit"] for p in parts]),
-                   "depth": np.concatenate([p[i.id]["depth"] for p in parts]),
-                   "through": np.concatenate([p[i.id]["through"] for p in parts]),
+    return {i.id: {**{key: np.concatenate([p[i.id][key] for p in parts]) for key in PER_POSE},
                    "drift": max(p[i.id]["drift"] for p in parts)} for i in items}
 
 
@@ -141,37 +156,61 @@ def _init_worker(parent: int) -> None:
         os.environ.setdefault(name, "1")
 
 
-def measure_probes(model: HandModel, items: list, poses: np.ndarray) -> dict:
+PER_POSE = ("fit", "depth", "through", "slide", "turned", "crossing")
+
+
+def measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool = True) -> dict:
     """`measure` in this process, on probes."""
-    out = {i.id: {"fit": np.zeros(len(poses)), "depth": np.zeros(len(poses)), "through": np.zeros(len(poses)),
-                  "drift": 0.0} for i in items}
+    out = {i.id: {**{key: np.zeros(len(poses)) for key in PER_POSE}, "drift": 0.0} for i in items}
     rigid = [i for i in items if isinstance(i, RigidProbe)]
     gloves = [i for i in items if isinstance(i, GloveProbe)]
+    rings = [i for i in rigid if worn and i.part >= 0]
+    fixed = [i for i in rigid if i not in rings]
     hand = HandParts(model)
     axes = _BoneAxes(model)
     solids = {i.id: Solid(i.vertices, i.faces) for i in rigid}
+    wear = {i.id: RingWear(model, i.joint, i.rest, i.vertices) for i in rings}
+    crossing = SelfCrossing(model) if rings else None
     near = neighbourhood(model.faces, model.num_vertices, rings=3) if gloves else None
     for s in range(0, len(poses), CHUNK):
         posed = forward(model, poses[s:s + CHUNK])
         B = len(posed.vertices)
-        placed = {i.id: posed.transforms[:, i.joint] @ i.rest for i in rigid}
-        for i in rigid:
-            fig = out[i.id]
-            fit, depth = hand_inside_rigid(solids[i.id], to_local(placed[i.id], posed.vertices),
-                                           hand.own_vertices(i.part))
-            fig["fit"][s:s + B], fig["depth"][s:s + B] = fit, depth
-            fig["drift"] = max(fig["drift"], axes.drift(i, placed[i.id], posed))
-        worn = {g.id: pose_skinned(g.vertices, g.weights, g.posedirs, posed.rotations, posed.transforms)
-                for g in gloves}
-        for p in range(B):
-            if rigid:
-                for item_id, (fit, depth) in rigid_inside_hand(hand, rigid, placed, posed.vertices[p], p).items():
-                    fig = out[item_id]
-                    fig["fit"][s + p] = max(fig["fit"][s + p], fit)
-                    fig["depth"][s + p] = max(fig["depth"][s + p], depth, fit)
-            if gloves:
-                _gloves_at(model, gloves, worn, posed.vertices[p], p, near, out, s + p)
+        placed = {i.id: posed.transforms[:, i.joint] @ i.rest for i in fixed}
+        _rigid_at(hand, axes, solids, fixed, posed, placed, out, s)
+        for i in rings:
+            w = [wear[i.id].worn(p) for p in poses[s:s + CHUNK]]
+            posed_i = forward(model, np.stack([x.pose for x in w]))
+            placed_i = {i.id: posed_i.transforms[:, i.joint] @ i.rest @ np.stack([x.local_slide() for x in w])}
+            _rigid_at(hand, axes, solids, [i], posed_i, placed_i, out, s)
+            out[i.id]["slide"][s:s + B] = [x.slide for x in w]
+            out[i.id]["turned"][s:s + B] = [max((np.abs(a).max() for a in x.changed.values()), default=0.0)
+                                            for x in w]
+            out[i.id]["crossing"][s:s + B] = [x.changed != {} and crossing.crossing(v) is not None
+                                              for x, v in zip(w, posed_i.vertices)]
+        if gloves:
+            worn_gloves = {g.id: pose_skinned(g.vertices, g.weights, g.posedirs, posed.rotations, posed.transforms)
+                           for g in gloves}
+            for p in range(B):
+                _gloves_at(model, gloves, worn_gloves, posed.vertices[p], p, near, out, s + p)
     return out
+
+
+def _rigid_at(hand: "HandParts", axes: "_BoneAxes", solids: dict, rigid: list, posed, placed: dict, out: dict,
+              s: int) -> None:
+    """Figures of rigid probes placed (`placed`: id -> (B, 4, 4)) on a posed batch, written at poses s.. of `out`."""
+    if not rigid:
+        return
+    B = len(posed.vertices)
+    for i in rigid:
+        fig = out[i.id]
+        fit, depth = hand_inside_rigid(solids[i.id], to_local(placed[i.id], posed.vertices), hand.own_vertices(i.part))
+        fig["fit"][s:s + B], fig["depth"][s:s + B] = fit, depth
+        fig["drift"] = max(fig["drift"], axes.drift(i, placed[i.id], posed))
+    for p in range(B):
+        for item_id, (fit, depth) in rigid_inside_hand(hand, rigid, placed, posed.vertices[p], p).items():
+            fig = out[item_id]
+            fig["fit"][s + p] = max(fig["fit"][s + p], fit)
+            fig["depth"][s + p] = max(fig["depth"][s + p], depth, fit)
 
 
 class HandParts:
@@ -225,27 +264,28 @@ def hand_inside_rigid(solid: Solid, local: np.ndarray, own: np.ndarray) -> tuple
 
 
 def rigid_inside_hand(hand: HandParts, rigid: list, placed: dict, vertices: np.ndarray, p: int) -> dict:
-    """{id: (fit, depth)} of the rigid accessories whose inward-facing vertices are inside the posed hand
-    (vertices (V, 3)): depth is measured to the whole hand's surface, fit to the surface of the part the accessory
-    is fitted to, counting only the vertices inside that part."""
-    pts = np.concatenate([apply(placed[i.id][p], i.inner) for i in rigid])
-    owner = np.repeat(np.arange(len(rigid)), [len(i.inner) for i in rigid])
+    """{id: (fit, depth)} of the rigid accessories with vertices inside the posed hand (vertices (V, 3)): depth is
+    the deepest of all their vertices below the whole hand's surface, fit that of their inward-facing vertices
+    inside the part they are fitted to, measured to that part's surface."""
+    pts = np.concatenate([apply(placed[i.id][p], i.vertices) for i in rigid])
+    owner = np.repeat(np.arange(len(rigid)), [len(i.vertices) for i in rigid])
+    inward = np.concatenate([np.isin(np.arange(len(i.vertices)), i.inner_ids) for i in rigid])
     whole = hand.whole.solid(vertices)
     inside = whole.inside(pts)
     out, digits = {}, {}
     for k in np.unique(owner[inside]):
         item = rigid[k]
-        mine = pts[inside[owner[inside] == k]]
-        depth = whole.deepest(mine)
+        ids = inside[owner[inside] == k]
+        depth = whole.deepest(pts[ids])
+        mine = pts[ids[inward[ids]]]
         part = hand.digit(item.part) if item.part >= 0 else None
         if part is None:
-            fit = depth
+            fit = whole.deepest(mine)
         else:
             if item.part not in digits:
                 digits[item.part] = part.solid(vertices)
             own = digits[item.part]
-            in_own = own.inside(mine)
-            fit = own.deepest(mine[in_own])
+            fit = own.deepest(mine[own.inside(mine)])
         out[item.id] = (float(fit), float(depth))
     return out
 
