@@ -5,13 +5,20 @@ over a ring on a finger flexed at its knuckle, and a neighbouring finger pressed
 thumb pressed into the palm) passes through the band. A real ring is pushed along its phalanx by the fold, and a
 real neighbour is pushed aside by the band. So, per pose, for a hand that wears a ring:
 
-1. slide: the ring moves along its bone axis to the position in `SLIDES` (metres from its fitted place, + toward
-   the fingertip) where the deepest of its sample points inside the posed hand is least (ties: the smallest move);
-2. make room: if that still leaves more than `TARGET`, the digits it touches turn aside -- the spread of the
-   fingers' knuckles (MCP), the thumb's base (CMC) on all three axes -- by the least change that clears the ring
-   by `CLEARANCE`: a Gauss-Newton step of the linearised depths (the gesture fit's point velocities,
-   model/gesture_fit), weighted by `SIGMA`, within the joint limits and `MAX_CHANGE_DEG`; then slide again, up to
-   `ROUNDS` times.
+1. slide: the ring moves along its bone axis to the smallest of the offsets `SLIDES` (metres from its fitted place,
+   + toward the fingertip) that leaves it at most `TARGET` deep in the posed hand, else to the one that leaves it
+   least deep (ties: the smaller move);
+2. make room: if that still leaves more than `TARGET`, the digits turn aside -- the knuckle (MCP) spread of the
+   ring's finger, of the fingers beside it and of any finger it touches, the thumb's base (CMC) on all three axes
+   when the thumb wears it or touches it -- by the least change that clears the ring by `CLEARANCE`, the slide
+   being one more unknown: Gauss-Newton steps of the linearised depths (the gesture fit's point velocities,
+   model/gesture_fit), weighted by `SIGMA` and `SLIDE_SIGMA`, within the joint limits, `MAX_CHANGE_DEG` and the
+   range of `SLIDES`, each measured again, up to `ROUNDS` times. Points outside the hand join the step once it
+   would bring them within `CLEARANCE` (an active set), so a finger turned from one neighbour is not turned into
+   the other. The shallowest round wins, unless its turn made two digits pass through each other
+   (model/self_crossing): then the next, and failing all, the pose as given (the ring keeps what sliding left);
+   when two fingers crossed (a middle finger turned from the ring into the index), the rounds are run again with
+   that pair's knuckles turning together, up to `MAX_LINKS` pairs.
 
 The result is the pose the frame shows (its labels come from it) and the ring's placement on its bone; both are a
 function of the pose alone, and a hand without a ring is never changed. The rig's forward pass is not touched: the
@@ -42,6 +49,7 @@ SLIDES = np.round(np.arange(-0.004, 0.0080001, 0.001), 6)   # m along the bone f
 TARGET = 0.0004           # m: deeper than this after sliding, the digits make room
 CLEARANCE = 0.0003        # m: how far outside the hand the room made puts the ring's points
 ROUNDS = 5
+MAX_LINKS = 2             # times a turn that crossed two fingers is tried again with the pair turning together
 SAMPLE_SPACING = 0.001    # m: the ring's sample points, one per cell of this size (at first)
 MAX_SAMPLES = 900         # ... grown until at most this many remain
 NEAREST = 4               # hand vertices whose tangent planes bound a point's depth
@@ -82,12 +90,14 @@ def sample_points(local_vertices: np.ndarray, spacing: float = SAMPLE_SPACING,
                   most: int = MAX_SAMPLES) -> np.ndarray:
     """(K, 3) one vertex per occupied cell of `spacing` metres (the first in vertex order), the cells grown until
     at most `most` remain: a ring's sample points in its local frame, evenly spread however its mesh is
-    tessellated (a braid's strands are many vertices deep)."""
+    tessellated (a braid's strands are many vertices deep). Coordinates are rounded to 0.1 um, so a mesh carried
+    to the rest frame and back (a catalogue's file) gives the same samples, bit for bit."""
+    rounded = np.round(local_vertices, 7)
     while True:
-        cells = np.floor(local_vertices / spacing).astype(np.int64)
+        cells = np.floor(rounded / spacing).astype(np.int64)
         _, first = np.unique(cells, axis=0, return_index=True)
         if len(first) <= most:
-            return local_vertices[np.sort(first)]
+            return rounded[np.sort(first)]
         spacing *= 1.2
 
 
@@ -108,6 +118,7 @@ class RingWear:
         self.subtree = _subtree(model.parents)
         self.digit = next(k for k, f in enumerate(FINGERS) if self.joint in FINGER_JOINTS[f])
         self._last: tuple | None = None
+        self.crossing = None         # model/self_crossing.SelfCrossing, made when a turn is first checked
 
     def worn_once(self, pose) -> Worn:
         """`worn`, remembered for the last pose (a frame rendered again from another view)."""
@@ -120,27 +131,57 @@ class RingWear:
     def worn(self, pose) -> Worn:
         """The ring worn in `pose` ((48,) MANO axis-angle, flat-hand relative)."""
         pose = np.asarray(pose, np.float64).reshape(-1)
+        links: frozenset = frozenset()
+        for _ in range(MAX_LINKS + 1):
+            choice, crossed = self._worn(pose, links)
+            pair = _finger_pair(crossed)
+            if pair is None or pair in links:
+                break
+            links = links | {pair}
+        depth, pose, s, posed, changed = choice
+        placement = posed.transforms[0, self.joint].astype(np.float64) @ self.rest @ slide_matrix(s)
+        return Worn(pose, float(s), placement, float(depth), changed)
+
+    def _worn(self, pose: np.ndarray, links: frozenset) -> tuple[tuple, str | None]:
+        """((depth, pose, slide, posed, changed) chosen, the digit pair a better turn crossed or None), with the
+        finger pairs in `links` turned together."""
         posed, (s, depth, contact) = self._slid(pose)
-        best = (depth, pose, s, posed, {})
+        unturned = (depth, pose, s, posed, {})
+        turned = []
         if depth > TARGET:
             start = axis_angle_to_angles(self.model, pose, self.frames)
             angles = start
             for _ in range(ROUNDS):
-                step = self._room(angles, start, s, posed, contact)
+                step = self._room(angles, start, s, posed, contact, links)
                 if step is None:
                     break
                 angles, s = step
                 current = self._pose(pose, angles, start)
                 posed, (depth, contact) = self._at(current, s)
-                if depth < best[0] - TIE:
-                    changed = {int(j): np.rad2deg(angles[j] - start[j]) for j in range(NUM_JOINTS)
-                               if np.any(angles[j] != start[j])}
-                    best = (depth, current, s, posed, changed)
+                changed = {int(j): np.rad2deg(angles[j] - start[j]) for j in range(NUM_JOINTS)
+                           if np.any(angles[j] != start[j])}
+                turned.append((depth, current, s, posed, changed))
                 if depth <= TARGET:
                     break
-        depth, pose, s, posed, changed = best
-        placement = posed.transforms[0, self.joint].astype(np.float64) @ self.rest @ slide_matrix(s)
-        return Worn(pose, float(s), placement, float(depth), changed)
+        return self._choose(unturned, turned)
+
+    def _choose(self, unturned: tuple, turned: list) -> tuple[tuple, str | None]:
+        """The shallowest of the turned rounds that beats the unturned pose by more than TIE and does not make two
+        digits pass through each other (model/self_crossing), else the unturned pose; with the pair ('index-middle')
+        the shallowest such round crossed, if it crossed."""
+        crossed = None
+        for candidate in sorted(turned, key=lambda c: c[0]):
+            if candidate[0] >= unturned[0] - TIE:
+                break
+            if self.crossing is None:
+                from darthand.model.self_crossing import SelfCrossing
+
+                self.crossing = SelfCrossing(self.model)
+            found = self.crossing.crossing(candidate[3].vertices[0])
+            if found is None:
+                return candidate, crossed
+            crossed = crossed or found
+        return unturned, crossed
 
     def _pose(self, pose: np.ndarray, angles: np.ndarray, start: np.ndarray) -> np.ndarray:
         """The pose with only the joints whose angles changed converted back (the others keep their exact values)."""
@@ -184,17 +225,19 @@ class RingWear:
         return posed, best
 
     # ------------------------------------------------------------------------------------------- make room
-    def _room(self, angles: np.ndarray, start: np.ndarray, s: float, posed, contact):
+    def _room(self, angles: np.ndarray, start: np.ndarray, s: float, posed, contact, links: frozenset = frozenset()):
         """(angles, slide) one Gauss-Newton step closer to clearing the ring by CLEARANCE (None when nothing
         moves). The slide is one more unknown (sigma SLIDE_SIGMA from the fitted place, within SLIDES' range).
 
         The residuals are the ring's sample points inside the hand or within NEAR of it: the points inside from
         the start, the ones outside (active set) only once the step would bring them closer than CLEARANCE, so that
-        a finger turned away from one neighbour is not turned into the other."""
+        a finger turned away from one neighbour is not turned into the other. Fingers linked in pairs (`links`,
+        FINGERS indices) turn their knuckles' spread together, as one unknown."""
         pts, signed, nearest = contact
         near = signed > -NEAR
         part = self.vertex_part[nearest]
-        free, sigma, reach = self._free(set(part[signed > TARGET].tolist()))
+        free, sigma, reach = self._free(set(part[signed > TARGET].tolist()), links)
+        M = _tied(free, links)                                             # (free angles, unknowns)
         omega, pivot = self._angular_velocities(angles, posed, free)
         v = posed.vertices[0].astype(np.float64)
         x, y = pts[near], v[nearest[near]]
@@ -203,14 +246,18 @@ class RingWear:
         shares = self.model.weights[nearest[near]] @ self.subtree[:, free // 3]           # (K, n)
         uy = np.cross(omega[None], y[:, None] - pivot[None]) * shares[..., None]
         axis = posed.transforms[0, self.joint, :3, :3].astype(np.float64) @ self.rest[:3, 0]
-        grad = np.concatenate([np.einsum("kd,knd->kn", n, uy - ux), -(n @ axis)[:, None]], 1)  # depth = (y-x).n
+        grad = np.concatenate([np.einsum("kd,knd->kn", n, uy - ux) @ M, -(n @ axis)[:, None]], 1)  # (y-x).n
         depth = signed[near]
-        x0 = np.append(angles.reshape(-1)[free], s)
-        home = np.append(start.reshape(-1)[free], 0.0)
-        sig = np.append(sigma, SLIDE_SIGMA)
+        first = np.argmax(M, axis=0)                                      # each unknown's first angle
+        x0 = np.append(angles.reshape(-1)[free][first], s)
+        home = np.append(start.reshape(-1)[free][first], 0.0)
+        sig = np.append(sigma[first] / np.sqrt(M.sum(0)), SLIDE_SIGMA)    # a linked pair: two angles' cost
         lim = self.limits.reshape(-1, 2)[free]
-        lo = np.append(np.maximum(lim[:, 0], home[:-1] - reach), SLIDES[0]) - x0
-        hi = np.append(np.minimum(lim[:, 1], home[:-1] + reach), SLIDES[-1]) - x0
+        now = angles.reshape(-1)[free]
+        low = np.maximum(lim[:, 0], start.reshape(-1)[free] - reach) - now     # per angle, as a step
+        high = np.minimum(lim[:, 1], start.reshape(-1)[free] + reach) - now
+        lo = np.append([low[M[:, k] > 0].max() for k in range(M.shape[1])], SLIDES[0] - s)
+        hi = np.append([high[M[:, k] > 0].min() for k in range(M.shape[1])], SLIDES[-1] - s)
         lo, hi = np.minimum(lo, 0.0), np.maximum(hi, 0.0)
         active = depth > 0
         step = np.zeros(len(x0))
@@ -225,15 +272,17 @@ class RingWear:
         if not np.any(np.abs(step) > 1e-7):
             return None
         out = angles.reshape(-1).copy()
-        out[free] += step[:-1]
+        out[free] += M @ step[:-1]
         return out.reshape(NUM_JOINTS, 3), float(s + step[-1])
 
-    def _free(self, touched: set) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _free(self, touched: set, links: frozenset = frozenset()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(angle indices into the flat (48,) angles, sigma (rad), largest change (rad)) of the digits that may
-        make room: those touched, the ring's own and the fingers beside it."""
+        make room: those touched (PARTS indices), the ring's own, the fingers beside it and those linked to any."""
         digits = {p - 1 for p in touched if p > 0} | {self.digit}
         if self.digit > 0:
             digits |= {d for d in (self.digit - 1, self.digit + 1) if 1 <= d < len(FINGERS)}
+        for _ in range(len(links)):
+            digits |= {d for pair in links if digits & pair for d in pair}
         free, sigma, reach = [], [], []
         for d in sorted(digits):
             kind = "thumb" if FINGERS[d] == "thumb" else "finger"
@@ -256,6 +305,31 @@ class RingWear:
             before = angles_to_matrix([0.0, sp, bd] if a == 0 else [0.0, 0.0, bd if a == 1 else 0.0])
             omega[i] = W[self.model.parents[j]] @ self.frames[j] @ before[:, a]
         return omega, posed.joints[0, joints].astype(np.float64)
+
+
+def _finger_pair(crossed: str | None) -> frozenset | None:
+    """The FINGERS indices of a crossing pair of fingers ('index-middle'), None for none or one with the thumb."""
+    if crossed is None:
+        return None
+    names = crossed.split("-")
+    if len(names) != 2 or "thumb" in names or not all(n in FINGERS for n in names):
+        return None
+    return frozenset(FINGERS.index(n) for n in names)
+
+
+def _tied(free: np.ndarray, links: frozenset) -> np.ndarray:
+    """(n, k) 0/1: which unknown each free angle follows; the spread angles of linked fingers share one."""
+    root_digit = {FINGER_JOINTS[f][0]: d for d, f in enumerate(FINGERS)}
+    keys = []
+    for angle in free:
+        joint, axis = divmod(int(angle), 3)
+        digit = root_digit.get(joint)
+        group = next((pair for pair in links if digit in pair), None) if axis == 1 else None
+        keys.append(("link", min(group)) if group is not None else ("angle", int(angle)))
+    unique = list(dict.fromkeys(keys))
+    M = np.zeros((len(free), len(unique)))
+    M[np.arange(len(free)), [unique.index(k) for k in keys]] = 1.0
+    return M
 
 
 def _signed_depths(solid: Solid, tree: cKDTree, v: np.ndarray, normals: np.ndarray, pts: np.ndarray):
