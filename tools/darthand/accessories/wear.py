@@ -18,7 +18,8 @@ real neighbour is pushed aside by the band. So, per pose, for a hand that wears 
    the other. The shallowest round wins, unless its turn made two digits pass through each other
    (model/self_crossing): then the next, and failing all, the pose as given (the ring keeps what sliding left);
    when two fingers crossed (a middle finger turned from the ring into the index), the rounds are run again with
-   that pair's knuckles turning together, up to `MAX_LINKS` pairs.
+   that pair's knuckles turning together; when a finger crossed the thumb, with that finger held; up to
+   `MAX_RETRIES` times.
 
 The result is the pose the frame shows (its labels come from it) and the ring's placement on its bone; both are a
 function of the pose alone, and a hand without a ring is never changed. The rig's forward pass is not touched: the
@@ -49,7 +50,7 @@ SLIDES = np.round(np.arange(-0.004, 0.0080001, 0.001), 6)   # m along the bone f
 TARGET = 0.0004           # m: deeper than this after sliding, the digits make room
 CLEARANCE = 0.0003        # m: how far outside the hand the room made puts the ring's points
 ROUNDS = 5
-MAX_LINKS = 2             # times a turn that crossed two fingers is tried again with the pair turning together
+MAX_RETRIES = 2           # times a turn that crossed two digits is tried again (the pair linked, or one held)
 SAMPLE_SPACING = 0.001    # m: the ring's sample points, one per cell of this size (at first)
 MAX_SAMPLES = 900         # ... grown until at most this many remain
 NEAREST = 4               # hand vertices whose tangent planes bound a point's depth
@@ -131,20 +132,37 @@ class RingWear:
     def worn(self, pose) -> Worn:
         """The ring worn in `pose` ((48,) MANO axis-angle, flat-hand relative)."""
         pose = np.asarray(pose, np.float64).reshape(-1)
-        links: frozenset = frozenset()
-        for _ in range(MAX_LINKS + 1):
-            choice, crossed = self._worn(pose, links)
-            pair = _finger_pair(crossed)
-            if pair is None or pair in links:
+        links, held = frozenset(), frozenset()
+        for _ in range(MAX_RETRIES + 1):
+            choice, crossed = self._worn(pose, links, held)
+            retry = self._retry(crossed, links, held)
+            if retry is None:
                 break
-            links = links | {pair}
+            links, held = retry
         depth, pose, s, posed, changed = choice
         placement = posed.transforms[0, self.joint].astype(np.float64) @ self.rest @ slide_matrix(s)
         return Worn(pose, float(s), placement, float(depth), changed)
 
-    def _worn(self, pose: np.ndarray, links: frozenset) -> tuple[tuple, str | None]:
+    def _retry(self, crossed: str | None, links: frozenset, held: frozenset) -> tuple | None:
+        """(links, held) to try again with after a better turn crossed the digit pair `crossed` ('index-middle'):
+        two fingers turn together; a finger that crossed the thumb is held (unless it wears the ring); None when
+        there is nothing new to try."""
+        if crossed is None:
+            return None
+        digits = [FINGERS.index(n) for n in crossed.split("-") if n in FINGERS]
+        if len(digits) != 2:
+            return None
+        pair = frozenset(digits)
+        if 0 not in pair:
+            return None if pair in links else (links | {pair}, held)
+        other = max(digits)
+        if other == self.digit or other in held:
+            return None
+        return links, held | {other}
+
+    def _worn(self, pose: np.ndarray, links: frozenset, held: frozenset) -> tuple[tuple, str | None]:
         """((depth, pose, slide, posed, changed) chosen, the digit pair a better turn crossed or None), with the
-        finger pairs in `links` turned together."""
+        finger pairs in `links` turned together and the digits in `held` (FINGERS indices) not turned."""
         posed, (s, depth, contact) = self._slid(pose)
         unturned = (depth, pose, s, posed, {})
         turned = []
@@ -152,7 +170,7 @@ class RingWear:
             start = axis_angle_to_angles(self.model, pose, self.frames)
             angles = start
             for _ in range(ROUNDS):
-                step = self._room(angles, start, s, posed, contact, links)
+                step = self._room(angles, start, s, posed, contact, links, held)
                 if step is None:
                     break
                 angles, s = step
@@ -225,18 +243,21 @@ class RingWear:
         return posed, best
 
     # ------------------------------------------------------------------------------------------- make room
-    def _room(self, angles: np.ndarray, start: np.ndarray, s: float, posed, contact, links: frozenset = frozenset()):
+    def _room(self, angles: np.ndarray, start: np.ndarray, s: float, posed, contact, links: frozenset = frozenset(),
+              held: frozenset = frozenset()):
         """(angles, slide) one Gauss-Newton step closer to clearing the ring by CLEARANCE (None when nothing
         moves). The slide is one more unknown (sigma SLIDE_SIGMA from the fitted place, within SLIDES' range).
 
         The residuals are the ring's sample points inside the hand or within NEAR of it: the points inside from
         the start, the ones outside (active set) only once the step would bring them closer than CLEARANCE, so that
         a finger turned away from one neighbour is not turned into the other. Fingers linked in pairs (`links`,
-        FINGERS indices) turn their knuckles' spread together, as one unknown."""
+        FINGERS indices) turn their knuckles' spread together, as one unknown; digits `held` do not turn."""
         pts, signed, nearest = contact
         near = signed > -NEAR
         part = self.vertex_part[nearest]
-        free, sigma, reach = self._free(set(part[signed > TARGET].tolist()), links)
+        free, sigma, reach = self._free(set(part[signed > TARGET].tolist()), links, held)
+        if len(free) == 0:
+            return None
         M = _tied(free, links)                                             # (free angles, unknowns)
         omega, pivot = self._angular_velocities(angles, posed, free)
         v = posed.vertices[0].astype(np.float64)
@@ -275,14 +296,17 @@ class RingWear:
         out[free] += M @ step[:-1]
         return out.reshape(NUM_JOINTS, 3), float(s + step[-1])
 
-    def _free(self, touched: set, links: frozenset = frozenset()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _free(self, touched: set, links: frozenset = frozenset(),
+              held: frozenset = frozenset()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(angle indices into the flat (48,) angles, sigma (rad), largest change (rad)) of the digits that may
-        make room: those touched (PARTS indices), the ring's own, the fingers beside it and those linked to any."""
+        make room: those touched (PARTS indices), the ring's own, the fingers beside it and those linked to any,
+        less those `held`."""
         digits = {p - 1 for p in touched if p > 0} | {self.digit}
         if self.digit > 0:
             digits |= {d for d in (self.digit - 1, self.digit + 1) if 1 <= d < len(FINGERS)}
         for _ in range(len(links)):
             digits |= {d for pair in links if digits & pair for d in pair}
+        digits -= held
         free, sigma, reach = [], [], []
         for d in sorted(digits):
             kind = "thumb" if FINGERS[d] == "thumb" else "finger"
@@ -305,16 +329,6 @@ class RingWear:
             before = angles_to_matrix([0.0, sp, bd] if a == 0 else [0.0, 0.0, bd if a == 1 else 0.0])
             omega[i] = W[self.model.parents[j]] @ self.frames[j] @ before[:, a]
         return omega, posed.joints[0, joints].astype(np.float64)
-
-
-def _finger_pair(crossed: str | None) -> frozenset | None:
-    """The FINGERS indices of a crossing pair of fingers ('index-middle'), None for none or one with the thumb."""
-    if crossed is None:
-        return None
-    names = crossed.split("-")
-    if len(names) != 2 or "thumb" in names or not all(n in FINGERS for n in names):
-        return None
-    return frozenset(FINGERS.index(n) for n in names)
 
 
 def _tied(free: np.ndarray, links: frozenset) -> np.ndarray:
