@@ -20,6 +20,7 @@ from darthand.accessories.wear import (CLEARANCE, MAX_CHANGE_DEG, SLIDES, RingWe
                                        slide_matrix, wear_ring)
 from darthand.model.anatomy import angles_to_axis_angle, axis_angle_to_angles, within_limits
 from darthand.model.forward import forward
+from darthand.model.gesture_fit import angular_velocities
 from darthand.model.layout import FINGER_JOINTS
 from scipy.spatial import cKDTree
 from test_sweep import closed, overlap, open_hand
@@ -145,7 +146,7 @@ def test_room_making_step_follows_finite_differences(hand):
     depth, (pts, signed, nearest) = wear._contact(hand_state, 0.0)
     pinky = FINGER_JOINTS["pinky"][0]
     free = np.array([3 * pinky + 1])
-    omega, pivot = wear._angular_velocities(angles, posed, free)
+    omega, pivot = angular_velocities(hand, wear.frames, angles, posed, free)
     v = posed.vertices[0].astype(np.float64)
     y = v[nearest]
     from darthand.model.topology import vertex_normals

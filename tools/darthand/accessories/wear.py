@@ -38,12 +38,12 @@ from scipy.spatial import cKDTree
 
 from darthand.accessories.attach import to_local
 from darthand.accessories.collide import ClosedHand, Solid
-from darthand.model.anatomy import angles_to_axis_angle, angles_to_matrix, axis_angle_to_angles, joint_frames
-from darthand.model.anatomy import limits_radians
+from darthand.model.anatomy import angles_to_axis_angle, axis_angle_to_angles, joint_frames, limits_radians
 from darthand.model.forward import forward
+from darthand.model.gesture_fit import angular_velocities, subtree_mask
 from darthand.model.hand_model import HandModel
 from darthand.model.intersections import joint_parts
-from darthand.model.layout import FINGER_JOINTS, FINGERS, NUM_JOINTS
+from darthand.model.layout import FINGER_JOINTS, FINGERS, JOINT_NAMES, NUM_JOINTS
 from darthand.model.topology import vertex_normals
 
 SLIDES = np.round(np.arange(-0.004, 0.0080001, 0.001), 6)   # m along the bone from the fitted place
@@ -116,10 +116,10 @@ class RingWear:
         self.frames = joint_frames(model)
         self.limits = limits_radians()
         self.vertex_part = joint_parts()[np.argmax(model.weights, axis=1)]
-        self.subtree = _subtree(model.parents)
+        self.subtree = subtree_mask(model.parents)
         self.digit = next(k for k, f in enumerate(FINGERS) if self.joint in FINGER_JOINTS[f])
         self._last: tuple | None = None
-        self.crossing = None         # model/self_crossing.SelfCrossing, made when a turn is first checked
+        self._crossing = None        # model/self_crossing.SelfCrossing, made when a turn is first checked
 
     def worn_once(self, pose) -> Worn:
         """`worn`, remembered for the last pose (a frame rendered again from another view)."""
@@ -191,11 +191,11 @@ class RingWear:
         for candidate in sorted(turned, key=lambda c: c[0]):
             if candidate[0] >= unturned[0] - TIE:
                 break
-            if self.crossing is None:
+            if self._crossing is None:
                 from darthand.model.self_crossing import SelfCrossing
 
-                self.crossing = SelfCrossing(self.model)
-            found = self.crossing.crossing(candidate[3].vertices[0])
+                self._crossing = SelfCrossing(self.model)
+            found = self._crossing.crossing(candidate[3].vertices[0])
             if found is None:
                 return candidate, crossed
             crossed = crossed or found
@@ -259,7 +259,7 @@ class RingWear:
         if len(free) == 0:
             return None
         M = _tied(free, links)                                             # (free angles, unknowns)
-        omega, pivot = self._angular_velocities(angles, posed, free)
+        omega, pivot = angular_velocities(self.model, self.frames, angles, posed, free)
         v = posed.vertices[0].astype(np.float64)
         x, y = pts[near], v[nearest[near]]
         n = vertex_normals(v, self.model.faces)[nearest[near]]
@@ -318,18 +318,6 @@ class RingWear:
                     reach.append(np.deg2rad(MAX_CHANGE_DEG[kind]))
         return np.array(free), np.array(sigma), np.array(reach)
 
-    def _angular_velocities(self, angles, posed, free):
-        """World angular velocity (n, 3) of each free angle and the posed joint (n, 3) it turns about (as in
-        model/gesture_fit: R_local = F Rz(bend) Ry(spread) Rx(twist) F^T on the parent's world rotation)."""
-        joints, axes = np.divmod(free, 3)
-        W = posed.world_rotations[0].astype(np.float64)
-        omega = np.empty((len(free), 3))
-        for i, (j, a) in enumerate(zip(joints, axes)):
-            _, sp, bd = angles[j]
-            before = angles_to_matrix([0.0, sp, bd] if a == 0 else [0.0, 0.0, bd if a == 1 else 0.0])
-            omega[i] = W[self.model.parents[j]] @ self.frames[j] @ before[:, a]
-        return omega, posed.joints[0, joints].astype(np.float64)
-
 
 def _tied(free: np.ndarray, links: frozenset) -> np.ndarray:
     """(n, k) 0/1: which unknown each free angle follows; the spread angles of linked fingers share one."""
@@ -363,13 +351,6 @@ def _signed_depths(solid: Solid, tree: cKDTree, v: np.ndarray, normals: np.ndarr
     return signed, nearest
 
 
-def _subtree(parents: np.ndarray) -> np.ndarray:
-    """(16, 16) D[j, k] = 1 when joint k is joint j or one of its ancestors."""
-    from darthand.model.gesture_fit import subtree_mask
-
-    return subtree_mask(parents)
-
-
 # ------------------------------------------------------------------------------------------------ for the renderer
 
 
@@ -391,8 +372,6 @@ def wear_ring(model: HandModel, acc, key, pose: np.ndarray, betas=None) -> tuple
     """(the pose the frame shows (48,), WornRing) of a rigid ring `acc` (accessories.loader.Accessory, fitted to
     the hand of `betas`; `key` names that fit) worn in `pose` (48,) on `model`; (pose, None) for a ring without
     its local frame (rest_transform) or off a digit. The RingWear of each (model, fit) is set up once and kept."""
-    from darthand.model.layout import JOINT_NAMES
-
     if acc.rest_transform is None or acc.parent_joint is None or not any(
             acc.parent_joint in chain for chain in FINGER_JOINTS.values()):
         return pose, None
