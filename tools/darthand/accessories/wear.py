@@ -33,7 +33,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import lsq_linear
 from scipy.spatial import cKDTree
 
 from darthand.accessories.attach import to_local
@@ -51,6 +50,7 @@ TARGET = 0.0004           # m: deeper than this after sliding, the digits make r
 CLEARANCE = 0.0003        # m: how far outside the hand the room made puts the ring's points
 ROUNDS = 5
 MAX_RETRIES = 2           # times a turn that crossed two digits is tried again (the pair linked, or one held)
+CHECKED = 2               # turned rounds tested for crossing digits per try (each test costs about 20 ms)
 SAMPLE_SPACING = 0.001    # m: the ring's sample points, one per cell of this size (at first)
 MAX_SAMPLES = 900         # ... grown until at most this many remain
 NEAREST = 4               # hand vertices whose tangent planes bound a point's depth
@@ -185,10 +185,10 @@ class RingWear:
 
     def _choose(self, unturned: tuple, turned: list) -> tuple[tuple, str | None]:
         """The shallowest of the turned rounds that beats the unturned pose by more than TIE and does not make two
-        digits pass through each other (model/self_crossing), else the unturned pose; with the pair ('index-middle')
-        the shallowest such round crossed, if it crossed."""
+        digits pass through each other (model/self_crossing; the CHECKED shallowest are tested), else the unturned
+        pose; with the pair ('index-middle') the shallowest such round crossed, if it crossed."""
         crossed = None
-        for candidate in sorted(turned, key=lambda c: c[0]):
+        for candidate in sorted(turned, key=lambda c: c[0])[:CHECKED]:
             if candidate[0] >= unturned[0] - TIE:
                 break
             if self._crossing is None:
@@ -217,12 +217,13 @@ class RingWear:
         base = posed.transforms[0, self.joint].astype(np.float64) @ self.rest
         return posed, (self.hand.solid(v), cKDTree(v), v, vertex_normals(v, self.model.faces), base)
 
-    def _contact(self, hand, s: float):
+    def _contact(self, hand, s: float, outside: bool = True):
         """(depth (m), (sample points (K, 3), signed depths (K,), nearest hand vertices (K,))) of the ring slid by
-        `s` against a posed hand (from `_posed`)."""
+        `s` against a posed hand (from `_posed`); without `outside`, the points outside the hand are left at
+        -inf (the depth alone is wanted)."""
         solid, tree, v, normals, base = hand
         pts = self.samples @ base[:3, :3].T + (base[:3, :3] @ [s, 0.0, 0.0] + base[:3, 3])
-        signed, nearest = _signed_depths(solid, tree, v, normals, pts)
+        signed, nearest = _signed_depths(solid, tree, v, normals, pts, outside)
         return max(float(signed.max(initial=0.0)), 0.0), (pts, signed, nearest)
 
     def _at(self, pose: np.ndarray, s: float):
@@ -235,12 +236,13 @@ class RingWear:
         posed, hand = self._posed(pose)
         best = None
         for s in SLIDES[np.argsort(np.abs(SLIDES), kind="stable")]:
-            depth, contact = self._contact(hand, float(s))
+            depth = self._contact(hand, float(s), outside=False)[0]
             if best is None or depth < best[1] - TIE:
-                best = (float(s), depth, contact)
+                best = (float(s), depth)
             if depth <= TARGET:
                 break
-        return posed, best
+        s, depth = best
+        return posed, (s, depth, self._contact(hand, s)[1] if depth > TARGET else None)
 
     # ------------------------------------------------------------------------------------------- make room
     def _room(self, angles: np.ndarray, start: np.ndarray, s: float, posed, contact, links: frozenset = frozenset(),
@@ -285,7 +287,7 @@ class RingWear:
         for _ in range(4):
             A = np.concatenate([grad[active] / SCALE, np.diag(1.0 / sig)])
             b = np.concatenate([-(depth[active] + CLEARANCE) / SCALE, -(x0 - home) / sig])
-            step = lsq_linear(A, b, bounds=(lo, hi + 1e-12)).x
+            step = box_least_squares(A, b, lo, hi)
             more = active | (depth + grad @ step > -CLEARANCE)
             if (more == active).all():
                 break
@@ -319,6 +321,25 @@ class RingWear:
         return np.array(free), np.array(sigma), np.array(reach)
 
 
+def box_least_squares(A: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """argmin |A x - b| with lo <= x <= hi, for a handful of unknowns (scipy's lsq_linear costs milliseconds a
+    call here): solve for the free unknowns, hold those that leave their bounds at the bound, solve again."""
+    n = A.shape[1]
+    x = np.zeros(n)
+    free = np.ones(n, bool)
+    for _ in range(n + 1):
+        if not free.any():
+            break
+        rhs = b - A[:, ~free] @ x[~free]
+        x[free] = np.linalg.lstsq(A[:, free], rhs, rcond=None)[0]
+        out = free & ((x < lo) | (x > hi))
+        if not out.any():
+            break
+        x = np.clip(x, lo, hi)
+        free &= ~out
+    return np.clip(x, lo, hi)
+
+
 def _tied(free: np.ndarray, links: frozenset) -> np.ndarray:
     """(n, k) 0/1: which unknown each free angle follows; the spread angles of linked fingers share one."""
     root_digit = {FINGER_JOINTS[f][0]: d for d, f in enumerate(FINGERS)}
@@ -334,20 +355,24 @@ def _tied(free: np.ndarray, links: frozenset) -> np.ndarray:
     return M
 
 
-def _signed_depths(solid: Solid, tree: cKDTree, v: np.ndarray, normals: np.ndarray, pts: np.ndarray):
+def _signed_depths(solid: Solid, tree: cKDTree, v: np.ndarray, normals: np.ndarray, pts: np.ndarray,
+                   outside: bool = True):
     """(signed depth (K,) m, nearest hand vertex (K,)) of points (K, 3) against the posed hand (v, normals):
     inside the hand (by Embree) the depth below the tangent planes of the NEAREST hand vertices, the shallowest
-    positive one; outside, minus the distance above the nearest vertex's tangent plane (at most 0)."""
-    _, near = tree.query(pts, k=NEAREST)
-    d = np.einsum("kmd,kmd->km", v[near] - pts[:, None], normals[near])
-    signed = np.minimum(d[:, 0], 0.0)
-    nearest = near[:, 0].copy()
+    positive one; outside, minus the distance above the nearest vertex's tangent plane (at most 0), or -inf (and
+    vertex -1) without `outside`."""
+    signed = np.full(len(pts), -np.inf)
+    nearest = np.full(len(pts), -1)
+    if outside:
+        _, nearest = tree.query(pts)
+        signed = np.minimum(np.einsum("kd,kd->k", v[nearest] - pts, normals[nearest]), 0.0)
     ids = solid.inside(pts)
     if len(ids):
-        di = d[ids]
-        pick = np.argmin(np.where(di > 0, di, np.inf), axis=1)
-        signed[ids] = np.maximum(di[np.arange(len(ids)), pick], 0.0)
-        nearest[ids] = near[ids, pick]
+        _, near = tree.query(pts[ids], k=NEAREST)
+        d = np.einsum("kmd,kmd->km", v[near] - pts[ids][:, None], normals[near])
+        pick = np.argmin(np.where(d > 0, d, np.inf), axis=1)
+        signed[ids] = np.maximum(d[np.arange(len(ids)), pick], 0.0)
+        nearest[ids] = near[np.arange(len(ids)), pick]
     return signed, nearest
 
 
