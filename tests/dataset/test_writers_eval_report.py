@@ -4,6 +4,7 @@ WebDataset shards read by the `webdataset` package, `darthand eval` on cases wit
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -123,6 +124,22 @@ def read_jpeg(path):
 
     buf = oiio.ImageBuf(str(path))
     return buf.get_pixels(oiio.UINT8)
+
+
+def test_freihand_of_a_dataset_without_the_model_format_names_the_missing_record(small_dataset, tmp_path, capsys):
+    """A dataset.json written before the model's format was recorded: the export cannot tell whether the hand is
+    MANO and says which record is missing (exit 2, nothing written)."""
+    out, _ = small_dataset
+    old = tmp_path / "old"
+    shutil.copytree(out, old)
+    doc = json.loads((old / "dataset.json").read_text())
+    for info in doc["models"].values():
+        info.pop("format", None)
+    (old / "dataset.json").write_text(json.dumps(doc))
+    assert main(["dataset", "export", str(old), "--format", "freihand", "--out", str(tmp_path / "no")]) == 2
+    err = capsys.readouterr().err
+    assert "models.right does not record the model's format" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "no").exists()
 
 
 def test_freihand_of_the_open_hand_is_refused_unless_asked(small_dataset, sources, tmp_path, capsys):

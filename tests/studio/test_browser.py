@@ -18,6 +18,7 @@ from __future__ import annotations
 import base64
 import fcntl
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -99,7 +100,7 @@ def session(tmp_path_factory):
         chromium()
     except BrowserUnavailable as e:
         pytest.skip(str(e))
-    shared = tmp_path_factory.getbasetemp().parent / "studio_browser"
+    shared = run_folder(tmp_path_factory) / "studio_browser"
     shared.mkdir(exist_ok=True)
     with open(shared / "lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
@@ -110,6 +111,13 @@ def session(tmp_path_factory):
     assert "error" not in doc["report"], doc["report"].get("error")
     return {"build": Path(doc["build"]), "shots": Path(doc["shots"]), "report": doc["report"],
             "results": doc["report"]["results"], "server": tuple(doc["server"])}
+
+
+def run_folder(tmp_path_factory) -> Path:
+    """This run's temporary folder, shared by its pytest-xdist workers: the workers' base folders are children of
+    it; without xdist it is the base folder itself (its parent holds every earlier run's folders)."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
 
 
 def _run_session(folder: Path) -> dict:

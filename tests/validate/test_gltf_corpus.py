@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import RING_ID, TEXTURE_IDS, write_png
+from package_parts import RING_ID, TEXTURE_IDS, write_png
 from corpus import accessor, copy_package, edit_glb, edit_gltf, hand_attr, reparent, ring_node
 
 from darthand.validate.run import validate_paths

@@ -8,7 +8,7 @@ import zlib
 
 import numpy as np
 import pytest
-from conftest import write_png
+from package_parts import write_png
 
 from darthand.model.layout import JOINT_NAMES, MANO_PARENTS
 from darthand.validate.asset import Limits, Mesh, Skeleton, Skin

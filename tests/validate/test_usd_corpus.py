@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import RING_ID, TEXTURE_IDS, write_png
+from package_parts import RING_ID, TEXTURE_IDS, write_png
 from corpus import (ALBEDO, GEOM, HAND, ROUGH, SKEL, add_fin, add_variant, array, change, copy_package, edit,
                     edit_faces, remove_property, scale_matrix, set_array, set_payload)
 from pxr import Sdf

@@ -120,12 +120,16 @@ def check_mano(models: dict, where, allow_non_mano: bool) -> bool:
     if all(kinds.values()) and kinds:
         return True
     if not allow_non_mano:
-        other = next((models[s].get("source", s) for s in sorted(kinds, reverse=True)  # right first
-                      if not kinds[s]), "unknown")
-        raise InputError(f"{where}: FreiHAND export: the hand ({other}) is not a MANO model, so training_mano.json's "
-                         f"shape and pose values would pose a different hand in MANO; render from MANO "
-                         f"(make assets MANO=MANO_RIGHT.pkl), or --allow-non-mano to write them anyway (shape "
-                         f"slots 0, said in README.md)")
+        side = next((s for s in sorted(kinds, reverse=True) if not kinds[s]), None)      # right first
+        info = models.get(side, {})
+        if side is not None and "format" not in info:
+            raise InputError(f"{where}: FreiHAND export: models.{side} does not record the model's format (a dataset "
+                             f"rendered before darthand recorded it), so whether it is MANO is unknown; render it "
+                             f"again, or --allow-non-mano to write it with shape slots 0 (said in README.md)")
+        raise InputError(f"{where}: FreiHAND export: the hand ({info.get('source', side or 'unknown')}) is not a MANO "
+                         f"model, so training_mano.json's shape and pose values would pose a different hand in MANO; "
+                         f"render from MANO (make assets MANO=MANO_RIGHT.pkl), or --allow-non-mano to write them "
+                         f"anyway (shape slots 0, said in README.md)")
     return False
 
 
