@@ -198,3 +198,22 @@ def test_frames_with_a_worn_ring_are_labelled_with_the_pose_they_show(hand):
                                                    item.vertices)).max() < 1e-5
     p2, none = wear_ring(hand, acc, acc.id, pose_of(hand), None)
     assert none is not None and none.record["turned_deg"] == {} and np.array_equal(p2, pose_of(hand))
+
+
+def test_sweep_measures_worn_rings_together_as_alone(hand):
+    """The sweep measures the rings whose pose was not turned against one shared hand and each turned one against
+    its own: the figures are those of each ring measured alone, bit for bit, and a turned pose is recorded."""
+    from darthand.accessories.sweep import measure
+
+    spec = cat.load_spec()
+    built = [generate(hand, {**e, "t": 0.5}, SEED) for e in cat.entries(spec, ["ring_01_court_gold",
+                                                                            "ring_02_flat_silver",
+                                                                            "watch_01_round_leather"])]
+    poses = np.stack([pose_of(hand), pose_of(hand, ring1=(0, 4, 45), pinky1=(0, -18, 50), pinky2=(0, 0, 60)),
+                      pose_of(hand, index1=(0, 0, 88), index2=(0, 0, 40))])
+    together = measure(hand, built, poses)
+    assert together["ring_01_court_gold"]["turned"][1] > 0 and together["ring_02_flat_silver"]["slide"][2] > 0
+    for b in built:
+        alone = measure(hand, [b], poses)[b.id]
+        for key, value in alone.items():
+            assert np.array_equal(together[b.id][key], value), (b.id, key)

@@ -30,7 +30,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -165,7 +165,7 @@ def measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool 
     rigid = [i for i in items if isinstance(i, RigidProbe)]
     gloves = [i for i in items if isinstance(i, GloveProbe)]
     rings = [i for i in rigid if worn and i.part >= 0]
-    fixed = [i for i in rigid if i not in rings]
+    fixed = [i for i in rigid if not (worn and i.part >= 0)]
     hand = HandParts(model)
     axes = _BoneAxes(model)
     solids = {i.id: Solid(i.vertices, i.faces) for i in rigid}
@@ -175,18 +175,20 @@ def measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool 
     for s in range(0, len(poses), CHUNK):
         posed = forward(model, poses[s:s + CHUNK])
         B = len(posed.vertices)
+        views = {i.id: posed for i in fixed}            # the posed batch each item is measured on
         placed = {i.id: posed.transforms[:, i.joint] @ i.rest for i in fixed}
-        _rigid_at(hand, axes, solids, fixed, posed, placed, out, s)
+        turned = {}
         for i in rings:
             w = [wear[i.id].worn(p) for p in poses[s:s + CHUNK]]
-            posed_i = forward(model, np.stack([x.pose for x in w]))
-            placed_i = {i.id: posed_i.transforms[:, i.joint] @ i.rest @ np.stack([x.local_slide() for x in w])}
-            _rigid_at(hand, axes, solids, [i], posed_i, placed_i, out, s)
-            out[i.id]["slide"][s:s + B] = [x.slide for x in w]
-            out[i.id]["turned"][s:s + B] = [max((np.abs(a).max() for a in x.changed.values()), default=0.0)
-                                            for x in w]
-            out[i.id]["crossing"][s:s + B] = [x.changed != {} and crossing.crossing(v) is not None
-                                              for x, v in zip(w, posed_i.vertices)]
+            turned[i.id] = np.array([bool(x.changed) for x in w])
+            views[i.id] = _with_turned(model, posed, w, turned[i.id])
+            placed[i.id] = views[i.id].transforms[:, i.joint] @ i.rest @ np.stack([x.local_slide() for x in w])
+            fig = out[i.id]
+            fig["slide"][s:s + B] = [x.slide for x in w]
+            fig["turned"][s:s + B] = [max((np.abs(a).max() for a in x.changed.values()), default=0.0) for x in w]
+            fig["crossing"][s:s + B] = [t and crossing.crossing(v) is not None
+                                        for t, v in zip(turned[i.id], views[i.id].vertices)]
+        _rigid_at(hand, axes, solids, rigid, views, placed, turned, out, s)
         if gloves:
             worn_gloves = {g.id: pose_skinned(g.vertices, g.weights, g.posedirs, posed.rotations, posed.transforms)
                            for g in gloves}
@@ -195,22 +197,42 @@ def measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool 
     return out
 
 
-def _rigid_at(hand: "HandParts", axes: "_BoneAxes", solids: dict, rigid: list, posed, placed: dict, out: dict,
-              s: int) -> None:
-    """Figures of rigid probes placed (`placed`: id -> (B, 4, 4)) on a posed batch, written at poses s.. of `out`."""
+def _with_turned(model: HandModel, posed, worn: list, turned: np.ndarray):
+    """The posed batch with the poses where a ring turned digits (`turned` (B,) bool) posed as worn."""
+    if not turned.any():
+        return posed
+    again = forward(model, np.stack([w.pose for w, t in zip(worn, turned) if t]))
+    arrays = {}
+    for name in ("vertices", "joints", "keypoints", "rotations", "transforms"):
+        a = getattr(posed, name).copy()
+        a[turned] = getattr(again, name)
+        arrays[name] = a
+    return replace(posed, **arrays)
+
+
+def _rigid_at(hand: "HandParts", axes: "_BoneAxes", solids: dict, rigid: list, views: dict, placed: dict,
+              turned: dict, out: dict, s: int) -> None:
+    """Figures of rigid probes placed (`placed`: id -> (B, 4, 4)) on their posed batches (`views`: id -> Posed),
+    written at poses s.. of `out`. Per pose, the items on the shared hand are measured against one closed surface;
+    a ring whose wear turned the hand (`turned`: id -> (B,) bool) against its own."""
     if not rigid:
         return
-    B = len(posed.vertices)
+    B = len(placed[rigid[0].id])
     for i in rigid:
-        fig = out[i.id]
-        fit, depth = hand_inside_rigid(solids[i.id], to_local(placed[i.id], posed.vertices), hand.own_vertices(i.part))
+        fig, view = out[i.id], views[i.id]
+        fit, depth = hand_inside_rigid(solids[i.id], to_local(placed[i.id], view.vertices), hand.own_vertices(i.part))
         fig["fit"][s:s + B], fig["depth"][s:s + B] = fit, depth
-        fig["drift"] = max(fig["drift"], axes.drift(i, placed[i.id], posed))
+        fig["drift"] = max(fig["drift"], axes.drift(i, placed[i.id], view))
     for p in range(B):
-        for item_id, (fit, depth) in rigid_inside_hand(hand, rigid, placed, posed.vertices[p], p).items():
-            fig = out[item_id]
-            fig["fit"][s + p] = max(fig["fit"][s + p], fit)
-            fig["depth"][s + p] = max(fig["depth"][s + p], depth, fit)
+        alone = [i for i in rigid if i.id in turned and turned[i.id][p]]
+        shared = [i for i in rigid if not (i.id in turned and turned[i.id][p])]
+        groups = ([(shared, views[shared[0].id].vertices[p])] if shared else []) + \
+            [([i], views[i.id].vertices[p]) for i in alone]
+        for items, vertices in groups:
+            for item_id, (fit, depth) in rigid_inside_hand(hand, items, placed, vertices, p).items():
+                fig = out[item_id]
+                fig["fit"][s + p] = max(fig["fit"][s + p], fit)
+                fig["depth"][s + p] = max(fig["depth"][s + p], depth, fit)
 
 
 class HandParts:
