@@ -103,7 +103,8 @@ TABLE_COLUMNS = {"rigid": {"fit": "fit_poses", "contact": "poses"},
 
 def penetration_table(entries: list[dict]) -> dict:
     """Per accessory type, over the sweep's poses (mm): each column's largest value and its item, and the worst
-    item's 99th percentile over the poses and that item."""
+    item's 99th percentile over the poses and that item; for rings, `worn`: how they were worn (`worn_summary`)
+    summed over the items -- poses turned, the largest turn (degrees), turned poses crossing, the slide range (mm)."""
     table = {}
     for kind in sorted({e["type"] for e in entries}):
         pens = {e["id"]: e["max_penetration_mm"] for e in entries if e["type"] == kind}
