@@ -104,7 +104,7 @@ TABLE_COLUMNS = {"rigid": {"fit": "fit_poses", "contact": "poses"},
 def penetration_table(entries: list[dict]) -> dict:
     """Per accessory type, over the sweep's poses (mm): each column's largest value and its item, and the worst
     item's 99th percentile over the poses and that item; for rings, `worn`: how they were worn (`worn_summary`)
-    summed over the items -- poses turned, the largest turn (degrees), turned poses crossing, the slide range (mm)."""
+    summed over the items -- poses turned, the largest turn (degrees), the slide range (mm)."""
     table = {}
     for kind in sorted({e["type"] for e in entries}):
         pens = {e["id"]: e["max_penetration_mm"] for e in entries if e["type"] == kind}
@@ -120,7 +120,6 @@ def penetration_table(entries: list[dict]) -> dict:
         if worn:
             row["worn"] = {"poses": sum(w["poses_turned"] for w in worn),
                            "turned_max_deg": max(w["turned_max_deg"] for w in worn),
-                           "turned_crossing": sum(w["turned_crossing"] for w in worn),
                            "slide_mm": [min(w["slide_mm"][0] for w in worn), max(w["slide_mm"][1] for w in worn)]}
         table[kind] = row
     return table
@@ -189,15 +188,14 @@ def write_accessory(out_dir: Path, b: Built, fig: dict, pose_names: list[str], n
 def worn_summary(fig: dict, n_named: int) -> dict:
     """How a ring was worn over the sweep (accessories/wear), rest pose left out: its slide along the bone (mm,
     least and most), how many poses turned digits aside to make room for it (of them, how many in the named
-    gestures, and how many where the turn made two digits cross), and the turn's median and largest angle (deg)."""
-    slide, turned, crossing = (fig[k][1:] for k in ("slide", "turned", "crossing"))
+    gestures), and the turn's median and largest angle (deg)."""
+    slide, turned = (fig[k][1:] for k in ("slide", "turned"))
     moved = turned[turned > 0]
     return {"slide_mm": [round(float(slide.min(initial=0.0)) * 1000.0, 3),
                          round(float(slide.max(initial=0.0)) * 1000.0, 3)],
             "poses_turned": int(len(moved)), "gestures_turned": int((turned[:n_named - 1] > 0).sum()),
             "turned_median_deg": round(float(np.median(moved)), 3) if len(moved) else 0.0,
-            "turned_max_deg": round(float(moved.max(initial=0.0)), 3),
-            "turned_crossing": int(crossing.sum())}
+            "turned_max_deg": round(float(moved.max(initial=0.0)), 3)}
 
 
 def _style(entry: dict) -> str:

@@ -12,9 +12,9 @@ Figures per accessory and pose (metres):
           surface;
   through gloves: how far the hand reaches beyond the glove's outer surface;
   drift   rigid items: the largest change of the distance from the accessory's centre to its bone axis;
-  slide, turned, crossing  rings worn per pose (`worn`, accessories/wear): how far the ring slid along its bone
-          (m), the largest change of a joint angle made to give it room (degrees), and 1 where that change made two
-          digits pass through each other (model/self_crossing, tested on the turned poses only).
+  slide, turned  rings worn per pose (`worn`, accessories/wear): how far the ring slid along its bone (m) and the
+          largest change of a joint angle made to give it room (degrees; wear never takes a turn that makes two
+          digits pass through each other, by model/self_crossing's test).
 
 With `worn` (the default), a ring is measured as a dataset frame shows it: in the pose accessories/wear gives
 (digits turned aside where the ring needs room) and slid along its bone; without, rigid on its bone at its fitted
@@ -33,6 +33,7 @@ import os
 from dataclasses import dataclass, replace
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from darthand.accessories import catalog as cat
 from darthand.accessories.attach import apply, axis_distance, pose_skinned, to_local
@@ -43,7 +44,6 @@ from darthand.model.anatomy import bone_ends, rest_joints, sample_poses
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import FINGER_JOINTS, MANO_PARENTS
-from darthand.model.self_crossing import SelfCrossing
 from darthand.model.topology import face_joints, vertex_normals
 from darthand.processes import deaf_to_ctrl_c, init_worker
 
@@ -63,6 +63,8 @@ def sweep_poses(model: HandModel, seed: int, n_sampled: int, gestures: list[str]
     sampled = sample_poses(model, n_sampled, cat.item_rng(seed, stream)) if n_sampled else np.zeros((0, 48))
     kept = np.arange(n_sampled)
     if skip_crossing and n_sampled:
+        from darthand.model.self_crossing import SelfCrossing
+
         kept = np.flatnonzero([c is None for c in SelfCrossing(model).crossing_poses(sampled)])
     names = ["rest"] + list(g.names) + [f"sample_{i:03d}" for i in kept]
     return names, np.concatenate([np.zeros((1, 48)), g.poses, sampled[kept]])
@@ -128,9 +130,8 @@ def digit_of(joint: int) -> int:
 
 
 def measure(model: HandModel, built, poses: np.ndarray, workers: int = 1, worn: bool = True) -> dict:
-    """Per accessory id: {"fit", "depth", "through", "slide", "turned", "crossing"} (P,) arrays (m; turned in
-    degrees; crossing 0/1) and "drift" (m) over `poses` (P, 48); rings `worn` per pose (see the module
-    docstring)."""
+    """Per accessory id: {"fit", "depth", "through", "slide", "turned"} (P,) arrays (m; turned in degrees) and
+    "drift" (m) over `poses` (P, 48); rings `worn` per pose (see the module docstring)."""
     items = probes(built)
     workers = max(1, min(int(workers), len(poses) // MIN_POSES_PER_WORKER))
     if workers == 1:
@@ -156,11 +157,17 @@ def _init_worker(parent: int) -> None:
         os.environ.setdefault(name, "1")
 
 
-PER_POSE = ("fit", "depth", "through", "slide", "turned", "crossing")
+PER_POSE = ("fit", "depth", "through", "slide", "turned")
 
 
 def measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool = True) -> dict:
-    """`measure` in this process, on probes."""
+    """`measure` in this process, on probes, with single-threaded BLAS (its products are small, a pose at a time
+    for worn rings, and threads only wait on each other, more so beside another worker)."""
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _measure_probes(model, items, poses, worn)
+
+
+def _measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool) -> dict:
     out = {i.id: {**{key: np.zeros(len(poses)) for key in PER_POSE}, "drift": 0.0} for i in items}
     rigid = [i for i in items if isinstance(i, RigidProbe)]
     gloves = [i for i in items if isinstance(i, GloveProbe)]
@@ -170,7 +177,6 @@ def measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool 
     axes = _BoneAxes(model)
     solids = {i.id: Solid(i.vertices, i.faces) for i in rigid}
     wear = {i.id: RingWear(model, i.joint, i.rest, i.vertices) for i in rings}
-    crossing = SelfCrossing(model) if rings else None
     near = neighbourhood(model.faces, model.num_vertices, rings=3) if gloves else None
     for s in range(0, len(poses), CHUNK):
         posed = forward(model, poses[s:s + CHUNK])
@@ -186,8 +192,6 @@ def measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool 
             fig = out[i.id]
             fig["slide"][s:s + B] = [x.slide for x in w]
             fig["turned"][s:s + B] = [max((np.abs(a).max() for a in x.changed.values()), default=0.0) for x in w]
-            fig["crossing"][s:s + B] = [t and crossing.crossing(v) is not None
-                                        for t, v in zip(turned[i.id], views[i.id].vertices)]
         _rigid_at(hand, axes, solids, rigid, views, placed, turned, out, s)
         if gloves:
             worn_gloves = {g.id: pose_skinned(g.vertices, g.weights, g.posedirs, posed.rotations, posed.transforms)

@@ -53,17 +53,21 @@ def run(n_poses: int = 32) -> dict:
 
 def ring_wear_cpu(model, built, poses) -> dict:
     """CPU per pose of wearing each ring (accessories/wear: slide, and room made where needed), as a dataset frame
-    with a ring pays it: mean and largest over the rings and poses (ms), and the share of poses that turned digits."""
+    with a ring pays it (single-threaded BLAS, as the renderer runs): mean, p90 and largest over the rings and poses
+    (ms), and the share of poses that turned digits."""
+    from threadpoolctl import threadpool_limits
+
     from darthand.accessories.wear import RingWear
 
     times, turned = [], 0
-    for item in [i for i in probes(built) if getattr(i, "part", -1) >= 0]:
-        wear = RingWear(model, item.joint, item.rest, item.vertices)
-        for pose in poses:
-            c0 = time.process_time()
-            w = wear.worn(pose)
-            times.append(time.process_time() - c0)
-            turned += bool(w.changed)
+    with threadpool_limits(limits=1, user_api="blas"):
+        for item in [i for i in probes(built) if getattr(i, "part", -1) >= 0]:
+            wear = RingWear(model, item.joint, item.rest, item.vertices)
+            for pose in poses:
+                c0 = time.process_time()
+                w = wear.worn(pose)
+                times.append(time.process_time() - c0)
+                turned += bool(w.changed)
     t = np.array(times) * 1000.0
     return {"ring_wear_cpu_ms_per_frame": round(float(t.mean()), 2) if len(t) else None,
             "ring_wear_cpu_ms_max": round(float(t.max()), 2) if len(t) else None,
