@@ -103,8 +103,11 @@ def test_npz_container_round_trip(built):
 @pytest.mark.slow
 def test_build_is_deterministic_and_order_independent(hand, built, tmp_path):
     out, _ = built
+    # Rings placed as the fixture's build places them (the same training poses), swept over fewer poses: an item
+    # the fixture did not regrow is not regrown here either, and is the same, bit for bit, whatever was built with
+    # it and in which order.
     other = build_accessories(hand, cat.load_spec(), tmp_path, ids=list(reversed(SUBSET[:2])), n_sampled=0,
-                              gestures=[], sheet=False, refit=False)
+                              gestures=["fist"], sheet=False, placement_poses=2)
     for a in other["accessories"]:
         for key in ("npz", "base_color", "metallic_roughness"):
             if key == "npz":

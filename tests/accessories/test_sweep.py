@@ -78,17 +78,18 @@ def digit_faces(model, digit: int) -> np.ndarray:
 
 
 def test_ring_figures_match_an_independent_measure():
-    """A ring on the open hand in the rest pose, a gesture and sampled poses that press skin into it: the sweep's
-    fit figure (against the digit) is the deepest point inside, both ways, by ray parity and the brute-force
-    distance, within 0.02 mm; so is its depth figure (against the whole hand) in every one of those poses (the sweep
-    leaves out the samples where the hand crosses itself, where parity would count a point inside two fingers as
-    outside)."""
+    """A ring on the open hand in the rest pose, a gesture and sampled poses that press skin into it, rigid on its
+    bone: the sweep's fit figure (against the digit: the ring's inward-facing vertices) is the deepest point inside,
+    both ways, by ray parity and the brute-force distance, within 0.02 mm; so is its depth figure (against the whole
+    hand: every ring vertex) in every one of those poses (the sweep leaves out the samples where the hand crosses
+    itself, where parity would count a point inside two fingers as outside)."""
     model = open_hand()
     spec = cat.load_spec()
     entry = cat.entries(spec, ["ring_02_flat_silver"])[0]
     built = generate(model, {**entry, "t": 0.5}, int(spec["seed"]), clearance=0.0)   # tight: skin reaches it
     names, poses = sweep_poses(model, int(spec["seed"]), 40, gestures=["fist"])
-    figures = measure(model, [built], poses)[built.id]
+    figures = measure(model, [built], poses, worn=False)[built.id]
+    assert not figures["slide"].any() and not figures["turned"].any()
     chosen = [0, 1] + list(1 + np.argsort(-figures["fit"][1:])[:3]) + list(1 + np.argsort(-figures["depth"][1:])[:2])
     (item,) = probes([built])
     ring = trimesh.Trimesh(item.vertices, item.faces, process=False)
@@ -102,7 +103,7 @@ def test_ring_figures_match_an_independent_measure():
         own = np.unique(digit)
         fit = overlap(ring, apply(placed, item.inner), part, to_local(placed, hand[own]))
         whole = closed(hand, model.faces)
-        depth = overlap(ring, apply(placed, item.inner), whole, to_local(placed, hand))
+        depth = overlap(ring, apply(placed, item.vertices), whole, to_local(placed, hand))
         assert figures["fit"][p] == pytest.approx(fit, abs=2e-5), names[p]
         assert figures["depth"][p] == pytest.approx(depth, abs=2e-5), names[p]
 
@@ -138,10 +139,12 @@ def test_placement_prefers_the_usual_place_and_grows_the_bore_by_the_excess():
 
 @pytest.mark.slow
 def test_catalogue_rings_and_gloves_sit_within_a_millimetre_in_every_sampled_pose():
-    """The issue's figures: every ring of the catalogue, placed and sized by the stage on the open hand, cuts at
-    most 1 mm into its finger, and no hand vertex is more than 1 mm into a glove, over the rest pose, the gestures
-    and the poses sampled within the joint limits where the hand does not cross itself; the catalogue's table is
-    the largest of its items' figures, and says how many samples were left out."""
+    """The issue's figures: every ring of the catalogue, placed and sized by the stage on the open hand and worn
+    per pose as dataset frames show it, cuts at most 1 mm into its finger and at most 1 mm into any other part of
+    the hand (its neighbours, the palm), and no hand vertex is more than 1 mm into a glove, over the rest pose, the
+    gestures and the poses sampled within the joint limits where the hand does not cross itself; the catalogue's
+    table is the largest of its items' figures, and says how
+    many samples were left out."""
     from darthand.accessories.build import build_accessories
 
     model = open_hand()
@@ -153,7 +156,8 @@ def test_catalogue_rings_and_gloves_sit_within_a_millimetre_in_every_sampled_pos
     for a in catalog["accessories"]:
         pen = a["max_penetration_mm"]
         if a["type"] == "ring":
-            assert pen["fit_rest"] == 0.0 and pen["fit_poses"] <= 1.0, (a["id"], pen)
+            assert pen["fit_rest"] == 0.0 and pen["fit_poses"] <= 1.0 and pen["poses"] <= 1.0, (a["id"], pen)
+            assert a["worn"]["turned_max_deg"] <= 15.0 + 1e-6, a["worn"]
             assert 8.0 < a["fitted_size"]["inner_radius_mm"] < 13.5
         else:
             assert pen["rest"] == 0.0 and pen["poses"] <= 1.0 and pen["through_poses"] <= 1.0, (a["id"], pen)

@@ -103,7 +103,8 @@ TABLE_COLUMNS = {"rigid": {"fit": "fit_poses", "contact": "poses"},
 
 def penetration_table(entries: list[dict]) -> dict:
     """Per accessory type, over the sweep's poses (mm): each column's largest value and its item, and the worst
-    item's 99th percentile over the poses and that item."""
+    item's 99th percentile over the poses and that item; for rings, `worn`: how they were worn (`worn_summary`)
+    summed over the items -- poses turned, the largest turn (degrees), the slide range (mm)."""
     table = {}
     for kind in sorted({e["type"] for e in entries}):
         pens = {e["id"]: e["max_penetration_mm"] for e in entries if e["type"] == kind}
@@ -115,6 +116,11 @@ def penetration_table(entries: list[dict]) -> dict:
                 top, top99 = max(worst, key=worst.get), max(p99, key=p99.get)
                 row[column] = {"max": round(worst[top], 4), "item": top, "worst_p99": round(p99[top99], 4),
                                "worst_p99_item": top99}
+        worn = [e["worn"] for e in entries if e["type"] == kind and "worn" in e]
+        if worn:
+            row["worn"] = {"poses": sum(w["poses_turned"] for w in worn),
+                           "turned_max_deg": max(w["turned_max_deg"] for w in worn),
+                           "slide_mm": [min(w["slide_mm"][0] for w in worn), max(w["slide_mm"][1] for w in worn)]}
         table[kind] = row
     return table
 
@@ -169,6 +175,7 @@ def write_accessory(out_dir: Path, b: Built, fig: dict, pose_names: list[str], n
         entry["axis_distance_mm"] = round(b.fit.axis_distance * 1000.0, 4)
         entry["max_axis_drift_mm"] = float(fig["drift"] * 1000.0) if len(sweep) else None
         if b.entry["type"] == "ring":
+            entry["worn"] = worn_summary(fig, n_named)
             entry["finger"] = b.entry["finger"]
             entry["position_along_bone"] = float(b.entry.get("t", 0.5))
             p = b.figures.get("placement")
@@ -176,6 +183,19 @@ def write_accessory(out_dir: Path, b: Built, fig: dict, pose_names: list[str], n
                 entry["placement_worst_fit_mm"] = {f"{t:g}": round(w * 1000.0, 4) for t, w in
                                                    p.worst_by_position.items()}
     return entry
+
+
+def worn_summary(fig: dict, n_named: int) -> dict:
+    """How a ring was worn over the sweep (accessories/wear), rest pose left out: its slide along the bone (mm,
+    least and most), how many poses turned digits aside to make room for it (of them, how many in the named
+    gestures), and the turn's median and largest angle (deg)."""
+    slide, turned = (fig[k][1:] for k in ("slide", "turned"))
+    moved = turned[turned > 0]
+    return {"slide_mm": [round(float(slide.min(initial=0.0)) * 1000.0, 3),
+                         round(float(slide.max(initial=0.0)) * 1000.0, 3)],
+            "poses_turned": int(len(moved)), "gestures_turned": int((turned[:n_named - 1] > 0).sum()),
+            "turned_median_deg": round(float(np.median(moved)), 3) if len(moved) else 0.0,
+            "turned_max_deg": round(float(moved.max(initial=0.0)), 3)}
 
 
 def _style(entry: dict) -> str:

@@ -81,7 +81,7 @@ def _worst_fit(model: HandModel, candidates: list[tuple[dict, float]], seed: int
     for e, t in candidates:
         b = generate(model, {**e, "t": t}, seed)
         built.append(replace(b, entry={**b.entry, "id": f"{e['id']}@{t}"}))     # ids unique per candidate
-    fit = measure(model, built, poses, workers) if built else {}
+    fit = measure(model, built, poses, workers, worn=False) if built else {}
     out: dict[str, dict[float, float]] = {}
     for (e, t), b in zip(candidates, built):
         out.setdefault(e["id"], {})[t] = float(fit[b.id]["fit"].max())

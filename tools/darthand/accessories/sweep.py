@@ -6,10 +6,19 @@ Figures per accessory and pose (metres):
           accessory's inward-facing vertices inside the part's closed surface (a digit's skin capped where it meets
           the palm). A neighbouring finger or the palm pressed against a ring is contact, not fit: it counts in
           `depth` only.
-  depth   the same against the whole hand, so contact with any part of it counts (the larger of the two); for
-          gloves, how far the hand reaches beyond the glove's inner surface;
+  depth   the overlap with the whole hand, so contact with any part of it counts (the larger of the two): hand
+          vertices inside the accessory, and every accessory vertex inside the hand (a band's outside pressed into
+          a neighbouring finger as well as its bore); for gloves, how far the hand reaches beyond the glove's inner
+          surface;
   through gloves: how far the hand reaches beyond the glove's outer surface;
-  drift   rigid items: the largest change of the distance from the accessory's centre to its bone axis.
+  drift   rigid items: the largest change of the distance from the accessory's centre to its bone axis;
+  slide, turned  rings worn per pose (`worn`, accessories/wear): how far the ring slid along its bone (m) and the
+          largest change of a joint angle made to give it room (degrees; wear never takes a turn that makes two
+          digits pass through each other, by model/self_crossing's test).
+
+With `worn` (the default), a ring is measured as a dataset frame shows it: in the pose accessories/wear gives
+(digits turned aside where the ring needs room) and slid along its bone; without, rigid on its bone at its fitted
+place, as a package (USD, glTF) poses it.
 
 The sweep is split over poses: each worker process measures every accessory on its share of the poses (whole
 batches of `CHUNK` poses), and a pose's figures depend only on its batch, so the result is the same, bit for bit,
@@ -21,14 +30,16 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from darthand.accessories import catalog as cat
 from darthand.accessories.attach import apply, axis_distance, pose_skinned, to_local
 from darthand.accessories.collide import ClosedHand, Solid, glove_penetration, inward_vertices, neighbourhood
 from darthand.accessories.fit import WRIST_JOINT, wrist_axis
+from darthand.accessories.wear import RingWear
 from darthand.model.anatomy import bone_ends, rest_joints, sample_poses
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
@@ -62,15 +73,21 @@ def sweep_poses(model: HandModel, seed: int, n_sampled: int, gestures: list[str]
 @dataclass(frozen=True)
 class RigidProbe:
     """What the sweep needs of a rigid accessory: its joint and rest placement, its local-frame mesh, the
-    inward-facing vertices (local) and the hand part it is fitted to (a digit index, or -1 for the whole hand)."""
+    inward-facing vertices (indices into vertices) and the hand part it is fitted to (a digit index, or -1 for the
+    whole hand)."""
 
     id: str
     joint: int
     rest: np.ndarray
     vertices: np.ndarray
     faces: np.ndarray
-    inner: np.ndarray
+    inner_ids: np.ndarray
     part: int
+
+    @property
+    def inner(self) -> np.ndarray:
+        """(K, 3) the inward-facing vertices (local)."""
+        return self.vertices[self.inner_ids]
 
 
 @dataclass(frozen=True)
@@ -100,7 +117,7 @@ def probes(built) -> list:
                                   sk["source_vertex"][interior], sk["source_vertex"][m.faces[:, 0]]))
         else:
             out.append(RigidProbe(b.id, int(b.fit.joint), b.fit.rest, m.vertices, m.faces,
-                                  m.vertices[inward_vertices(m.vertices, m.normals)], digit_of(b.fit.joint)))
+                                  inward_vertices(m.vertices, m.normals), digit_of(b.fit.joint)))
     return out
 
 
@@ -112,12 +129,13 @@ def digit_of(joint: int) -> int:
     return -1
 
 
-def measure(model: HandModel, built, poses: np.ndarray, workers: int = 1) -> dict:
-    """Per accessory id: {"fit", "depth", "through"} (P,) arrays (m) and "drift" (m) over `poses` (P, 48)."""
+def measure(model: HandModel, built, poses: np.ndarray, workers: int = 1, worn: bool = True) -> dict:
+    """Per accessory id: {"fit", "depth", "through", "slide", "turned"} (P,) arrays (m; turned in degrees) and
+    "drift" (m) over `poses` (P, 48); rings `worn` per pose (see the module docstring)."""
     items = probes(built)
     workers = max(1, min(int(workers), len(poses) // MIN_POSES_PER_WORKER))
     if workers == 1:
-        return measure_probes(model, items, poses)
+        return measure_probes(model, items, poses, worn)
     # Shares in whole chunks: each pose is posed in the same batch as in one process, so figures agree to the bit.
     chunks = -(-len(poses) // CHUNK)
     bounds = np.minimum(np.linspace(0, chunks, workers + 1).astype(int) * CHUNK, len(poses))
@@ -126,11 +144,9 @@ def measure(model: HandModel, built, poses: np.ndarray, workers: int = 1) -> dic
                                 initargs=(os.getpid(),)) as pool:
         with deaf_to_ctrl_c():                  # map starts the workers; Ctrl-C is ours, even while they import
             shares = pool.map(measure_probes, [model] * workers, [items] * workers,
-                              [poses[a:b] for a, b in zip(bounds[:-1], bounds[1:])])
+                              [poses[a:b] for a, b in zip(bounds[:-1], bounds[1:])], [worn] * workers)
         parts = list(shares)
-    return {i.id: {"fit": np.concatenate([p[i.id]["fit"] for p in parts]),
-                   "depth": np.concatenate([p[i.id]["depth"] for p in parts]),
-                   "through": np.concatenate([p[i.id]["through"] for p in parts]),
+    return {i.id: {**{key: np.concatenate([p[i.id][key] for p in parts]) for key in PER_POSE},
                    "drift": max(p[i.id]["drift"] for p in parts)} for i in items}
 
 
@@ -141,37 +157,86 @@ def _init_worker(parent: int) -> None:
         os.environ.setdefault(name, "1")
 
 
-def measure_probes(model: HandModel, items: list, poses: np.ndarray) -> dict:
-    """`measure` in this process, on probes."""
-    out = {i.id: {"fit": np.zeros(len(poses)), "depth": np.zeros(len(poses)), "through": np.zeros(len(poses)),
-                  "drift": 0.0} for i in items}
+PER_POSE = ("fit", "depth", "through", "slide", "turned")
+
+
+def measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool = True) -> dict:
+    """`measure` in this process, on probes, with single-threaded BLAS (its products are small, a pose at a time
+    for worn rings, and threads only wait on each other, more so beside another worker)."""
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _measure_probes(model, items, poses, worn)
+
+
+def _measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool) -> dict:
+    out = {i.id: {**{key: np.zeros(len(poses)) for key in PER_POSE}, "drift": 0.0} for i in items}
     rigid = [i for i in items if isinstance(i, RigidProbe)]
     gloves = [i for i in items if isinstance(i, GloveProbe)]
+    rings = [i for i in rigid if worn and i.part >= 0]
+    fixed = [i for i in rigid if not (worn and i.part >= 0)]
     hand = HandParts(model)
     axes = _BoneAxes(model)
     solids = {i.id: Solid(i.vertices, i.faces) for i in rigid}
+    wear = {i.id: RingWear(model, i.joint, i.rest, i.vertices) for i in rings}
     near = neighbourhood(model.faces, model.num_vertices, rings=3) if gloves else None
     for s in range(0, len(poses), CHUNK):
         posed = forward(model, poses[s:s + CHUNK])
         B = len(posed.vertices)
-        placed = {i.id: posed.transforms[:, i.joint] @ i.rest for i in rigid}
-        for i in rigid:
+        views = {i.id: posed for i in fixed}            # the posed batch each item is measured on
+        placed = {i.id: posed.transforms[:, i.joint] @ i.rest for i in fixed}
+        turned = {}
+        for i in rings:
+            w = [wear[i.id].worn(p) for p in poses[s:s + CHUNK]]
+            turned[i.id] = np.array([bool(x.changed) for x in w])
+            views[i.id] = _with_turned(model, posed, w, turned[i.id])
+            placed[i.id] = views[i.id].transforms[:, i.joint] @ i.rest @ np.stack([x.local_slide() for x in w])
             fig = out[i.id]
-            fit, depth = hand_inside_rigid(solids[i.id], to_local(placed[i.id], posed.vertices),
-                                           hand.own_vertices(i.part))
-            fig["fit"][s:s + B], fig["depth"][s:s + B] = fit, depth
-            fig["drift"] = max(fig["drift"], axes.drift(i, placed[i.id], posed))
-        worn = {g.id: pose_skinned(g.vertices, g.weights, g.posedirs, posed.rotations, posed.transforms)
-                for g in gloves}
-        for p in range(B):
-            if rigid:
-                for item_id, (fit, depth) in rigid_inside_hand(hand, rigid, placed, posed.vertices[p], p).items():
-                    fig = out[item_id]
-                    fig["fit"][s + p] = max(fig["fit"][s + p], fit)
-                    fig["depth"][s + p] = max(fig["depth"][s + p], depth, fit)
-            if gloves:
-                _gloves_at(model, gloves, worn, posed.vertices[p], p, near, out, s + p)
+            fig["slide"][s:s + B] = [x.slide for x in w]
+            fig["turned"][s:s + B] = [max((np.abs(a).max() for a in x.changed.values()), default=0.0) for x in w]
+        _rigid_at(hand, axes, solids, rigid, views, placed, turned, out, s)
+        if gloves:
+            worn_gloves = {g.id: pose_skinned(g.vertices, g.weights, g.posedirs, posed.rotations, posed.transforms)
+                           for g in gloves}
+            for p in range(B):
+                _gloves_at(model, gloves, worn_gloves, posed.vertices[p], p, near, out, s + p)
     return out
+
+
+def _with_turned(model: HandModel, posed, worn: list, turned: np.ndarray):
+    """The posed batch with the poses where a ring turned digits (`turned` (B,) bool) posed as worn."""
+    if not turned.any():
+        return posed
+    again = forward(model, np.stack([w.pose for w, t in zip(worn, turned) if t]))
+    arrays = {}
+    for name in ("vertices", "joints", "keypoints", "rotations", "transforms"):
+        a = getattr(posed, name).copy()
+        a[turned] = getattr(again, name)
+        arrays[name] = a
+    return replace(posed, **arrays)
+
+
+def _rigid_at(hand: "HandParts", axes: "_BoneAxes", solids: dict, rigid: list, views: dict, placed: dict,
+              turned: dict, out: dict, s: int) -> None:
+    """Figures of rigid probes placed (`placed`: id -> (B, 4, 4)) on their posed batches (`views`: id -> Posed),
+    written at poses s.. of `out`. Per pose, the items on the shared hand are measured against one closed surface;
+    a ring whose wear turned the hand (`turned`: id -> (B,) bool) against its own."""
+    if not rigid:
+        return
+    B = len(placed[rigid[0].id])
+    for i in rigid:
+        fig, view = out[i.id], views[i.id]
+        fit, depth = hand_inside_rigid(solids[i.id], to_local(placed[i.id], view.vertices), hand.own_vertices(i.part))
+        fig["fit"][s:s + B], fig["depth"][s:s + B] = fit, depth
+        fig["drift"] = max(fig["drift"], axes.drift(i, placed[i.id], view))
+    for p in range(B):
+        alone = [i for i in rigid if i.id in turned and turned[i.id][p]]
+        shared = [i for i in rigid if not (i.id in turned and turned[i.id][p])]
+        groups = ([(shared, views[shared[0].id].vertices[p])] if shared else []) + \
+            [([i], views[i.id].vertices[p]) for i in alone]
+        for items, vertices in groups:
+            for item_id, (fit, depth) in rigid_inside_hand(hand, items, placed, vertices, p).items():
+                fig = out[item_id]
+                fig["fit"][s + p] = max(fig["fit"][s + p], fit)
+                fig["depth"][s + p] = max(fig["depth"][s + p], depth, fit)
 
 
 class HandParts:
@@ -225,27 +290,28 @@ def hand_inside_rigid(solid: Solid, local: np.ndarray, own: np.ndarray) -> tuple
 
 
 def rigid_inside_hand(hand: HandParts, rigid: list, placed: dict, vertices: np.ndarray, p: int) -> dict:
-    """{id: (fit, depth)} of the rigid accessories whose inward-facing vertices are inside the posed hand
-    (vertices (V, 3)): depth is measured to the whole hand's surface, fit to the surface of the part the accessory
-    is fitted to, counting only the vertices inside that part."""
-    pts = np.concatenate([apply(placed[i.id][p], i.inner) for i in rigid])
-    owner = np.repeat(np.arange(len(rigid)), [len(i.inner) for i in rigid])
+    """{id: (fit, depth)} of the rigid accessories with vertices inside the posed hand (vertices (V, 3)): depth is
+    the deepest of all their vertices below the whole hand's surface, fit that of their inward-facing vertices
+    inside the part they are fitted to, measured to that part's surface."""
+    pts = np.concatenate([apply(placed[i.id][p], i.vertices) for i in rigid])
+    owner = np.repeat(np.arange(len(rigid)), [len(i.vertices) for i in rigid])
+    inward = np.concatenate([np.isin(np.arange(len(i.vertices)), i.inner_ids) for i in rigid])
     whole = hand.whole.solid(vertices)
     inside = whole.inside(pts)
     out, digits = {}, {}
     for k in np.unique(owner[inside]):
         item = rigid[k]
-        mine = pts[inside[owner[inside] == k]]
-        depth = whole.deepest(mine)
+        ids = inside[owner[inside] == k]
+        depth = whole.deepest(pts[ids])
+        mine = pts[ids[inward[ids]]]
         part = hand.digit(item.part) if item.part >= 0 else None
         if part is None:
-            fit = depth
+            fit = whole.deepest(mine)
         else:
             if item.part not in digits:
                 digits[item.part] = part.solid(vertices)
             own = digits[item.part]
-            in_own = own.inside(mine)
-            fit = own.deepest(mine[in_own])
+            fit = own.deepest(mine[own.inside(mine)])
         out[item.id] = (float(fit), float(depth))
     return out
 

@@ -31,8 +31,8 @@ class SourceSpec:
         from darthand.render.api import open_source
 
         if not self.mirror:
-            return open_source(self.package, textures=self.textures, accessories=self.accessories,
-                               model=self.model)
+            return worn_rings(open_source(self.package, textures=self.textures, accessories=self.accessories,
+                                          model=self.model))
         from darthand.model.load import load_model
         from darthand.model.mirror import mirror_model
         from darthand.render.assets import HandAssets, default_catalogues
@@ -44,7 +44,16 @@ class SourceSpec:
             tex, acc = tex or found[0], acc or found[1]
         twin = HandAssets.load(mirror_model(load_model(str(path))), tex or None, acc or None)
         twin.source = f"{self.package} (mirrored)"
-        return twin
+        return worn_rings(twin)
+
+
+def worn_rings(source):
+    """The source with rings worn per pose (accessories/wear: slid along the bone, digits turned aside where the
+    ring needs room; the frame's labels follow the pose it shows) where it poses the hand itself (a model source);
+    a USD package poses its rings rigidly, as every package does."""
+    if hasattr(source, "worn_rings"):
+        source.worn_rings = True
+    return source
 
 
 def parse_sides(text) -> tuple[str, ...]:

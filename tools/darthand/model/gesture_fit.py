@@ -87,6 +87,23 @@ def freedom(authored: np.ndarray) -> np.ndarray:
     return sigma
 
 
+def angular_velocities(model: HandModel, frames: np.ndarray, angles: np.ndarray, posed,
+                       free: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World angular velocity (n, 3) of each angle `free` (indices into the flat (48,) angles (16, 3)) and the
+    posed joint (n, 3) it turns about, for the first pose of `posed` (forward's result at those angles).
+
+    R_local = F Rz(bend) Ry(spread) Rx(twist) F^T, composed onto the parent's world rotation W, so the twist
+    turns about W F Rz Ry e_x, the spread about W F Rz e_y and the bend about W F e_z."""
+    joints, axes = np.divmod(np.asarray(free), 3)
+    W = np.asarray(posed.world_rotations[0], np.float64)
+    omega = np.empty((len(joints), 3))
+    for i, (j, a) in enumerate(zip(joints, axes)):
+        _, s, b = angles[j]
+        before = angles_to_matrix([0.0, s, b] if a == 0 else [0.0, 0.0, b if a == 1 else 0.0])  # Rz Ry, Rz, I
+        omega[i] = W[model.parents[j]] @ frames[j] @ before[:, a]
+    return omega, np.asarray(posed.joints[0, joints], np.float64)
+
+
 def subtree_mask(parents: np.ndarray) -> np.ndarray:
     """(16, 16) D[j, k] = 1 when joint k is joint j or one of its ancestors (rotating k moves j's points)."""
     D = np.zeros((len(parents), len(parents)))
@@ -200,18 +217,8 @@ class GestureProblem:
         return r, J
 
     def angular_velocities(self, angles: np.ndarray, posed) -> tuple[np.ndarray, np.ndarray]:
-        """World angular velocity (n, 3) of each free angle and the posed joint (n, 3) it turns about.
-
-        R_local = F Rz(bend) Ry(spread) Rx(twist) F^T, composed onto the parent's world rotation W, so the twist
-        turns about W F Rz Ry e_x, the spread about W F Rz e_y and the bend about W F e_z."""
-        joints, axes = np.divmod(self.free, 3)
-        W = posed.world_rotations[0]
-        omega = np.empty((len(self.free), 3))
-        for i, (j, a) in enumerate(zip(joints, axes)):
-            _, s, b = angles[j]
-            before = angles_to_matrix([0.0, s, b] if a == 0 else [0.0, 0.0, b if a == 1 else 0.0])  # Rz Ry, Rz, I
-            omega[i] = W[self.model.parents[j]] @ self.frames[j] @ before[:, a]
-        return omega, posed.joints[0, joints]
+        """World angular velocity (n, 3) of each free angle and the posed joint (n, 3) it turns about."""
+        return angular_velocities(self.model, self.frames, angles, posed, self.free)
 
     def distance_gradient(self, v: np.ndarray, h, velocity, transforms: np.ndarray) -> np.ndarray:
         """(K, n) derivative of each hit's signed distance with respect to the free angles (transforms: the

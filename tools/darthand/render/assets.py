@@ -46,6 +46,7 @@ class HandAssets:
     _face_joints: dict = field(default_factory=dict, repr=False)    # also float32 glove arrays, ("f32", id)
     _refitter: object = field(default=None, repr=False)          # accessories.reshape.ShapeRefitter, made once
     _refits: tuple | None = field(default=None, repr=False)       # (shape key, {id: refitted Accessory})
+    worn_rings: bool = False     # rings worn per pose (accessories/wear), as dataset frames show them
 
     @classmethod
     def load(cls, model, textures=None, accessories=None) -> "HandAssets":
@@ -93,6 +94,11 @@ class HandAssets:
 
         pose_vec, gesture = resolve_pose(self.model, pose, cache=self._gestures)
         texture, accessory = self.resolve_texture(texture), self.resolve_accessory(accessory)
+        worn = None
+        if self.worn_rings and accessory != NONE and self.accessories[accessory].kind == "ring":
+            from darthand.accessories.wear import wear_ring
+
+            pose_vec, worn = wear_ring(self.model, *self.fitted_accessory(accessory, betas), pose_vec, betas)
         key = (pose_vec.tobytes(), None if betas is None else np.asarray(betas, np.float64).tobytes(), keypoint_order)
         if self._last is not None and self._last[0] == key:
             posed, hand_v, hand_n = self._last[1:]
@@ -113,11 +119,12 @@ class HandAssets:
         if accessory != NONE:
             if self._last_accessory is None or self._last_accessory[0] != (key, accessory):
                 acc, acc_key = self.fitted_accessory(accessory, betas)
-                self._last_accessory = ((key, accessory), self.posed_accessory(acc, posed, acc_key))
+                move = None if worn is None else worn.move
+                self._last_accessory = ((key, accessory), self.posed_accessory(acc, posed, acc_key, move))
             surfaces.append(self._last_accessory[1])
         surfaces.append(self.posed_cap(posed, betas, hand.material))      # last: surface indices 0 hand, 1 accessory
         info = {"source": self.source, "texture": texture, "skin_tone_offset": float(skin_tone_offset),
-                "accessory": accessory, "gesture": gesture,
+                "accessory": accessory, "gesture": gesture, **({} if worn is None else {"ring_worn": worn.record}),
                 "accessory_parent_joint": None if accessory == NONE else self.accessories[accessory].parent_joint}
         return Subject(tuple(surfaces), posed.joints[0].astype(np.float64), posed.keypoints[0].astype(np.float64),
                        m.side, pose_vec, keypoint_order, info)
@@ -185,13 +192,16 @@ class HandAssets:
             fitted[accessory] = self._refitter.refit(b, [accessory])[0]
         return fitted[accessory], ("refit", accessory)
 
-    def posed_accessory(self, acc: Accessory, posed, key=None) -> Surface:
-        """The accessory placed for a forward-pass result: rigid ones by their joint's skinning transform,
-        gloves skinned with their own correctives. key: what its rest arrays are kept under (default its id; a
-        refitted accessory's includes the shape)."""
+    def posed_accessory(self, acc: Accessory, posed, key=None, move=None) -> Surface:
+        """The accessory placed for a forward-pass result: rigid ones by their joint's skinning transform (after
+        `move`, a (4, 4) rigid move in the rest frame: a worn ring's slide), gloves skinned with their own
+        correctives. key: what its rest arrays are kept under (default its id; a refitted accessory's includes the
+        shape)."""
         key = acc.id if key is None else key
         if acc.parent_joint is not None:
             G = posed.transforms[0, acc.parent_joint].astype(np.float64)
+            if move is not None:
+                G = G @ move
             rest_n = self._rest_normals.get(("normals", key))
             if rest_n is None:
                 rest_n = self._rest_normals["normals", key] = vertex_normals(acc.vertices, acc.faces)
