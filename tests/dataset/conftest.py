@@ -51,7 +51,7 @@ def package(hand, tmp_path_factory):
     ring = ring_around(hand, RING_JOINT, RING_JOINT + 1)
     acc = root / "accessories"
     acc.mkdir()
-    np.savez(acc / "ring_test.npz", vertices=ring.vertices, faces=ring.faces)
+    np.savez(acc / "ring_test.npz", vertices=ring.vertices, faces=ring.faces, rest_transform=ring_frame(hand))
     _write(acc / "catalog.json", {
         "format": "darthand-accessory-catalog", "format_version": 1, "seed": 1,
         "model": {"source": "test", "side": "right"},
@@ -63,6 +63,20 @@ def package(hand, tmp_path_factory):
                          "material": {**ring.material, "kind": "metal", "base_color_texture": None,
                                       "metallic_roughness_texture": None}}]})
     return str(model), str(tex), str(acc)
+
+
+def ring_frame(hand) -> np.ndarray:
+    """(4, 4) the test ring's local frame in the rest hand (as a catalogue's fit records it): x along its bone, at
+    the bone's middle, where ring_around centres it; dataset sources wear rings along that axis."""
+    J = hand.J_regressor @ hand.v_template
+    a, b = J[RING_JOINT], J[RING_JOINT + 1]
+    axis = (b - a) / np.linalg.norm(b - a)
+    side = np.cross(axis, [0, 0, 1.0])
+    side /= np.linalg.norm(side)
+    frame = np.eye(4)
+    frame[:3, :3] = np.stack([axis, side, np.cross(axis, side)], axis=1)
+    frame[:3, 3] = (a + b) / 2
+    return frame
 
 
 @pytest.fixture(scope="session")

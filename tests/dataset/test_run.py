@@ -36,6 +36,7 @@ def test_two_processes_write_the_same_bytes_as_one(planner, sources, small_datas
 def test_labels_match_the_forward_pass_in_the_camera_frame(small_dataset, sources):
     out, _ = small_dataset
     opened, _ = sources
+    rings = 0
     for path in sorted((out / "labels").iterdir()):
         labels = json.loads(path.read_text())
         check_schema(labels, "labels.schema.json", path.name)
@@ -54,6 +55,25 @@ def test_labels_match_the_forward_pass_in_the_camera_frame(small_dataset, source
         assert labels["sample"]["pose"]["mode"] == "dart" and labels["split"] in ("train", "val", "test")
         assert labels["render"]["background"]["used"].startswith("builtin:")
         assert all(labels["in_image"])                                            # the hand kept in frame
+        worn = labels["accessory"].get("worn")
+        assert (worn is not None) == (labels["accessory"]["id"] == "ring_test")   # rings are worn per pose
+        rings += worn is not None
+    assert rings
+
+
+def test_ring_frames_digest_how_rings_are_worn(planner, monkeypatch):
+    """Ring frames rendered before rings were worn per pose (or by another version of it) are rendered again on
+    resume; other frames keep their digests."""
+    from darthand.dataset import frames
+
+    jobs = list(planner.jobs(0, 16))
+    ring = next(j for j in jobs if j["accessory"] == "ring_test")
+    other = next(j for j in jobs if j["accessory"] != "ring_test")
+    settings = {"size": 64, "samples": 4, "aa_shading": "triangle"}
+    before = [frames.job_digest(j, settings) for j in (ring, other)]
+    monkeypatch.setattr(frames, "RING_WEAR", frames.RING_WEAR + 1)
+    after = [frames.job_digest(j, settings) for j in (ring, other)]
+    assert before[0] != after[0] and before[1] == after[1]
 
 
 def test_resume_skips_shards_and_frames_already_rendered(planner, sources, tmp_path):

@@ -66,9 +66,11 @@ class ShapeRefitter:
         self.model = model
         self.loop = wrist_loop(model)
         self.accessories = {a.id: a for a in accessories}
-        # rigid items without a rest frame (not from a catalogue) cannot be placed again: they stay as they are
-        self.keys = {a.id: section_key(model, a, self.loop) for a in accessories
-                     if not a.skinned and a.rest_transform is not None}
+        # rigid items without a rest frame (not from a catalogue), or on a joint no fit uses, cannot be placed again:
+        # they stay as they are
+        keys = {a.id: section_key(model, a, self.loop) for a in accessories
+                if not a.skinned and a.rest_transform is not None}
+        self.keys = {k: v for k, v in keys.items() if v is not None}
         self._sections: dict = {}
 
     def section(self, acc_id: str) -> TrackedSection:
@@ -117,9 +119,12 @@ class ShapeRefitter:
         return out
 
 
-def section_key(model: HandModel, acc: Accessory, loop: np.ndarray) -> tuple:
+def section_key(model: HandModel, acc: Accessory, loop: np.ndarray) -> tuple | None:
     """(kind, finger, t, offset, width) of where a rigid accessory sits, read back from its rest transform and
-    local extent (the same on the built hand as when it was fitted)."""
+    local extent (the same on the built hand as when it was fitted); None for an item on a joint the fits do not
+    use (not the wrist, not a finger's first joint: a user's item on a middle phalanx), which keeps its shape."""
+    if acc.parent_joint != 0 and acc.parent_joint not in RING_JOINTS.values():
+        return None
     rest = acc.rest_transform
     local = (acc.vertices - rest[:3, 3]) @ rest[:3, :3]
     width = round(float(2 * np.abs(local[:, 0]).max()), 5)

@@ -23,6 +23,7 @@ from darthand.errors import InputError
 
 MIN_DIGITS = 6
 KINDS = ("image", "mask", "labels", "vertices")
+RING_WEAR = 1             # version of how a ring frame wears its ring (accessories/wear.py), in its digest
 
 
 def frame_names(index: int) -> dict:
@@ -40,7 +41,15 @@ def job_digest(job: dict, settings: dict) -> str:
 
     key = {"job": job, **{k: settings[k] for k in ("size", "samples", "aa_shading")},
            "shading": shading_options(settings.get("shading")).to_json()}
+    if wears_ring(job):
+        key["ring_wear"] = RING_WEAR       # ring frames rendered before rings were worn per pose are made again
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def wears_ring(job: dict) -> bool:
+    """Whether the job's accessory is a ring (its sampling record's accessory type, else the catalogue's id)."""
+    kind = (job.get("sample") or {}).get("accessory")
+    return kind == "ring" if kind else str(job.get("accessory") or "").startswith("ring_")
 
 
 def render_job(renderer, job: dict, settings: dict):
@@ -92,6 +101,9 @@ def dataset_labels(frame, job: dict, digest: str, source, background: dict | Non
     if model is not None and not hasattr(source, "gestures"):
         labels["mano"] = mano_camera_parameters(model, frame.subject.pose, frame.camera.R, frame.camera.t,
                                                 job.get("betas"))
+    worn = frame.subject.info.get("ring_worn")
+    if worn is not None:
+        labels["accessory"] = {**labels["accessory"], "worn": worn}
     labels["split"] = job.get("split", "none")
     labels["sample"] = {**job.get("sample", {}), "side": labels["side"], "skin_tone_offset":
                         job.get("skin_tone_offset", 0.0), "texture_id": labels["texture"]["id"],
