@@ -184,9 +184,10 @@ def test_sweep_leaves_out_hands_that_cross_themselves():
     assert names[:3] == ["rest", "fist", "pinch"] and np.array_equal(poses[3:], drawn[kept])
     assert SelfCrossing(model).crossing_poses(poses[:3]) == [None] * 3
     crossing = []
+    digits = [digit_faces(model, d) for d in range(5)]
     for v in forward(model, drawn).vertices:
-        digits = [digit_faces(model, d) for d in range(5)]
-        inside = [closed(v, digits[q]).ray.contains_points(v[np.unique(digits[p])]).sum()
+        solids = [closed(v, faces) for faces in digits]
+        inside = [solids[q].ray.contains_points(v[np.unique(digits[p])]).sum()
                   for q in range(5) for p in range(5) if p != q]
         crossing.append(max(inside) >= 8)
     left_out = set(range(n)) - set(kept)

@@ -198,10 +198,10 @@ class ClosedHand:
 
 
 def inward_vertices(vertices: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """Indices of an accessory's vertices (local frame, axis +X) whose normals point toward the axis."""
+    """(N,) bool: which of an accessory's vertices (local frame, axis +X) have normals pointing toward the axis."""
     radial = vertices.copy()
     radial[:, 0] = 0.0
-    return np.where((normals * radial).sum(1) < 0)[0]
+    return (normals * radial).sum(1) < 0
 
 
 def glove_penetration(glove_vertices: np.ndarray, glove_faces: np.ndarray, inner_mask: np.ndarray,

@@ -39,11 +39,12 @@ from darthand.accessories import catalog as cat
 from darthand.accessories.attach import apply, axis_distance, pose_skinned, to_local
 from darthand.accessories.collide import ClosedHand, Solid, glove_penetration, inward_vertices, neighbourhood
 from darthand.accessories.fit import WRIST_JOINT, wrist_axis
-from darthand.accessories.wear import RingWear
+from darthand.accessories.wear import RingWear, slide_matrix
 from darthand.model.anatomy import bone_ends, rest_joints, sample_poses
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
-from darthand.model.layout import FINGER_JOINTS, MANO_PARENTS
+from darthand.model.intersections import joint_parts
+from darthand.model.layout import MANO_PARENTS
 from darthand.model.topology import face_joints, vertex_normals
 from darthand.processes import deaf_to_ctrl_c, init_worker
 
@@ -73,7 +74,7 @@ def sweep_poses(model: HandModel, seed: int, n_sampled: int, gestures: list[str]
 @dataclass(frozen=True)
 class RigidProbe:
     """What the sweep needs of a rigid accessory: its joint and rest placement, its local-frame mesh, the
-    inward-facing vertices (indices into vertices) and the hand part it is fitted to (a digit index, or -1 for the
+    inward-facing vertices (a mask over vertices) and the hand part it is fitted to (a digit index, or -1 for the
     whole hand)."""
 
     id: str
@@ -81,13 +82,13 @@ class RigidProbe:
     rest: np.ndarray
     vertices: np.ndarray
     faces: np.ndarray
-    inner_ids: np.ndarray
+    inward: np.ndarray
     part: int
 
     @property
     def inner(self) -> np.ndarray:
         """(K, 3) the inward-facing vertices (local)."""
-        return self.vertices[self.inner_ids]
+        return self.vertices[self.inward]
 
 
 @dataclass(frozen=True)
@@ -123,10 +124,7 @@ def probes(built) -> list:
 
 def digit_of(joint: int) -> int:
     """Index into FINGERS of the digit a joint belongs to; -1 for the wrist (the whole hand)."""
-    for k, chain in enumerate(FINGER_JOINTS.values()):
-        if joint in chain:
-            return k
-    return -1
+    return int(joint_parts()[joint]) - 1
 
 
 def measure(model: HandModel, built, poses: np.ndarray, workers: int = 1, worn: bool = True) -> dict:
@@ -188,7 +186,7 @@ def _measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool
             w = [wear[i.id].worn(p) for p in poses[s:s + CHUNK]]
             turned[i.id] = np.array([bool(x.changed) for x in w])
             views[i.id] = _with_turned(model, posed, w, turned[i.id])
-            placed[i.id] = views[i.id].transforms[:, i.joint] @ i.rest @ np.stack([x.local_slide() for x in w])
+            placed[i.id] = views[i.id].transforms[:, i.joint] @ i.rest @ np.stack([slide_matrix(x.slide) for x in w])
             fig = out[i.id]
             fig["slide"][s:s + B] = [x.slide for x in w]
             fig["turned"][s:s + B] = [max((np.abs(a).max() for a in x.changed.values()), default=0.0) for x in w]
@@ -295,7 +293,7 @@ def rigid_inside_hand(hand: HandParts, rigid: list, placed: dict, vertices: np.n
     inside the part they are fitted to, measured to that part's surface."""
     pts = np.concatenate([apply(placed[i.id][p], i.vertices) for i in rigid])
     owner = np.repeat(np.arange(len(rigid)), [len(i.vertices) for i in rigid])
-    inward = np.concatenate([np.isin(np.arange(len(i.vertices)), i.inner_ids) for i in rigid])
+    inward = np.concatenate([i.inward for i in rigid])
     whole = hand.whole.solid(vertices)
     inside = whole.inside(pts)
     out, digits = {}, {}

@@ -66,18 +66,12 @@ TIE = 0.05e-3             # m: slides whose depths differ by less are equal (the
 @dataclass(frozen=True)
 class Worn:
     """A ring worn in one pose: `pose` (48,) the pose the hand takes (the given pose unless room was made),
-    `slide` (m) along the bone, `placement` (4, 4) the ring's local frame in the posed world, `depth` (m) the
-    estimated deepest point of the ring inside the hand there, `changed` {joint: (3,) degrees added}."""
+    `slide` (m) along the bone (slide_matrix, applied before the ring's rest transform), `changed` {joint: (3,)
+    degrees added}."""
 
     pose: np.ndarray
     slide: float
-    placement: np.ndarray
-    depth: float
     changed: dict
-
-    def local_slide(self) -> np.ndarray:
-        """(4, 4) the move along the ring's own axis (its local +x), applied before its rest transform."""
-        return slide_matrix(self.slide)
 
 
 def slide_matrix(s: float) -> np.ndarray:
@@ -117,7 +111,7 @@ class RingWear:
         self.limits = limits_radians()
         self.vertex_part = joint_parts()[np.argmax(model.weights, axis=1)]
         self.subtree = subtree_mask(model.parents)
-        self.digit = next(k for k, f in enumerate(FINGERS) if self.joint in FINGER_JOINTS[f])
+        self.digit = int(joint_parts()[self.joint]) - 1                  # index into FINGERS
         self._last: tuple | None = None
         self._crossing = None        # model/self_crossing.SelfCrossing, made when a turn is first checked
 
@@ -132,16 +126,16 @@ class RingWear:
     def worn(self, pose) -> Worn:
         """The ring worn in `pose` ((48,) MANO axis-angle, flat-hand relative)."""
         pose = np.asarray(pose, np.float64).reshape(-1)
+        slid = self._slid(pose)                       # the same for every try: only the turns differ
         links, held = frozenset(), frozenset()
         for _ in range(MAX_RETRIES + 1):
-            choice, crossed = self._worn(pose, links, held)
+            choice, crossed = self._worn(pose, slid, links, held)
             retry = self._retry(crossed, links, held)
             if retry is None:
                 break
             links, held = retry
-        depth, pose, s, posed, changed = choice
-        placement = posed.transforms[0, self.joint].astype(np.float64) @ self.rest @ slide_matrix(s)
-        return Worn(pose, float(s), placement, float(depth), changed)
+        _, pose, s, _, changed = choice
+        return Worn(pose, float(s), changed)
 
     def _retry(self, crossed: str | None, links: frozenset, held: frozenset) -> tuple | None:
         """(links, held) to try again with after a better turn crossed the digit pair `crossed` ('index-middle'):
@@ -160,10 +154,11 @@ class RingWear:
             return None
         return links, held | {other}
 
-    def _worn(self, pose: np.ndarray, links: frozenset, held: frozenset) -> tuple[tuple, str | None]:
-        """((depth, pose, slide, posed, changed) chosen, the digit pair a better turn crossed or None), with the
-        finger pairs in `links` turned together and the digits in `held` (FINGERS indices) not turned."""
-        posed, (s, depth, contact) = self._slid(pose)
+    def _worn(self, pose: np.ndarray, slid, links: frozenset, held: frozenset) -> tuple[tuple, str | None]:
+        """((depth, pose, slide, posed, changed) chosen, the digit pair a better turn crossed or None) from the
+        pose's best slide `slid` (`_slid`), with the finger pairs in `links` turned together and the digits in
+        `held` (FINGERS indices) not turned."""
+        posed, (s, depth, contact) = slid
         unturned = (depth, pose, s, posed, {})
         turned = []
         if depth > TARGET:
@@ -245,6 +240,22 @@ class RingWear:
         return posed, (s, depth, self._contact(hand, s)[1] if depth > TARGET else None)
 
     # ------------------------------------------------------------------------------------------- make room
+    def _depth_gradient(self, angles: np.ndarray, posed, x: np.ndarray, nearest: np.ndarray, free: np.ndarray,
+                        M: np.ndarray) -> np.ndarray:
+        """(K, U + 1): how the signed depth (y - x) . n of each sample point x (K, 3) changes per unknown of the
+        step -- the U columns of M (free angles (A,) tied into unknowns: (A, U)), radians, then the slide, metres
+        -- linearised: y its nearest hand vertex (nearest (K,)) carried by the joints as skinned, x by the ring's
+        bone, n held (the turn of the tangent plane and the correctives left out, as the gesture fit does)."""
+        omega, pivot = angular_velocities(self.model, self.frames, angles, posed, free)
+        v = posed.vertices[0].astype(np.float64)
+        y = v[nearest]
+        n = vertex_normals(v, self.model.faces)[nearest]
+        ux = np.cross(omega[None], x[:, None] - pivot[None]) * self.subtree[self.joint, free // 3][None, :, None]
+        shares = self.model.weights[nearest] @ self.subtree[:, free // 3]           # (K, A)
+        uy = np.cross(omega[None], y[:, None] - pivot[None]) * shares[..., None]
+        axis = posed.transforms[0, self.joint, :3, :3].astype(np.float64) @ self.rest[:3, 0]
+        return np.concatenate([np.einsum("kd,knd->kn", n, uy - ux) @ M, -(n @ axis)[:, None]], 1)
+
     def _room(self, angles: np.ndarray, start: np.ndarray, s: float, posed, contact, links: frozenset = frozenset(),
               held: frozenset = frozenset()):
         """(angles, slide) one Gauss-Newton step closer to clearing the ring by CLEARANCE (None when nothing
@@ -261,15 +272,7 @@ class RingWear:
         if len(free) == 0:
             return None
         M = _tied(free, links)                                             # (free angles, unknowns)
-        omega, pivot = angular_velocities(self.model, self.frames, angles, posed, free)
-        v = posed.vertices[0].astype(np.float64)
-        x, y = pts[near], v[nearest[near]]
-        n = vertex_normals(v, self.model.faces)[nearest[near]]
-        ux = np.cross(omega[None], x[:, None] - pivot[None]) * self.subtree[self.joint, free // 3][None, :, None]
-        shares = self.model.weights[nearest[near]] @ self.subtree[:, free // 3]           # (K, n)
-        uy = np.cross(omega[None], y[:, None] - pivot[None]) * shares[..., None]
-        axis = posed.transforms[0, self.joint, :3, :3].astype(np.float64) @ self.rest[:3, 0]
-        grad = np.concatenate([np.einsum("kd,knd->kn", n, uy - ux) @ M, -(n @ axis)[:, None]], 1)  # (y-x).n
+        grad = self._depth_gradient(angles, posed, pts[near], nearest[near], free, M)
         depth = signed[near]
         first = np.argmax(M, axis=0)                                      # each unknown's first angle
         x0 = np.append(angles.reshape(-1)[free][first], s)
@@ -397,8 +400,7 @@ def wear_ring(model: HandModel, acc, key, pose: np.ndarray, betas=None) -> tuple
     """(the pose the frame shows (48,), WornRing) of a rigid ring `acc` (accessories.loader.Accessory, fitted to
     the hand of `betas`; `key` names that fit) worn in `pose` (48,) on `model`; (pose, None) for a ring without
     its local frame (rest_transform) or off a digit. The RingWear of each (model, fit) is set up once and kept."""
-    if acc.rest_transform is None or acc.parent_joint is None or not any(
-            acc.parent_joint in chain for chain in FINGER_JOINTS.values()):
+    if acc.rest_transform is None or acc.parent_joint is None or joint_parts()[acc.parent_joint] == 0:
         return pose, None
     shape = None if betas is None else np.asarray(betas, np.float64).tobytes()
     entry = _WEARS.get((key, shape))
