@@ -572,7 +572,7 @@ def _add_dataset_arguments(p) -> None:
     p.add_argument("--size", type=number(int, 8, run.MAX_SIZE), default=512, metavar="N",
                    help="square image size in pixels (default 512)")
     _add_antialiasing_options(p, run.DEFAULT_SAMPLES)
-    _add_shading_options(p, run.DEFAULT_SHADING)
+    _add_shading_options(p)
     p.add_argument("--processes", type=number(int, 1, 100_000), default=None, metavar="N",
                    help="worker processes, each rendering whole frames (default: the number of cores; 1 renders "
                         "in this process)")
@@ -649,11 +649,11 @@ def _add_antialiasing_options(p, samples: int = 8) -> None:
                         "default), or each one (sample: slower, exact supersampling)")
 
 
-def _add_shading_options(p, defaults: dict | None = None) -> None:
-    """--ao-rays, --no-interreflection, --skin; `defaults` overrides the renderer's (shade.ShadingOptions)."""
+def _add_shading_options(p) -> None:
+    """--ao-rays, --no-interreflection, --skin, defaulting to the renderer's (shade.ShadingOptions)."""
     from darthand.render.shade import SKIN_MODELS, ShadingOptions
 
-    d = ShadingOptions(**(defaults or {}))
+    d = ShadingOptions()
     p.add_argument("--ao-rays", type=number(int, 0, 4096), default=d.ao_rays, metavar="N",
                    help="rays per vertex for the ambient light's occlusion and light reflected between surfaces; "
                         f"0: ambient light reaches everything, nothing is interreflected (default {d.ao_rays})")

@@ -14,12 +14,11 @@ def render_dataset(args) -> int:
     from darthand.dataset.jobs import write_jobs
     from darthand.dataset.plan import Planner, plan_spec
     from darthand.dataset.run import render_dataset as run
-    from darthand.dataset.sources import parse_sides, source_specs, worn_rings
-    from darthand.render.api import open_source
+    from darthand.dataset.sources import SourceSpec, parse_sides, source_specs
 
     if args.jobs and args.plan:
         raise InputError("--plan: writes planned jobs, so it cannot be given with --jobs")
-    first = open_source(args.package, textures=args.textures, accessories=args.accessories, model=args.model)
+    first = SourceSpec(str(args.package), args.textures, args.accessories, args.model).open()
     jobs, origin = None, None
     if args.jobs:
         from darthand.dataset.jobs import load_jobs
@@ -31,7 +30,7 @@ def render_dataset(args) -> int:
         sides = parse_sides(args.sides)
     specs = source_specs(args.package, sides, textures=args.textures, accessories=args.accessories,
                          model=args.model, opened=first)
-    sources = {side: (worn_rings(first) if spec.package == str(args.package) and not spec.mirror else spec.open())
+    sources = {side: (first if spec.package == str(args.package) and not spec.mirror else spec.open())
                for side, spec in specs.items()}
     formats = _check_formats(args, sources)
     planner = None

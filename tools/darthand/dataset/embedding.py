@@ -46,7 +46,7 @@ def _tsne(distances: np.ndarray, start: np.ndarray, perplexity: float, iteration
         # delta-bar-delta gains: grow where the gradient keeps its direction against the last step, shrink otherwise
         gains = np.where(np.sign(grad) != np.sign(step), gains + 0.2, gains * 0.8).clip(0.01)
         step = ((0.5 if early else 0.8) * step - rate * gains * grad).astype(np.float32)
-        y += step.astype(np.float32)
+        y += step
         y -= y.mean(0)
     return y.astype(np.float64)
 

@@ -47,9 +47,10 @@ def job_digest(job: dict, settings: dict) -> str:
 
 
 def wears_ring(job: dict) -> bool:
-    """Whether the job's accessory is a ring (its sampling record's accessory type, else the catalogue's id)."""
-    kind = (job.get("sample") or {}).get("accessory")
-    return kind == "ring" if kind else str(job.get("accessory") or "").startswith("ring_")
+    """Whether the job's accessory is a ring: its sampling record's accessory type, else its id's first word (as
+    the planner names a type it cannot look up, plan._accessory_kind)."""
+    kind = (job.get("sample") or {}).get("accessory") or str(job.get("accessory") or "").split("_")[0]
+    return kind == "ring"
 
 
 def render_job(renderer, job: dict, settings: dict):

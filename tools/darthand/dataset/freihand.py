@@ -40,12 +40,12 @@ import numpy as np
 
 from darthand.errors import InputError
 from darthand.fileio import atomic_path, read_json, write_bytes
+from darthand.model.mano_pkl import MANO_FORMAT
 
 SETS = {"train": "training", "val": "validation", "test": "evaluation"}
 ROOT = 9
 JPEG_QUALITY = 95
 LEFT_MODES = ("mirror", "skip")
-MANO_FORMAT = "MANO pickle"       # model.meta["format"] of a model read from a MANO file (model/mano_pkl.py)
 
 
 class _JsonList:

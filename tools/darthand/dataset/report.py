@@ -111,7 +111,7 @@ def pose_sets(root: Path, doc: dict, frames: list[dict]) -> tuple[np.ndarray, np
     from darthand.model.mirror import mirror_pose
     from darthand.model.rotations import axis_angle_to_quaternion
 
-    pick = np.unique(np.linspace(0, len(frames) - 1, min(MAX_POSES, len(frames))).round().astype(int))
+    pick = spread_index(len(frames), MAX_POSES)
     poses = []
     for k in pick:
         labels = read_json(root / frame_names(frames[k]["index"])["labels"], "labels")
@@ -139,9 +139,7 @@ def _reference(doc: dict) -> tuple[np.ndarray, str]:
     except (InputError, AttributeError, KeyError) as e:
         return np.zeros((0, 15, 4)), f"none ({e})"
     quats = ref.quats.astype(np.float64)
-    if len(quats) > MAX_REFERENCE:
-        quats = quats[np.unique(np.linspace(0, len(quats) - 1, MAX_REFERENCE).round().astype(int))]
-    return quats, ref.source
+    return quats[spread_index(len(quats), MAX_REFERENCE)], ref.source
 
 
 def _features(quats: np.ndarray) -> np.ndarray:
@@ -163,7 +161,7 @@ def pose_embedding(poses: np.ndarray, reference: np.ndarray) -> dict:
     """2-D t-SNE coordinates of (an evenly spread subsample of) both sets, embedded together: {"dataset" (n, 2),
     "reference" (m, 2), "poses": [n of len(poses), m of len(reference)]}. Starts from both sets' first two
     principal components of the sign-fixed quaternions (deterministic)."""
-    data, ref = _spread(poses, EMBED_DATASET), _spread(reference, EMBED_REFERENCE)
+    data, ref = poses[spread_index(len(poses), EMBED_DATASET)], reference[spread_index(len(reference), EMBED_REFERENCE)]
     both = np.concatenate([data, ref])
     features = _features(both)
     features = features - features.mean(0)
@@ -173,11 +171,9 @@ def pose_embedding(poses: np.ndarray, reference: np.ndarray) -> dict:
             "poses": [[len(data), len(poses)], [len(ref), len(reference)]]}
 
 
-def _spread(items: np.ndarray, most: int) -> np.ndarray:
-    """Up to `most` of `items`, evenly spread over them."""
-    if len(items) <= most:
-        return items
-    return items[np.unique(np.linspace(0, len(items) - 1, most).round().astype(int))]
+def spread_index(n: int, most: int) -> np.ndarray:
+    """Indices of up to `most` of n items, evenly spread over them (all n when n <= most)."""
+    return np.unique(np.linspace(0, n - 1, min(most, n)).round().astype(int))
 
 
 def coverage_figures(poses: np.ndarray, reference: np.ndarray) -> dict:
@@ -191,16 +187,10 @@ def coverage_figures(poses: np.ndarray, reference: np.ndarray) -> dict:
                        "median_deg": round(float(np.median(d)), 3), "within_10deg": round(float((d <= 10).mean()), 4),
                        "within_20deg": round(float((d <= 20).mean()), 4)})
     if len(poses) > 1:
-        own = np.concatenate([_nearest_other(poses, k) for k in range(0, len(poses), 256)])
-        result["dataset_nearest_median_deg"] = round(float(np.median(own)), 3)
+        d = pose_distances(poses, poses)
+        np.fill_diagonal(d, np.inf)
+        result["dataset_nearest_median_deg"] = round(float(np.median(d.min(1))), 3)
     return result
-
-
-def _nearest_other(poses: np.ndarray, k: int) -> np.ndarray:
-    """Distance from each of poses[k:k + 256] to its nearest other pose of the set."""
-    d = pose_distances(poses[k:k + 256], poses)
-    d[np.arange(len(d)), np.arange(k, k + len(d))] = np.inf
-    return d.min(1)
 
 
 # ------------------------------------------------------------------------------------------------ panels
@@ -210,7 +200,7 @@ def _contact_sheet(ax, root: Path, frames: list[dict], count: int) -> None:
     from darthand.dataset.frames import frame_names
     from darthand.render.image import read_png
 
-    pick = np.unique(np.linspace(0, len(frames) - 1, min(count, len(frames))).round().astype(int))
+    pick = spread_index(len(frames), count)
     cols = min(8, len(pick))
     rows = -(-len(pick) // cols)
     tiles = []

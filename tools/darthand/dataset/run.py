@@ -39,10 +39,9 @@ DATASET_VERSION = 2
 DEFAULT_SHARD_SIZE = 8192
 # Dataset render settings, chosen from benchmarks/dataset_settings.py (CPU per 512^2 frame against error, 24 frames
 # of the default plan, against 16 sub-samples shaded each and 64 indirect rays; quiet machine): 4 edge sub-samples
-# instead of the renderer's 8 save 3.4 of 89.6 ms a frame for +0.05 sRGB codes of mean error (0.62 -> 0.67); 8
-# indirect rays instead of 16 would save 4.8 ms more for +0.18 codes (0.67 -> 0.85), so the shading defaults stay.
+# instead of the renderer's 8 save 7.3 of 73.1 ms a frame for +0.05 sRGB codes of mean error (0.62 -> 0.67); 8
+# indirect rays instead of 16 would save 1.2 ms more for +0.18 codes (0.67 -> 0.85), so the shading defaults stay.
 DEFAULT_SAMPLES = 4
-DEFAULT_SHADING: dict = {}                # shade.ShadingOptions' defaults
 MAX_CHUNK = 32                    # frames per task: ~1-2 s of work, so progress and Ctrl-C stay responsive
 DEFAULT_MAX_FRAMES = 1_000_000    # a budget: more needs max_frames= (--max-frames)
 MAX_SIZE = 4096
@@ -52,7 +51,8 @@ FOLDERS = ("images", "masks", "labels", "meshes", "shards")
 def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0, count: int | None = None,
                    specs: dict | None = None, sources: dict | None = None, processes: int | None = None,
                    threads: int | None = None, size: int = 512, samples: int = DEFAULT_SAMPLES,
-                   aa_shading: str = "triangle", shading: dict | None = None, resume: bool = True, progress=True, shard_size: int = DEFAULT_SHARD_SIZE,
+                   aa_shading: str = "triangle", shading: dict | None = None, resume: bool = True, progress=True,
+                   shard_size: int = DEFAULT_SHARD_SIZE,
                    chunk_size: int | None = None, max_frames: int = DEFAULT_MAX_FRAMES,
                    jobs_source: dict | None = None, cluster: dict | None = None) -> dict:
     """Render frames into out_dir (module docstring); returns the dataset.json document.
@@ -63,8 +63,8 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
     processes: worker processes (default: the cores available; 1 renders in this process); threads: render threads
         per process (default 1 with workers, all cores with processes=1).
     resume: skip what is already rendered from the same jobs (module docstring). samples, aa_shading: edge
-        anti-aliasing (api.Renderer.render); shading: api.shading_options' fields (None: DEFAULT_SHADING). progress: False, True (a line at most every 5 s) or a
-        callable(done, total, seconds).
+        anti-aliasing (api.Renderer.render); shading: api.shading_options' fields (None: the renderer's defaults).
+    progress: False, True (a line at most every 5 s) or a callable(done, total, seconds).
     cluster: render on a Ray cluster instead of local processes (dataset/ray_runner.RayRunner: {'address': ...,
         'files': 'auto'|'shared'|'ship'}); processes, when given, is then the number of Ray workers.
     A frame that fails stops the run with an InputError 'frame N: cause'.
@@ -75,7 +75,7 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
 
     t_start = time.monotonic()
     aa.check_options(samples, aa_shading)
-    shading = shading_options({**DEFAULT_SHADING, **(shading or {})}).to_json()
+    shading = shading_options(shading).to_json()
     size = _bounded_int(size, "size", 8, MAX_SIZE, "pixels")
     if cluster is None:
         processes = _bounded_int(len(os.sched_getaffinity(0)) if processes is None else processes, "processes", 1,
@@ -417,7 +417,7 @@ def model_info(source) -> dict:
     file format it was read from ("MANO pickle" for a MANO file: its parameters are MANO's)."""
     model = getattr(source, "model", None)
     if model is None or hasattr(source, "gestures"):
-        return {"source": str(getattr(source, "source", "usd"))}
+        return {"source": str(getattr(source, "source", "usd")), "format": "usd"}
     wrist = model.meta.get("wrist") or {}
     return {"source": str(getattr(source, "source", "model")), "format": str(model.meta.get("format", "darthand")),
             "hands_mean": np.asarray(model.hands_mean).tolist(),

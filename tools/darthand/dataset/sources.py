@@ -31,7 +31,7 @@ class SourceSpec:
         from darthand.render.api import open_source
 
         if not self.mirror:
-            return worn_rings(open_source(self.package, textures=self.textures, accessories=self.accessories,
+            return _worn_rings(open_source(self.package, textures=self.textures, accessories=self.accessories,
                                           model=self.model))
         from darthand.model.load import load_model
         from darthand.model.mirror import mirror_model
@@ -44,10 +44,10 @@ class SourceSpec:
             tex, acc = tex or found[0], acc or found[1]
         twin = HandAssets.load(mirror_model(load_model(str(path))), tex or None, acc or None)
         twin.source = f"{self.package} (mirrored)"
-        return worn_rings(twin)
+        return _worn_rings(twin)
 
 
-def worn_rings(source):
+def _worn_rings(source):
     """The source with rings worn per pose (accessories/wear: slid along the bone, digits turned aside where the
     ring needs room; the frame's labels follow the pose it shows) where it poses the hand itself (a model source);
     a USD package poses its rings rigidly, as every package does."""

@@ -37,6 +37,7 @@ from darthand.model.hand_model import HandModel, check_parents
 from darthand.model.layout import FINGER_JOINTS, FINGERS, MANO_TIP_IDS, NUM_JOINTS, NUM_POSE_FEATURES
 
 MANO_NUM_VERTICES = 778
+MANO_FORMAT = "MANO pickle"       # meta["format"] of a model read from a MANO file (datasets record it)
 LEFT_SHAPEDIRS_FIX = "left shapedirs x sign flipped"
 # |Pearson correlation| above which an axis counts in the left-shapedirs test (see `shapedirs_x_sign_wrong`).
 _DECISIVE_CORRELATION = 0.5
@@ -709,7 +710,7 @@ def load_mano_pkl(path: str | Path) -> HandModel:
         tip_ids = fallback_tip_ids(v_template, arrays["weights"], joints)
         tips_from = "fallback: farthest-from-wrist vertex per finger chain"
 
-    meta = {"source": str(path), "format": "MANO pickle", "sha256": sha256, "fixes": fixes, "side_from": side_from,
+    meta = {"source": str(path), "format": MANO_FORMAT, "sha256": sha256, "fixes": fixes, "side_from": side_from,
             "tip_ids_from": tips_from, "shapedirs_check": shapedirs_check, "warnings": warnings}
     return HandModel.create(
         source=str(path),
