@@ -174,7 +174,8 @@ def _measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool
     hand = HandParts(model)
     axes = _BoneAxes(model)
     solids = {i.id: Solid(i.vertices, i.faces) for i in rigid}
-    wear = {i.id: RingWear(model, i.joint, i.rest, i.vertices) for i in rings}
+    hands: dict = {}                                   # the rings' posed hand, shared pose by pose
+    wear = {i.id: RingWear(model, i.joint, i.rest, i.vertices, hands=hands) for i in rings}
     near = neighbourhood(model.faces, model.num_vertices, rings=3) if gloves else None
     for s in range(0, len(poses), CHUNK):
         posed = forward(model, poses[s:s + CHUNK])
@@ -182,8 +183,12 @@ def _measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool
         views = {i.id: posed for i in fixed}            # the posed batch each item is measured on
         placed = {i.id: posed.transforms[:, i.joint] @ i.rest for i in fixed}
         turned = {}
+        worn_by = {i.id: [] for i in rings}
+        for p in poses[s:s + CHUNK]:                   # pose by pose: every ring wears the same posed hand
+            for i in rings:
+                worn_by[i.id].append(wear[i.id].worn(p))
         for i in rings:
-            w = [wear[i.id].worn(p) for p in poses[s:s + CHUNK]]
+            w = worn_by[i.id]
             turned[i.id] = np.array([bool(x.changed) for x in w])
             views[i.id] = _with_turned(model, posed, w, turned[i.id])
             placed[i.id] = views[i.id].transforms[:, i.joint] @ i.rest @ np.stack([slide_matrix(x.slide) for x in w])

@@ -100,11 +100,14 @@ class RingWear:
     """How one ring is worn on one model (hand of `betas`), set up once for any number of poses.
 
     joint: the ring's bone (MANO joint); rest (4, 4) its local frame in the rest hand; local_vertices (N, 3) its mesh
-    in that frame."""
+    in that frame. hands: a dict shared by the RingWears of one model and shape (the catalogue sweep's rings), in
+    which the last posed hand is kept for the next ring worn in the same pose."""
 
-    def __init__(self, model: HandModel, joint: int, rest: np.ndarray, local_vertices: np.ndarray, betas=None):
+    def __init__(self, model: HandModel, joint: int, rest: np.ndarray, local_vertices: np.ndarray, betas=None,
+                 hands: dict | None = None):
         self.model, self.joint, self.rest = model, int(joint), np.asarray(rest, float)
         self.betas = betas
+        self._hands = {} if hands is None else hands
         self.samples = sample_points(np.asarray(local_vertices, float))
         self.hand = ClosedHand(model.faces)
         self.frames = joint_frames(model)
@@ -206,11 +209,18 @@ class RingWear:
 
     # ------------------------------------------------------------------------------------------- measure
     def _posed(self, pose: np.ndarray):
-        """(posed, the hand's closed solid, vertices (V, 3), normals (V, 3), vertex KD-tree, ring base (4, 4))."""
-        posed = forward(self.model, pose[None], self.betas, dtype=np.float32)
-        v = posed.vertices[0].astype(np.float64)
-        base = posed.transforms[0, self.joint].astype(np.float64) @ self.rest
-        return posed, (self.hand.solid(v), cKDTree(v), v, vertex_normals(v, self.model.faces), base)
+        """(posed, (the hand's closed solid, vertex KD-tree, vertices (V, 3), normals (V, 3), ring base (4, 4)));
+        the hand is kept for the last pose (in `hands`)."""
+        key = pose.tobytes()
+        hand = self._hands.get(key)
+        if hand is None:
+            posed = forward(self.model, pose[None], self.betas, dtype=np.float32)
+            v = posed.vertices[0].astype(np.float64)
+            hand = (posed, self.hand.solid(v), cKDTree(v), v, vertex_normals(v, self.model.faces))
+            self._hands.clear()
+            self._hands[key] = hand
+        posed = hand[0]
+        return posed, (*hand[1:], posed.transforms[0, self.joint].astype(np.float64) @ self.rest)
 
     def _contact(self, hand, s: float, outside: bool = True):
         """(depth (m), (sample points (K, 3), signed depths (K,), nearest hand vertices (K,))) of the ring slid by
