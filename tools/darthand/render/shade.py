@@ -35,7 +35,7 @@ import numpy as np
 
 from darthand.errors import InputError
 from darthand.jit import kernel
-from darthand.render.skin import skin_width, subsurface_diffuse
+from darthand.render.skin import skin_width, sphere_table, table_rows
 from darthand.render.subject import Material
 
 SHADOW_LIFT = 2e-3          # shadow-ray origin offset, relative to the scene's bounding-box diagonal
@@ -245,7 +245,8 @@ def vertex_albedo(material: Material, uvs: np.ndarray | None, count: int) -> np.
 
 def ambient_light(p: SurfaceParams, ambient: np.ndarray, spec, nv: np.ndarray, hits: Hits) -> np.ndarray:
     """(3, M) radiance reflected from the ambient light (3,) and other surfaces: albedo x the indirect irradiance
-    (albedo x ambient without it), plus spec x Karis' ambient specular x the open fraction."""
+    (albedo x ambient without it), plus spec x Karis' ambient specular x the open fraction. The definition in numpy;
+    `shade` computes the same inside _radiance_kernel."""
     out = p.albedo * (ambient[:, None] if hits.indirect is None else hits.indirect)
     if spec:
         specular = spec * ambient[:, None] * ambient_specular(p.f0, p.roughness, nv)
@@ -253,73 +254,234 @@ def ambient_light(p: SurfaceParams, ambient: np.ndarray, spec, nv: np.ndarray, h
     return out
 
 
-def diffuse_model(material: Material, p: SurfaceParams, hits: Hits, skin_model: str):
-    """(response(ndl (M,)) -> (3, M) or (M,), reach): a surface's diffuse response per unit irradiance at the
-    light's cosine, and the lowest cosine at which it can be lit (below 0: past the terminator; shadow rays are cast
-    where the response is not nil)."""
-    if material.kind != "skin" or skin_model == "lambert" or (skin_model == "subsurface" and hits.radius is None):
-        return (lambda ndl: np.maximum(ndl, 0)), 0.0
-    if skin_model == "subsurface":
-        width = skin_width(material)
-        nails = None if hits.skin is None or hits.skin.all() else np.flatnonzero(~hits.skin)
+LAMBERT, WRAP, SUBSURFACE = 0, 1, 2      # _lights_kernel's diffuse models
 
-        def subsurface(ndl):
-            out = subsurface_diffuse(ndl, hits.radius, width)
-            if nails is not None:
-                out[:, nails] = np.maximum(ndl[nails], 0)
-            return out
-        return subsurface, -1.0
+
+@dataclass
+class DiffuseModel:
+    """How a surface's diffuse part responds to a light, as _lights_kernel reads it: kind (LAMBERT: max(0, n.l);
+    WRAP: wrap_diffuse with `wrap` (3,); SUBSURFACE: skin.subsurface_diffuse, its table rows from skin.table_rows
+    (row_r (M,), shifts (3,)), Lambert where `skin` (M,) bool is False (nails; empty: all skin)); by_cosine: a light
+    reaches where n.l > 0 (else: where the response's largest channel exceeds 1e-4, past the terminator)."""
+
+    kind: int
+    by_cosine: bool
+    wrap: np.ndarray
+    row_r: np.ndarray
+    shifts: np.ndarray
+    skin: np.ndarray
+
+
+def diffuse_model(material: Material, hits: Hits, skin_model: str) -> DiffuseModel:
+    """The diffuse response of `material` at `hits` under the skin model `skin_model` (SKIN_MODELS): Lambert for
+    every material but skin (and for skin without its curvature radius under 'subsurface', or an all-zero wrap)."""
+    none = np.zeros(0, np.float32)
+    lambert = DiffuseModel(LAMBERT, True, np.zeros(3, np.float32), none, np.zeros(3, np.float32), np.zeros(0, bool))
+    if material.kind != "skin" or skin_model == "lambert" or (skin_model == "subsurface" and hits.radius is None):
+        return lambert
+    if skin_model == "subsurface":
+        row_r, shifts = table_rows(np.ascontiguousarray(hits.radius, np.float32), skin_width(material))
+        skin = np.zeros(0, bool) if hits.skin is None else np.ascontiguousarray(hits.skin, bool)
+        return DiffuseModel(SUBSURFACE, False, lambert.wrap, np.ascontiguousarray(row_r, np.float32), shifts, skin)
     wrap = np.asarray(material.wrap, np.float32)
     if not wrap.any():
-        return (lambda ndl: np.maximum(ndl, 0)), 0.0
-    return (lambda ndl: wrap_diffuse(ndl, wrap)), -float(wrap.max())
+        return lambert
+    return DiffuseModel(WRAP, -float(wrap.max()) >= 0, wrap, none, lambert.shifts, lambert.skin)
+
+
+def light_table(lights: list[dict]) -> np.ndarray:
+    """(L, 8) float32, a row per light as the kernels read it: kind (0 directional, 1 point), the direction toward
+    the light (directional) or its position (point), radiance (3,), shadows (0 or 1)."""
+    table = np.zeros((len(lights), 8), np.float32)
+    for k, light in enumerate(lights):
+        point = light["type"] != "directional"
+        table[k, 0] = point
+        table[k, 1:4] = light["position"].astype(np.float32) if point else (-light["direction"]).astype(np.float32)
+        table[k, 4:7] = np.asarray(light["radiance"], np.float32)
+        table[k, 7] = bool(light["shadows"])
+    return table
 
 
 def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarray, occluded, extent: float,
           counters: dict | None = None, skin_model: str = DEFAULT_SKIN) -> np.ndarray:
     """(3, M) float32 outgoing radiance at the hits.
 
-    lights: world-frame lights (lights.world_lights). occluded(origins (K, 3), directions (K, 3), tfar) -> (K,)
-    bool: the scene's occlusion query. extent: the scene's size (m), for the shadow-ray offset. counters: adds
-    'shadow_rays'. Indirect light comes with the hits (Hits.indirect, Hits.visible). skin_model: how a skin
-    material's diffuse part responds to a light (SKIN_MODELS).
+    lights: world-frame lights (lights.world_lights; radiance float32). occluded(origins (K, 3), directions (K, 3),
+    tfar (K,)) -> (K,) bool: the scene's occlusion query. extent: the scene's size (m), for the shadow-ray offset.
+    counters: adds 'shadow_rays'. Indirect light comes with the hits (Hits.indirect, Hits.visible). skin_model: how
+    a skin material's diffuse part responds to a light (SKIN_MODELS).
+
+    Two compiled passes around the shadow rays: _lights_kernel (per light and hit: n.l, the diffuse response, which
+    hits the light can reach and their shadow rays), then Embree's occlusion query per light, then _radiance_kernel
+    (the ambient term plus each reached light's albedo x diffuse + specular, scaled). Same float32 arithmetic, in the
+    same order, as the numpy formulas (ambient_light, wrap_diffuse, skin.subsurface_diffuse, ggx_specular): the
+    tests hold them equal; the one libm call (exp2, in ambient_specular) stays numpy's, between the kernels.
     """
     p = material_params(material, hits)
-    n, v = hits.normal, hits.view
-    nv = np.clip(_dot(n, v), 1e-4, 1)
+    f32 = lambda a: np.ascontiguousarray(a, np.float32)
+    m = hits.position.shape[1]
+    n, v, position = f32(hits.normal), f32(hits.view), f32(hits.position)
+    table = light_table(lights)
+    model = diffuse_model(material, hits, skin_model)
     spec = np.float32(material.specular)
-    out = ambient_light(p, ambient, spec, nv, hits)
-    response, reach = diffuse_model(material, p, hits, skin_model)
     lift = np.float32(SHADOW_LIFT * max(extent, 1e-3))
-    for light in lights:
-        if light["type"] == "directional":
-            l = (-light["direction"]).astype(np.float32)[:, None]
-            dist = None
-            scale = light["radiance"][:, None]
-        else:
-            l = light["position"].astype(np.float32)[:, None] - hits.position
-            dist = np.sqrt(_dot(l, l))
-            l = l / np.maximum(dist, 1e-9)
-            scale = light["radiance"][:, None] / np.maximum(dist * dist, 1e-12)
-        ndl = _dot(n, l)
-        diffuse = response(ndl)
-        # Where the diffuse response is nil (and so is the specular, n.l <= 0) no shadow ray is needed.
-        reached = ndl > 0 if reach >= 0 else (diffuse.max(axis=0) if diffuse.ndim == 2 else diffuse) > 1e-4
-        if light["shadows"]:
-            idx = np.flatnonzero(reached)
-            if len(idx):
-                origin = (hits.position[:, idx] + lift * n[:, idx]).T
-                dirs = np.broadcast_to(l.T, (len(idx), 3)) if dist is None else l[:, idx].T
-                tfar = np.inf if dist is None else np.maximum(dist[idx] - lift, 0)
-                reached[idx[occluded(np.ascontiguousarray(origin), np.ascontiguousarray(dirs), tfar)]] = False
-                if counters is not None:
-                    counters["shadow_rays"] = counters.get("shadow_rays", 0) + len(idx)
-        colour = p.albedo * diffuse
-        if spec:
-            h = _normalize(v + l)
-            colour += spec * ggx_specular(np.clip(ndl, 0, 1), nv, np.clip(_dot(n, h), 0, 1),
-                                          np.clip(_dot(v, h), 0, 1), p.roughness, p.f0)
-        colour *= reached
-        colour *= scale
-        out += colour
-    return out.astype(np.float32, copy=False)
+    rays = int(table[:, 7].sum()) * m
+    nv, e2 = np.empty(m, np.float32), np.empty(m, np.float32)
+    diffuse, reached = np.empty((len(lights), 3, m), np.float32), np.empty((len(lights), m), np.bool_)
+    origins, directions = np.empty((rays, 3), np.float32), np.empty((rays, 3), np.float32)
+    tfar, ray_hit, offsets = np.empty(rays, np.float32), np.empty(rays, np.int64), np.zeros(len(lights) + 1, np.int64)
+    _lights_kernel(n, v, position, table, model.kind, model.by_cosine, model.wrap, model.row_r, model.shifts,
+                   model.skin, sphere_table().ravel(), lift, nv, e2, diffuse, reached, origins, directions, tfar,
+                   ray_hit, offsets)
+    if spec:
+        np.exp2(e2, out=e2)                # numpy's exp2 (SIMD): numba's libm differs from it in the last bit
+    for k in range(len(lights)):
+        a, b = offsets[k], offsets[k + 1]
+        if b > a:
+            reached[k, ray_hit[a:b][occluded(origins[a:b], directions[a:b], tfar[a:b])]] = False
+            if counters is not None:
+                counters["shadow_rays"] = counters.get("shadow_rays", 0) + int(b - a)
+    f0 = p.f0 if np.ndim(p.f0) else np.full((3, 1), p.f0, np.float32)
+    indirect = np.zeros((0, 0), np.float32) if hits.indirect is None else f32(hits.indirect)
+    visible = np.zeros(0, np.float32) if hits.visible is None else f32(hits.visible)
+    out = np.empty((3, m), np.float32)
+    _radiance_kernel(f32(p.albedo), f32(p.roughness), f32(f0), spec, f32(ambient), indirect, visible, nv, e2, n, v,
+                     position, table, diffuse, reached, out)
+    return out
+
+
+@kernel
+def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r, shifts, skin, sphere, lift,
+                   nv, e2, diffuse, reached, origins, directions, tfar, ray_hit, offsets):
+    """Per hit i: nv[i] = clip(n.v, 1e-4, 1) and e2[i] = -9.28 nv (the exponent of ambient_specular's exp2); per
+    light k (row of `lights`, light_table) and hit: the diffuse response diffuse[k, :, i] at n.l (DiffuseModel's
+    kind, wrap, row_r, shifts, skin; `sphere` the flattened skin.sphere_table), reached[k, i], and for a light
+    with shadows a shadow ray per reached hit: origin p + lift n, direction toward the light, tfar (inf, or the
+    distance to a point light less lift), ray_hit its hit; light k's rays are [offsets[k], offsets[k + 1]).
+    Float32 in the numpy formulas' order (subsurface's blend in float64, rounded once, as numpy promotes it)."""
+    zero, one, tiny = np.float32(0.0), np.float32(1.0), np.float32(1e-9)
+    cos_half = np.float32(64.0)          # (skin.COS_STEPS - 1) / 2 (literals: a cached kernel would not see a
+    cos_last, row_last, row_len = 127, np.float32(48.0), 129   # changed global); rows 0..RATIO_STEPS - 1
+    m = normal.shape[1]
+    for i in range(m):
+        c = normal[0, i] * view[0, i] + normal[1, i] * view[1, i] + normal[2, i] * view[2, i]
+        c = min(max(c, np.float32(1e-4)), one)
+        nv[i] = c
+        e2[i] = np.float32(-9.28) * c
+    r = 0
+    for k in range(lights.shape[0]):
+        offsets[k] = r
+        point = lights[k, 0] != zero
+        shadows = lights[k, 7] != zero
+        for i in range(m):
+            lx, ly, lz = lights[k, 1], lights[k, 2], lights[k, 3]
+            dist = zero
+            if point:
+                lx, ly, lz = lx - position[0, i], ly - position[1, i], lz - position[2, i]
+                dist = np.sqrt(lx * lx + ly * ly + lz * lz)
+                d = max(dist, tiny)
+                lx, ly, lz = lx / d, ly / d, lz / d
+            ndl = normal[0, i] * lx + normal[1, i] * ly + normal[2, i] * lz
+            lam = max(ndl, zero)
+            d0 = d1 = d2 = lam
+            if kind == 1:
+                d0 = max((ndl + wrap[0]) / (one + wrap[0]), zero)
+                d1 = max((ndl + wrap[1]) / (one + wrap[1]), zero)
+                d2 = max((ndl + wrap[2]) / (one + wrap[2]), zero)
+            elif kind == 2 and (skin.shape[0] == 0 or skin[i]):
+                cu = (min(max(ndl, -one), one) + one) * cos_half
+                c0 = min(np.int32(cu), cos_last)
+                fc = np.float64(cu) - np.float64(c0)
+                for ch in range(3):
+                    row = np.int32(min(max(np.rint(row_r[i] + shifts[ch]), zero), row_last))
+                    flat = row * row_len + c0
+                    lo = sphere[flat]
+                    diffuse[k, ch, i] = np.float32(np.float64(lo) + fc * np.float64(sphere[flat + 1] - lo))
+                d0, d1, d2 = diffuse[k, 0, i], diffuse[k, 1, i], diffuse[k, 2, i]
+            if kind != 2 or not (skin.shape[0] == 0 or skin[i]):
+                diffuse[k, 0, i], diffuse[k, 1, i], diffuse[k, 2, i] = d0, d1, d2
+            if by_cosine:
+                lit = ndl > zero
+            else:
+                lit = max(max(d0, d1), d2) > np.float32(1e-4)
+            reached[k, i] = lit
+            if lit and shadows:
+                origins[r, 0] = position[0, i] + lift * normal[0, i]
+                origins[r, 1] = position[1, i] + lift * normal[1, i]
+                origins[r, 2] = position[2, i] + lift * normal[2, i]
+                directions[r, 0], directions[r, 1], directions[r, 2] = lx, ly, lz
+                tfar[r] = max(dist - lift, zero) if point else np.float32(np.inf)
+                ray_hit[r] = i
+                r += 1
+    offsets[lights.shape[0]] = r
+
+
+@kernel
+def _radiance_kernel(albedo, roughness, f0, spec, ambient, indirect, visible, nv, e2, normal, view, position, lights,
+                     diffuse, reached, out):
+    """out (3, M): per hit, ambient_light (albedo x (indirect[:, i] or ambient), plus spec x ambient x Karis' F0 A + B
+    x visible[i], e2 = exp2(-9.28 n.v)), then per reached light (lights, diffuse, reached as _lights_kernel left
+    them) albedo x diffuse + spec x ggx_specular, times its radiance (over the squared distance for a point light).
+    f0 (3, M) or (3, 1); indirect (3, M) or (0, 0); visible (M,) or empty. Float32 in the numpy formulas' order."""
+    zero, one, half = np.float32(0.0), np.float32(1.0), np.float32(0.5)
+    m = albedo.shape[1]
+    wide_f0 = f0.shape[1] > 1
+    with_spec = spec != zero
+    o, colour = np.empty(3, np.float32), np.empty(3, np.float32)
+    for i in range(m):
+        j = i if wide_f0 else 0
+        rough = roughness[i]
+        for c in range(3):
+            o[c] = albedo[c, i] * (indirect[c, i] if indirect.shape[0] else ambient[c])
+        if with_spec:
+            r0 = rough * np.float32(-1.0) + one
+            r1 = rough * np.float32(-0.0275) + np.float32(0.0425)
+            a004 = min(r0 * r0, e2[i]) * r0 + r1
+            A = a004 * np.float32(-1.04) + (rough * np.float32(-0.572) + np.float32(1.04))
+            B = a004 * np.float32(1.04) + (rough * np.float32(0.022) + np.float32(-0.04))
+            for c in range(3):
+                s = spec * ambient[c] * (f0[c, j] * A + B)
+                if visible.shape[0]:
+                    s = s * visible[i]
+                o[c] = o[c] + s
+        nvi = nv[i]
+        a2 = rough * rough
+        a2 = a2 * a2
+        nx, ny, nz = normal[0, i], normal[1, i], normal[2, i]
+        vx, vy, vz = view[0, i], view[1, i], view[2, i]
+        for k in range(lights.shape[0]):
+            if not reached[k, i]:
+                continue                 # numpy's colour x 0 added: the same sum
+            lx, ly, lz = lights[k, 1], lights[k, 2], lights[k, 3]
+            point = lights[k, 0] != zero
+            falloff = one
+            if point:
+                lx, ly, lz = lx - position[0, i], ly - position[1, i], lz - position[2, i]
+                dist = np.sqrt(lx * lx + ly * ly + lz * lz)
+                d = max(dist, np.float32(1e-9))
+                lx, ly, lz = lx / d, ly / d, lz / d
+                falloff = max(dist * dist, np.float32(1e-12))
+            for c in range(3):
+                colour[c] = albedo[c, i] * diffuse[k, c, i]
+            if with_spec:
+                ndl = nx * lx + ny * ly + nz * lz
+                hx, hy, hz = vx + lx, vy + ly, vz + lz
+                length = max(np.sqrt(hx * hx + hy * hy + hz * hz), np.float32(1e-30))
+                hx, hy, hz = hx / length, hy / length, hz / length
+                nl = min(max(ndl, zero), one)
+                nh = min(max(nx * hx + ny * hy + nz * hz, zero), one)
+                vh = min(max(vx * hx + vy * hy + vz * hz, zero), one)
+                d = nh * nh * (a2 - one) + one
+                vis = half / max(nl * np.sqrt(nvi * nvi * (one - a2) + a2) + nvi * np.sqrt(nl * nl * (one - a2) + a2),
+                                 np.float32(1e-7))
+                s = a2 / (d * d) * vis * nl
+                x = one - vh
+                x2 = x * x
+                x5 = x2 * x2 * x
+                for c in range(3):
+                    colour[c] = colour[c] + spec * (s * (f0[c, j] + (one - f0[c, j]) * x5))
+            for c in range(3):
+                scale = lights[k, 4 + c] / falloff if point else lights[k, 4 + c]
+                o[c] = o[c] + colour[c] * scale
+        for c in range(3):
+            out[c, i] = o[c]

@@ -82,22 +82,30 @@ def sphere_table() -> np.ndarray:
 def subsurface_diffuse(ndl: np.ndarray, radius: np.ndarray, width: np.ndarray) -> np.ndarray:
     """(3, M) float32 diffuse response per unit irradiance (D above) at cosines ndl (M,) on spheres of radius
     `radius` (M,) metres, with profile widths `width` (3,) metres per channel: linear in cos theta, nearest row in
-    log2(r / d) (rows a quarter octave apart)."""
+    log2(r / d) (rows a quarter octave apart). The definition in numpy; the renderer does the same lookup inside its
+    shading kernel (shade._lights_kernel), from the same `table_rows`, and the tests hold the two equal."""
     flat_table = sphere_table().ravel()
     cu = (np.clip(ndl, -1, 1) + 1) * np.float32((COS_STEPS - 1) / 2)
     c0 = np.minimum(cu.astype(np.int32), COS_STEPS - 2)
-    fc = cu - c0
-    step = (RATIO_STEPS - 1) / (LOG_HI - LOG_LO)
-    # rows in units of the table's step: log2(r) once, each channel's log2(d) as a shift of it
-    row_r = np.log2(radius) * np.float32(step)
+    fc = cu - c0                      # float64 (float32 - int32): the blend below is in float64, rounded once
+    row_r, shifts = table_rows(radius, width)
     out = np.empty((3, len(ndl)), np.float32)
     for c in range(3):
-        shift = np.float32(-(np.log2(width[c]) + LOG_LO) * step)
-        row = np.clip(np.rint(row_r + shift), 0, RATIO_STEPS - 1).astype(np.int32)
+        row = np.clip(np.rint(row_r + shifts[c]), 0, RATIO_STEPS - 1).astype(np.int32)
         flat = row * np.int32(COS_STEPS) + c0
         lo = flat_table[flat]
         out[c] = lo + fc * (flat_table[flat + 1] - lo)
     return out
+
+
+def table_rows(radius: np.ndarray, width: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The table row of each hit and channel, before rounding, as (row_r (M,), shifts (3,)) float32: row =
+    clip(rint(row_r + shifts[c]), 0, RATIO_STEPS - 1), in units of the table's step: log2(r) once per hit
+    (`radius` (M,) metres), each channel's log2(d) (`width` (3,) metres) as a shift of it."""
+    step = (RATIO_STEPS - 1) / (LOG_HI - LOG_LO)
+    row_r = np.log2(radius) * np.float32(step)
+    shifts = np.array([-(np.log2(width[c]) + LOG_LO) * step for c in range(3)], np.float32)
+    return row_r, shifts
 
 
 _WIDTHS: dict = {}
