@@ -341,11 +341,13 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
             reached[k, ray_hit[a:b][occluded(origins[a:b], directions[a:b], tfar[a:b])]] = False
             if counters is not None:
                 counters["shadow_rays"] = counters.get("shadow_rays", 0) + int(b - a)
-    f0 = p.f0 if np.ndim(p.f0) else np.full((3, 1), p.f0, np.float32)
-    indirect = np.zeros((0, 0), np.float32) if hits.indirect is None else f32(hits.indirect)
-    visible = np.zeros(0, np.float32) if hits.visible is None else f32(hits.visible)
+    # absent inputs as their neutral values, the same numbers: f0 per hit, the ambient light as irradiance, x 1
+    f0 = f32(np.broadcast_to(p.f0, (3, m)))
+    ambient = f32(ambient)
+    irradiance = f32(np.broadcast_to(ambient[:, None], (3, m)) if hits.indirect is None else hits.indirect)
+    visible = np.ones(m, np.float32) if hits.visible is None else f32(hits.visible)
     out = np.empty((3, m), np.float32)
-    _radiance_kernel(f32(p.albedo), f32(p.roughness), f32(f0), spec, f32(ambient), indirect, visible, nv, e2, n, v,
+    _radiance_kernel(f32(p.albedo), f32(p.roughness), f0, spec, ambient, irradiance, visible, nv, e2, n, v,
                      position, table, diffuse, reached, out)
     return out
 
@@ -359,22 +361,34 @@ def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r,
     with shadows a shadow ray per reached hit: origin p + lift n, direction toward the light, tfar (inf, or the
     distance to a point light less lift), ray_hit its hit; light k's rays are [offsets[k], offsets[k + 1]).
     Float32 in the numpy formulas' order (subsurface's blend in float64, rounded once, as numpy promotes it)."""
-    zero, one, tiny = np.float32(0.0), np.float32(1.0), np.float32(1e-9)
+    zero, one, tiny, floor = np.float32(0.0), np.float32(1.0), np.float32(1e-9), np.float32(1e-4)
     cos_half = np.float32(64.0)          # (skin.COS_STEPS - 1) / 2 (literals: a cached kernel would not see a
     cos_last, row_last, row_len = 127, np.float32(48.0), 129   # changed global); rows 0..RATIO_STEPS - 1
     m = normal.shape[1]
+    subsurface = kind == 2
+    # per hit: n.v, and the subsurface table's row (start index) per channel, -1 for a nail
+    rows = np.empty((3, m if subsurface else 0), np.int64)
+    all_skin = skin.shape[0] == 0
     for i in range(m):
         c = normal[0, i] * view[0, i] + normal[1, i] * view[1, i] + normal[2, i] * view[2, i]
-        c = min(max(c, np.float32(1e-4)), one)
+        c = min(max(c, floor), one)
         nv[i] = c
         e2[i] = np.float32(-9.28) * c
+        if subsurface:
+            nail = not (all_skin or skin[i])
+            for ch in range(3):
+                row = np.int64(min(max(np.rint(row_r[i] + shifts[ch]), zero), row_last))
+                rows[ch, i] = -1 if nail else row * row_len
+    w0, w1, w2 = wrap[0], wrap[1], wrap[2]
+    u0, u1, u2 = one + w0, one + w1, one + w2
     r = 0
     for k in range(lights.shape[0]):
         offsets[k] = r
         point = lights[k, 0] != zero
         shadows = lights[k, 7] != zero
+        px, py, pz = lights[k, 1], lights[k, 2], lights[k, 3]
         for i in range(m):
-            lx, ly, lz = lights[k, 1], lights[k, 2], lights[k, 3]
+            lx, ly, lz = px, py, pz
             dist = zero
             if point:
                 lx, ly, lz = lx - position[0, i], ly - position[1, i], lz - position[2, i]
@@ -382,28 +396,23 @@ def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r,
                 d = max(dist, tiny)
                 lx, ly, lz = lx / d, ly / d, lz / d
             ndl = normal[0, i] * lx + normal[1, i] * ly + normal[2, i] * lz
-            lam = max(ndl, zero)
-            d0 = d1 = d2 = lam
+            d0 = d1 = d2 = max(ndl, zero)
             if kind == 1:
-                d0 = max((ndl + wrap[0]) / (one + wrap[0]), zero)
-                d1 = max((ndl + wrap[1]) / (one + wrap[1]), zero)
-                d2 = max((ndl + wrap[2]) / (one + wrap[2]), zero)
-            elif kind == 2 and (skin.shape[0] == 0 or skin[i]):
+                d0 = max((ndl + w0) / u0, zero)
+                d1 = max((ndl + w1) / u1, zero)
+                d2 = max((ndl + w2) / u2, zero)
+            elif subsurface and rows[0, i] >= 0:
                 cu = (min(max(ndl, -one), one) + one) * cos_half
-                c0 = min(np.int32(cu), cos_last)
+                c0 = min(np.int64(cu), cos_last)
                 fc = np.float64(cu) - np.float64(c0)
-                for ch in range(3):
-                    row = np.int32(min(max(np.rint(row_r[i] + shifts[ch]), zero), row_last))
-                    flat = row * row_len + c0
-                    lo = sphere[flat]
-                    diffuse[k, ch, i] = np.float32(np.float64(lo) + fc * np.float64(sphere[flat + 1] - lo))
-                d0, d1, d2 = diffuse[k, 0, i], diffuse[k, 1, i], diffuse[k, 2, i]
-            if kind != 2 or not (skin.shape[0] == 0 or skin[i]):
-                diffuse[k, 0, i], diffuse[k, 1, i], diffuse[k, 2, i] = d0, d1, d2
-            if by_cosine:
-                lit = ndl > zero
-            else:
-                lit = max(max(d0, d1), d2) > np.float32(1e-4)
+                f = rows[0, i] + c0
+                d0 = np.float32(np.float64(sphere[f]) + fc * np.float64(sphere[f + 1] - sphere[f]))
+                f = rows[1, i] + c0
+                d1 = np.float32(np.float64(sphere[f]) + fc * np.float64(sphere[f + 1] - sphere[f]))
+                f = rows[2, i] + c0
+                d2 = np.float32(np.float64(sphere[f]) + fc * np.float64(sphere[f + 1] - sphere[f]))
+            diffuse[k, 0, i], diffuse[k, 1, i], diffuse[k, 2, i] = d0, d1, d2
+            lit = ndl > zero if by_cosine else max(max(d0, d1), d2) > floor
             reached[k, i] = lit
             if lit and shadows:
                 origins[r, 0] = position[0, i] + lift * normal[0, i]
@@ -417,71 +426,72 @@ def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r,
 
 
 @kernel
-def _radiance_kernel(albedo, roughness, f0, spec, ambient, indirect, visible, nv, e2, normal, view, position, lights,
-                     diffuse, reached, out):
-    """out (3, M): per hit, ambient_light (albedo x (indirect[:, i] or ambient), plus spec x ambient x Karis' F0 A + B
-    x visible[i], e2 = exp2(-9.28 n.v)), then per reached light (lights, diffuse, reached as _lights_kernel left
-    them) albedo x diffuse + spec x ggx_specular, times its radiance (over the squared distance for a point light).
-    f0 (3, M) or (3, 1); indirect (3, M) or (0, 0); visible (M,) or empty. Float32 in the numpy formulas' order."""
+def _radiance_kernel(albedo, roughness, f0, spec, ambient, irradiance, visible, nv, e2, normal, view, position,
+                     lights, diffuse, reached, out):
+    """out (3, M): per hit, ambient_light (albedo x irradiance (3, M) (the indirect irradiance, or the ambient
+    light), plus spec x ambient (3,) x Karis' F0 A + B x visible (M,), e2 = exp2(-9.28 n.v)), then per reached light
+    (lights, diffuse, reached as _lights_kernel left them) albedo x diffuse + spec x ggx_specular, times its radiance
+    (over the squared distance for a point light). f0 (3, M). Float32 in the numpy formulas' order."""
     zero, one, half = np.float32(0.0), np.float32(1.0), np.float32(0.5)
+    tiny, eps = np.float32(1e-30), np.float32(1e-7)
     m = albedo.shape[1]
-    wide_f0 = f0.shape[1] > 1
     with_spec = spec != zero
-    o, colour = np.empty(3, np.float32), np.empty(3, np.float32)
+    s0, s1, s2 = spec * ambient[0], spec * ambient[1], spec * ambient[2]
     for i in range(m):
-        j = i if wide_f0 else 0
-        rough = roughness[i]
-        for c in range(3):
-            o[c] = albedo[c, i] * (indirect[c, i] if indirect.shape[0] else ambient[c])
+        o0, o1, o2 = albedo[0, i] * irradiance[0, i], albedo[1, i] * irradiance[1, i], albedo[2, i] * irradiance[2, i]
         if with_spec:
+            rough = roughness[i]
             r0 = rough * np.float32(-1.0) + one
             r1 = rough * np.float32(-0.0275) + np.float32(0.0425)
             a004 = min(r0 * r0, e2[i]) * r0 + r1
             A = a004 * np.float32(-1.04) + (rough * np.float32(-0.572) + np.float32(1.04))
             B = a004 * np.float32(1.04) + (rough * np.float32(0.022) + np.float32(-0.04))
-            for c in range(3):
-                s = spec * ambient[c] * (f0[c, j] * A + B)
-                if visible.shape[0]:
-                    s = s * visible[i]
-                o[c] = o[c] + s
-        nvi = nv[i]
-        a2 = rough * rough
-        a2 = a2 * a2
-        nx, ny, nz = normal[0, i], normal[1, i], normal[2, i]
-        vx, vy, vz = view[0, i], view[1, i], view[2, i]
-        for k in range(lights.shape[0]):
+            o0 = o0 + s0 * (f0[0, i] * A + B) * visible[i]
+            o1 = o1 + s1 * (f0[1, i] * A + B) * visible[i]
+            o2 = o2 + s2 * (f0[2, i] * A + B) * visible[i]
+        out[0, i], out[1, i], out[2, i] = o0, o1, o2
+    for k in range(lights.shape[0]):
+        point = lights[k, 0] != zero
+        px, py, pz = lights[k, 1], lights[k, 2], lights[k, 3]
+        e0, e1, e2_ = lights[k, 4], lights[k, 5], lights[k, 6]
+        for i in range(m):
             if not reached[k, i]:
                 continue                 # numpy's colour x 0 added: the same sum
-            lx, ly, lz = lights[k, 1], lights[k, 2], lights[k, 3]
-            point = lights[k, 0] != zero
-            falloff = one
+            lx, ly, lz = px, py, pz
+            q0, q1, q2 = e0, e1, e2_
             if point:
                 lx, ly, lz = lx - position[0, i], ly - position[1, i], lz - position[2, i]
                 dist = np.sqrt(lx * lx + ly * ly + lz * lz)
                 d = max(dist, np.float32(1e-9))
                 lx, ly, lz = lx / d, ly / d, lz / d
                 falloff = max(dist * dist, np.float32(1e-12))
-            for c in range(3):
-                colour[c] = albedo[c, i] * diffuse[k, c, i]
+                q0, q1, q2 = e0 / falloff, e1 / falloff, e2_ / falloff
+            c0 = albedo[0, i] * diffuse[k, 0, i]
+            c1 = albedo[1, i] * diffuse[k, 1, i]
+            c2 = albedo[2, i] * diffuse[k, 2, i]
             if with_spec:
+                nx, ny, nz = normal[0, i], normal[1, i], normal[2, i]
+                vx, vy, vz = view[0, i], view[1, i], view[2, i]
+                nvi = nv[i]
+                a2 = roughness[i] * roughness[i]
+                a2 = a2 * a2
                 ndl = nx * lx + ny * ly + nz * lz
                 hx, hy, hz = vx + lx, vy + ly, vz + lz
-                length = max(np.sqrt(hx * hx + hy * hy + hz * hz), np.float32(1e-30))
+                length = max(np.sqrt(hx * hx + hy * hy + hz * hz), tiny)
                 hx, hy, hz = hx / length, hy / length, hz / length
                 nl = min(max(ndl, zero), one)
                 nh = min(max(nx * hx + ny * hy + nz * hz, zero), one)
                 vh = min(max(vx * hx + vy * hy + vz * hz, zero), one)
                 d = nh * nh * (a2 - one) + one
                 vis = half / max(nl * np.sqrt(nvi * nvi * (one - a2) + a2) + nvi * np.sqrt(nl * nl * (one - a2) + a2),
-                                 np.float32(1e-7))
+                                 eps)
                 s = a2 / (d * d) * vis * nl
                 x = one - vh
                 x2 = x * x
                 x5 = x2 * x2 * x
-                for c in range(3):
-                    colour[c] = colour[c] + spec * (s * (f0[c, j] + (one - f0[c, j]) * x5))
-            for c in range(3):
-                scale = lights[k, 4 + c] / falloff if point else lights[k, 4 + c]
-                o[c] = o[c] + colour[c] * scale
-        for c in range(3):
-            out[c, i] = o[c]
+                c0 = c0 + spec * (s * (f0[0, i] + (one - f0[0, i]) * x5))
+                c1 = c1 + spec * (s * (f0[1, i] + (one - f0[1, i]) * x5))
+                c2 = c2 + spec * (s * (f0[2, i] + (one - f0[2, i]) * x5))
+            out[0, i] = out[0, i] + c0 * q0
+            out[1, i] = out[1, i] + c1 * q1
+            out[2, i] = out[2, i] + c2 * q2
