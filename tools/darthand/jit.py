@@ -11,6 +11,10 @@ registers. `kernel` marks such a loop. Rules the kernels follow:
   (trace.in_chunks) and the frame writer's thread run alongside a kernel.
 - Arrays passed in contiguous and of fixed dtypes (callers normalise them), so each kernel compiles for one or two
   signatures, not one per layout.
+- Divisions: numba checks every division for a zero divisor (Python's ZeroDivisionError), and that branch keeps LLVM
+  from vectorising the loop. A kernel whose divisors cannot be zero (each guarded, as max(|v|, 1e-30)) says
+  `@kernel(error_model="numpy")`: the check goes, the numbers stay (IEEE division either way); SIMD lanes do the
+  same float32 operations in the same order, so vectorising changes no bit.
 - Self-contained: a kernel calls no other kernel (so `kernel` can stay lazy, below, and a cached kernel never
   outlives a change in a function it inlined: numba's cache checks only the kernel's own source file).
 
@@ -34,9 +38,12 @@ import threading
 _LOCK = threading.Lock()
 
 
-def kernel(func):
+def kernel(func=None, *, error_model: str = "python"):
     """`func` as a numba kernel (njit, cache=True, nogil=True), compiled at its first call; `func` itself stays
-    available as `.py_func` (plain Python, for debugging)."""
+    available as `.py_func` (plain Python, for debugging). As `@kernel(error_model="numpy")`: no zero-divisor checks
+    (see the rules above)."""
+    if func is None:
+        return lambda f: kernel(f, error_model=error_model)
     compiled = None
 
     @functools.wraps(func)
@@ -47,7 +54,7 @@ def kernel(func):
                 if compiled is None:
                     import numba
 
-                    compiled = numba.njit(cache=True, nogil=True)(func)
+                    compiled = numba.njit(cache=True, nogil=True, error_model=error_model)(func)
         return compiled(*args)
 
     call.py_func = func

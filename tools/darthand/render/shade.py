@@ -352,7 +352,7 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
     return out
 
 
-@kernel
+@kernel(error_model="numpy")
 def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r, shifts, skin, sphere, lift,
                    nv, e2, diffuse, reached, origins, directions, tfar, ray_hit, offsets):
     """Per hit i: nv[i] = clip(n.v, 1e-4, 1) and e2[i] = -9.28 nv (the exponent of ambient_specular's exp2); per
@@ -381,20 +381,19 @@ def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r,
                 rows[ch, i] = -1 if nail else row * row_len
     w0, w1, w2 = wrap[0], wrap[1], wrap[2]
     u0, u1, u2 = one + w0, one + w1, one + w2
+    toward = np.empty((4, m), np.float32)          # a point light's direction and distance per hit
     r = 0
     for k in range(lights.shape[0]):
-        offsets[k] = r
         point = lights[k, 0] != zero
-        shadows = lights[k, 7] != zero
         px, py, pz = lights[k, 1], lights[k, 2], lights[k, 3]
-        for i in range(m):
+        for i in range(m):                         # straight-line code: LLVM vectorises it
             lx, ly, lz = px, py, pz
-            dist = zero
             if point:
                 lx, ly, lz = lx - position[0, i], ly - position[1, i], lz - position[2, i]
                 dist = np.sqrt(lx * lx + ly * ly + lz * lz)
                 d = max(dist, tiny)
                 lx, ly, lz = lx / d, ly / d, lz / d
+                toward[0, i], toward[1, i], toward[2, i], toward[3, i] = lx, ly, lz, dist
             ndl = normal[0, i] * lx + normal[1, i] * ly + normal[2, i] * lz
             d0 = d1 = d2 = max(ndl, zero)
             if kind == 1:
@@ -412,20 +411,27 @@ def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r,
                 f = rows[2, i] + c0
                 d2 = np.float32(np.float64(sphere[f]) + fc * np.float64(sphere[f + 1] - sphere[f]))
             diffuse[k, 0, i], diffuse[k, 1, i], diffuse[k, 2, i] = d0, d1, d2
-            lit = ndl > zero if by_cosine else max(max(d0, d1), d2) > floor
-            reached[k, i] = lit
-            if lit and shadows:
+            reached[k, i] = ndl > zero if by_cosine else max(max(d0, d1), d2) > floor
+        offsets[k] = r
+        if lights[k, 7] == zero:
+            continue
+        for i in range(m):                         # the shadow rays of the reached hits, in order
+            if reached[k, i]:
                 origins[r, 0] = position[0, i] + lift * normal[0, i]
                 origins[r, 1] = position[1, i] + lift * normal[1, i]
                 origins[r, 2] = position[2, i] + lift * normal[2, i]
-                directions[r, 0], directions[r, 1], directions[r, 2] = lx, ly, lz
-                tfar[r] = max(dist - lift, zero) if point else np.float32(np.inf)
+                if point:
+                    directions[r, 0], directions[r, 1], directions[r, 2] = toward[0, i], toward[1, i], toward[2, i]
+                    tfar[r] = max(toward[3, i] - lift, zero)
+                else:
+                    directions[r, 0], directions[r, 1], directions[r, 2] = px, py, pz
+                    tfar[r] = np.float32(np.inf)
                 ray_hit[r] = i
                 r += 1
     offsets[lights.shape[0]] = r
 
 
-@kernel
+@kernel(error_model="numpy")
 def _radiance_kernel(albedo, roughness, f0, spec, ambient, irradiance, visible, nv, e2, normal, view, position,
                      lights, diffuse, reached, out):
     """out (3, M): per hit, ambient_light (albedo x irradiance (3, M) (the indirect irradiance, or the ambient
