@@ -366,42 +366,50 @@ def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r,
     cos_last, row_last, row_len = 127, np.float32(48.0), 129   # changed global); rows 0..RATIO_STEPS - 1
     m = normal.shape[1]
     subsurface = kind == 2
-    # per hit: n.v, and the subsurface table's row (start index) per channel, -1 for a nail
+    # per hit: n.v, and the subsurface table's row (start index) per channel; nail[i]: Lambert instead
     rows = np.empty((3, m if subsurface else 0), np.int64)
+    nail = np.zeros(m if subsurface else 0, np.bool_)
     all_skin = skin.shape[0] == 0
     for i in range(m):
         c = normal[0, i] * view[0, i] + normal[1, i] * view[1, i] + normal[2, i] * view[2, i]
         c = min(max(c, floor), one)
         nv[i] = c
         e2[i] = np.float32(-9.28) * c
-        if subsurface:
-            nail = not (all_skin or skin[i])
+    if subsurface:
+        for i in range(m):
             for ch in range(3):
-                row = np.int64(min(max(np.rint(row_r[i] + shifts[ch]), zero), row_last))
-                rows[ch, i] = -1 if nail else row * row_len
+                rows[ch, i] = np.int64(min(max(np.rint(row_r[i] + shifts[ch]), zero), row_last)) * row_len
+            nail[i] = not (all_skin or skin[i])
     w0, w1, w2 = wrap[0], wrap[1], wrap[2]
     u0, u1, u2 = one + w0, one + w1, one + w2
     toward = np.empty((4, m), np.float32)          # a point light's direction and distance per hit
+    ndl = np.empty(m, np.float32)
     r = 0
+    # loops of straight-line code, one per case (LLVM vectorises them), then the rays' compaction
     for k in range(lights.shape[0]):
         point = lights[k, 0] != zero
         px, py, pz = lights[k, 1], lights[k, 2], lights[k, 3]
-        for i in range(m):                         # straight-line code: LLVM vectorises it
-            lx, ly, lz = px, py, pz
-            if point:
-                lx, ly, lz = lx - position[0, i], ly - position[1, i], lz - position[2, i]
+        if point:
+            for i in range(m):
+                lx, ly, lz = px - position[0, i], py - position[1, i], pz - position[2, i]
                 dist = np.sqrt(lx * lx + ly * ly + lz * lz)
                 d = max(dist, tiny)
                 lx, ly, lz = lx / d, ly / d, lz / d
                 toward[0, i], toward[1, i], toward[2, i], toward[3, i] = lx, ly, lz, dist
-            ndl = normal[0, i] * lx + normal[1, i] * ly + normal[2, i] * lz
-            d0 = d1 = d2 = max(ndl, zero)
-            if kind == 1:
-                d0 = max((ndl + w0) / u0, zero)
-                d1 = max((ndl + w1) / u1, zero)
-                d2 = max((ndl + w2) / u2, zero)
-            elif subsurface and rows[0, i] >= 0:
-                cu = (min(max(ndl, -one), one) + one) * cos_half
+                ndl[i] = normal[0, i] * lx + normal[1, i] * ly + normal[2, i] * lz
+        else:
+            for i in range(m):
+                ndl[i] = normal[0, i] * px + normal[1, i] * py + normal[2, i] * pz
+        if kind == 1:
+            for i in range(m):
+                d0 = max((ndl[i] + w0) / u0, zero)
+                d1 = max((ndl[i] + w1) / u1, zero)
+                d2 = max((ndl[i] + w2) / u2, zero)
+                diffuse[k, 0, i], diffuse[k, 1, i], diffuse[k, 2, i] = d0, d1, d2
+                reached[k, i] = ndl[i] > zero if by_cosine else max(max(d0, d1), d2) > floor
+        elif subsurface:
+            for i in range(m):
+                cu = (min(max(ndl[i], -one), one) + one) * cos_half
                 c0 = min(np.int64(cu), cos_last)
                 fc = np.float64(cu) - np.float64(c0)
                 f = rows[0, i] + c0
@@ -410,8 +418,16 @@ def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r,
                 d1 = np.float32(np.float64(sphere[f]) + fc * np.float64(sphere[f + 1] - sphere[f]))
                 f = rows[2, i] + c0
                 d2 = np.float32(np.float64(sphere[f]) + fc * np.float64(sphere[f + 1] - sphere[f]))
-            diffuse[k, 0, i], diffuse[k, 1, i], diffuse[k, 2, i] = d0, d1, d2
-            reached[k, i] = ndl > zero if by_cosine else max(max(d0, d1), d2) > floor
+                lam = max(ndl[i], zero)
+                if nail[i]:
+                    d0 = d1 = d2 = lam
+                diffuse[k, 0, i], diffuse[k, 1, i], diffuse[k, 2, i] = d0, d1, d2
+                reached[k, i] = max(max(d0, d1), d2) > floor
+        else:
+            for i in range(m):
+                lam = max(ndl[i], zero)
+                diffuse[k, 0, i], diffuse[k, 1, i], diffuse[k, 2, i] = lam, lam, lam
+                reached[k, i] = ndl[i] > zero
         offsets[k] = r
         if lights[k, 7] == zero:
             continue
