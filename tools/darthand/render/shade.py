@@ -35,7 +35,7 @@ import numpy as np
 
 from darthand.errors import InputError
 from darthand.jit import kernel
-from darthand.render.skin import skin_width, sphere_table, table_rows
+from darthand.render.skin import skin_width, sphere_blend_table, table_rows
 from darthand.render.subject import Material
 
 SHADOW_LIFT = 2e-3          # shadow-ray origin offset, relative to the scene's bounding-box diagonal
@@ -331,7 +331,7 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
     origins, directions = np.empty((rays, 3), np.float32), np.empty((rays, 3), np.float32)
     tfar, ray_hit, offsets = np.empty(rays, np.float32), np.empty(rays, np.int64), np.zeros(len(lights) + 1, np.int64)
     _lights_kernel(n, v, position, table, model.kind, model.by_cosine, model.wrap, model.row_r, model.shifts,
-                   model.skin, sphere_table().ravel(), lift, nv, e2, diffuse, reached, origins, directions, tfar,
+                   model.skin, sphere_blend_table(), lift, nv, e2, diffuse, reached, origins, directions, tfar,
                    ray_hit, offsets)
     if spec:
         np.exp2(e2, out=e2)                # numpy's exp2 (SIMD): numba's libm differs from it in the last bit
@@ -357,7 +357,7 @@ def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r,
                    nv, e2, diffuse, reached, origins, directions, tfar, ray_hit, offsets):
     """Per hit i: nv[i] = clip(n.v, 1e-4, 1) and e2[i] = -9.28 nv (the exponent of ambient_specular's exp2); per
     light k (row of `lights`, light_table) and hit: the diffuse response diffuse[k, :, i] at n.l (DiffuseModel's
-    kind, wrap, row_r, shifts, skin; `sphere` the flattened skin.sphere_table), reached[k, i], and for a light
+    kind, wrap, row_r, shifts, skin; `sphere` skin.sphere_blend_table), reached[k, i], and for a light
     with shadows a shadow ray per reached hit: origin p + lift n, direction toward the light, tfar (inf, or the
     distance to a point light less lift), ray_hit its hit; light k's rays are [offsets[k], offsets[k + 1]).
     Float32 in the numpy formulas' order (subsurface's blend in float64, rounded once, as numpy promotes it)."""
@@ -413,11 +413,11 @@ def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r,
                 c0 = min(np.int64(cu), cos_last)
                 fc = np.float64(cu) - np.float64(c0)
                 f = rows[0, i] + c0
-                d0 = np.float32(np.float64(sphere[f]) + fc * np.float64(sphere[f + 1] - sphere[f]))
+                d0 = np.float32(sphere[f, 0] + fc * sphere[f, 1])
                 f = rows[1, i] + c0
-                d1 = np.float32(np.float64(sphere[f]) + fc * np.float64(sphere[f + 1] - sphere[f]))
+                d1 = np.float32(sphere[f, 0] + fc * sphere[f, 1])
                 f = rows[2, i] + c0
-                d2 = np.float32(np.float64(sphere[f]) + fc * np.float64(sphere[f + 1] - sphere[f]))
+                d2 = np.float32(sphere[f, 0] + fc * sphere[f, 1])
                 lam = max(ndl[i], zero)
                 if nail[i]:
                     d0 = d1 = d2 = lam

@@ -79,6 +79,16 @@ def sphere_table() -> np.ndarray:
     return np.asarray(rows, np.float32)
 
 
+@functools.lru_cache(maxsize=1)
+def sphere_blend_table() -> np.ndarray:
+    """(RATIO_STEPS * COS_STEPS, 2) float64: each entry of the flattened sphere_table and its float32 step to the
+    next (hi - lo), as subsurface_diffuse's blend lo + fc (hi - lo) reads them (float32 difference, float64 blend)."""
+    flat = sphere_table().ravel()
+    step = np.zeros_like(flat)
+    step[:-1] = flat[1:] - flat[:-1]
+    return np.stack([flat, step], axis=1).astype(np.float64)
+
+
 def subsurface_diffuse(ndl: np.ndarray, radius: np.ndarray, width: np.ndarray) -> np.ndarray:
     """(3, M) float32 diffuse response per unit irradiance (D above) at cosines ndl (M,) on spheres of radius
     `radius` (M,) metres, with profile widths `width` (3,) metres per channel: linear in cos theta, nearest row in
