@@ -18,6 +18,15 @@ from darthand.render.subject import Material, skin_material
 from darthand.render.texture import MipTexture
 
 
+def dot(a, b):
+    """(M,) dot products of (3, M) vectors, summed x, y, z."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def normalize(v):
+    return v / np.maximum(np.sqrt(dot(v, v)), np.float32(1e-30))
+
+
 def reference_diffuse(material, hits, skin_model):
     """(response(ndl) -> (3, M) or (M,), reach): the numpy diffuse models (shade.diffuse_model's meaning)."""
     if material.kind != "skin" or skin_model == "lambert" or (skin_model == "subsurface" and hits.radius is None):
@@ -42,7 +51,7 @@ def reference_shade(material, hits, lights, ambient, occluded, extent, counters,
     """shade() as numpy passes, light after light."""
     p = sh.material_params(material, hits)
     n, v = hits.normal, hits.view
-    nv = np.clip(sh._dot(n, v), 1e-4, 1)
+    nv = np.clip(dot(n, v), 1e-4, 1)
     spec = np.float32(material.specular)
     out = sh.ambient_light(p, ambient, spec, nv, hits)
     response, reach = reference_diffuse(material, hits, skin_model)
@@ -54,10 +63,10 @@ def reference_shade(material, hits, lights, ambient, occluded, extent, counters,
             scale = light["radiance"][:, None]
         else:
             l = light["position"].astype(np.float32)[:, None] - hits.position
-            dist = np.sqrt(sh._dot(l, l))
+            dist = np.sqrt(dot(l, l))
             l = l / np.maximum(dist, 1e-9)
             scale = light["radiance"][:, None] / np.maximum(dist * dist, 1e-12)
-        ndl = sh._dot(n, l)
+        ndl = dot(n, l)
         diffuse = response(ndl)
         reached = ndl > 0 if reach >= 0 else (diffuse.max(axis=0) if diffuse.ndim == 2 else diffuse) > 1e-4
         if light["shadows"]:
@@ -70,9 +79,9 @@ def reference_shade(material, hits, lights, ambient, occluded, extent, counters,
                 counters["shadow_rays"] = counters.get("shadow_rays", 0) + len(idx)
         colour = p.albedo * diffuse
         if spec:
-            h = sh._normalize(v + l)
-            colour += spec * sh.ggx_specular(np.clip(ndl, 0, 1), nv, np.clip(sh._dot(n, h), 0, 1),
-                                             np.clip(sh._dot(v, h), 0, 1), p.roughness, p.f0)
+            h = normalize(v + l)
+            colour += spec * sh.ggx_specular(np.clip(ndl, 0, 1), nv, np.clip(dot(n, h), 0, 1),
+                                             np.clip(dot(v, h), 0, 1), p.roughness, p.f0)
         colour *= reached
         colour *= scale
         out += colour

@@ -90,15 +90,6 @@ class Hits:
     skin: np.ndarray | None = None
 
 
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(M,) dot products of (3, M) vectors."""
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _normalize(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.sqrt(_dot(v, v)), np.float32(1e-30))
-
-
 def surface_hits(faces, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray, directions: np.ndarray,
                  depth: np.ndarray, pixel_angle: float) -> Hits:
     """Interpolate a surface's attributes (scene.FaceData) at ray hits: faces `prim` (M,), barycentrics
