@@ -194,3 +194,17 @@ def test_open_plane_reflects_the_ambient_light_only():
     vl.ensure(0, np.array([0, 1], np.int32))
     assert (vl.values[0][3] == 1).all() and (vl.values[0][:3] == ambient[:, None]).all()
     assert not vl.lit[0].any()                                    # no ray hit anything: no light made at vertices
+
+
+def test_direction_tables_are_kept_within_their_budget(monkeypatch):
+    """Tables beyond the budget go least recently used first; a kept table is the one made before."""
+    monkeypatch.setattr(indirect, "_LOCAL", type(indirect._LOCAL)())
+    monkeypatch.setattr(indirect, "LOCAL_BUDGET", 3 * 100 * 4 * 4 * 3)                  # three tables of 100 x 4
+    first = indirect.direction_table(100, 4, 1)
+    for salt in (2, 3):
+        indirect.direction_table(100, 4, salt)
+    assert indirect.direction_table(100, 4, 1) is first                                 # used again: now the newest
+    indirect.direction_table(100, 4, 4)                                                 # drops salt 2
+    assert list(indirect._LOCAL) == [(100, 4, 3), (100, 4, 1), (100, 4, 4)]
+    assert np.array_equal(indirect.direction_table(100, 4, 2), indirect.local_directions(np.arange(100), 4, 2))
+    assert len(indirect._LOCAL) == 3

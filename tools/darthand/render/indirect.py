@@ -36,6 +36,8 @@ directions in every frame (no flicker in a sequence).
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 
 from darthand.jit import kernel
@@ -82,18 +84,22 @@ def local_directions(vertex_ids: np.ndarray, rays: int, salt: int) -> np.ndarray
     return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1 - uu)]).astype(np.float32)
 
 
-_LOCAL: dict = {}
+_LOCAL: OrderedDict = OrderedDict()
+LOCAL_BUDGET = 32 << 20     # bytes of direction tables kept: the hand's and all 50 accessories' at 16 rays take 11 MB
 
 
 def direction_table(count: int, rays: int, salt: int) -> np.ndarray:
-    """(3, count, K) float32 `local_directions` of vertices 0..count-1, made once per (count, rays, salt) and kept
-    (they depend on the mesh's vertex count only; the hashes and trigonometry are most of the cost of making rays)."""
+    """(3, count, K) float32 `local_directions` of vertices 0..count-1, made once per (count, rays, salt) and kept,
+    least recently used dropped first beyond LOCAL_BUDGET (they depend on the mesh's vertex count only, and making
+    them, hashes and trigonometry, costs 1-3 ms for an accessory: more than the rest of its indirect light)."""
     key = (int(count), int(rays), int(salt))
     table = _LOCAL.get(key)
     if table is None:
-        if len(_LOCAL) > 32:
-            _LOCAL.clear()
         table = _LOCAL[key] = local_directions(np.arange(count), rays, salt)
+        while len(_LOCAL) > 1 and sum(t.nbytes for t in _LOCAL.values()) > LOCAL_BUDGET:
+            _LOCAL.popitem(last=False)
+    else:
+        _LOCAL.move_to_end(key)
     return table
 
 
