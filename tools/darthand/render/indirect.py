@@ -228,6 +228,13 @@ class VertexLight:
         self.lit = [np.zeros(n, bool) for n in sizes]                      # reflected made
         self.values = [np.zeros((4, n), np.float32) for n in sizes]        # E (3), V; by row
         self.done = [np.zeros(n, bool) for n in sizes]
+        # per light (L,): point (else directional), towards (L, 3) its position or the direction toward it, radiance
+        # (L, 3), shadows
+        self.light_arrays = (np.array([light["type"] != "directional" for light in lights], bool).reshape(-1),
+                             np.array([(light["position"] if light["type"] != "directional" else -light["direction"])
+                                       .astype(np.float32) for light in lights], np.float32).reshape(-1, 3),
+                             np.array([light["radiance"] for light in lights], np.float32).reshape(-1, 3),
+                             np.array([bool(light["shadows"]) for light in lights], bool).reshape(-1))
 
     def _mesh(self, g: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Surface g's (vertices (N, 3) float32, normals (N, 3) float32, faces (F, 3) int32), contiguous."""
@@ -252,30 +259,21 @@ class VertexLight:
         self.has_albedo[g][ids] = True
 
     def _reflect(self, g: int, ids: np.ndarray) -> None:
-        """Make the reflected light (albedo x direct irradiance) of surface g's vertices `ids` that have none yet."""
+        """Make the reflected light of surface g's vertices `ids` that have none yet: albedo x the irradiance (pi
+        folded) of the lights, cos-weighted, shadowed (one shadow ray per vertex and shadowed light it faces)."""
         ids = ids[~self.lit[g][ids]]
         if not len(ids):
             return
         self._albedo(g, ids)
-        self.reflected[g][ids] = self.albedo[g][ids] * self._direct(g, ids)
-        self.lit[g][ids] = True
-
-    def _direct(self, g: int, ids: np.ndarray) -> np.ndarray:
-        """(N, 3) float32 irradiance (pi folded) of the lights at surface g's vertices `ids` (N,), shadowed."""
         vertices, normals, _ = self._mesh(g)
-        out = np.zeros((len(ids), 3), np.float32)
-        lift = np.float32(self.lift)
-        for light in self.lights:
-            point = light["type"] != "directional"
-            towards = (light["position"] if point else -light["direction"]).astype(np.float32)
-            lit, origins, dirs, tfar, contribution = _light_kernel(
-                vertices, normals, ids, point, towards, np.ascontiguousarray(light["radiance"], np.float32), lift)
-            if light["shadows"] and len(lit):
-                open_ = ~self.scene.occluded(origins, dirs, tfar)
-                self.counters["indirect_rays"] = self.counters.get("indirect_rays", 0) + len(origins)
-                lit, contribution = lit[open_], contribution[open_]
-            out[lit] += contribution
-        return out
+        state, contribution, origins, dirs, tfar = _lights_kernel(vertices, normals, ids, *self.light_arrays,
+                                                                  np.float32(self.lift))
+        blocked = np.zeros(0, bool)
+        if len(origins):
+            blocked = self.scene.occluded(origins, dirs, tfar)
+            self.counters["indirect_rays"] = self.counters.get("indirect_rays", 0) + len(origins)
+        _reflect_kernel(ids, state, contribution, blocked, self.albedo[g], self.reflected[g])
+        self.lit[g][ids] = True
 
     def ensure(self, g: int, prim: np.ndarray) -> None:
         """Compute E and V for the vertices of faces `prim` of surface g that have none yet."""
@@ -325,13 +323,17 @@ class VertexLight:
 
 @kernel
 def _todo_kernel(faces, prim, done):
-    """(T,) int64 ascending: the vertices of faces `prim` (M,) int32 (faces (F, 3) int32) that are not `done` (N,)."""
-    needed = np.zeros(done.shape[0], np.bool_)
+    """(T,) int64 ascending: the vertices of faces `prim` (M,) int32 (faces (F, 3) int32) that are not `done` (N,).
+    (Faces first: a frame's hits are many per face.)"""
+    hit = np.zeros(faces.shape[0], np.bool_)
     for i in range(prim.shape[0]):
-        p = prim[i]
-        needed[faces[p, 0]] = True
-        needed[faces[p, 1]] = True
-        needed[faces[p, 2]] = True
+        hit[prim[i]] = True
+    needed = np.zeros(done.shape[0], np.bool_)
+    for f in range(faces.shape[0]):
+        if hit[f]:
+            needed[faces[f, 0]] = True
+            needed[faces[f, 1]] = True
+            needed[faces[f, 2]] = True
     count = 0
     for i in range(done.shape[0]):
         if needed[i] and not done[i]:
@@ -346,49 +348,76 @@ def _todo_kernel(faces, prim, done):
 
 
 @kernel
-def _light_kernel(vertices, normals, ids, point, towards, radiance, lift):
-    """One light at vertices `ids` (N,) int64 of (V, 3) float32 vertices and normals: (lit (L,) int64 positions in
-    ids of the vertices facing it (cos > 0), their shadow rays' origins (L, 3) (lifted by `lift` along the normal),
-    unit directions (L, 3) and tfar (L,) float32, and contributions cos x radiance (L, 3)). point: `towards` is the
-    light's position (radiance falls off as 1 / max(d^2, 1e-12), the shadow ray stops `lift` short of it), else the
-    direction toward the light (tfar inf). Float32, in the order of the numpy it replaced (d / max(|d|, 1e-9))."""
-    n = ids.shape[0]
-    lit = np.empty(n, np.int64)
-    origins = np.empty((n, 3), np.float32)
-    dirs = np.empty((n, 3), np.float32)
-    contribution = np.empty((n, 3), np.float32)
-    tfar = np.empty(n, np.float32)
+def _lights_kernel(vertices, normals, ids, point, towards, radiance, shadows, lift):
+    """The lights (point, towards, radiance, shadows: VertexLight.light_arrays) at vertices `ids` (N,) int64 of
+    (V, 3) float32 vertices and normals: (state (L, N) int64: -2 the vertex faces away from the light (cos <= 0), -1
+    lit without a shadow ray, else its shadow ray's index; contributions cos x radiance (L, N, 3) float32; the shadow
+    rays' origins (S, 3) (the vertex lifted by `lift` along its normal), unit directions (S, 3), tfar (S,) float32).
+    A point light's radiance falls off as 1 / max(d^2, 1e-12) and its shadow ray stops `lift` short of it; a
+    directional light's goes to infinity. Float32, in the order of the numpy it replaced (d / max(|d|, 1e-9))."""
+    n, lights = ids.shape[0], point.shape[0]
+    state = np.empty((lights, n), np.int64)
+    contribution = np.empty((lights, n, 3), np.float32)
+    origins = np.empty((lights * n, 3), np.float32)
+    dirs = np.empty((lights * n, 3), np.float32)
+    tfar = np.empty(lights * n, np.float32)
     zero, tiny, tiny2 = np.float32(0.0), np.float32(1e-9), np.float32(1e-12)
     inf = np.float32(np.inf)
     count = 0
-    for i in range(n):
+    for k in range(lights):
+        for i in range(n):
+            vi = ids[i]
+            n0, n1, n2 = normals[vi, 0], normals[vi, 1], normals[vi, 2]
+            s0, s1, s2 = radiance[k, 0], radiance[k, 1], radiance[k, 2]
+            if point[k]:
+                d0 = towards[k, 0] - vertices[vi, 0]
+                d1 = towards[k, 1] - vertices[vi, 1]
+                d2 = towards[k, 2] - vertices[vi, 2]
+                dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                length = tiny if dist < tiny else dist             # np.maximum: NaN stays NaN
+                l0, l1, l2 = d0 / length, d1 / length, d2 / length
+                square = dist * dist
+                square = tiny2 if square < tiny2 else square
+                s0, s1, s2 = s0 / square, s1 / square, s2 / square
+                far = dist - lift
+                far = zero if far < zero else far
+            else:
+                l0, l1, l2 = towards[k, 0], towards[k, 1], towards[k, 2]
+                far = inf
+            cos = n0 * l0 + n1 * l1 + n2 * l2
+            contribution[k, i, 0], contribution[k, i, 1], contribution[k, i, 2] = cos * s0, cos * s1, cos * s2
+            if not cos > zero:
+                state[k, i] = -2
+            elif not shadows[k]:
+                state[k, i] = -1
+            else:
+                state[k, i] = count
+                origins[count, 0] = vertices[vi, 0] + lift * n0
+                origins[count, 1] = vertices[vi, 1] + lift * n1
+                origins[count, 2] = vertices[vi, 2] + lift * n2
+                dirs[count, 0], dirs[count, 1], dirs[count, 2] = l0, l1, l2
+                tfar[count] = far
+                count += 1
+    return state, contribution, origins[:count], dirs[:count], tfar[:count]
+
+
+@kernel
+def _reflect_kernel(ids, state, contribution, blocked, albedo, reflected):
+    """reflected[ids[i]] = albedo[ids[i]] x the sum, light by light in order from 0, of the contributions (L, N, 3)
+    of the lights that reach the vertex (state (L, N) from _lights_kernel, blocked (S,) bool of its shadow rays)."""
+    for i in range(ids.shape[0]):
+        e0, e1, e2 = np.float32(0.0), np.float32(0.0), np.float32(0.0)
+        for k in range(state.shape[0]):
+            ray = state[k, i]
+            if ray == -2 or (ray >= 0 and blocked[ray]):
+                continue
+            e0 += contribution[k, i, 0]
+            e1 += contribution[k, i, 1]
+            e2 += contribution[k, i, 2]
         vi = ids[i]
-        n0, n1, n2 = normals[vi, 0], normals[vi, 1], normals[vi, 2]
-        s0, s1, s2 = radiance[0], radiance[1], radiance[2]
-        if point:
-            d0, d1, d2 = towards[0] - vertices[vi, 0], towards[1] - vertices[vi, 1], towards[2] - vertices[vi, 2]
-            dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            length = tiny if dist < tiny else dist
-            l0, l1, l2 = d0 / length, d1 / length, d2 / length
-            d2_ = dist * dist
-            d2_ = tiny2 if d2_ < tiny2 else d2_
-            s0, s1, s2 = s0 / d2_, s1 / d2_, s2 / d2_
-            far = dist - lift
-            far = zero if far < zero else far
-        else:
-            l0, l1, l2 = towards[0], towards[1], towards[2]
-            far = inf
-        cos = n0 * l0 + n1 * l1 + n2 * l2
-        if cos > zero:
-            lit[count] = i
-            origins[count, 0] = vertices[vi, 0] + lift * n0
-            origins[count, 1] = vertices[vi, 1] + lift * n1
-            origins[count, 2] = vertices[vi, 2] + lift * n2
-            dirs[count, 0], dirs[count, 1], dirs[count, 2] = l0, l1, l2
-            tfar[count] = far
-            contribution[count, 0], contribution[count, 1], contribution[count, 2] = cos * s0, cos * s1, cos * s2
-            count += 1
-    return lit[:count], origins[:count], dirs[:count], tfar[:count], contribution[:count]
+        reflected[vi, 0] = albedo[vi, 0] * e0
+        reflected[vi, 1] = albedo[vi, 1] * e1
+        reflected[vi, 2] = albedo[vi, 2] * e2
 
 
 @kernel
