@@ -168,6 +168,12 @@ def test_degenerate_normals_match_the_numpy():
     compare(scene, 16, True, batches, hits)
 
 
+
+def test_no_rays_is_not_a_vertex_light():
+    with pytest.raises(ValueError, match="at least 1 ray"):
+        indirect.VertexLight(Scene(subject(quad())), [], np.zeros(3, np.float32), 0)
+
+
 # ------------------------------------------------------------------------------------------------ closed forms
 
 

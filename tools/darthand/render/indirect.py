@@ -219,6 +219,9 @@ class VertexLight:
                  counters: dict | None = None):
         """lights: lights.world_lights' dicts (radiance (3,) float32); ambient (3,) float32; rays per hand vertex;
         counters: adds 'indirect_rays' (indirect and shadow rays cast)."""
+        if int(rays) < 1:
+            raise ValueError(f"VertexLight needs at least 1 ray per vertex, not {rays} (without indirect light, "
+                             "make none)")
         self.scene, self.lights, self.rays = scene, lights, int(rays)
         self.interreflection = bool(interreflection)
         self.ambient = np.ascontiguousarray(ambient, np.float32)
