@@ -196,22 +196,62 @@ def shade_hits(ctx: Context, hits: RayHits, footprint: float = 1.0,
     counters: dict = {}
     pixel_angle = footprint / float(np.sqrt(abs(np.linalg.det(ctx.camera.K[:2, :2]))))
     for g, surface in enumerate(ctx.scene.surfaces):
-        idx = np.flatnonzero(hits.geom == g)
+        idx, on = hits_on(hits, g)
         if not len(idx):
             continue
-        on = hits.take(idx)
         at = surface_hits(ctx.scene.faces[g], on.prim, on.u, on.v, on.directions, on.depth, pixel_angle)
         if ctx.indirect is not None:
             at.indirect, at.visible = ctx.indirect.at(g, on.prim, on.u, on.v)
         if ctx.skin == "subsurface" and surface.material.kind == "skin":
             skin_at(at, surface, on.prim, on.u, on.v)
-        normal[:, idx] = at.normal
-        radiance[:, idx] = shade(surface.material, at, ctx.lights, ctx.ambient, ctx.scene.occluded,
-                                 ctx.scene.extent, counters, ctx.skin)
+        _put_columns_kernel(idx, np.ascontiguousarray(at.normal, np.float32), normal)
+        colour = shade(surface.material, at, ctx.lights, ctx.ambient, ctx.scene.occluded, ctx.scene.extent,
+                       counters, ctx.skin)
+        _put_columns_kernel(idx, np.ascontiguousarray(colour, np.float32), radiance)
     if stats is not None:
         stats["shade"] = stats.get("shade", 0.0) + time.perf_counter() - t0
         stats["shadow_rays"] = stats.get("shadow_rays", 0) + counters.get("shadow_rays", 0)
     return normal, radiance
+
+
+def hits_on(hits: RayHits, g: int) -> tuple[np.ndarray, RayHits]:
+    """(idx (M,) int64 ascending, hits.take(idx)) of the hits on surface g, in one pass."""
+    idx, *fields = _hits_on_kernel(np.ascontiguousarray(hits.geom, np.int32), np.int32(g),
+                                   np.ascontiguousarray(hits.prim, np.int32), np.ascontiguousarray(hits.u, np.float32),
+                                   np.ascontiguousarray(hits.v, np.float32),
+                                   np.ascontiguousarray(hits.depth, np.float32),
+                                   np.ascontiguousarray(hits.directions, np.float32))
+    return idx, RayHits(*fields)
+
+
+@kernel
+def _hits_on_kernel(geom, g, prim, u, v, depth, directions):
+    """(idx, prim, u, v, depth, directions) of the rays whose geom is g, in ray order."""
+    m = 0
+    for i in range(geom.shape[0]):
+        if geom[i] == g:
+            m += 1
+    idx = np.empty(m, np.int64)
+    out_geom, out_prim = np.empty(m, np.int32), np.empty(m, np.int32)
+    out_u, out_v, out_depth = np.empty(m, np.float32), np.empty(m, np.float32), np.empty(m, np.float32)
+    out_dir = np.empty((3, m), np.float32)
+    k = 0
+    for i in range(geom.shape[0]):
+        if geom[i] == g:
+            idx[k] = i
+            out_geom[k], out_prim[k], out_u[k], out_v[k], out_depth[k] = geom[i], prim[i], u[i], v[i], depth[i]
+            for c in range(3):
+                out_dir[c, k] = directions[c, i]
+            k += 1
+    return idx, out_geom, out_prim, out_u, out_v, out_depth, out_dir
+
+
+@kernel
+def _put_columns_kernel(idx, values, out):
+    """out[:, idx] = values ((C, M) float32 into (C, N))."""
+    for c in range(values.shape[0]):
+        for k in range(idx.shape[0]):
+            out[c, idx[k]] = values[c, k]
 
 
 def prepare_shading(ctx: Context, hits: RayHits, stats: dict | None = None) -> None:
