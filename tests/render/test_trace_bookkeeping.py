@@ -215,7 +215,8 @@ def test_tiles_and_traced_pixels_match_the_numpy_chain(assets, ring):
             traced = api.tile_pixels(tiles, r1 - r0, c1 - c0)
             ref_traced, ref_uv = old_traced(tiles, *bounds)
             assert same(traced, ref_traced) and same(api.pixel_positions(traced, r0, c0, c1 - c0), ref_uv)
-    for tiles in (np.zeros((3, 4), bool), np.ones((3, 4), bool)):            # no tile, every tile
+    grid = (-(-20 // trace.TILE), -(-29 // trace.TILE))
+    for tiles in (np.zeros(grid, bool), np.ones(grid, bool)):                 # no tile, every tile
         assert same(api.tile_pixels(tiles, 20, 29), old_traced(tiles, 0, 20, 0, 29)[0])
 
 

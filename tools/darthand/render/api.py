@@ -282,6 +282,8 @@ def _scatter_kernel(index, geom, prim, depth, normal, radiance, out_geom, out_pr
 def tile_pixels(tiles: np.ndarray, h: int, w: int, tile: int = TILE) -> np.ndarray:
     """(M,) int64 ascending row-major indices of the pixels of an h x w region whose tile (tile x tile pixels) is
     True in `tiles` (ceil(h / tile), ceil(w / tile)) bool."""
+    if tiles.shape != (-(-h // tile), -(-w // tile)):
+        raise ValueError(f"tiles {tiles.shape} do not cover {h} x {w} pixels in tiles of {tile}")
     out = np.empty(h * w, np.int64)
     return out[:_tile_pixels_kernel(np.ascontiguousarray(tiles, np.bool_), h, w, tile, out)]
 
