@@ -98,6 +98,17 @@ def old_per_triangle(shade, sub, centre_geom, centre_prim, centre_radiance, S):
     return radiance.reshape(3, -1), len(shade_at)
 
 
+def old_rays_near_sphere(origins, directions, centre, radius):
+    w = (centre[None, :] - origins).T
+    d = directions.T
+    wd = w[0] * d[0] + w[1] * d[1] + w[2] * d[2]
+    dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    ww = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
+    r2 = np.float32((radius * (1 + 1e-3) + 1e-6) ** 2)
+    near = (ww * dd - wd * wd < (r2 + np.float32(1e-6) * ww) * dd) & ((wd > 0) | (ww < r2))
+    return np.flatnonzero(near)
+
+
 # --- helpers -------------------------------------------------------------------------------------------------
 
 def same(a, b):
@@ -254,6 +265,22 @@ def test_hits_split_by_surface_as_flatnonzero_and_take(assets, ring):
             assert same(idx, ref_idx.astype(np.int64))
             for k in ("geom", "prim", "u", "v", "depth", "directions"):
                 assert same(getattr(on, k), getattr(ref, k)), k
+
+
+def test_sphere_culling_matches_the_numpy_chain():
+    from darthand.render.scene import _rays_near_sphere
+
+    rng = np.random.default_rng(5)
+    centre, radius = np.float32([0.1, -0.2, 0.3]), 0.05
+    for n in (0, 1, 5000):
+        origins = rng.normal(scale=0.3, size=(n, 3)).astype(np.float32)
+        dirs = (centre + rng.normal(scale=0.06, size=(n, 3)) - origins).astype(np.float32)
+        blocked = rng.uniform(size=n) < 0.3
+        ref = old_rays_near_sphere(origins, dirs, centre, radius)
+        assert same(_rays_near_sphere(origins, dirs, centre, radius), ref)
+        rest = np.flatnonzero(~blocked)                 # occluded(): rays already blocked are not tested again
+        assert same(_rays_near_sphere(origins, dirs, centre, radius, blocked),
+                    rest[old_rays_near_sphere(origins[rest], dirs[rest], centre, radius)])
 
 
 def test_scalar_interpolation_matches_interpolate():

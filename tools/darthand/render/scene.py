@@ -207,8 +207,7 @@ class Scene:
         d = np.array(np.broadcast_to(np.asarray(tfar, np.float32), (len(origins),)), np.float32, copy=True)
         blocked = self.embree.run(origins, directions, dists=d.copy(), query="OCCLUDED") >= 0
         for _, embree, R, t, centre, radius in self.rigid:
-            rest = np.flatnonzero(~blocked)
-            rest = rest[_rays_near_sphere(origins[rest], directions[rest], centre, radius)]
+            rest = _rays_near_sphere(origins, directions, centre, radius, blocked)
             if not len(rest):
                 continue
             o, dl = _to_local(origins[rest], directions[rest], R, t)
@@ -249,21 +248,39 @@ def _local_scene(local: np.ndarray, faces: np.ndarray):
     return entry[2:]
 
 
-def _rays_near_sphere(origins: np.ndarray, directions: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
-    """Indices of the rays (N, 3) (origin + s direction, s > 0) that pass within `radius` of `centre`: the only
-    rays that can hit a mesh inside that sphere. Culling the others before a small rigid surface's own Embree query
+def _rays_near_sphere(origins: np.ndarray, directions: np.ndarray, centre: np.ndarray, radius: float,
+                      skip: np.ndarray | None = None) -> np.ndarray:
+    """Indices (ascending) of the rays (N, 3) float32 (origin + s direction, s > 0), other than those `skip` (N,)
+    bool marks, that pass within `radius` of `centre`: the only rays that can hit a mesh inside that sphere. Culling the others before a small rigid surface's own Embree query
     saves moving every ray into its frame and a query per ray. Conservative: the radius is padded for float32
     rounding, which in |w|^2 |d|^2 - (w.d)^2 grows with |w|^2 (hence the 1e-6 |w|^2 term)."""
-    w = (centre[None, :] - origins).T                               # (3, N)
-    d = directions.T
-    wd = w[0] * d[0] + w[1] * d[1] + w[2] * d[2]                   # (faster than einsum on (N, 3) rows)
-    dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-    ww = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
     r2 = np.float32((radius * (1 + 1e-3) + 1e-6) ** 2)
-    # squared distance from the centre to the ray's line, times |d|^2; a centre behind the origin counts as near
-    # only if the origin is inside the sphere.
-    near = (ww * dd - wd * wd < (r2 + np.float32(1e-6) * ww) * dd) & ((wd > 0) | (ww < r2))
-    return np.flatnonzero(near)
+    out = np.empty(len(origins), np.int64)
+    skip = np.zeros(len(origins), np.bool_) if skip is None else np.ascontiguousarray(skip, np.bool_)
+    return out[:_near_sphere_kernel(np.ascontiguousarray(origins, np.float32),
+                                    np.ascontiguousarray(directions, np.float32),
+                                    np.ascontiguousarray(centre, np.float32), r2, skip, out)]
+
+
+@kernel
+def _near_sphere_kernel(origins, directions, centre, r2, skip, out):
+    """`_rays_near_sphere` per ray, float32 in the order of the numpy version it replaced (w = centre - origin;
+    dots summed x, y, z): ray i (not skipped) is near when |w|^2 |d|^2 - (w.d)^2 < (r2 + 1e-6 |w|^2) |d|^2 and
+    (w.d > 0 or |w|^2 < r2); its index goes to out; returns how many."""
+    tol = np.float32(1e-6)
+    m = 0
+    for i in range(origins.shape[0]):
+        if skip[i]:
+            continue
+        w0, w1, w2 = centre[0] - origins[i, 0], centre[1] - origins[i, 1], centre[2] - origins[i, 2]
+        d0, d1, d2 = directions[i, 0], directions[i, 1], directions[i, 2]
+        wd = w0 * d0 + w1 * d1 + w2 * d2
+        dd = d0 * d0 + d1 * d1 + d2 * d2
+        ww = w0 * w0 + w1 * w1 + w2 * w2
+        if ww * dd - wd * wd < (r2 + tol * ww) * dd and (wd > 0 or ww < r2):
+            out[m] = i
+            m += 1
+    return m
 
 
 def _to_local(origins: np.ndarray, directions: np.ndarray, R: np.ndarray, t: np.ndarray):
