@@ -207,8 +207,9 @@ def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighti
         where = np.flatnonzero(edges.reshape(-1))
         edge_count = len(where)
         if edge_count:
-            colour, cover = aa.supersample(ctx, pixel_positions(where, r0, c0, w), primary.geom[where], primary.prim[where],
-                                           primary.radiance[:, where], samples, aa_shading, stats)
+            colour, cover = aa.supersample(ctx, pixel_positions(where, r0, c0, w), primary.geom[where],
+                                           primary.prim[where], primary.radiance[:, where], samples, aa_shading,
+                                           stats)
             premult.reshape(3, -1)[:, where] = colour
             alpha.reshape(-1)[where] = cover
     timings["aa"] = _lap(t)

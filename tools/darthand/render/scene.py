@@ -251,9 +251,10 @@ def _local_scene(local: np.ndarray, faces: np.ndarray):
 def _rays_near_sphere(origins: np.ndarray, directions: np.ndarray, centre: np.ndarray, radius: float,
                       skip: np.ndarray | None = None) -> np.ndarray:
     """Indices (ascending) of the rays (N, 3) float32 (origin + s direction, s > 0), other than those `skip` (N,)
-    bool marks, that pass within `radius` of `centre`: the only rays that can hit a mesh inside that sphere. Culling the others before a small rigid surface's own Embree query
-    saves moving every ray into its frame and a query per ray. Conservative: the radius is padded for float32
-    rounding, which in |w|^2 |d|^2 - (w.d)^2 grows with |w|^2 (hence the 1e-6 |w|^2 term)."""
+    bool marks, that pass within `radius` of `centre`: the only rays that can hit a mesh inside that sphere.
+    Culling the others before a small rigid surface's own Embree query saves moving every ray into its frame and a
+    query per ray. Conservative: the radius is padded for float32 rounding, which in |w|^2 |d|^2 - (w.d)^2 grows
+    with |w|^2 (hence the 1e-6 |w|^2 term)."""
     r2 = np.float32((radius * (1 + 1e-3) + 1e-6) ** 2)
     out = np.empty(len(origins), np.int64)
     skip = np.zeros(len(origins), np.bool_) if skip is None else np.ascontiguousarray(skip, np.bool_)
