@@ -1,6 +1,7 @@
 """The texture loads' PNG fast path (render/png.py) and streaming mip pass against independent truth: every file is
 decoded by OpenImageIO (libpng) too, and the pyramids load_maps builds are compared with the ones made the earlier
-way (OpenImageIO's codes copied into level 0; levels >= 1 by box_filter's float chain and encode_srgb8), to the byte.
+way (OpenImageIO's codes copied into level 0; levels >= 1 by numpy's float32 box averages and encode_srgb8), to the
+byte.
 Files are written by libpng itself (OpenImageIO's writer, one PNG filter selection at a time) and by this test's own
 encoder (every filter type on every row, the chunk layouts a fast path must refuse). Damaged files give one
 InputError line naming the file."""
@@ -17,7 +18,7 @@ import pytest
 from darthand.errors import InputError
 from darthand.render import png
 from darthand.render import texture as texture_module
-from darthand.render.texture import MipTexture, box_filter, code_pyramid, decode_tables, load_maps
+from darthand.render.texture import MipTexture, code_pyramid, decode_tables, load_maps
 from darthand.textures.color import encode_srgb8
 
 COLOUR_TYPES = {1: 0, 2: 4, 3: 2, 4: 6}          # channels -> PNG colour type
@@ -153,28 +154,41 @@ def test_files_the_fast_path_must_leave_to_openimageio(tmp_path):
     assert np.array_equal(fast_decode(tagged), oiio_codes(tagged))
 
 
+def box_numpy(level: np.ndarray, pairs: bool) -> np.ndarray:
+    """The next level of (H, W, C) float32 values by numpy, in the float32 order the pyramids have always been
+    summed in: (a + b) + (c + d) of horizontal pairs (8-bit level 0 of an even width), else ((a + b) + c) + d; an
+    odd last row or column repeated, a side of 1 averaged along the other only."""
+    H, W = level.shape[:2]
+    rows, cols = np.minimum(np.arange(0, H, 2) + 1, H - 1), np.minimum(np.arange(0, W, 2) + 1, W - 1)
+    a, b = level[0::2][:, 0::2], level[0::2][:, cols]
+    c, d = level[rows][:, 0::2], level[rows][:, cols]
+    quarter, half = np.float32(0.25), np.float32(0.5)
+    if pairs:
+        return ((a + b) + (c + d)) * quarter if H > 1 else (a + b) * half
+    if H > 1 and W > 1:
+        return (((a + b) + c) + d) * quarter
+    return (a + c) * half if H > 1 else (a + b) * half if W > 1 else a * np.float32(1)
+
+
 def old_pyramid(level0: np.ndarray, colour: int) -> MipTexture:
-    """The 8-bit pyramid as build_mips made it before its streaming pass: a float32 copy of levels >= 1 by
-    box_filter (decode tables at level 1), then encode_srgb8 of the colour channels and rint(x 255) of the others."""
+    """The 8-bit pyramid as load_maps made it before its streaming pass, by numpy: level 0's codes decoded to float32
+    (decode_tables), box averages level by level in float32, then encode_srgb8 of the colour channels and
+    rint(x 255) of the others."""
     h, w, c = level0.shape
     tex = MipTexture.empty(h, w, c, np.uint8, decode_tables(c, colour))
     tex.texels(0)[...] = level0
-    if len(tex.offsets) == 1:
-        return tex
-    tail = MipTexture.empty(int(tex.heights[1]), int(tex.widths[1]), c, np.float32)
-    box_filter(tex.texels(0), tail.texels(0), decode_tables(c, colour))
-    for k in range(1, len(tail.offsets)):
-        box_filter(tail.texels(k - 1), tail.texels(k))
-    stored = tex.flat[int(tex.offsets[1]):]
-    stored[:, :colour] = encode_srgb8(tail.flat[:, :colour])
-    data = tail.flat[:, colour:] * np.float32(255)
-    stored[:, colour:] = np.rint(data)
+    table = decode_tables(c, colour)
+    values = np.stack([table[k][level0[..., k]] for k in range(c)], axis=-1)
+    for k in range(1, len(tex.offsets)):
+        values = box_numpy(values, pairs=k == 1 and w % 2 == 0)
+        tex.texels(k)[..., :colour] = encode_srgb8(values[..., :colour])
+        tex.texels(k)[..., colour:] = np.rint(values[..., colour:] * np.float32(255))
     return tex
 
 
 @pytest.mark.parametrize("shape", [(1, 1), (1, 6), (7, 1), (5, 7), (6, 3), (2, 2), (33, 64), (64, 17), (48, 48)])
 @pytest.mark.parametrize("channels,colour", [(4, 3), (3, 3), (5, 3), (1, 0), (2, 1)])
-def test_streaming_mips_equal_the_float_chain_to_the_byte(shape, channels, colour):
+def test_streaming_mips_equal_numpys_float_chain_to_the_byte(shape, channels, colour):
     codes = pattern(*shape, channels, seed=sum(shape))
     codes[: shape[0] // 2, : shape[1] // 2, :colour] = 2                 # dark: the sRGB curve's linear segment
     assert np.array_equal(code_pyramid(codes, colour).flat, old_pyramid(codes, colour).flat)

@@ -280,24 +280,19 @@ def mip_sizes(height: int, width: int) -> list[tuple[int, int]]:
     return sizes
 
 
-def box_filter(level: np.ndarray, out: np.ndarray, decode: np.ndarray | None = None) -> np.ndarray:
-    """out (h, w, C) float32 = the 2x2 box average of level (H, W, C), h = ceil(H / 2), w = ceil(W / 2) (an odd
-    last row or column repeated; a side of 1 averaged along the other side only): the next mip level, written in
-    place. level: float32 values, or uint8 codes decoded through `decode` (C, 256) before averaging (linear
-    light), without a float copy of the level. One compiled pass (_box_kernel)."""
-    level = np.ascontiguousarray(level)
-    if decode is not None:
-        decode = np.ascontiguousarray(decode, np.float32)
-    _box_kernel(level, decode, decode is not None and level.shape[1] % 2 == 0, out)
+def box_filter(level: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """out (h, w, C) float32 = the 2x2 box average of level (H, W, C) float32, h = ceil(H / 2), w = ceil(W / 2) (an
+    odd last row or column repeated; a side of 1 averaged along the other side only): the next mip level of a float
+    pyramid, written in place. One compiled pass (_box_kernel)."""
+    _box_kernel(np.ascontiguousarray(level, np.float32), out)
     return out
 
 
 @kernel
-def _box_kernel(level, decode, pairs, out):
+def _box_kernel(level, out):
     """`box_filter`, with the float32 sums in the order of the numpy filter it replaced, so the pyramids are the
     same to the bit: ((a + b) + c) + d of the four quarters (top-left, top-right, bottom-left, bottom-right), times
-    1/4 (1/2 of two texels where a side is 1); with `pairs` (8-bit levels of even width) the sums of horizontal
-    pairs added, (a + b) + (c + d), as the pair-sum tables did."""
+    1/4 (1/2 of two texels where a side is 1)."""
     H, W = level.shape[0], level.shape[1]
     quarter, half, whole = np.float32(0.25), np.float32(0.5), np.float32(1.0)
     for i in range(out.shape[0]):
@@ -305,14 +300,8 @@ def _box_kernel(level, decode, pairs, out):
         for j in range(out.shape[1]):
             ca, cb = 2 * j, min(2 * j + 1, W - 1)
             for c in range(out.shape[2]):
-                if decode is None:
-                    a, b, d, e = level[ra, ca, c], level[ra, cb, c], level[rb, ca, c], level[rb, cb, c]
-                else:
-                    a, b = decode[c, level[ra, ca, c]], decode[c, level[ra, cb, c]]
-                    d, e = decode[c, level[rb, ca, c]], decode[c, level[rb, cb, c]]
-                if pairs:
-                    out[i, j, c] = ((a + b) + (d + e)) * quarter if H > 1 else (a + b) * half
-                elif H > 1 and W > 1:
+                a, b, d, e = level[ra, ca, c], level[ra, cb, c], level[rb, ca, c], level[rb, cb, c]
+                if H > 1 and W > 1:
                     out[i, j, c] = (((a + b) + d) + e) * quarter
                 elif H > 1:
                     out[i, j, c] = (a + d) * half
@@ -324,22 +313,25 @@ def _box_kernel(level, decode, pairs, out):
 
 @kernel
 def _code_mips_kernel(flat, offsets, heights, widths, decode, colour, table):
-    """Levels >= 1 of an 8-bit pyramid (MipTexture.build_mips) in one streaming pass: each texel the 2x2 box average
-    of the level above as _box_kernel computes it (the same float32 sums in the same order, so the same values to
-    the bit) -- of level 0's codes read through `decode` (C, 256) for level 1, of the level above's unquantised
-    values below it -- and written to `flat` as codes: the first `colour` channels sRGB-encoded through `table`
-    (srgb8_table, as textures/color.encode_srgb8_into), the others rint(value x 255).
+    """Levels >= 1 of an 8-bit pyramid (MipTexture.build_mips) in one streaming pass. Each texel is the 2x2 box
+    average of the level above -- of level 0's codes read through `decode` (C, 256) for level 1, of the level
+    above's unquantised values below it -- in float32, summed in the order the pyramids have always been made (so
+    the codes are the same to the bit): at level 1 of an even width (a + b) + (c + d) of the top and bottom pairs,
+    elsewhere ((a + b) + c) + d of the four quarters (top-left, top-right, bottom-left, bottom-right), times 1/4
+    (1/2 of two texels where a side is 1; an odd last row or column repeated). It is written to `flat` as codes:
+    the first `colour` channels sRGB-encoded through `table` (srgb8_table, as textures/color.encode_srgb8_into),
+    the others rint(value x 255).
 
     Level 1 is made row by row; a level's row is made as soon as the two rows above it are (the last row of an odd
     height twice), so the unquantised values live in two rows per level (`rows`, in cache), not in a float copy
-    of the pyramid."""
+    of the pyramid: no 22 MB buffer to fault in per skin texture."""
     C = flat.shape[1]
     last = len(offsets) - 1
     quarter, half, whole, zero = np.float32(0.25), np.float32(0.5), np.float32(1.0), np.float32(0.0)
     top, scale = np.float32(len(table) - 1), np.float32(255)
     rows = np.empty((last + 1, 2, widths[1], C), np.float32)      # rows[k, r % 2]: row r of level k, unquantised
     H, W, w = heights[0], widths[0], widths[1]
-    pairs = W % 2 == 0                                  # _box_kernel's order for 8-bit levels of even width
+    pairs = W % 2 == 0
     for i in range(heights[1]):
         ra, rb = 2 * i * W, min(2 * i + 1, H - 1) * W   # level 0's two rows (the last repeated)
         out = rows[1, i % 2]
