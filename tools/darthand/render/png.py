@@ -2,10 +2,10 @@
 
 A dataset shard loads every catalogue texture once (a 2048^2 RGB albedo and a 2048^2 grey roughness PNG): through
 OpenImageIO that is its libpng decode (zlib's inflate, then a copy per row), a copy out of the ImageBuf, and a
-copy into the mip pyramid's interleaved level 0. Here the scanlines are inflated by libdeflate (the `deflate`
-package: 2.5x faster than zlib's inflate, 2x faster than ISA-L's, on these files) and one compiled pass
-(_unfilter_kernel) undoes PNG's per-row filters and writes each pixel's channels where the caller wants them
-(texture.py: channels 0..2 of level 0 for the albedo, channel 3 for the roughness).
+copy into the mip pyramid's interleaved level 0: ~75 ms of CPU for the two files. Here the scanlines are
+inflated by libdeflate (the `deflate` package: a 2048^2 RGB albedo in 6 ms against zlib's 26 and ISA-L's 15, loaded
+2-core machine) and one compiled pass (_unfilter_kernel, ~3 ms) undoes PNG's per-row filters and writes each pixel's
+channels where the caller wants them (texture.py: channels 0..2 of level 0 for the albedo, 3 for the roughness).
 
 Only files this module reads exactly as OpenImageIO does take this path: bit depth 8, colour type 0 (grey) or 2
 (RGB), not interlaced, no chunk that changes what the pixels read as (tRNS adds alpha, PLTE, sBIT, and any chunk

@@ -574,7 +574,10 @@ def _open_codes(path: str) -> Png8 | np.ndarray:
 
     st = regular_file(path, "texture")
     check_memory(f"reading {path}", st.st_size)
-    png = open_png8(path)
+    try:
+        png = open_png8(path)
+    except OSError as e:
+        raise InputError(f"{path}: cannot read texture ({e.strerror or type(e).__name__})") from None
     if png is None:
         return read_codes(path)
     check_memory(f"decoding {path} ({png.width}x{png.height})", 8 * png.width * png.height * png.channels)
