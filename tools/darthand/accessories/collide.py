@@ -17,6 +17,8 @@ Closest-point distances: KD-trees (scipy) pick candidate triangles, trimesh's po
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
@@ -188,6 +190,13 @@ class ClosedHand:
             n += 1
         self.faces = np.concatenate(caps)
 
+    @staticmethod
+    def of(faces: np.ndarray) -> "ClosedHand":
+        """The ClosedHand of `faces`, made once per topology (a dataset wears a ring on a new hand shape nearly
+        every ring frame: the capping, 7 ms, depends on the faces only)."""
+        faces = np.ascontiguousarray(faces, np.int64)
+        return _closed_hand(faces.tobytes(), faces.shape)
+
     def vertices(self, posed: np.ndarray) -> np.ndarray:
         """(used + loops, 3) the posed vertices (V, 3) it uses, with the cap centres appended."""
         mine = posed[self.used]
@@ -195,6 +204,11 @@ class ClosedHand:
 
     def solid(self, posed: np.ndarray) -> Solid:
         return Solid(self.vertices(posed), self.faces)
+
+
+@functools.lru_cache(maxsize=8)
+def _closed_hand(faces_bytes: bytes, shape: tuple) -> ClosedHand:
+    return ClosedHand(np.frombuffer(faces_bytes, np.int64).reshape(shape))
 
 
 def inward_vertices(vertices: np.ndarray, normals: np.ndarray) -> np.ndarray:

@@ -109,7 +109,7 @@ class RingWear:
         self.betas = betas
         self._hands = {} if hands is None else hands
         self.samples = sample_points(np.asarray(local_vertices, float))
-        self.hand = ClosedHand(model.faces)
+        self.hand = ClosedHand.of(model.faces)
         self.frames = joint_frames(model)
         self.limits = limits_radians()
         self.vertex_part = joint_parts()[np.argmax(model.weights, axis=1)]

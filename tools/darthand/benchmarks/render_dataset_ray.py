@@ -188,7 +188,7 @@ class CpuMeter:
 
 
 def _unit_costs(model, textures, accessories, plan, tmp: Path) -> dict:
-    """ms to plan and digest a shard of 8,192 jobs on the driver; ms to decode a catalogue texture the first time
+    """ms to plan and digest a shard (DEFAULT_SHARD_SIZE jobs) on the driver; ms to decode a catalogue texture the first time
     (the albedo and roughness of three textures, no cache); MB of a texture's files."""
     from darthand.dataset.frames import job_digest
     from darthand.dataset.plan import Planner, plan_spec

@@ -36,13 +36,19 @@ from darthand.fileio import read_json, write_json
 
 DATASET_FORMAT = "darthand-dataset"
 DATASET_VERSION = 2
-DEFAULT_SHARD_SIZE = 8192
+# 16,384 frames: a shard's chunks load each catalogue texture about once (325 textures of 2048^2, ~0.1 s of CPU
+# each), so the larger the shard the fewer loads per frame. Simulated over the benchmark's plan (32,768 frames, two
+# workers, the 512 MB texture cache): 8,192-frame shards and 32-frame tasks load 1,405 textures (4.7 ms of CPU a
+# frame), 16,384 and 64 load 661 (2.2 ms). A shard's plan in memory is ~6 kB a job (~100 MB at 16,384); frames
+# inside an unfinished shard still resume one by one.
+DEFAULT_SHARD_SIZE = 16384
 # Dataset render settings, chosen from benchmarks/dataset_settings.py (CPU per 512^2 frame against error, 24 frames
 # of the default plan, against 16 sub-samples shaded each and 64 indirect rays; quiet machine): 4 edge sub-samples
 # instead of the renderer's 8 save 7.3 of 73.1 ms a frame for +0.05 sRGB codes of mean error (0.62 -> 0.67); 8
 # indirect rays instead of 16 would save 1.2 ms more for +0.18 codes (0.67 -> 0.85), so the shading defaults stay.
 DEFAULT_SAMPLES = 4
-MAX_CHUNK = 32                    # frames per task: ~1-2 s of work, so progress and Ctrl-C stay responsive
+MAX_CHUNK = 64                    # frames per task: ~3-6 s of work (progress stays live; a stop is seen per frame),
+                                  # and a texture's frames in a 16,384-frame shard (~50) fit one task
 DEFAULT_MAX_FRAMES = 1_000_000    # a budget: more needs max_frames= (--max-frames)
 MAX_SIZE = 4096
 FOLDERS = ("images", "masks", "labels", "meshes", "shards")
