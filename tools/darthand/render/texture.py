@@ -335,16 +335,23 @@ def _code_mips_kernel(flat, offsets, heights, widths, decode, colour, table):
     for i in range(heights[1]):
         ra, rb = 2 * i * W, min(2 * i + 1, H - 1) * W   # level 0's two rows (the last repeated)
         out = rows[1, i % 2]
-        if pairs and H > 1 and C == 4:
+        skin = pairs and H > 1 and C == 4 and colour == 3
+        if skin:
             # A skin texture (sRGB colour and roughness): level 1 is three quarters of the work; the channel loop
-            # unrolled, 2-3x faster than the general loop below.
+            # unrolled and the codes stored at once, 2-3x faster than the general loops.
             d0, d1, d2, d3 = decode[0], decode[1], decode[2], decode[3]
+            at = offsets[1] + i * w
             for j in range(w):
                 p, q = ra + 2 * j, rb + 2 * j
-                out[j, 0] = ((d0[flat[p, 0]] + d0[flat[p + 1, 0]]) + (d0[flat[q, 0]] + d0[flat[q + 1, 0]])) * quarter
-                out[j, 1] = ((d1[flat[p, 1]] + d1[flat[p + 1, 1]]) + (d1[flat[q, 1]] + d1[flat[q + 1, 1]])) * quarter
-                out[j, 2] = ((d2[flat[p, 2]] + d2[flat[p + 1, 2]]) + (d2[flat[q, 2]] + d2[flat[q + 1, 2]])) * quarter
-                out[j, 3] = ((d3[flat[p, 3]] + d3[flat[p + 1, 3]]) + (d3[flat[q, 3]] + d3[flat[q + 1, 3]])) * quarter
+                v0 = ((d0[flat[p, 0]] + d0[flat[p + 1, 0]]) + (d0[flat[q, 0]] + d0[flat[q + 1, 0]])) * quarter
+                v1 = ((d1[flat[p, 1]] + d1[flat[p + 1, 1]]) + (d1[flat[q, 1]] + d1[flat[q + 1, 1]])) * quarter
+                v2 = ((d2[flat[p, 2]] + d2[flat[p + 1, 2]]) + (d2[flat[q, 2]] + d2[flat[q + 1, 2]])) * quarter
+                v3 = ((d3[flat[p, 3]] + d3[flat[p + 1, 3]]) + (d3[flat[q, 3]] + d3[flat[q + 1, 3]])) * quarter
+                out[j, 0], out[j, 1], out[j, 2], out[j, 3] = v0, v1, v2, v3
+                flat[at + j, 0] = table[int(min(max(v0, zero), whole) * top + half)]
+                flat[at + j, 1] = table[int(min(max(v1, zero), whole) * top + half)]
+                flat[at + j, 2] = table[int(min(max(v2, zero), whole) * top + half)]
+                flat[at + j, 3] = int(np.rint(v3 * scale))
         else:
             for j in range(w):
                 p, q = 2 * j, min(2 * j + 1, W - 1)
@@ -363,7 +370,7 @@ def _code_mips_kernel(flat, offsets, heights, widths, decode, colour, table):
         while True:
             # Row r of level k is made: store its codes, then make the row below it if both its rows are made.
             src, at = rows[k, r % 2], offsets[k] + r * widths[k]
-            for j in range(widths[k]):
+            for j in range(widths[k] if k > 1 or not skin else 0):
                 for c in range(colour):
                     v = min(max(src[j, c], zero), whole)                # finite: sums of decode-table values
                     flat[at + j, c] = table[int(v * top + half)]
