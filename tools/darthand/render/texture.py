@@ -322,9 +322,10 @@ def _code_mips_kernel(flat, offsets, heights, widths, decode, colour, table):
     the first `colour` channels sRGB-encoded through `table` (srgb8_table, as textures/color.encode_srgb8_into),
     the others rint(value x 255).
 
-    Level 1 is made row by row; a level's row is made as soon as the two rows above it are (the last row of an odd
-    height twice), so the unquantised values live in two rows per level (`rows`, in cache), not in a float copy
-    of the pyramid: no 22 MB buffer to fault in per skin texture."""
+    Level 1 is made row by row (from two level-0 rows decoded to float32, or straight from the codes for a skin
+    texture); a level's row is made as soon as the two rows above it are (the last row of an odd height twice), so
+    the unquantised values live in two rows per level (`rows`, in cache), not in a float copy of the pyramid: no
+    22 MB buffer to fault in per skin texture."""
     C = flat.shape[1]
     last = len(offsets) - 1
     quarter, half, whole, zero = np.float32(0.25), np.float32(0.5), np.float32(1.0), np.float32(0.0)
@@ -332,15 +333,16 @@ def _code_mips_kernel(flat, offsets, heights, widths, decode, colour, table):
     rows = np.empty((last + 1, 2, widths[1], C), np.float32)      # rows[k, r % 2]: row r of level k, unquantised
     H, W, w = heights[0], widths[0], widths[1]
     pairs = W % 2 == 0
+    skin = pairs and H > 1 and C == 4 and colour == 3
+    top0 = np.empty((W, C), np.float32)                 # two rows of level 0, decoded (but for a skin texture)
+    bottom0 = np.empty((W, C), np.float32)
     for i in range(heights[1]):
         ra, rb = 2 * i * W, min(2 * i + 1, H - 1) * W   # level 0's two rows (the last repeated)
-        out = rows[1, i % 2]
-        skin = pairs and H > 1 and C == 4 and colour == 3
         if skin:
             # A skin texture (sRGB colour and roughness): level 1 is three quarters of the work; the channel loop
             # unrolled and the codes stored at once, 2-3x faster than the general loops.
             d0, d1, d2, d3 = decode[0], decode[1], decode[2], decode[3]
-            at = offsets[1] + i * w
+            out, at = rows[1, i % 2], offsets[1] + i * w
             for j in range(w):
                 p, q = ra + 2 * j, rb + 2 * j
                 v0 = ((d0[flat[p, 0]] + d0[flat[p + 1, 0]]) + (d0[flat[q, 0]] + d0[flat[q + 1, 0]])) * quarter
@@ -352,41 +354,38 @@ def _code_mips_kernel(flat, offsets, heights, widths, decode, colour, table):
                 flat[at + j, 1] = table[int(min(max(v1, zero), whole) * top + half)]
                 flat[at + j, 2] = table[int(min(max(v2, zero), whole) * top + half)]
                 flat[at + j, 3] = int(np.rint(v3 * scale))
+            k, r = 1, i
         else:
-            for j in range(w):
-                p, q = 2 * j, min(2 * j + 1, W - 1)
+            for j in range(W):
                 for c in range(C):
-                    a, b = decode[c, flat[ra + p, c]], decode[c, flat[ra + q, c]]
-                    e, f = decode[c, flat[rb + p, c]], decode[c, flat[rb + q, c]]
-                    if pairs:
-                        out[j, c] = ((a + b) + (e + f)) * quarter if H > 1 else (a + b) * half
-                    elif H > 1 and W > 1:
-                        out[j, c] = (((a + b) + e) + f) * quarter
-                    elif H > 1:
-                        out[j, c] = (a + e) * half
-                    else:
-                        out[j, c] = (a + b) * half if W > 1 else a * whole
-        k, r = 1, i
+                    top0[j, c], bottom0[j, c] = decode[c, flat[ra + j, c]], decode[c, flat[rb + j, c]]
+            k, r = 0, 2 * i
         while True:
-            # Row r of level k is made: store its codes, then make the row below it if both its rows are made.
-            src, at = rows[k, r % 2], offsets[k] + r * widths[k]
-            for j in range(widths[k] if k > 1 or not skin else 0):
-                for c in range(colour):
-                    v = min(max(src[j, c], zero), whole)                # finite: sums of decode-table values
-                    flat[at + j, c] = table[int(v * top + half)]
-                for c in range(colour, C):
-                    flat[at + j, c] = int(np.rint(src[j, c] * scale))
-            if k == last or not (r % 2 == 1 or r == heights[k] - 1):
-                break
-            Hk, Wk = heights[k], widths[k]                 # of the level above the new row
-            upper, lower = rows[k, 0], rows[k, r % 2]   # rows 2r' and min(2r' + 1, Hk - 1) of level k
+            if k > 0:
+                # Row r of level k is made: store its codes (unless stored already), then make the row below it
+                # if both its rows are made.
+                src, at = rows[k, r % 2], offsets[k] + r * widths[k]
+                for j in range(widths[k] if k > 1 or not skin else 0):
+                    for c in range(colour):
+                        v = min(max(src[j, c], zero), whole)            # finite: sums of decode-table values
+                        flat[at + j, c] = table[int(v * top + half)]
+                    for c in range(colour, C):
+                        flat[at + j, c] = int(np.rint(src[j, c] * scale))
+                if k == last or not (r % 2 == 1 or r == heights[k] - 1):
+                    break
+                upper, lower = rows[k, 0], rows[k, r % 2]   # rows 2r' and min(2r' + 1, H_k - 1) of level k
+            else:
+                upper, lower = top0, bottom0
+            Hk, Wk, pair = heights[k], widths[k], k == 0 and pairs      # of the level above the new row
             k, r = k + 1, r // 2
             out = rows[k, r % 2]
             for j in range(widths[k]):
                 p, q = 2 * j, min(2 * j + 1, Wk - 1)
                 for c in range(C):
                     a, b, e, f = upper[p, c], upper[q, c], lower[p, c], lower[q, c]
-                    if Hk > 1 and Wk > 1:
+                    if pair:
+                        out[j, c] = ((a + b) + (e + f)) * quarter if Hk > 1 else (a + b) * half
+                    elif Hk > 1 and Wk > 1:
                         out[j, c] = (((a + b) + e) + f) * quarter
                     elif Hk > 1:
                         out[j, c] = (a + e) * half
