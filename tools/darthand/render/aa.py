@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.jit import kernel
 from darthand.render.trace import Context, intersect_parallel, shade_parallel
 
 # Direct3D 11 standard sample patterns, in 1/16 pixel from the pixel centre.
@@ -104,21 +105,66 @@ def supersample(ctx: Context, centres: np.ndarray, centre_geom: np.ndarray, cent
 def _shade_per_triangle(ctx: Context, sub, centre_geom, centre_prim, centre_radiance, S: int, stats):
     """(radiance (3, P * S), number shaded) of pixel-major sub-sample hits `sub`: one colour per (pixel, surface,
     triangle), the primary sample's when it hit that triangle."""
-    key = (sub.geom.astype(np.int64) << 32 | (sub.prim.astype(np.int64) & 0xFFFFFFFF)).reshape(-1, S)
-    centre_key = centre_geom.astype(np.int64) << 32 | (centre_prim.astype(np.int64) & 0xFFFFFFFF)
-    hit = sub.geom.reshape(-1, S) >= 0
-    # first[p, j]: the first sub-sample of pixel p that hit what sub-sample j hit.
-    first = np.argmax(key[:, :, None] == key[:, None, :], axis=2)
-    as_centre = hit & (key == centre_key[:, None])
-    own = hit & ~as_centre & (first == np.arange(S)[None, :])
-    radiance = np.zeros((3,) + key.shape, np.float32)
-    rows, cols = np.nonzero(as_centre)
-    radiance[:, rows, cols] = centre_radiance[:, rows]
-    shade_at = np.flatnonzero(own)
-    if len(shade_at):
+    n = len(sub.geom)
+    mode, slot = np.empty(n, np.int8), np.empty(n, np.int64)
+    shade_at = np.empty(n, np.int64)
+    shaded = _triangle_groups_kernel(np.ascontiguousarray(sub.geom, np.int32), np.ascontiguousarray(sub.prim, np.int32),
+                                     np.ascontiguousarray(centre_geom, np.int32),
+                                     np.ascontiguousarray(centre_prim, np.int32), S, mode, slot, shade_at)
+    shade_at = shade_at[:shaded]
+    colour = np.empty((3, 0), np.float32)
+    if shaded:
         _, colour = shade_parallel(ctx, sub.take(shade_at), 1.0, stats)
-        radiance.reshape(3, -1)[:, shade_at] = colour
-    # Sub-samples that are not their triangle's first in the pixel copy its colour.
-    rows, cols = np.nonzero(hit & ~as_centre & ~own)
-    radiance[:, rows, cols] = radiance[:, rows, first[rows, cols]]
-    return radiance.reshape(3, -1), len(shade_at)
+    radiance = np.empty((3, n), np.float32)
+    _triangle_fill_kernel(mode, slot, np.ascontiguousarray(centre_radiance, np.float32),
+                          np.ascontiguousarray(colour, np.float32), radiance)
+    return radiance, shaded
+
+
+BACKGROUND, CENTRE, OWN, COPY = 0, 1, 2, 3          # _triangle_groups_kernel's modes
+
+
+@kernel
+def _triangle_groups_kernel(geom, prim, centre_geom, centre_prim, S, mode, slot, shade_at):
+    """Which colour each of the P * S pixel-major sub-samples takes; returns M, the number to shade. mode per
+    sub-sample: 0 background; 1 hit its pixel's primary triangle (slot: the pixel); 2 the first in its pixel to hit
+    its triangle (slot: its place in shade_at[:M], ascending); 3 a later one (slot: the first one's place)."""
+    m = 0
+    for p in range(geom.shape[0] // S):
+        for j in range(S):
+            i = p * S + j
+            if geom[i] < 0:
+                mode[i] = 0
+                slot[i] = 0
+            elif geom[i] == centre_geom[p] and prim[i] == centre_prim[p]:
+                mode[i] = 1
+                slot[i] = p
+            else:
+                first = j
+                for k in range(j):
+                    if geom[p * S + k] == geom[i] and prim[p * S + k] == prim[i]:
+                        first = k
+                        break
+                if first == j:
+                    mode[i] = 2
+                    slot[i] = m
+                    shade_at[m] = i
+                    m += 1
+                else:
+                    mode[i] = 3
+                    slot[i] = slot[p * S + first]
+    return m
+
+
+@kernel
+def _triangle_fill_kernel(mode, slot, centre_radiance, colour, radiance):
+    """radiance (3, P * S) from the modes and slots of _triangle_groups_kernel: 0, the primary sample's colour
+    (centre_radiance (3, P)) or a shaded one (colour (3, M))."""
+    for i in range(mode.shape[0]):
+        for c in range(3):
+            if mode[i] == 0:
+                radiance[c, i] = np.float32(0.0)
+            elif mode[i] == 1:
+                radiance[c, i] = centre_radiance[c, slot[i]]
+            else:
+                radiance[c, i] = colour[c, slot[i]]

@@ -20,6 +20,7 @@ import numpy as np
 from darthand.budget import check_memory
 from darthand.errors import InputError
 from darthand.fileio import write_json
+from darthand.jit import kernel
 from darthand.render import aa
 from darthand.render.camera import Camera, load_camera
 from darthand.render.image import compose, encode_mask8, load_background, write_exr, write_png
@@ -29,7 +30,7 @@ from darthand.render.lights import Lighting, load_lighting, world_lights
 from darthand.render.scene import Scene, scene_for
 from darthand.render.shade import ShadingOptions
 from darthand.render.subject import Subject
-from darthand.render.trace import (TILE, Context, Samples, default_threads, pixel_centres, scene_bounds,
+from darthand.render.trace import (TILE, Context, Samples, default_threads, scene_bounds,
                                    single_threaded_blas, touched_tiles, trace_parallel)
 
 DEFAULT_SAMPLES = 8
@@ -190,10 +191,9 @@ def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighti
     t = time.perf_counter()
     r0, r1, c0, c1 = scene_bounds(cam, subject.all_vertices())
     h, w = r1 - r0, c1 - c0
-    centres = pixel_centres(r0, r1, c0, c1)
     tiles = touched_tiles(cam, subject.surfaces, (r0, r1, c0, c1))
-    traced = np.flatnonzero(np.repeat(np.repeat(tiles, TILE, 0), TILE, 1)[:h, :w].reshape(-1))
-    primary = scatter(trace_parallel(ctx, centres[traced], 1.0, stats), traced, h * w)
+    traced = tile_pixels(tiles, h, w)
+    primary = scatter(trace_parallel(ctx, pixel_positions(traced, r0, c0, w), 1.0, stats), traced, h * w)
     timings["primary"] = _lap(t)
     stats["primary_rays"] = int(len(traced))
 
@@ -207,8 +207,9 @@ def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighti
         where = np.flatnonzero(edges.reshape(-1))
         edge_count = len(where)
         if edge_count:
-            colour, cover = aa.supersample(ctx, centres[where], primary.geom[where], primary.prim[where],
-                                           primary.radiance[:, where], samples, aa_shading, stats)
+            colour, cover = aa.supersample(ctx, pixel_positions(where, r0, c0, w), primary.geom[where],
+                                           primary.prim[where], primary.radiance[:, where], samples, aa_shading,
+                                           stats)
             premult.reshape(3, -1)[:, where] = colour
             alpha.reshape(-1)[where] = cover
     timings["aa"] = _lap(t)
@@ -247,14 +248,63 @@ def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighti
 
 
 def scatter(samples: Samples, index: np.ndarray, n: int) -> Samples:
-    """Samples of `n` pixels of which those at `index` were traced; the others are background."""
+    """Samples of `n` pixels of which those at `index` (ascending) were traced; the others are background."""
     if len(index) == n:
         return samples
-    out = Samples(np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.full(n, np.inf, np.float32),
-                  np.zeros((3, n), np.float32), np.zeros((3, n), np.float32))
-    out.geom[index], out.prim[index], out.depth[index] = samples.geom, samples.prim, samples.depth
-    out.normal[:, index], out.radiance[:, index] = samples.normal, samples.radiance
+    out = Samples(np.empty(n, np.int32), np.empty(n, np.int32), np.empty(n, np.float32),
+                  np.empty((3, n), np.float32), np.empty((3, n), np.float32))
+    f32 = lambda a: np.ascontiguousarray(a, np.float32)
+    _scatter_kernel(np.ascontiguousarray(index, np.int64), np.ascontiguousarray(samples.geom, np.int32),
+                    np.ascontiguousarray(samples.prim, np.int32), f32(samples.depth), f32(samples.normal),
+                    f32(samples.radiance), out.geom, out.prim, out.depth, out.normal, out.radiance)
     return out
+
+
+@kernel
+def _scatter_kernel(index, geom, prim, depth, normal, radiance, out_geom, out_prim, out_depth, out_normal,
+                    out_radiance):
+    """`scatter` in one pass over the n outputs: traced sample k goes to pixel index[k] (ascending), every other
+    pixel is background (geom, prim -1, depth inf, normal and radiance 0)."""
+    k = 0
+    for i in range(out_geom.shape[0]):
+        if k < index.shape[0] and index[k] == i:
+            out_geom[i], out_prim[i], out_depth[i] = geom[k], prim[k], depth[k]
+            for c in range(3):
+                out_normal[c, i] = normal[c, k]
+                out_radiance[c, i] = radiance[c, k]
+            k += 1
+        else:
+            out_geom[i], out_prim[i], out_depth[i] = -1, -1, np.float32(np.inf)
+            for c in range(3):
+                out_normal[c, i] = np.float32(0.0)
+                out_radiance[c, i] = np.float32(0.0)
+
+
+def tile_pixels(tiles: np.ndarray, h: int, w: int, tile: int = TILE) -> np.ndarray:
+    """(M,) int64 ascending row-major indices of the pixels of an h x w region whose tile (tile x tile pixels) is
+    True in `tiles` (ceil(h / tile), ceil(w / tile)) bool."""
+    if tiles.shape != (-(-h // tile), -(-w // tile)):
+        raise ValueError(f"tiles {tiles.shape} do not cover {h} x {w} pixels in tiles of {tile}")
+    out = np.empty(h * w, np.int64)
+    return out[:_tile_pixels_kernel(np.ascontiguousarray(tiles, np.bool_), h, w, tile, out)]
+
+
+@kernel
+def _tile_pixels_kernel(tiles, h, w, tile, out):
+    m = 0
+    for r in range(h):
+        for c in range(w):
+            if tiles[r // tile, c // tile]:
+                out[m] = r * w + c
+                m += 1
+    return m
+
+
+def pixel_positions(index: np.ndarray, r0: int, c0: int, w: int) -> np.ndarray:
+    """(M, 2) float64 pixel-centre positions (u, v) of flat indices (M,) into the region of width w whose first
+    pixel is (row r0, column c0): as trace.pixel_centres(r0, r1, c0, c1)[index]."""
+    rows, cols = np.divmod(index, w)
+    return np.stack([cols + (c0 + 0.5), rows + (r0 + 0.5)], axis=1)
 
 
 def write_frame(frame: Frame, out_dir: str | Path, *, depth: bool = False, names: dict | None = None) -> dict:

@@ -26,6 +26,8 @@ Per vertex rather than per pixel because its cost does not grow with the image (
 only the vertices of faces a frame's rays hit are computed (VertexLight.ensure), and an accessory's vertices, far
 denser than the hand's, get K / 4 rays (at least 4). What it loses is indirect light
 that changes inside one triangle (sharp contact shadows), measured by `make bench` against the reference.
+The loops over vertices and rays are compiled kernels (darthand/jit.py) between the Embree calls: about 1 ms of a
+frame's CPU besides Embree's 3 (the numpy chains they replaced took 4-5 ms, with the same values to the bit).
 
 Directions: one stratified set of K cosine-weighted directions (a Fibonacci spiral on the unit disk lifted to the
 hemisphere, Malley's method), turned about each vertex's normal and shifted radially by amounts hashed from (surface
@@ -36,9 +38,12 @@ directions in every frame (no flicker in a sequence).
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 
-from darthand.render.scene import FaceData, interpolate
+from darthand.jit import kernel
+from darthand.render.scene import FaceData
 
 GEOMETRIC = FaceData.GEOMETRIC
 
@@ -70,21 +75,6 @@ def hash_uniform(keys: np.ndarray, salt: int) -> np.ndarray:
     return x.astype(np.float64) / 2.0 ** 32
 
 
-def tangent_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(tangent, bitangent, about_x) for unit normals (N, 3): tangent = e x n normalised, bitangent = n x tangent,
-    with e the x axis (about_x True) or, for normals within 26 degrees of it, the y axis. Built from the x axis so
-    that the frame of a mirrored normal (x -> -x, how a left hand is made from a right one) is the mirror of the
-    frame, up to the sign of one local axis (`local_directions` flips it)."""
-    n = np.asarray(normals, np.float32)
-    about_x = np.abs(n[:, 0]) < 0.9
-    e = np.zeros_like(n)
-    e[about_x, 0] = 1
-    e[~about_x, 1] = 1
-    t = np.cross(e, n)
-    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), np.float32(1e-30))
-    return t, np.cross(n, t), about_x
-
-
 def local_directions(vertex_ids: np.ndarray, rays: int, salt: int) -> np.ndarray:
     """(3, N, K) float32 cosine-distributed directions in each vertex's tangent frame (x, y tangent, z normal): the
     disk set turned by a per-vertex angle and shifted by a per-vertex radial offset (Cranley-Patterson rotation),
@@ -96,39 +86,88 @@ def local_directions(vertex_ids: np.ndarray, rays: int, salt: int) -> np.ndarray
     return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1 - uu)]).astype(np.float32)
 
 
-_LOCAL: dict = {}
+_LOCAL: OrderedDict = OrderedDict()
+LOCAL_BUDGET = 32 << 20     # bytes of direction tables kept: the hand's and all 50 accessories' at 16 rays take 11 MB
 
 
-def cached_local_directions(vertex_ids: np.ndarray, count: int, rays: int, salt: int) -> np.ndarray:
-    """`local_directions` of the ids (N,) among `count` vertices, from a table of all of them made once per
-    (count, rays, salt) (the hashes and trigonometry are most of the cost of making rays)."""
+def direction_table(count: int, rays: int, salt: int) -> np.ndarray:
+    """(3, count, K) float32 `local_directions` of vertices 0..count-1, made once per (count, rays, salt) and kept,
+    least recently used dropped first beyond LOCAL_BUDGET (they depend on the mesh's vertex count only, and making
+    them, hashes and trigonometry, costs 1-3 ms for an accessory: more than the rest of its indirect light)."""
     key = (int(count), int(rays), int(salt))
     table = _LOCAL.get(key)
     if table is None:
-        if len(_LOCAL) > 32:
-            _LOCAL.clear()
         table = _LOCAL[key] = local_directions(np.arange(count), rays, salt)
-    return table[:, vertex_ids]
+        while len(_LOCAL) > 1 and sum(t.nbytes for t in _LOCAL.values()) > LOCAL_BUDGET:
+            _LOCAL.popitem(last=False)
+    else:
+        _LOCAL.move_to_end(key)
+    return table
 
 
 def vertex_rays(vertices: np.ndarray, normals: np.ndarray, vertex_ids: np.ndarray, rays: int, lift: float,
                 salt: int = 0, mirrored: bool = False, count: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(origins, directions) (N * K, 3) float32, vertex-major: K cosine-distributed rays about each unit normal
-    (N, 3), leaving from the vertex (N, 3) lifted by `lift` metres along its normal. mirrored: the surface is the
-    x -> -x mirror image of the one the directions are defined for (a left hand): its rays are the mirror images of
-    the right hand's, so that both hands render alike. count: the surface's vertex count, to reuse the directions
-    of all its vertices (cached_local_directions)."""
-    n = np.asarray(normals, np.float32)
-    t, s, about_x = tangent_frames(n)
-    local = (local_directions(vertex_ids, rays, salt) if count is None
-             else cached_local_directions(vertex_ids, count, rays, salt).copy())
-    if mirrored:
-        # mirror(frame(n)) = (t, -s, n) about the x axis and (-t, s, n) about the y axis (tangent_frames)
-        local[1][about_x] *= -1
-        local[0][~about_x] *= -1
-    dirs = local[0][..., None] * t[:, None] + local[1][..., None] * s[:, None] + local[2][..., None] * n[:, None]
-    origins = np.repeat(np.asarray(vertices, np.float32) + np.float32(lift) * n, rays, axis=0)
-    return origins, np.ascontiguousarray(dirs.reshape(-1, 3))
+    (N, 3), leaving from the vertex (N, 3) lifted by `lift` metres along its normal; vertex_ids (N,) pick each
+    vertex's directions (local_directions). mirrored: the surface is the x -> -x mirror image of the one the
+    directions are defined for (a left hand): its rays are the mirror images of the right hand's, so that both hands
+    render alike. count: the surface's vertex count, to reuse the directions of all its vertices (direction_table)."""
+    v = np.ascontiguousarray(vertices, np.float32)
+    n = np.ascontiguousarray(normals, np.float32)
+    rows = np.arange(len(v), dtype=np.int64)
+    if count is None:
+        table, table_rows = local_directions(vertex_ids, rays, salt), rows
+    else:
+        table, table_rows = direction_table(count, rays, salt), np.ascontiguousarray(vertex_ids, np.int64)
+    return _rays_kernel(v, n, rows, table, table_rows, np.float32(lift), bool(mirrored))
+
+
+@kernel
+def _rays_kernel(vertices, normals, ids, table, table_rows, lift, mirrored):
+    """(origins, directions) (N * K, 3) float32 of vertices `ids` (N,) int64 of (V, 3) float32 vertices and unit
+    normals: the directions table[:, table_rows[i]] (3, K) of the i-th, in its tangent frame.
+
+    Tangent frame: t = e x n / max(|e x n|, 1e-30), s = n x t, with e the x axis where |n_x| < 0.9, else the y
+    axis; built from the x axis so that the frame of a mirrored normal (x -> -x, how a left hand is made from a
+    right one) is the mirror of the frame up to the sign of one local axis, which `mirrored` flips (y about the x
+    axis, x about the y axis). Direction = (x t + y s) + z n; origin = vertex + lift n. Float32 arithmetic in the
+    order of the numpy version it replaced (cross products as numpy's, sums x, y, z)."""
+    k = table.shape[2]
+    origins = np.empty((ids.shape[0] * k, 3), np.float32)
+    dirs = np.empty((ids.shape[0] * k, 3), np.float32)
+    zero, one, tiny, near_x = np.float32(0.0), np.float32(1.0), np.float32(1e-30), np.float32(0.9)
+    for i in range(ids.shape[0]):
+        vi, row = ids[i], table_rows[i]
+        n0, n1, n2 = normals[vi, 0], normals[vi, 1], normals[vi, 2]
+        about_x = abs(n0) < near_x
+        e0 = one if about_x else zero
+        e1 = zero if about_x else one
+        e2 = zero
+        t0 = e1 * n2 - e2 * n1
+        t1 = e2 * n0 - e0 * n2
+        t2 = e0 * n1 - e1 * n0
+        length = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        length = tiny if length < tiny else length          # np.maximum: NaN stays NaN
+        t0, t1, t2 = t0 / length, t1 / length, t2 / length
+        s0 = n1 * t2 - n2 * t1
+        s1 = n2 * t0 - n0 * t2
+        s2 = n0 * t1 - n1 * t0
+        o0 = vertices[vi, 0] + lift * n0
+        o1 = vertices[vi, 1] + lift * n1
+        o2 = vertices[vi, 2] + lift * n2
+        for j in range(k):
+            x, y, z = table[0, row, j], table[1, row, j], table[2, row, j]
+            if mirrored:
+                if about_x:
+                    y = -y
+                else:
+                    x = -x
+            r = i * k + j
+            dirs[r, 0] = x * t0 + y * s0 + z * n0
+            dirs[r, 1] = x * t1 + y * s1 + z * n1
+            dirs[r, 2] = x * t2 + y * s2 + z * n2
+            origins[r, 0], origins[r, 1], origins[r, 2] = o0, o1, o2
+    return origins, dirs
 
 
 def vertex_occlusion(vertices: np.ndarray, normals: np.ndarray, occluded, rays: int, lift: float,
@@ -141,13 +180,6 @@ def vertex_occlusion(vertices: np.ndarray, normals: np.ndarray, occluded, rays: 
     origins, dirs = vertex_rays(vertices, normals, np.arange(n), rays, lift, salt, mirrored)
     blocked = occluded(origins, dirs, np.inf)
     return (1 - blocked.reshape(n, rays).mean(axis=1)).astype(np.float32)
-
-
-def sphere_bounce(visible: np.ndarray, albedo: np.ndarray) -> np.ndarray:
-    """(..., 3) the integrating-sphere factor 1 / (1 - rho (1 - V)) for open fractions V (...,) and albedos rho
-    (..., 3) (clipped to MAX_BOUNCE_ALBEDO)."""
-    rho = np.minimum(albedo, np.float32(MAX_BOUNCE_ALBEDO))
-    return 1 / (1 - rho * (1 - np.asarray(visible)[..., None]))
 
 
 _UVS: dict = {}
@@ -172,117 +204,329 @@ def vertex_uvs(surface) -> np.ndarray | None:
 class VertexLight:
     """One frame's indirect light at the vertices of every surface of a committed scene.Scene.
 
-    Per vertex, made when first needed: the diffuse albedo rho (3) and the direct light the vertex reflects,
-    rho x irradiance (3) (all lights, cos-weighted, one shadow ray per shadowed light) -- only at the vertices of
-    faces the indirect rays hit, so that the cost follows what a frame sees, not the accessory's vertex count.
-    `ensure(g, prim)` computes E and V (above) for the vertices of faces `prim` of surface g that have none yet;
-    `at(g, prim, bu, bv)` interpolates them at hits: (E (3, M), V (M,)). Not thread-safe: `ensure` runs before a
-    batch is shaded in parallel."""
+    Per vertex, made when first needed: the diffuse albedo rho (3) (for the sphere factor of the vertices computed
+    and the light reflected by the vertices hit), and the direct light the vertex reflects, rho x irradiance (3)
+    (all lights, cos-weighted, one shadow ray per shadowed light) -- only at the vertices of faces the indirect rays
+    hit, so that the cost follows what a frame sees, not the accessory's vertex count. `ensure(g, prim)` computes E
+    and V (above) for the vertices of faces `prim` of surface g that have none yet; `at(g, prim, bu, bv)`
+    interpolates them at hits: (E (3, M), V (M,)). Not thread-safe: `ensure` runs before a batch is shaded in
+    parallel.
+
+    The per-vertex loops are compiled kernels (darthand/jit.py) between the Embree calls, each in the float32 order
+    of the numpy it replaced: the same values to the bit."""
 
     def __init__(self, scene, lights: list[dict], ambient: np.ndarray, rays: int, interreflection: bool = True,
                  counters: dict | None = None):
+        """lights: lights.world_lights' dicts (radiance (3,) float32); ambient (3,) float32; rays per hand vertex;
+        counters: adds 'indirect_rays' (indirect and shadow rays cast)."""
+        if int(rays) < 1:
+            raise ValueError(f"VertexLight needs at least 1 ray per vertex, not {rays} (without indirect light, "
+                             "make none)")
         self.scene, self.lights, self.rays = scene, lights, int(rays)
         self.interreflection = bool(interreflection)
-        self.ambient = np.asarray(ambient, np.float32)
+        self.ambient = np.ascontiguousarray(ambient, np.float32)
         self.lift = LIFT * max(scene.extent, 1e-3)
         self.counters = counters if counters is not None else {}
         sizes = [len(s.vertices) for s in scene.surfaces]
+        self.meshes: list = [None] * len(sizes)                            # (vertices, normals, faces) for kernels
         self.albedo = [np.zeros((n, 3), np.float32) for n in sizes]
+        self.has_albedo = [np.zeros(n, bool) for n in sizes]
         self.reflected = [np.zeros((n, 3), np.float32) for n in sizes]     # albedo x direct irradiance
-        self.lit = [np.zeros(n, bool) for n in sizes]                      # albedo and reflected made
+        self.lit = [np.zeros(n, bool) for n in sizes]                      # reflected made
         self.values = [np.zeros((4, n), np.float32) for n in sizes]        # E (3), V; by row
         self.done = [np.zeros(n, bool) for n in sizes]
+        # per light (L,): point (else directional), towards (L, 3) its position or the direction toward it, radiance
+        # (L, 3), shadows
+        self.light_arrays = (np.array([light["type"] != "directional" for light in lights], bool).reshape(-1),
+                             np.array([(light["position"] if light["type"] != "directional" else -light["direction"])
+                                       .astype(np.float32) for light in lights], np.float32).reshape(-1, 3),
+                             np.array([light["radiance"] for light in lights], np.float32).reshape(-1, 3),
+                             np.array([bool(light["shadows"]) for light in lights], bool).reshape(-1))
 
-    def _light_vertices(self, g: int, ids: np.ndarray) -> None:
-        """Make albedo and reflected light of surface g's vertices `ids` that have none yet."""
+    def _mesh(self, g: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Surface g's (vertices (N, 3) float32, normals (N, 3) float32, faces (F, 3) int32), contiguous."""
+        mesh = self.meshes[g]
+        if mesh is None:
+            s = self.scene.surfaces[g]
+            mesh = self.meshes[g] = (np.ascontiguousarray(s.vertices, np.float32),
+                                     np.ascontiguousarray(s.normals, np.float32),
+                                     np.ascontiguousarray(s.faces, np.int32))
+        return mesh
+
+    def _albedo(self, g: int, ids: np.ndarray) -> None:
+        """Make the albedo of surface g's vertices `ids` that have none yet."""
         from darthand.render.shade import vertex_albedo
 
-        ids = ids[~self.lit[g][ids]]
+        ids = ids[~self.has_albedo[g][ids]]
         if not len(ids):
             return
         s = self.scene.surfaces[g]
         uvs = vertex_uvs(s)
         self.albedo[g][ids] = vertex_albedo(s.material, None if uvs is None else uvs[ids], len(ids))
-        if self.interreflection:
-            self.reflected[g][ids] = self.albedo[g][ids] * self._direct(s.vertices[ids], s.normals[ids])
-        self.lit[g][ids] = True
+        self.has_albedo[g][ids] = True
 
-    def _direct(self, vertices: np.ndarray, normals: np.ndarray) -> np.ndarray:
-        """(N, 3) float32 irradiance (pi folded) of the lights at vertices (N, 3) with normals (N, 3), shadowed."""
-        v = np.asarray(vertices, np.float32)
-        n = np.asarray(normals, np.float32)
-        out = np.zeros((len(v), 3), np.float32)
-        for light in self.lights:
-            if light["type"] == "directional":
-                l = np.broadcast_to((-light["direction"]).astype(np.float32), v.shape)
-                scale = np.broadcast_to(light["radiance"], v.shape)
-                tfar = np.inf
-            else:
-                d = light["position"].astype(np.float32) - v
-                dist = np.linalg.norm(d, axis=1)
-                l = d / np.maximum(dist, 1e-9)[:, None]
-                scale = light["radiance"][None, :] / np.maximum(dist * dist, 1e-12)[:, None]
-                tfar = np.maximum(dist - self.lift, 0)
-            cos = np.einsum("ij,ij->i", n, l)
-            lit = np.flatnonzero(cos > 0)
-            if light["shadows"] and len(lit):
-                origins = np.ascontiguousarray(v[lit] + np.float32(self.lift) * n[lit])
-                far = tfar if np.isscalar(tfar) else tfar[lit]
-                lit = lit[~self.scene.occluded(origins, np.ascontiguousarray(l[lit]), far)]
-                self.counters["indirect_rays"] = self.counters.get("indirect_rays", 0) + len(origins)
-            out[lit] += cos[lit, None] * scale[lit]
-        return out
+    def _reflect(self, g: int, ids: np.ndarray) -> None:
+        """Make the reflected light of surface g's vertices `ids` that have none yet: albedo x the irradiance (pi
+        folded) of the lights, cos-weighted, shadowed (one shadow ray per vertex and shadowed light it faces)."""
+        ids = ids[~self.lit[g][ids]]
+        if not len(ids):
+            return
+        self._albedo(g, ids)
+        vertices, normals, _ = self._mesh(g)
+        state, contribution, origins, dirs, tfar = _lights_kernel(vertices, normals, ids, *self.light_arrays,
+                                                                  np.float32(self.lift))
+        blocked = np.zeros(0, bool)
+        if len(origins):
+            blocked = self.scene.occluded(origins, dirs, tfar)
+            self.counters["indirect_rays"] = self.counters.get("indirect_rays", 0) + len(origins)
+        _reflect_kernel(ids, state, contribution, blocked, self.albedo[g], self.reflected[g])
+        self.lit[g][ids] = True
 
     def ensure(self, g: int, prim: np.ndarray) -> None:
         """Compute E and V for the vertices of faces `prim` of surface g that have none yet."""
-        faces = self.scene.surfaces[g].faces
-        hit = np.zeros(len(faces), bool)
-        hit[prim] = True
-        needed = np.zeros(len(self.done[g]), bool)
-        needed[faces[hit].ravel()] = True
-        todo = np.flatnonzero(needed & ~self.done[g])
+        todo = _todo_kernel(self._mesh(g)[2], np.ascontiguousarray(prim, np.int32), self.done[g])
         if len(todo):
-            self.values[g][:, todo] = self._compute(g, todo).T
+            self._compute(g, todo)
             self.done[g][todo] = True
 
-    def _compute(self, g: int, ids: np.ndarray) -> np.ndarray:
-        """(len(ids), 4) float32: E (3) and V of surface g's vertices `ids`."""
+    def _compute(self, g: int, ids: np.ndarray) -> None:
+        """Compute E and V of surface g's vertices `ids` (int64) into values[g]."""
         s = self.scene.surfaces[g]
+        vertices, normals, _ = self._mesh(g)
         k = self.rays if s.role == "hand" else max(ACCESSORY_MIN_RAYS, self.rays // ACCESSORY_RAY_SHARE)
-        self._light_vertices(g, ids)
-        origins, dirs = vertex_rays(s.vertices[ids], s.normals[ids], ids, k, self.lift, salt=977 * g + 1,
-                                    mirrored=self.scene.subject.side == "left", count=len(s.vertices))
+        origins, dirs = _rays_kernel(vertices, normals, ids, direction_table(len(vertices), k, 977 * g + 1), ids,
+                                     np.float32(self.lift), self.scene.subject.side == "left")
         self.counters["indirect_rays"] = self.counters.get("indirect_rays", 0) + len(origins)
-        out = np.empty((len(ids), 4), np.float32)
         if not self.interreflection:
-            blocked = self.scene.occluded(origins, dirs, np.inf).reshape(-1, k)
-            out[:, 3] = 1 - blocked.mean(axis=1)
-            out[:, :3] = self.ambient * out[:, 3:]
-            return out
+            _open_kernel(self.scene.occluded(origins, dirs, np.inf), k, self.ambient, ids, self.values[g])
+            return
+        self._albedo(g, ids)
         hit = self.scene.intersect(origins, dirs)
-        geom = hit["geomID"]
+        geom, prim = np.ascontiguousarray(hit["geomID"], np.int32), np.ascontiguousarray(hit["primID"], np.int32)
+        u, v = np.ascontiguousarray(hit["u"], np.float32), np.ascontiguousarray(hit["v"], np.float32)
         bounce = np.zeros((len(geom), 3), np.float32)
-        for h, surface in enumerate(self.scene.surfaces):
-            at = np.flatnonzero(geom == h)
-            if len(at):
-                prim = hit["primID"][at]
-                # A ray that meets the back of a face started inside a surface (where fingers press into the palm)
-                # or went through a gap in it: it brings nothing back.
-                facing = np.einsum("ij,ji->i", dirs[at], self.scene.faces[h].table[GEOMETRIC:GEOMETRIC + 3, prim]) < 0
-                at, prim = at[facing], prim[facing]
-                self._light_vertices(h, np.unique(surface.faces[prim]))
-                bu, bv = hit["u"][at], hit["v"][at]
-                bounce[at] = interpolate(self.reflected[h], surface.faces, prim, bu, bv)
-        visible = (geom < 0).reshape(-1, k).mean(axis=1, dtype=np.float32)
-        gathered = bounce.reshape(-1, k, 3).mean(axis=1)
-        out[:, 3] = visible
-        out[:, :3] = (self.ambient * visible[:, None] + gathered) * sphere_bounce(visible, self.albedo[g][ids])
-        return out
+        for h in range(len(self.scene.surfaces)):
+            faces = self._mesh(h)[2]
+            rays, hit_vertices = _facing_kernel(geom, prim, dirs, h, self.scene.faces[h].table, GEOMETRIC, faces,
+                                                len(self.done[h]))
+            if len(rays):
+                self._reflect(h, hit_vertices)
+                _gather_kernel(rays, prim, u, v, faces, self.reflected[h], bounce)
+        _gather_vertices_kernel(geom, bounce, k, self.ambient, self.albedo[g], np.float32(MAX_BOUNCE_ALBEDO), ids,
+                                self.values[g])
 
     def at(self, g: int, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(E (3, M) float32 indirect irradiance, V (M,) open fraction) at hits on surface g (faces ensured)."""
-        f = self.scene.surfaces[g].faces[prim]
-        values = self.values[g]
-        a = np.take(values, f[:, 0], axis=1)
-        v = a + bu * (np.take(values, f[:, 1], axis=1) - a) + bv * (np.take(values, f[:, 2], axis=1) - a)
+        """(E (3, M) float32 indirect irradiance, V (M,) open fraction) at hits on faces prim (M,) of surface g
+        (ensured), barycentrics bu, bv (M,) float32."""
+        v = _at_kernel(self.values[g], self._mesh(g)[2], np.ascontiguousarray(prim, np.int32),
+                       np.ascontiguousarray(bu, np.float32), np.ascontiguousarray(bv, np.float32))
         return v[:3], v[3]
+
+
+# ------------------------------------------------------------------------------------------------ kernels
+# Each does in one pass what a chain of numpy steps did, in their float32 order: tests/render/test_indirect_kernels.py
+# compares them bit for bit with that numpy (tests/render/indirect_numpy.py).
+
+
+@kernel
+def _todo_kernel(faces, prim, done):
+    """(T,) int64 ascending: the vertices of faces `prim` (M,) int32 (faces (F, 3) int32) that are not `done` (N,).
+    (Faces first: a frame's hits are many per face.)"""
+    hit = np.zeros(faces.shape[0], np.bool_)
+    for i in range(prim.shape[0]):
+        hit[prim[i]] = True
+    needed = np.zeros(done.shape[0], np.bool_)
+    for f in range(faces.shape[0]):
+        if hit[f]:
+            needed[faces[f, 0]] = True
+            needed[faces[f, 1]] = True
+            needed[faces[f, 2]] = True
+    count = 0
+    for i in range(done.shape[0]):
+        if needed[i] and not done[i]:
+            count += 1
+    todo = np.empty(count, np.int64)
+    count = 0
+    for i in range(done.shape[0]):
+        if needed[i] and not done[i]:
+            todo[count] = i
+            count += 1
+    return todo
+
+
+@kernel
+def _lights_kernel(vertices, normals, ids, point, towards, radiance, shadows, lift):
+    """The lights (point, towards, radiance, shadows: VertexLight.light_arrays) at vertices `ids` (N,) int64 of
+    (V, 3) float32 vertices and normals: (state (L, N) int64: -2 the vertex faces away from the light (cos <= 0), -1
+    lit without a shadow ray, else its shadow ray's index; contributions cos x radiance (L, N, 3) float32; the shadow
+    rays' origins (S, 3) (the vertex lifted by `lift` along its normal), unit directions (S, 3), tfar (S,) float32).
+    A point light's radiance falls off as 1 / max(d^2, 1e-12) and its shadow ray stops `lift` short of it; a
+    directional light's goes to infinity. Float32, in the order of the numpy it replaced (d / max(|d|, 1e-9))."""
+    n, lights = ids.shape[0], point.shape[0]
+    state = np.empty((lights, n), np.int64)
+    contribution = np.empty((lights, n, 3), np.float32)
+    origins = np.empty((lights * n, 3), np.float32)
+    dirs = np.empty((lights * n, 3), np.float32)
+    tfar = np.empty(lights * n, np.float32)
+    zero, tiny, tiny2 = np.float32(0.0), np.float32(1e-9), np.float32(1e-12)
+    inf = np.float32(np.inf)
+    count = 0
+    for k in range(lights):
+        for i in range(n):
+            vi = ids[i]
+            n0, n1, n2 = normals[vi, 0], normals[vi, 1], normals[vi, 2]
+            s0, s1, s2 = radiance[k, 0], radiance[k, 1], radiance[k, 2]
+            if point[k]:
+                d0 = towards[k, 0] - vertices[vi, 0]
+                d1 = towards[k, 1] - vertices[vi, 1]
+                d2 = towards[k, 2] - vertices[vi, 2]
+                dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                length = tiny if dist < tiny else dist             # np.maximum: NaN stays NaN
+                l0, l1, l2 = d0 / length, d1 / length, d2 / length
+                square = dist * dist
+                square = tiny2 if square < tiny2 else square
+                s0, s1, s2 = s0 / square, s1 / square, s2 / square
+                far = dist - lift
+                far = zero if far < zero else far
+            else:
+                l0, l1, l2 = towards[k, 0], towards[k, 1], towards[k, 2]
+                far = inf
+            cos = n0 * l0 + n1 * l1 + n2 * l2
+            contribution[k, i, 0], contribution[k, i, 1], contribution[k, i, 2] = cos * s0, cos * s1, cos * s2
+            if not cos > zero:
+                state[k, i] = -2
+            elif not shadows[k]:
+                state[k, i] = -1
+            else:
+                state[k, i] = count
+                origins[count, 0] = vertices[vi, 0] + lift * n0
+                origins[count, 1] = vertices[vi, 1] + lift * n1
+                origins[count, 2] = vertices[vi, 2] + lift * n2
+                dirs[count, 0], dirs[count, 1], dirs[count, 2] = l0, l1, l2
+                tfar[count] = far
+                count += 1
+    return state, contribution, origins[:count], dirs[:count], tfar[:count]
+
+
+@kernel
+def _reflect_kernel(ids, state, contribution, blocked, albedo, reflected):
+    """reflected[ids[i]] = albedo[ids[i]] x the sum, light by light in order from 0, of the contributions (L, N, 3)
+    of the lights that reach the vertex (state (L, N) from _lights_kernel, blocked (S,) bool of its shadow rays)."""
+    for i in range(ids.shape[0]):
+        e0, e1, e2 = np.float32(0.0), np.float32(0.0), np.float32(0.0)
+        for k in range(state.shape[0]):
+            ray = state[k, i]
+            if ray == -2 or (ray >= 0 and blocked[ray]):
+                continue
+            e0 += contribution[k, i, 0]
+            e1 += contribution[k, i, 1]
+            e2 += contribution[k, i, 2]
+        vi = ids[i]
+        reflected[vi, 0] = albedo[vi, 0] * e0
+        reflected[vi, 1] = albedo[vi, 1] * e1
+        reflected[vi, 2] = albedo[vi, 2] * e2
+
+
+@kernel
+def _facing_kernel(geom, prim, dirs, h, table, row, faces, count):
+    """Of rays (R,) with hits geom, prim (R,) int32 and directions (R, 3) float32: (the rays (M,) int64 that hit
+    the front of a face of surface h, the vertices (U,) int64 ascending of the faces they hit, among `count`). Front:
+    direction . geometric normal < 0, the normal at rows row..row+2 of the FaceData table (K, F) float32; a ray that
+    meets the back of a face started inside a surface (where fingers press into the palm) or went through a gap in
+    it: it brings nothing back."""
+    rays = np.empty(geom.shape[0], np.int64)
+    used = np.zeros(count, np.bool_)
+    m = 0
+    zero = np.float32(0.0)
+    for i in range(geom.shape[0]):
+        if geom[i] != h:
+            continue
+        p = prim[i]
+        if dirs[i, 0] * table[row, p] + dirs[i, 1] * table[row + 1, p] + dirs[i, 2] * table[row + 2, p] < zero:
+            rays[m] = i
+            m += 1
+            used[faces[p, 0]] = True
+            used[faces[p, 1]] = True
+            used[faces[p, 2]] = True
+    u = 0
+    for i in range(count):
+        if used[i]:
+            u += 1
+    vertices = np.empty(u, np.int64)
+    u = 0
+    for i in range(count):
+        if used[i]:
+            vertices[u] = i
+            u += 1
+    return rays[:m], vertices
+
+
+@kernel
+def _gather_kernel(rays, prim, u, v, faces, reflected, bounce):
+    """bounce[r] (3,) = the per-vertex reflected light (N, 3) float32 interpolated at the hit of each ray r of
+    `rays` (M,) int64 (faces prim (R,) int32, barycentrics u, v (R,) float32): a + u (b - a) + v (c - a)."""
+    for i in range(rays.shape[0]):
+        r = rays[i]
+        p = prim[r]
+        a, b, c = faces[p, 0], faces[p, 1], faces[p, 2]
+        bu, bv = u[r], v[r]
+        for ch in range(3):
+            x = reflected[a, ch]
+            bounce[r, ch] = x + bu * (reflected[b, ch] - x) + bv * (reflected[c, ch] - x)
+
+
+@kernel
+def _gather_vertices_kernel(geom, bounce, k, ambient, albedo, max_albedo, ids, values):
+    """values[:, ids[i]] = (E (3), V) of the i-th vertex from its k rays i k .. i k + k - 1 (geom (R,) int32, -1
+    missed; bounce (R, 3) float32 the light each brings back): V = misses / k, gathered light S = mean bounce
+    (summed in ray order, then divided in float64 as numpy's mean), E = (ambient V + S) / (1 - rho (1 - V)) with
+    rho = min(albedo[ids[i]], max_albedo)."""
+    one = np.float32(1.0)
+    for i in range(ids.shape[0]):
+        first = i * k
+        misses = 0
+        for j in range(k):
+            if geom[first + j] < 0:
+                misses += 1
+        visible = np.float32(np.float64(misses) / np.float64(k))
+        vi = ids[i]
+        for ch in range(3):
+            total = bounce[first, ch]
+            for j in range(1, k):
+                total += bounce[first + j, ch]
+            gathered = np.float32(np.float64(total) / np.float64(k))
+            rho = albedo[vi, ch]
+            rho = max_albedo if rho > max_albedo else rho      # np.minimum: NaN stays NaN
+            values[ch, vi] = (ambient[ch] * visible + gathered) * (one / (one - rho * (one - visible)))
+        values[3, vi] = visible
+
+
+@kernel
+def _open_kernel(blocked, k, ambient, ids, values):
+    """values[:, ids[i]] = (ambient V, V) with V = 1 - the share of the i-th vertex's k rays `blocked` (R,) bool
+    (in float64, as numpy's mean of booleans, then float32): ambient occlusion without interreflection."""
+    for i in range(ids.shape[0]):
+        hits = 0
+        for j in range(i * k, i * k + k):
+            if blocked[j]:
+                hits += 1
+        visible = np.float32(1.0 - np.float64(hits) / np.float64(k))
+        vi = ids[i]
+        for ch in range(3):
+            values[ch, vi] = ambient[ch] * visible
+        values[3, vi] = visible
+
+
+@kernel
+def _at_kernel(values, faces, prim, bu, bv):
+    """(4, M) float32: per-vertex values (4, N) interpolated at hits on faces prim (M,) int32 with barycentrics
+    bu, bv (M,) float32: a + bu (b - a) + bv (c - a)."""
+    out = np.empty((4, prim.shape[0]), np.float32)
+    for i in range(prim.shape[0]):
+        p = prim[i]
+        a, b, c = faces[p, 0], faces[p, 1], faces[p, 2]
+        u, v = bu[i], bv[i]
+        for row in range(4):
+            x = values[row, a]
+            out[row, i] = x + u * (values[row, b] - x) + v * (values[row, c] - x)
+    return out

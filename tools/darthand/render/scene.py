@@ -3,7 +3,8 @@
 embreex builds static scenes only (no vertex-buffer updates, no instancing), so a pose change means a new scene
 for the skinned hand; a rigid accessory keeps one scene in its joint's frame and the rays are moved into it (see
 Scene). What did not move is not recomputed on the numpy side (see assets.HandAssets), and a scene whose surfaces
-are the same arrays is reused (only the camera or the lights changed).
+are the same arrays is reused (only the camera or the lights changed). Meshes reach Embree by a buffer copy
+(embree_mesh.add_triangles), not embreex's per-element one.
 
 The scene is committed on construction (a one-ray query) so that the parallel queries of trace.py start from a
 committed scene.
@@ -15,10 +16,11 @@ import copy
 
 import numpy as np
 from embreex import rtcore_scene
-from embreex.mesh_construction import TriangleMesh
 from embreex.rtcore import EmbreeDevice
 
+from darthand.jit import kernel
 from darthand.render.camera import point_bounds
+from darthand.render.embree_mesh import add_triangles
 from darthand.render.subject import Subject, Surface
 
 _DEVICE = None
@@ -46,13 +48,22 @@ class FaceData:
     POSITION, NORMAL, GEOMETRIC, UV, UV_SCALE = 0, 9, 18, 21, 27
 
     def __init__(self, surface: Surface):
-        f = surface.faces
-        corners = surface.vertices[f]                                            # (F, 3, 3) float32
+        self.has_uvs = surface.uvs is not None
+        arrays = (surface.vertices, surface.normals) + ((surface.uvs,) if self.has_uvs else ())
+        if all(a.dtype == np.float32 for a in arrays):
+            self.table = np.empty((28 if self.has_uvs else 21, len(surface.faces)), np.float32)
+            none = np.empty((0, 2), np.float32), np.empty((0, 3), np.int64)
+            _face_table_kernel(np.ascontiguousarray(surface.vertices), np.ascontiguousarray(surface.normals),
+                               np.ascontiguousarray(surface.faces, np.int64),
+                               *((np.ascontiguousarray(surface.uvs), np.ascontiguousarray(surface.faces_uv, np.int64))
+                                 if self.has_uvs else none), self.table)
+            return
+        f = surface.faces                                     # other dtypes (float64 arrays): numpy, same order
+        corners = surface.vertices[f]
         n = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
         area2 = np.linalg.norm(n, axis=1)
         rows = [corners.reshape(-1, 9), surface.normals[f].reshape(-1, 9),
                 n / np.maximum(area2, 1e-30)[:, None]]
-        self.has_uvs = surface.uvs is not None
         if self.has_uvs:
             cuv = surface.uvs[surface.faces_uv]                                  # (F, 3, 2)
             d1, d2 = cuv[:, 1] - cuv[:, 0], cuv[:, 2] - cuv[:, 0]
@@ -66,6 +77,44 @@ class FaceData:
         return np.take(self.table, prim, axis=1)
 
 
+@kernel
+def _face_table_kernel(vertices, normals, faces, uvs, faces_uv, table):
+    """FaceData's table (K, F) of float32 vertices, normals (N, 3), faces (F, 3), uvs (T, 2) and faces_uv (F, 3)
+    (empty: no UVs), in one pass; float32 arithmetic in the order of the numpy version (np.cross's a1 b2 - a2 b1,
+    |n| = sqrt(x^2 + y^2 + z^2), n / max(|n|, 1e-30), sqrt(|uv cross| / max(|n|, 1e-30)))."""
+    tiny = np.float32(1e-30)
+    for f in range(faces.shape[0]):
+        i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+        for k in range(3):
+            i = faces[f, k]
+            for c in range(3):
+                table[3 * k + c, f] = vertices[i, c]
+                table[9 + 3 * k + c, f] = normals[i, c]
+        ax = vertices[i1, 0] - vertices[i0, 0]
+        ay = vertices[i1, 1] - vertices[i0, 1]
+        az = vertices[i1, 2] - vertices[i0, 2]
+        bx = vertices[i2, 0] - vertices[i0, 0]
+        by = vertices[i2, 1] - vertices[i0, 1]
+        bz = vertices[i2, 2] - vertices[i0, 2]
+        nx = ay * bz - az * by
+        ny = az * bx - ax * bz
+        nz = ax * by - ay * bx
+        area2 = np.sqrt(nx * nx + ny * ny + nz * nz)
+        d = max(area2, tiny)
+        table[18, f] = nx / d
+        table[19, f] = ny / d
+        table[20, f] = nz / d
+        if uvs.shape[0]:
+            j0, j1, j2 = faces_uv[f, 0], faces_uv[f, 1], faces_uv[f, 2]
+            for k in range(3):
+                j = faces_uv[f, k]
+                table[21 + 2 * k, f] = uvs[j, 0]
+                table[22 + 2 * k, f] = uvs[j, 1]
+            d1u, d1v = uvs[j1, 0] - uvs[j0, 0], uvs[j1, 1] - uvs[j0, 1]
+            d2u, d2v = uvs[j2, 0] - uvs[j0, 0], uvs[j2, 1] - uvs[j0, 1]
+            table[27, f] = np.sqrt(abs(d1u * d2v - d1v * d2u) / d)
+
+
 def interpolate(values: np.ndarray, faces: np.ndarray, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> np.ndarray:
     """Per-vertex values (N, ...) interpolated at hits on faces `prim` (M,) with barycentrics (1 - bu - bv, bu, bv):
     (M, ...)."""
@@ -74,6 +123,27 @@ def interpolate(values: np.ndarray, faces: np.ndarray, prim: np.ndarray, bu: np.
     if a.ndim > 1:
         bu, bv = bu[:, None], bv[:, None]
     return a + bu * (b - a) + bv * (c - a)
+
+
+def interpolate_scalar(values: np.ndarray, faces: np.ndarray, prim: np.ndarray, bu: np.ndarray,
+                       bv: np.ndarray) -> np.ndarray:
+    """`interpolate` of per-vertex scalars (N,) float32 at float32 barycentrics, in one pass: (M,) float32."""
+    if values.dtype != np.float32 or values.ndim != 1:
+        return interpolate(values, faces, prim, bu, bv)
+    out = np.empty(len(prim), np.float32)
+    _interpolate_kernel(np.ascontiguousarray(values), np.ascontiguousarray(faces, np.int64),
+                        np.ascontiguousarray(prim, np.int64), np.ascontiguousarray(bu, np.float32),
+                        np.ascontiguousarray(bv, np.float32), out)
+    return out
+
+
+@kernel
+def _interpolate_kernel(values, faces, prim, bu, bv, out):
+    """out = a + bu (b - a) + bv (c - a) of the corner values a, b, c of face prim, float32, in interpolate's order."""
+    for i in range(prim.shape[0]):
+        f = prim[i]
+        a = values[faces[f, 0]]
+        out[i] = a + bu[i] * (values[faces[f, 1]] - a) + bv[i] * (values[faces[f, 2]] - a)
 
 
 class Scene:
@@ -101,8 +171,7 @@ class Scene:
                 R, t = G[:3, :3].astype(np.float32), G[:3, 3].astype(np.float32)
                 self.rigid.append((i, embree, R, t, (R @ centre + t).astype(np.float32), radius))
             else:
-                TriangleMesh(self.embree, np.ascontiguousarray(s.vertices, np.float32),
-                             np.ascontiguousarray(s.faces, np.int32))
+                add_triangles(self.embree, s.vertices, s.faces)
                 baked.append(i)
         self.baked = np.array(baked + [-1], np.int32)     # geomID of the baked scene -> surface index (-1 -> -1)
         pts = subject.all_vertices()
@@ -138,8 +207,7 @@ class Scene:
         d = np.array(np.broadcast_to(np.asarray(tfar, np.float32), (len(origins),)), np.float32, copy=True)
         blocked = self.embree.run(origins, directions, dists=d.copy(), query="OCCLUDED") >= 0
         for _, embree, R, t, centre, radius in self.rigid:
-            rest = np.flatnonzero(~blocked)
-            rest = rest[_rays_near_sphere(origins[rest], directions[rest], centre, radius)]
+            rest = _rays_near_sphere(origins, directions, centre, radius, blocked)
             if not len(rest):
                 continue
             o, dl = _to_local(origins[rest], directions[rest], R, t)
@@ -172,7 +240,7 @@ def _local_scene(local: np.ndarray, faces: np.ndarray):
         if len(_LOCAL_SCENES) > 64:
             _LOCAL_SCENES.clear()
         embree = rtcore_scene.EmbreeScene(device())
-        TriangleMesh(embree, np.ascontiguousarray(local, np.float32), np.ascontiguousarray(faces, np.int32))
+        add_triangles(embree, local, faces)
         _commit(embree)
         centre = (local.min(0) + local.max(0)) / 2
         radius = float(np.linalg.norm(local - centre, axis=1).max())
@@ -180,21 +248,40 @@ def _local_scene(local: np.ndarray, faces: np.ndarray):
     return entry[2:]
 
 
-def _rays_near_sphere(origins: np.ndarray, directions: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
-    """Indices of the rays (N, 3) (origin + s direction, s > 0) that pass within `radius` of `centre`: the only
-    rays that can hit a mesh inside that sphere. Culling the others before a small rigid surface's own Embree query
-    saves moving every ray into its frame and a query per ray. Conservative: the radius is padded for float32
-    rounding, which in |w|^2 |d|^2 - (w.d)^2 grows with |w|^2 (hence the 1e-6 |w|^2 term)."""
-    w = (centre[None, :] - origins).T                               # (3, N)
-    d = directions.T
-    wd = w[0] * d[0] + w[1] * d[1] + w[2] * d[2]                   # (faster than einsum on (N, 3) rows)
-    dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-    ww = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
+def _rays_near_sphere(origins: np.ndarray, directions: np.ndarray, centre: np.ndarray, radius: float,
+                      skip: np.ndarray | None = None) -> np.ndarray:
+    """Indices (ascending) of the rays (N, 3) float32 (origin + s direction, s > 0), other than those `skip` (N,)
+    bool marks, that pass within `radius` of `centre`: the only rays that can hit a mesh inside that sphere.
+    Culling the others before a small rigid surface's own Embree query saves moving every ray into its frame and a
+    query per ray. Conservative: the radius is padded for float32 rounding, which in |w|^2 |d|^2 - (w.d)^2 grows
+    with |w|^2 (hence the 1e-6 |w|^2 term)."""
     r2 = np.float32((radius * (1 + 1e-3) + 1e-6) ** 2)
-    # squared distance from the centre to the ray's line, times |d|^2; a centre behind the origin counts as near
-    # only if the origin is inside the sphere.
-    near = (ww * dd - wd * wd < (r2 + np.float32(1e-6) * ww) * dd) & ((wd > 0) | (ww < r2))
-    return np.flatnonzero(near)
+    out = np.empty(len(origins), np.int64)
+    skip = np.zeros(len(origins), np.bool_) if skip is None else np.ascontiguousarray(skip, np.bool_)
+    return out[:_near_sphere_kernel(np.ascontiguousarray(origins, np.float32),
+                                    np.ascontiguousarray(directions, np.float32),
+                                    np.ascontiguousarray(centre, np.float32), r2, skip, out)]
+
+
+@kernel
+def _near_sphere_kernel(origins, directions, centre, r2, skip, out):
+    """`_rays_near_sphere` per ray, float32 in the order of the numpy version it replaced (w = centre - origin;
+    dots summed x, y, z): ray i (not skipped) is near when |w|^2 |d|^2 - (w.d)^2 < (r2 + 1e-6 |w|^2) |d|^2 and
+    (w.d > 0 or |w|^2 < r2); its index goes to out; returns how many."""
+    tol = np.float32(1e-6)
+    m = 0
+    for i in range(origins.shape[0]):
+        if skip[i]:
+            continue
+        w0, w1, w2 = centre[0] - origins[i, 0], centre[1] - origins[i, 1], centre[2] - origins[i, 2]
+        d0, d1, d2 = directions[i, 0], directions[i, 1], directions[i, 2]
+        wd = w0 * d0 + w1 * d1 + w2 * d2
+        dd = d0 * d0 + d1 * d1 + d2 * d2
+        ww = w0 * w0 + w1 * w1 + w2 * w2
+        if ww * dd - wd * wd < (r2 + tol * ww) * dd and (wd > 0 or ww < r2):
+            out[m] = i
+            m += 1
+    return m
 
 
 def _to_local(origins: np.ndarray, directions: np.ndarray, R: np.ndarray, t: np.ndarray):
