@@ -255,8 +255,8 @@ def test_two_offsets_decode_the_file_once(tmp_path, monkeypatch):
     albedo = write_png(tmp_path / "albedo.png", codes)
     rough = write_png(tmp_path / "rough.png", random_codes(16, 16, 1, seed=5))
     reads = []
-    real = texture_module.read_codes
-    monkeypatch.setattr(texture_module, "read_codes", lambda path: reads.append(str(path)) or real(path))
+    real = texture_module._open_codes
+    monkeypatch.setattr(texture_module, "_open_codes", lambda path: reads.append(str(path)) or real(path))
     a = load_maps(albedo, offset=0.0, data=rough)
     b = load_maps(albedo, offset=-0.1, data=rough)
     assert sorted(reads) == sorted([str(albedo.resolve()), str(rough.resolve())])      # each file decoded once
@@ -276,8 +276,8 @@ def test_the_cache_keeps_many_small_maps_within_its_memory_budget(tmp_path, monk
     paths = [write_png(tmp_path / f"m{i}.png", random_codes(8, 8, 3, seed=i)) for i in range(60)]
     texture_module.clear_cache()
     reads = []
-    real = texture_module.read_codes
-    monkeypatch.setattr(texture_module, "read_codes", lambda path: reads.append(str(path)) or real(path))
+    real = texture_module._open_codes
+    monkeypatch.setattr(texture_module, "_open_codes", lambda path: reads.append(str(path)) or real(path))
     for _ in range(2):
         for p in paths:
             load_maps(p)

@@ -1,8 +1,9 @@
 """Benchmark of the renderer's skin textures: 8-bit (SRGB8-style) pyramids shared across skin-tone offsets against
 float32 pyramids decoded per (texture, offset) -- the earlier storage.
 
-Figures: load time of the skin texture + roughness map (cold: nothing cached; then a second offset of the same
-files), memory per loaded texture, ms per 512^2 frame single-threaded (the scene of benchmarks/render.py) with the
+Figures: load time of the skin texture + roughness map (cold: nothing cached, wall and CPU time; then a second
+offset of the same files; and the CPU of a cold load with the files read through OpenImageIO rather than
+render/png.py's decoder), memory per loaded texture, ms per 512^2 frame single-threaded (the scene of benchmarks/render.py) with the
 time spent in texture lookups, and the image difference between the two storages at skin-tone offsets 0 and -0.1
 over the pixels the hand covers, in 8-bit sRGB codes (the re-quantised mips and the offset applied after filtering
 at levels >= 1 are the lossy part).
@@ -71,7 +72,7 @@ def _loaders(before) -> dict:
         ref = _Loader(lambda *a, **k: texture.load_maps(*a, **k, codes=False), texture._float_maps.cache_clear)
     else:
         old = _module(before)
-        ref = _Loader(old.load_maps, old._load_maps.cache_clear)
+        ref = _Loader(old.load_maps, getattr(old, "clear_cache", None) or old._load_maps.cache_clear)
     return {"after": after, "before": ref}
 
 
@@ -91,19 +92,36 @@ def _memory(tex) -> int:
 
 
 def _load_times(loader, albedo, rough, repeats: int) -> dict:
-    cold, second = [], []
+    cold, cold_cpu, second = [], [], []
     for _ in range(repeats):
         loader.clear()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         tex = loader(albedo, offset=OFFSETS[0], data=rough, channels=(0,))
-        t1 = time.perf_counter()
+        t1, c1 = time.perf_counter(), time.process_time()
         loader(albedo, offset=OFFSETS[1], data=rough, channels=(0,))
         t2 = time.perf_counter()
         cold.append(round(1000 * (t1 - t0), 1))
+        cold_cpu.append(round(1000 * (c1 - c0), 1))
         second.append(round(1000 * (t2 - t1), 2))
-    return {"cold_ms": cold, "second_offset_ms": second, "memory_mb": round(_memory(tex) / 1e6, 1),
+    return {"cold_ms": cold, "cold_cpu_ms": cold_cpu, "second_offset_ms": second,
+            "memory_mb": round(_memory(tex) / 1e6, 1),
             "memory_mb_two_offsets": round(_memory(tex) * (1 if hasattr(tex, "decode") and
                                                           tex.decode is not None else 2) / 1e6, 1)}
+
+
+def _openimageio_decode_times(albedo, rough, repeats: int) -> list[float]:
+    """CPU ms of cold load_maps with every file read through OpenImageIO (render/png.py's fast path off)."""
+    from darthand.render import texture
+
+    cpu = []
+    with mock.patch.object(texture, "open_png8", lambda path: None):
+        for _ in range(repeats):
+            texture.clear_cache()
+            c0 = time.process_time()
+            texture.load_maps(albedo, offset=OFFSETS[0], data=rough, channels=(0,))
+            cpu.append(round(1000 * (time.process_time() - c0), 1))
+    texture.clear_cache()
+    return cpu
 
 
 def _render_times(renderers, loaders, gestures, texture_id, frames: int, repeats: int) -> dict:
@@ -176,6 +194,8 @@ def run(frames: int = 20, repeats: int = 3, before: str | os.PathLike | None = N
             first = round(1000 * (time.perf_counter() - t0), 1)
             loads[name] = {"first_in_process_ms": first,
                            **_load_times(loader, files.albedo, files.roughness, repeats)}
+        loads["after"]["cold_cpu_ms_openimageio_decode"] = _openimageio_decode_times(files.albedo, files.roughness,
+                                                                                     repeats)
         import OpenImageIO as oiio
 
         spec = oiio.ImageInput.open(str(files.albedo)).spec()
