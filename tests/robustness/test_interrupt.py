@@ -125,6 +125,47 @@ def test_ctrl_c_during_make_stops_the_step_and_its_workers_cleanly(tmp_path):
     assert not (build / "textures" / "catalog.json").exists()
 
 
+COMPILING = """
+import numba  # imported before the signal can come: only the compile is under test
+import numpy as np
+from darthand.jit import kernel
+
+
+@kernel
+def kernel_under_test(a):
+    total = 0.0
+    for i in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            total += np.sqrt(abs(a[i, j])) * np.cos(a[i, j])
+    return total
+
+
+print("compiling", flush=True)
+try:
+    kernel_under_test(np.ones((3, 3)))
+    print("returned", flush=True)
+except KeyboardInterrupt:
+    print("interrupted", flush=True)
+"""
+
+
+def test_ctrl_c_while_a_kernel_compiles_waits_for_the_compile_and_prints_no_traceback(tmp_path):
+    """A kernel's first call compiles it (numba, into tmp_path/__pycache__: nothing cached yet). A Ctrl-C then must
+    not land inside LLVM's callbacks, where Python prints it as an ignored exception and drops it: it is held until
+    the compile is done (its cache files written) and interrupts the call as it returns."""
+    script = tmp_path / "compiling.py"
+    script.write_text(COMPILING)
+    proc = Proc([PYTHON, str(script)], tmp_path, limit=False)
+    assert proc.wait_for("compiling", 60), proc.stderr
+    time.sleep(0.05)                                       # well inside the compile (0.3 s or more)
+    os.killpg(proc.p.pid, signal.SIGINT)
+    assert proc.wait(60) == 0, proc.stderr
+    assert proc.stdout.split() == ["compiling", "interrupted"], proc.stdout + proc.stderr
+    assert "Exception ignored" not in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+    cached = sorted(p.suffix for p in (tmp_path / "__pycache__").glob("compiling.kernel_under_test-*"))
+    assert cached == [".nbc", ".nbi"], cached
+
+
 # ------------------------------------------------------------------------------------------------ damaged outputs
 
 

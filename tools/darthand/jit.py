@@ -35,6 +35,8 @@ from __future__ import annotations
 import functools
 import threading
 
+from darthand.processes import ctrl_c_held
+
 _LOCK = threading.Lock()
 
 
@@ -54,7 +56,12 @@ def kernel(func=None, *, error_model: str = "python"):
                 if compiled is None:
                     import numba
 
-                    compiled = numba.njit(cache=True, nogil=True, error_model=error_model)(func)
+                    dispatcher = numba.njit(cache=True, nogil=True, error_model=error_model)(func)
+                    # The first call compiles (or loads the cache): a Ctrl-C waits for it (processes.ctrl_c_held)
+                    with ctrl_c_held():
+                        result = dispatcher(*args)
+                    compiled = dispatcher
+                    return result
         return compiled(*args)
 
     call.py_func = func

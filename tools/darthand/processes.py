@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import threading
 
 PR_SET_PDEATHSIG = 1     # linux/prctl.h
 M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD = -1, -2, -3      # glibc malloc.h
@@ -26,8 +27,6 @@ def init_worker(parent: int | None = None) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     parent = os.getppid() if parent is None else parent
     if not die_with_parent():
-        import threading
-
         threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="darthand-watchdog").start()
     if os.getppid() != parent:        # the parent died before any of this took effect
         os._exit(1)
@@ -67,6 +66,25 @@ def keep_freed_memory(largest: int = 32 << 20) -> bool:
             (M_MMAP_THRESHOLD, largest), (M_TRIM_THRESHOLD, 1 << 30), (M_TOP_PAD, 64 << 20)))
     except (OSError, AttributeError):
         return False
+
+
+@contextlib.contextmanager
+def ctrl_c_held():
+    """Hold a Ctrl-C (SIGINT) that arrives in the block and deliver it when the block ends: for work in which a
+    KeyboardInterrupt would be raised inside C callbacks (LLVM's, while numba compiles), where Python prints it as
+    an ignored exception with a traceback and drops it. Python runs signal handlers in the main thread only, so
+    elsewhere the block changes nothing (the interrupt is raised in the main thread's own code)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if caught:
+            signal.raise_signal(signal.SIGINT)
 
 
 @contextlib.contextmanager
