@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 
@@ -33,7 +34,11 @@ def studio(args) -> int:
         signal.signal(signal.SIGTERM, previous)
         server.server_close()
     print("[studio] stopped", file=sys.stderr, flush=True)
-    return 0
+    sys.stdout.flush()
+    # Leave now: a render the page left running would otherwise be waited for at exit (the renderer's thread pool is
+    # joined), seconds, or tens of seconds the first time its kernels compile on a machine. Files are written
+    # atomically (fileio.atomic_path), so an abandoned write leaves at most its hidden temporary, never half a file.
+    os._exit(0)
 
 
 def _interrupt(signum, frame):
