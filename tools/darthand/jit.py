@@ -23,9 +23,9 @@ of CPU, which commands that never run one, like `darthand validate`, should not 
 at its first call for the argument types given. The machine code is cached on disk (numba's cache=True): in the
 `__pycache__` folder beside the source file when that folder is writable (an editable install, as `make` makes),
 otherwise in numba's per-user cache folder (NUMBA_CACHE_DIR overrides it). So a process pays the compilation only
-when no earlier process on the machine has, and otherwise loads the cached code. Measured (loaded 2-core
-machine, every kernel a dataset frame runs): 3.9 s of CPU to compile them all (0.2-1.4 s each) in the first
-process, 0.5 s in every later one (0.2 s importing numba, 0.3 s starting its dispatcher, milliseconds per kernel).
+when no earlier process on the machine has, and otherwise loads the cached code. Measured (quiet 2-core machine,
+every kernel a dataset frame runs, 2026-11-24): a process's first dataset frame costs 14.6 s of CPU when it compiles
+them all, 1.8 s when it loads them (with numba's import, its dispatcher's start and the frame's texture loads).
 Processes compiling the same kernel at once (pytest-xdist workers, dataset workers) are safe:
 numba writes each cache file under a temporary name and renames it into place.
 """

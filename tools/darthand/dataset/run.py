@@ -44,8 +44,8 @@ DATASET_VERSION = 2
 DEFAULT_SHARD_SIZE = 16384
 # Dataset render settings, chosen from benchmarks/dataset_settings.py (CPU per 512^2 frame against error, 24 frames
 # of the default plan, against 16 sub-samples shaded each and 64 indirect rays; quiet machine): 4 edge sub-samples
-# instead of the renderer's 8 save 7.3 of 73.1 ms a frame for +0.05 sRGB codes of mean error (0.62 -> 0.67); 8
-# indirect rays instead of 16 would save 1.2 ms more for +0.18 codes (0.67 -> 0.85), so the shading defaults stay.
+# instead of the renderer's 8 save 7.2 of 56.6 ms a frame for +0.05 sRGB codes of mean error (0.62 -> 0.67); 8
+# indirect rays instead of 16 would save 1.6 ms more for +0.18 codes (0.67 -> 0.85), so the shading defaults stay.
 DEFAULT_SAMPLES = 4
 MAX_CHUNK = 64                    # frames per task: ~3-6 s of work (progress stays live; a stop is seen per frame),
                                   # and a texture's frames in a 16,384-frame shard (~50) fit one task
