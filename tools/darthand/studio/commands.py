@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import signal
 import sys
 
@@ -34,11 +33,7 @@ def studio(args) -> int:
         signal.signal(signal.SIGTERM, previous)
         server.server_close()
     print("[studio] stopped", file=sys.stderr, flush=True)
-    sys.stdout.flush()
-    # Leave now: a render the page left running would otherwise be waited for at exit (the renderer's thread pool is
-    # joined), seconds, or tens of seconds the first time its kernels compile on a machine. Files are written
-    # atomically (fileio.atomic_path), so an abandoned write leaves at most its hidden temporary, never half a file.
-    os._exit(0)
+    return 0
 
 
 def _interrupt(signum, frame):
