@@ -66,7 +66,8 @@ class StudioProcess:
         self.stderr = ""
 
     def __enter__(self) -> "StudioProcess":
-        self.proc = subprocess.Popen(self.args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.proc = subprocess.Popen(self.args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     preexec_fn=_ctrl_c_as_in_a_terminal)
         line = self.proc.stdout.readline()
         match = re.search(r"open (http://\S+/)", line)
         if not match:
@@ -84,3 +85,10 @@ class StudioProcess:
             self.proc.kill()
             _, self.stderr = self.proc.communicate()
         self.returncode = self.proc.returncode
+
+
+def _ctrl_c_as_in_a_terminal() -> None:
+    """In the child, before it runs the studio: SIGINT at its default, as a terminal's foreground job has it. When
+    the tests themselves run in the background (`make test &`, nohup), SIGINT comes ignored, Python keeps it ignored
+    in the children, and the Ctrl-C this class sends would never reach the server."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
