@@ -74,8 +74,8 @@ def ctrl_c_held():
     KeyboardInterrupt would be raised inside C callbacks (LLVM's, while numba compiles), where Python prints it as
     an ignored exception with a traceback and drops it. Python runs signal handlers in the main thread only, so
     elsewhere the block changes nothing (the interrupt is raised in the main thread's own code)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is None:
+        yield                   # (None: a handler set outside Python, which could not be put back)
         return
     caught = []
     previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
