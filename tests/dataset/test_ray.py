@@ -76,12 +76,21 @@ def _args(package, *extra):
             *extra]
 
 
-def _cli(args, timeout=RUN_TIMEOUT_S) -> subprocess.CompletedProcess:
-    """The command in a process of its own (a Ray driver, as a user runs it)."""
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
-    env.pop("RAY_ADDRESS", None)
-    return subprocess.run([sys.executable, "-m", "darthand.cli", *args], env=env, capture_output=True, text=True,
-                          timeout=timeout)
+def _driver(cluster, args, **popen) -> subprocess.Popen:
+    """The command in a process of its own (a Ray driver, as a user runs it) with the cluster's environment."""
+    env = cluster.env({**os.environ, "OPENBLAS_NUM_THREADS": "1"})
+    return subprocess.Popen([sys.executable, "-m", "darthand.cli", *args], env=env, text=True, **popen)
+
+
+def _cli(cluster, args, timeout=RUN_TIMEOUT_S) -> subprocess.CompletedProcess:
+    """_driver run to its end: its exit code, stdout and stderr."""
+    with _driver(cluster, args, stdout=subprocess.PIPE, stderr=subprocess.PIPE) as proc:
+        try:
+            stdout, stderr = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            raise
+    return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
 
 
 def _local(args, out) -> dict:
@@ -115,7 +124,7 @@ def test_a_two_node_cluster_without_a_shared_filesystem_writes_a_local_runs_byte
     args = _args((package[0], textures, package[2]), "--count", "12", "--seed", "5", "--shard-size", "4",
                  "--texture-ids", "light_moles_00,dark_moles_01", "--accessory-share", "0.5")
     ship = [] if HIDE else ["--ray-files", "ship"]
-    done = _cli([*args, "--ray", head.address, *ship, "--out", str(tmp_path / "ray")])
+    done = _cli(head, [*args, "--ray", head.address, *ship, "--out", str(tmp_path / "ray")])
     assert done.returncode == 0, done.stderr
     assert "Ray workers on 2 nodes" in done.stdout and "node " in done.stdout
     assert files_of(tmp_path / "ray") == _local(args, tmp_path / "local")
@@ -131,11 +140,26 @@ def test_a_two_node_cluster_without_a_shared_filesystem_writes_a_local_runs_byte
     assert not [p for p in (tmp_path / "ray").rglob(".*") if p.is_file()]            # no probe or temporary left
 
 
+def test_a_users_own_ray_token_does_not_reach_the_cluster(package, head, worker_node, tmp_path, monkeypatch):
+    """Any ray.init() on the machine leaves ~/.ray/auth_token; Ray picks it up in a node started after it, which then
+    cannot join a head without that token (reproduced: `InvalidAuthToken`). The cluster and its drivers use the
+    cluster's own token instead."""
+    home = tmp_path / "home"
+    (home / ".ray").mkdir(parents=True)
+    (home / ".ray" / "auth_token").write_text("f" * 64)
+    monkeypatch.setenv("HOME", str(home))
+    worker_node()
+    args = _args(package, "--count", "4", "--seed", "2", "--size", "48", "--ray", head.address)
+    done = _cli(head, [*args, "--out", str(tmp_path / "ray")])
+    assert done.returncode == 0, done.stderr
+    assert re.search(r"Ray workers on [2-9] nodes", done.stdout), done.stdout
+
+
 @pytest.mark.skipif(not HIDE, reason=NO_HIDE)
 def test_a_node_without_the_files_is_a_one_line_error_when_files_must_be_shared(package, head, hidden_node,
                                                                                 tmp_path):
     args = _args(package, "--count", "4", "--ray", head.address, "--ray-files", "shared")
-    strict = _cli([*args, "--out", str(tmp_path / "strict")])
+    strict = _cli(head, [*args, "--out", str(tmp_path / "strict")])
     err = strict.stderr.strip().splitlines()
     assert strict.returncode == 2 and len(err) == 1, strict.stderr
     assert re.search(r"--ray-files shared: node \S+ \([0-9a-f]{8}\) does not see (the output folder )?/tmp/",
@@ -184,9 +208,8 @@ def test_a_node_lost_mid_run_the_run_finishes_with_nothing_lost_or_written_twice
     args = _args(package, "--count", "32", "--seed", "8", "--shard-size", "8", "--size", "64")
     out = tmp_path / "ray"
     watch = RenameWatch([out / k for k in ("images", "masks", "labels", "meshes", "shards")])
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
-    proc = subprocess.Popen([sys.executable, "-m", "darthand.cli", *args, "--ray", head.address, "--out", str(out)],
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = _driver(head, [*args, "--ray", head.address, "--out", str(out)], stdout=subprocess.PIPE,
+                   stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + RUN_TIMEOUT_S
         while time.monotonic() < deadline and proc.poll() is None and len(list((out / "labels").glob("0*"))) < 8:
@@ -218,8 +241,8 @@ def test_an_interrupted_cluster_run_resumes_by_shards_to_a_local_runs_bytes(pack
     run byte for byte."""
     args = _args(package, "--count", "24", "--seed", "4", "--shard-size", "4", "--size", "96")
     out = tmp_path / "ray"
-    proc = subprocess.Popen([sys.executable, "-m", "darthand.cli", *args, "--ray", head.address, "--out", str(out)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = _driver(head, [*args, "--ray", head.address, "--out", str(out)], stdout=subprocess.DEVNULL,
+                   stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + RUN_TIMEOUT_S
         while time.monotonic() < deadline and proc.poll() is None and len(list((out / "shards").glob("0*"))) < 2:
@@ -229,7 +252,7 @@ def test_an_interrupted_cluster_run_resumes_by_shards_to_a_local_runs_bytes(pack
         proc.wait()
     finished = len(list((out / "shards").glob("0*")))
     assert 2 <= finished < 6
-    again = _cli([*args, "--ray", head.address, "--out", str(out)])
+    again = _cli(head, [*args, "--ray", head.address, "--out", str(out)])
     assert again.returncode == 0, again.stderr
     doc = json.loads((out / "dataset.json").read_text())
     assert doc["skipped"] >= 4 * finished and doc["rendered"] == 24 - doc["skipped"]

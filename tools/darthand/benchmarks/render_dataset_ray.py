@@ -47,7 +47,7 @@ def run(frames: int | None = None) -> dict:
         model, textures, accessories, where = dataset_inputs(tmp)
         plan = {"seed": 0}
         t0 = time.perf_counter()
-        with LocalRayCluster(nodes=2, cpus=1) as cluster:
+        with LocalRayCluster(nodes=2, cpus=1) as cluster, cluster.driver():
             cluster_start = time.perf_counter() - t0
             order = ["local", "ray", "ray", "local"] * (rounds // 2) + (["local", "ray"] if rounds % 2 else [])
             runs: dict = {"local": [], "ray": []}

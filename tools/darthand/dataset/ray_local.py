@@ -12,12 +12,17 @@ Several such clusters (other test sessions, a user's own) can run on one machine
 
 `hide=[paths]` starts a worker node in its own mount namespace with an empty tmpfs over those folders (root and
 util-linux `unshare` needed): a node without the shared filesystem, on one machine.
+
+The cluster uses token authentication with a token of its own, so it never reads the user's Ray state (any
+`ray.init()` leaves `~/.ray/auth_token`, which Ray would otherwise pick up in some processes and not others).
+Drivers connect with `cluster.env()` (a subprocess's environment) or inside `with cluster.driver():`.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import secrets
 import shutil
 import signal
 import socket
@@ -73,6 +78,28 @@ class LocalRayCluster:
         self.address = f"127.0.0.1:{self.port}"
         self.procs: list[subprocess.Popen | None] = []
         self._n, self._hide = int(nodes), dict(hide or {})
+        self.token = secrets.token_hex(32)
+
+    def env(self, base: dict | None = None) -> dict:
+        """The environment (of `base`, default os.environ) for a node of this cluster or a driver connecting to it:
+        token authentication with the cluster's own token; no RAY_ADDRESS or token path of the user's."""
+        env = {**(os.environ if base is None else base), "RAY_USAGE_STATS_ENABLED": "0", "RAY_AUTH_MODE": "token",
+               "RAY_AUTH_TOKEN": self.token}
+        for name in ("RAY_ADDRESS", "RAY_AUTH_TOKEN_PATH"):
+            env.pop(name, None)
+        return env
+
+    @contextlib.contextmanager
+    def driver(self):
+        """This process's environment set to `env()` for a driver in this process (ray.init), restored after."""
+        saved = dict(os.environ)
+        os.environ.clear()
+        os.environ.update(self.env(saved))
+        try:
+            yield self
+        finally:
+            os.environ.clear()
+            os.environ.update(saved)
 
     def __enter__(self) -> "LocalRayCluster":
         try:
@@ -114,10 +141,8 @@ class LocalRayCluster:
             mounts = " && ".join(f"mount -t tmpfs tmpfs '{Path(p)}'" for p in hide)
             cmd = ["unshare", "--mount", "--propagation", "private", "sh", "-c",
                    f"{mounts} && exec " + " ".join(f"'{c}'" for c in cmd)]
-        env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
-        env.pop("RAY_ADDRESS", None)
         with open(log, "w") as out:
-            proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, process_group=0, env=env,
+            proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, process_group=0, env=self.env(),
                                     cwd=self.root)
         self.procs.append(proc)
         deadline = time.monotonic() + START_TIMEOUT_S
