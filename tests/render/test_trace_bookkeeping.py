@@ -14,7 +14,7 @@ from render_scenes import quad, subject, surface, top_camera
 from darthand.render import aa, api, trace
 from darthand.render.embree_mesh import _Api, add_triangles
 from darthand.render.lights import Lighting
-from darthand.render.scene import FaceData, Scene, device, interpolate, interpolate_scalar
+from darthand.render.scene import FaceData, Scene, device, interpolate, interpolate_columns
 from darthand.render.trace import Context, RayHits, Samples
 
 
@@ -223,12 +223,12 @@ def test_tiles_and_traced_pixels_match_the_numpy_chain(assets, ring):
             tiles = trace.touched_tiles(cam, subj.surfaces, bounds)
             assert same(tiles, old_touched_tiles(cam, subj.surfaces, bounds))
             r0, r1, c0, c1 = bounds
-            traced = api.tile_pixels(tiles, r1 - r0, c1 - c0)
+            traced = trace.tile_pixels(tiles, r1 - r0, c1 - c0)
             ref_traced, ref_uv = old_traced(tiles, *bounds)
-            assert same(traced, ref_traced) and same(api.pixel_positions(traced, r0, c0, c1 - c0), ref_uv)
+            assert same(traced, ref_traced) and same(trace.pixel_positions(traced, r0, c0, c1 - c0), ref_uv)
     grid = (-(-20 // trace.TILE), -(-29 // trace.TILE))
     for tiles in (np.zeros(grid, bool), np.ones(grid, bool)):                 # no tile, every tile
-        assert same(api.tile_pixels(tiles, 20, 29), old_traced(tiles, 0, 20, 0, 29)[0])
+        assert same(trace.tile_pixels(tiles, 20, 29), old_traced(tiles, 0, 20, 0, 29)[0])
 
 
 def test_scatter_matches_the_numpy_chain():
@@ -283,14 +283,24 @@ def test_sphere_culling_matches_the_numpy_chain():
                     rest[old_rays_near_sphere(origins[rest], dirs[rest], centre, radius)])
 
 
-def test_scalar_interpolation_matches_interpolate():
+def test_interpolation_matches_interpolate():
+    """Rows of per-vertex values (a skin radius, VertexLight's E and V) at all hits, and at some hits into their
+    columns of an array that keeps the others."""
     rng = np.random.default_rng(4)
-    values = rng.uniform(1e-3, 2e-2, 60).astype(np.float32)
     faces = rng.integers(0, 60, (40, 3)).astype(np.int32)
-    for m in (0, 1, 300):
-        prim = rng.integers(0, 40, m).astype(np.int32)
-        bu, bv = rng.uniform(0, 0.5, (2, m)).astype(np.float32)
-        assert same(interpolate_scalar(values, faces, prim, bu, bv), interpolate(values, faces, prim, bu, bv))
+    for rows in (1, 4):
+        values = rng.uniform(1e-3, 2e-2, (rows, 60)).astype(np.float32)
+        for m in (0, 1, 300):
+            prim = rng.integers(0, 40, m).astype(np.int32)
+            bu, bv = rng.uniform(0, 0.5, (2, m)).astype(np.float32)
+            want = interpolate(values.T, faces, prim, bu, bv).T
+            assert same(interpolate_columns(values, faces, prim, bu, bv), np.ascontiguousarray(want))
+            some = np.flatnonzero(rng.random(m) < 0.3)
+            out = np.full((rows, m), -1.0, np.float32)
+            interpolate_columns(values, faces, prim, bu, bv, rays=some, out=out)
+            keep = np.full((rows, m), -1.0, np.float32)
+            keep[:, some] = want[:, some]
+            assert same(out, keep)
 
 
 # --- anti-aliasing --------------------------------------------------------------------------------------------

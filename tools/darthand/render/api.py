@@ -30,8 +30,8 @@ from darthand.render.lights import Lighting, load_lighting, world_lights
 from darthand.render.scene import Scene, scene_for
 from darthand.render.shade import ShadingOptions
 from darthand.render.subject import Subject
-from darthand.render.trace import (TILE, Context, Samples, default_threads, scene_bounds,
-                                   single_threaded_blas, touched_tiles, trace_parallel)
+from darthand.render.trace import (Context, Samples, default_threads, pixel_positions, scene_bounds,
+                                   single_threaded_blas, tile_pixels, touched_tiles, trace_parallel)
 
 DEFAULT_SAMPLES = 8
 # Peak memory per image pixel while rendering (measured about 115 bytes at 2048^2 with the hand filling the frame).
@@ -278,33 +278,6 @@ def _scatter_kernel(index, geom, prim, depth, normal, radiance, out_geom, out_pr
             for c in range(3):
                 out_normal[c, i] = np.float32(0.0)
                 out_radiance[c, i] = np.float32(0.0)
-
-
-def tile_pixels(tiles: np.ndarray, h: int, w: int, tile: int = TILE) -> np.ndarray:
-    """(M,) int64 ascending row-major indices of the pixels of an h x w region whose tile (tile x tile pixels) is
-    True in `tiles` (ceil(h / tile), ceil(w / tile)) bool."""
-    if tiles.shape != (-(-h // tile), -(-w // tile)):
-        raise ValueError(f"tiles {tiles.shape} do not cover {h} x {w} pixels in tiles of {tile}")
-    out = np.empty(h * w, np.int64)
-    return out[:_tile_pixels_kernel(np.ascontiguousarray(tiles, np.bool_), h, w, tile, out)]
-
-
-@kernel
-def _tile_pixels_kernel(tiles, h, w, tile, out):
-    m = 0
-    for r in range(h):
-        for c in range(w):
-            if tiles[r // tile, c // tile]:
-                out[m] = r * w + c
-                m += 1
-    return m
-
-
-def pixel_positions(index: np.ndarray, r0: int, c0: int, w: int) -> np.ndarray:
-    """(M, 2) float64 pixel-centre positions (u, v) of flat indices (M,) into the region of width w whose first
-    pixel is (row r0, column c0): as trace.pixel_centres(r0, r1, c0, c1)[index]."""
-    rows, cols = np.divmod(index, w)
-    return np.stack([cols + (c0 + 0.5), rows + (r0 + 0.5)], axis=1)
 
 
 def write_frame(frame: Frame, out_dir: str | Path, *, depth: bool = False, names: dict | None = None) -> dict:

@@ -43,7 +43,8 @@ from collections import OrderedDict
 import numpy as np
 
 from darthand.jit import kernel
-from darthand.render.scene import FaceData
+from darthand.render.lights import light_table
+from darthand.render.scene import FaceData, interpolate_columns
 
 GEOMETRIC = FaceData.GEOMETRIC
 
@@ -112,20 +113,18 @@ def vertex_rays(vertices: np.ndarray, normals: np.ndarray, vertex_ids: np.ndarra
     vertex's directions (local_directions). mirrored: the surface is the x -> -x mirror image of the one the
     directions are defined for (a left hand): its rays are the mirror images of the right hand's, so that both hands
     render alike. count: the surface's vertex count, to reuse the directions of all its vertices (direction_table)."""
-    v = np.ascontiguousarray(vertices, np.float32)
-    n = np.ascontiguousarray(normals, np.float32)
-    rows = np.arange(len(v), dtype=np.int64)
     if count is None:
-        table, table_rows = local_directions(vertex_ids, rays, salt), rows
+        table, table_rows = local_directions(vertex_ids, rays, salt), np.arange(len(vertex_ids), dtype=np.int64)
     else:
         table, table_rows = direction_table(count, rays, salt), np.ascontiguousarray(vertex_ids, np.int64)
-    return _rays_kernel(v, n, rows, table, table_rows, np.float32(lift), bool(mirrored))
+    return _rays_kernel(np.ascontiguousarray(vertices, np.float32), np.ascontiguousarray(normals, np.float32), table,
+                        table_rows, np.float32(lift), bool(mirrored))
 
 
 @kernel
-def _rays_kernel(vertices, normals, ids, table, table_rows, lift, mirrored):
-    """(origins, directions) (N * K, 3) float32 of vertices `ids` (N,) int64 of (V, 3) float32 vertices and unit
-    normals: the directions table[:, table_rows[i]] (3, K) of the i-th, in its tangent frame.
+def _rays_kernel(vertices, normals, table, table_rows, lift, mirrored):
+    """(origins, directions) (N * K, 3) float32 of (N, 3) float32 vertices and unit normals: the i-th's directions
+    table[:, table_rows[i]] (3, K), in its tangent frame.
 
     Tangent frame: t = e x n / max(|e x n|, 1e-30), s = n x t, with e the x axis where |n_x| < 0.9, else the y
     axis; built from the x axis so that the frame of a mirrored normal (x -> -x, how a left hand is made from a
@@ -133,12 +132,12 @@ def _rays_kernel(vertices, normals, ids, table, table_rows, lift, mirrored):
     axis, x about the y axis). Direction = (x t + y s) + z n; origin = vertex + lift n. Float32 arithmetic in the
     order of the numpy version it replaced (cross products as numpy's, sums x, y, z)."""
     k = table.shape[2]
-    origins = np.empty((ids.shape[0] * k, 3), np.float32)
-    dirs = np.empty((ids.shape[0] * k, 3), np.float32)
+    origins = np.empty((vertices.shape[0] * k, 3), np.float32)
+    dirs = np.empty((vertices.shape[0] * k, 3), np.float32)
     zero, one, tiny, near_x = np.float32(0.0), np.float32(1.0), np.float32(1e-30), np.float32(0.9)
-    for i in range(ids.shape[0]):
-        vi, row = ids[i], table_rows[i]
-        n0, n1, n2 = normals[vi, 0], normals[vi, 1], normals[vi, 2]
+    for i in range(vertices.shape[0]):
+        row = table_rows[i]
+        n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
         about_x = abs(n0) < near_x
         e0 = one if about_x else zero
         e1 = zero if about_x else one
@@ -152,9 +151,9 @@ def _rays_kernel(vertices, normals, ids, table, table_rows, lift, mirrored):
         s0 = n1 * t2 - n2 * t1
         s1 = n2 * t0 - n0 * t2
         s2 = n0 * t1 - n1 * t0
-        o0 = vertices[vi, 0] + lift * n0
-        o1 = vertices[vi, 1] + lift * n1
-        o2 = vertices[vi, 2] + lift * n2
+        o0 = vertices[i, 0] + lift * n0
+        o1 = vertices[i, 1] + lift * n1
+        o2 = vertices[i, 2] + lift * n2
         for j in range(k):
             x, y, z = table[0, row, j], table[1, row, j], table[2, row, j]
             if mirrored:
@@ -231,17 +230,11 @@ class VertexLight:
         self.meshes: list = [None] * len(sizes)                            # (vertices, normals, faces) for kernels
         self.albedo = [np.zeros((n, 3), np.float32) for n in sizes]
         self.has_albedo = [np.zeros(n, bool) for n in sizes]
-        self.reflected = [np.zeros((n, 3), np.float32) for n in sizes]     # albedo x direct irradiance
+        self.reflected = [np.zeros((3, n), np.float32) for n in sizes]     # albedo x direct irradiance; by row
         self.lit = [np.zeros(n, bool) for n in sizes]                      # reflected made
         self.values = [np.zeros((4, n), np.float32) for n in sizes]        # E (3), V; by row
         self.done = [np.zeros(n, bool) for n in sizes]
-        # per light (L,): point (else directional), towards (L, 3) its position or the direction toward it, radiance
-        # (L, 3), shadows
-        self.light_arrays = (np.array([light["type"] != "directional" for light in lights], bool).reshape(-1),
-                             np.array([(light["position"] if light["type"] != "directional" else -light["direction"])
-                                       .astype(np.float32) for light in lights], np.float32).reshape(-1, 3),
-                             np.array([light["radiance"] for light in lights], np.float32).reshape(-1, 3),
-                             np.array([bool(light["shadows"]) for light in lights], bool).reshape(-1))
+        self.light_table = light_table(lights)
 
     def _mesh(self, g: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Surface g's (vertices (N, 3) float32, normals (N, 3) float32, faces (F, 3) int32), contiguous."""
@@ -273,12 +266,12 @@ class VertexLight:
             return
         self._albedo(g, ids)
         vertices, normals, _ = self._mesh(g)
-        state, contribution, origins, dirs, tfar = _lights_kernel(vertices, normals, ids, *self.light_arrays,
+        state, contribution, origins, dirs, tfar = _lights_kernel(vertices, normals, ids, self.light_table,
                                                                   np.float32(self.lift))
         blocked = np.zeros(0, bool)
         if len(origins):
             blocked = self.scene.occluded(origins, dirs, tfar)
-            self.counters["indirect_rays"] = self.counters.get("indirect_rays", 0) + len(origins)
+            self._count(len(origins))
         _reflect_kernel(ids, state, contribution, blocked, self.albedo[g], self.reflected[g])
         self.lit[g][ids] = True
 
@@ -294,9 +287,9 @@ class VertexLight:
         s = self.scene.surfaces[g]
         vertices, normals, _ = self._mesh(g)
         k = self.rays if s.role == "hand" else max(ACCESSORY_MIN_RAYS, self.rays // ACCESSORY_RAY_SHARE)
-        origins, dirs = _rays_kernel(vertices, normals, ids, direction_table(len(vertices), k, 977 * g + 1), ids,
-                                     np.float32(self.lift), self.scene.subject.side == "left")
-        self.counters["indirect_rays"] = self.counters.get("indirect_rays", 0) + len(origins)
+        origins, dirs = vertex_rays(vertices[ids], normals[ids], ids, k, self.lift, salt=977 * g + 1,
+                                    mirrored=self.scene.subject.side == "left", count=len(vertices))
+        self._count(len(origins))
         if not self.interreflection:
             _open_kernel(self.scene.occluded(origins, dirs, np.inf), k, self.ambient, ids, self.values[g])
             return
@@ -304,23 +297,25 @@ class VertexLight:
         hit = self.scene.intersect(origins, dirs)
         geom, prim = np.ascontiguousarray(hit["geomID"], np.int32), np.ascontiguousarray(hit["primID"], np.int32)
         u, v = np.ascontiguousarray(hit["u"], np.float32), np.ascontiguousarray(hit["v"], np.float32)
-        bounce = np.zeros((len(geom), 3), np.float32)
+        bounce = np.zeros((3, len(geom)), np.float32)                      # the light each ray brings back
         for h in range(len(self.scene.surfaces)):
             faces = self._mesh(h)[2]
             rays, hit_vertices = _facing_kernel(geom, prim, dirs, h, self.scene.faces[h].table, GEOMETRIC, faces,
                                                 len(self.done[h]))
             if len(rays):
                 self._reflect(h, hit_vertices)
-                _gather_kernel(rays, prim, u, v, faces, self.reflected[h], bounce)
+                interpolate_columns(self.reflected[h], faces, prim, u, v, rays=rays, out=bounce)
         _gather_vertices_kernel(geom, bounce, k, self.ambient, self.albedo[g], np.float32(MAX_BOUNCE_ALBEDO), ids,
                                 self.values[g])
 
     def at(self, g: int, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(E (3, M) float32 indirect irradiance, V (M,) open fraction) at hits on faces prim (M,) of surface g
         (ensured), barycentrics bu, bv (M,) float32."""
-        v = _at_kernel(self.values[g], self._mesh(g)[2], np.ascontiguousarray(prim, np.int32),
-                       np.ascontiguousarray(bu, np.float32), np.ascontiguousarray(bv, np.float32))
+        v = interpolate_columns(self.values[g], self._mesh(g)[2], prim, bu, bv)
         return v[:3], v[3]
+
+    def _count(self, rays: int) -> None:
+        self.counters["indirect_rays"] = self.counters.get("indirect_rays", 0) + rays
 
 
 # ------------------------------------------------------------------------------------------------ kernels
@@ -355,31 +350,31 @@ def _todo_kernel(faces, prim, done):
 
 
 @kernel
-def _lights_kernel(vertices, normals, ids, point, towards, radiance, shadows, lift):
-    """The lights (point, towards, radiance, shadows: VertexLight.light_arrays) at vertices `ids` (N,) int64 of
+def _lights_kernel(vertices, normals, ids, lights, lift):
+    """The lights (L, 8) (lights.light_table) at vertices `ids` (N,) int64 of
     (V, 3) float32 vertices and normals: (state (L, N) int64: -2 the vertex faces away from the light (cos <= 0), -1
     lit without a shadow ray, else its shadow ray's index; contributions cos x radiance (L, N, 3) float32; the shadow
     rays' origins (S, 3) (the vertex lifted by `lift` along its normal), unit directions (S, 3), tfar (S,) float32).
     A point light's radiance falls off as 1 / max(d^2, 1e-12) and its shadow ray stops `lift` short of it; a
     directional light's goes to infinity. Float32, in the order of the numpy it replaced (d / max(|d|, 1e-9))."""
-    n, lights = ids.shape[0], point.shape[0]
-    state = np.empty((lights, n), np.int64)
-    contribution = np.empty((lights, n, 3), np.float32)
-    origins = np.empty((lights * n, 3), np.float32)
-    dirs = np.empty((lights * n, 3), np.float32)
-    tfar = np.empty(lights * n, np.float32)
+    n, count_lights = ids.shape[0], lights.shape[0]
+    state = np.empty((count_lights, n), np.int64)
+    contribution = np.empty((count_lights, n, 3), np.float32)
+    origins = np.empty((count_lights * n, 3), np.float32)
+    dirs = np.empty((count_lights * n, 3), np.float32)
+    tfar = np.empty(count_lights * n, np.float32)
     zero, tiny, tiny2 = np.float32(0.0), np.float32(1e-9), np.float32(1e-12)
     inf = np.float32(np.inf)
     count = 0
-    for k in range(lights):
+    for k in range(count_lights):
         for i in range(n):
             vi = ids[i]
             n0, n1, n2 = normals[vi, 0], normals[vi, 1], normals[vi, 2]
-            s0, s1, s2 = radiance[k, 0], radiance[k, 1], radiance[k, 2]
-            if point[k]:
-                d0 = towards[k, 0] - vertices[vi, 0]
-                d1 = towards[k, 1] - vertices[vi, 1]
-                d2 = towards[k, 2] - vertices[vi, 2]
+            s0, s1, s2 = lights[k, 4], lights[k, 5], lights[k, 6]
+            if lights[k, 0] != zero:
+                d0 = lights[k, 1] - vertices[vi, 0]
+                d1 = lights[k, 2] - vertices[vi, 1]
+                d2 = lights[k, 3] - vertices[vi, 2]
                 dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
                 length = tiny if dist < tiny else dist             # np.maximum: NaN stays NaN
                 l0, l1, l2 = d0 / length, d1 / length, d2 / length
@@ -389,13 +384,13 @@ def _lights_kernel(vertices, normals, ids, point, towards, radiance, shadows, li
                 far = dist - lift
                 far = zero if far < zero else far
             else:
-                l0, l1, l2 = towards[k, 0], towards[k, 1], towards[k, 2]
+                l0, l1, l2 = lights[k, 1], lights[k, 2], lights[k, 3]
                 far = inf
             cos = n0 * l0 + n1 * l1 + n2 * l2
             contribution[k, i, 0], contribution[k, i, 1], contribution[k, i, 2] = cos * s0, cos * s1, cos * s2
             if not cos > zero:
                 state[k, i] = -2
-            elif not shadows[k]:
+            elif lights[k, 7] == zero:
                 state[k, i] = -1
             else:
                 state[k, i] = count
@@ -410,7 +405,7 @@ def _lights_kernel(vertices, normals, ids, point, towards, radiance, shadows, li
 
 @kernel
 def _reflect_kernel(ids, state, contribution, blocked, albedo, reflected):
-    """reflected[ids[i]] = albedo[ids[i]] x the sum, light by light in order from 0, of the contributions (L, N, 3)
+    """reflected[:, ids[i]] = albedo[ids[i]] x the sum, light by light in order from 0, of the contributions (L, N, 3)
     of the lights that reach the vertex (state (L, N) from _lights_kernel, blocked (S,) bool of its shadow rays)."""
     for i in range(ids.shape[0]):
         e0, e1, e2 = np.float32(0.0), np.float32(0.0), np.float32(0.0)
@@ -422,9 +417,9 @@ def _reflect_kernel(ids, state, contribution, blocked, albedo, reflected):
             e1 += contribution[k, i, 1]
             e2 += contribution[k, i, 2]
         vi = ids[i]
-        reflected[vi, 0] = albedo[vi, 0] * e0
-        reflected[vi, 1] = albedo[vi, 1] * e1
-        reflected[vi, 2] = albedo[vi, 2] * e2
+        reflected[0, vi] = albedo[vi, 0] * e0
+        reflected[1, vi] = albedo[vi, 1] * e1
+        reflected[2, vi] = albedo[vi, 2] * e2
 
 
 @kernel
@@ -462,23 +457,9 @@ def _facing_kernel(geom, prim, dirs, h, table, row, faces, count):
 
 
 @kernel
-def _gather_kernel(rays, prim, u, v, faces, reflected, bounce):
-    """bounce[r] (3,) = the per-vertex reflected light (N, 3) float32 interpolated at the hit of each ray r of
-    `rays` (M,) int64 (faces prim (R,) int32, barycentrics u, v (R,) float32): a + u (b - a) + v (c - a)."""
-    for i in range(rays.shape[0]):
-        r = rays[i]
-        p = prim[r]
-        a, b, c = faces[p, 0], faces[p, 1], faces[p, 2]
-        bu, bv = u[r], v[r]
-        for ch in range(3):
-            x = reflected[a, ch]
-            bounce[r, ch] = x + bu * (reflected[b, ch] - x) + bv * (reflected[c, ch] - x)
-
-
-@kernel
 def _gather_vertices_kernel(geom, bounce, k, ambient, albedo, max_albedo, ids, values):
     """values[:, ids[i]] = (E (3), V) of the i-th vertex from its k rays i k .. i k + k - 1 (geom (R,) int32, -1
-    missed; bounce (R, 3) float32 the light each brings back): V = misses / k, gathered light S = mean bounce
+    missed; bounce (3, R) float32 the light each brings back): V = misses / k, gathered light S = mean bounce
     (summed in ray order, then divided in float64 as numpy's mean), E = (ambient V + S) / (1 - rho (1 - V)) with
     rho = min(albedo[ids[i]], max_albedo)."""
     one = np.float32(1.0)
@@ -491,9 +472,9 @@ def _gather_vertices_kernel(geom, bounce, k, ambient, albedo, max_albedo, ids, v
         visible = np.float32(np.float64(misses) / np.float64(k))
         vi = ids[i]
         for ch in range(3):
-            total = bounce[first, ch]
+            total = bounce[ch, first]
             for j in range(1, k):
-                total += bounce[first + j, ch]
+                total += bounce[ch, first + j]
             gathered = np.float32(np.float64(total) / np.float64(k))
             rho = albedo[vi, ch]
             rho = max_albedo if rho > max_albedo else rho      # np.minimum: NaN stays NaN
@@ -515,18 +496,3 @@ def _open_kernel(blocked, k, ambient, ids, values):
         for ch in range(3):
             values[ch, vi] = ambient[ch] * visible
         values[3, vi] = visible
-
-
-@kernel
-def _at_kernel(values, faces, prim, bu, bv):
-    """(4, M) float32: per-vertex values (4, N) interpolated at hits on faces prim (M,) int32 with barycentrics
-    bu, bv (M,) float32: a + bu (b - a) + bv (c - a)."""
-    out = np.empty((4, prim.shape[0]), np.float32)
-    for i in range(prim.shape[0]):
-        p = prim[i]
-        a, b, c = faces[p, 0], faces[p, 1], faces[p, 2]
-        u, v = bu[i], bv[i]
-        for row in range(4):
-            x = values[row, a]
-            out[row, i] = x + u * (values[row, b] - x) + v * (values[row, c] - x)
-    return out

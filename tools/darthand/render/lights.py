@@ -122,3 +122,17 @@ def world_lights(lighting: Lighting, R: np.ndarray, t: np.ndarray) -> list[dict]
             d["position"] = R.T @ (p - t) if light.frame == "camera" else p
         out.append(d)
     return out
+
+
+def light_table(lights: list[dict]) -> np.ndarray:
+    """(L, 8) float32, a row per world light (world_lights) as the shading and indirect-light kernels read it: kind
+    (0 directional, 1 point), the direction toward the light (directional) or its position (point), radiance (3,),
+    shadows (0 or 1)."""
+    table = np.zeros((len(lights), 8), np.float32)
+    for k, light in enumerate(lights):
+        point = light["type"] != "directional"
+        table[k, 0] = point
+        table[k, 1:4] = light["position"].astype(np.float32) if point else (-light["direction"]).astype(np.float32)
+        table[k, 4:7] = np.asarray(light["radiance"], np.float32)
+        table[k, 7] = bool(light["shadows"])
+    return table

@@ -49,28 +49,12 @@ class FaceData:
 
     def __init__(self, surface: Surface):
         self.has_uvs = surface.uvs is not None
-        arrays = (surface.vertices, surface.normals) + ((surface.uvs,) if self.has_uvs else ())
-        if all(a.dtype == np.float32 for a in arrays):
-            self.table = np.empty((28 if self.has_uvs else 21, len(surface.faces)), np.float32)
-            none = np.empty((0, 2), np.float32), np.empty((0, 3), np.int64)
-            _face_table_kernel(np.ascontiguousarray(surface.vertices), np.ascontiguousarray(surface.normals),
-                               np.ascontiguousarray(surface.faces, np.int64),
-                               *((np.ascontiguousarray(surface.uvs), np.ascontiguousarray(surface.faces_uv, np.int64))
-                                 if self.has_uvs else none), self.table)
-            return
-        f = surface.faces                                     # other dtypes (float64 arrays): numpy, same order
-        corners = surface.vertices[f]
-        n = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        area2 = np.linalg.norm(n, axis=1)
-        rows = [corners.reshape(-1, 9), surface.normals[f].reshape(-1, 9),
-                n / np.maximum(area2, 1e-30)[:, None]]
-        if self.has_uvs:
-            cuv = surface.uvs[surface.faces_uv]                                  # (F, 3, 2)
-            d1, d2 = cuv[:, 1] - cuv[:, 0], cuv[:, 2] - cuv[:, 0]
-            uv_area2 = np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
-            scale = np.sqrt(uv_area2 / np.maximum(area2, 1e-30))
-            rows += [cuv.reshape(-1, 6), scale[:, None]]
-        self.table = np.ascontiguousarray(np.concatenate(rows, axis=1, dtype=np.float32).T)
+        self.table = np.empty((28 if self.has_uvs else 21, len(surface.faces)), np.float32)
+        f32 = lambda a: np.ascontiguousarray(a, np.float32)
+        uvs = ((f32(surface.uvs), np.ascontiguousarray(surface.faces_uv, np.int64)) if self.has_uvs
+               else (np.empty((0, 2), np.float32), np.empty((0, 3), np.int64)))
+        _face_table_kernel(f32(surface.vertices), f32(surface.normals), np.ascontiguousarray(surface.faces, np.int64),
+                           *uvs, self.table)
 
     def gather(self, prim: np.ndarray) -> np.ndarray:
         """(K, M) float32 rows of the faces `prim` (M,)."""
@@ -125,25 +109,32 @@ def interpolate(values: np.ndarray, faces: np.ndarray, prim: np.ndarray, bu: np.
     return a + bu * (b - a) + bv * (c - a)
 
 
-def interpolate_scalar(values: np.ndarray, faces: np.ndarray, prim: np.ndarray, bu: np.ndarray,
-                       bv: np.ndarray) -> np.ndarray:
-    """`interpolate` of per-vertex scalars (N,) float32 at float32 barycentrics, in one pass: (M,) float32."""
-    if values.dtype != np.float32 or values.ndim != 1:
-        return interpolate(values, faces, prim, bu, bv)
-    out = np.empty(len(prim), np.float32)
-    _interpolate_kernel(np.ascontiguousarray(values), np.ascontiguousarray(faces, np.int64),
-                        np.ascontiguousarray(prim, np.int64), np.ascontiguousarray(bu, np.float32),
-                        np.ascontiguousarray(bv, np.float32), out)
+def interpolate_columns(values: np.ndarray, faces: np.ndarray, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray,
+                        rays: np.ndarray | None = None, out: np.ndarray | None = None) -> np.ndarray:
+    """Per-vertex values (C, N) float32 interpolated at hits on faces `prim` (R,) with float32 barycentrics bu, bv
+    (R,), as `interpolate` (a + bu (b - a) + bv (c - a), float32, in that order), in one pass: (C, R) float32.
+    rays (M,): only those hits, written into their columns of `out` (C, R) (the other columns left as they are)."""
+    prim = np.ascontiguousarray(prim, np.int32)
+    if out is None:
+        out = np.empty((len(values), len(prim)), np.float32)
+    rays = np.arange(len(prim), dtype=np.int64) if rays is None else np.ascontiguousarray(rays, np.int64)
+    _interpolate_kernel(np.ascontiguousarray(values, np.float32), np.ascontiguousarray(faces, np.int32), prim,
+                        np.ascontiguousarray(bu, np.float32), np.ascontiguousarray(bv, np.float32), rays, out)
     return out
 
 
 @kernel
-def _interpolate_kernel(values, faces, prim, bu, bv, out):
-    """out = a + bu (b - a) + bv (c - a) of the corner values a, b, c of face prim, float32, in interpolate's order."""
-    for i in range(prim.shape[0]):
-        f = prim[i]
-        a = values[faces[f, 0]]
-        out[i] = a + bu[i] * (values[faces[f, 1]] - a) + bv[i] * (values[faces[f, 2]] - a)
+def _interpolate_kernel(values, faces, prim, bu, bv, rays, out):
+    """out[:, r] = a + bu[r] (b - a) + bv[r] (c - a) of the rows of values (C, N) at the corners a, b, c of face
+    prim[r], for each r in rays."""
+    for i in range(rays.shape[0]):
+        r = rays[i]
+        f = prim[r]
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        u, v = bu[r], bv[r]
+        for row in range(values.shape[0]):
+            x = values[row, a]
+            out[row, r] = x + u * (values[row, b] - x) + v * (values[row, c] - x)
 
 
 class Scene:

@@ -35,6 +35,7 @@ import numpy as np
 
 from darthand.errors import InputError
 from darthand.jit import kernel
+from darthand.render.lights import light_table
 from darthand.render.skin import skin_width, sphere_blend_table, table_rows
 from darthand.render.subject import Material
 
@@ -277,20 +278,7 @@ def diffuse_model(material: Material, hits: Hits, skin_model: str) -> DiffuseMod
     wrap = np.asarray(material.wrap, np.float32)
     if not wrap.any():
         return lambert
-    return DiffuseModel(WRAP, -float(wrap.max()) >= 0, wrap, none, lambert.shifts, lambert.skin)
-
-
-def light_table(lights: list[dict]) -> np.ndarray:
-    """(L, 8) float32, a row per light as the kernels read it: kind (0 directional, 1 point), the direction toward
-    the light (directional) or its position (point), radiance (3,), shadows (0 or 1)."""
-    table = np.zeros((len(lights), 8), np.float32)
-    for k, light in enumerate(lights):
-        point = light["type"] != "directional"
-        table[k, 0] = point
-        table[k, 1:4] = light["position"].astype(np.float32) if point else (-light["direction"]).astype(np.float32)
-        table[k, 4:7] = np.asarray(light["radiance"], np.float32)
-        table[k, 7] = bool(light["shadows"])
-    return table
+    return DiffuseModel(WRAP, bool(wrap.max() <= 0), wrap, none, lambert.shifts, lambert.skin)
 
 
 def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarray, occluded, extent: float,
@@ -347,7 +335,7 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
 def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r, shifts, skin, sphere, lift,
                    nv, e2, diffuse, reached, origins, directions, tfar, ray_hit, offsets):
     """Per hit i: nv[i] = clip(n.v, 1e-4, 1) and e2[i] = -9.28 nv (the exponent of ambient_specular's exp2); per
-    light k (row of `lights`, light_table) and hit: the diffuse response diffuse[k, :, i] at n.l (DiffuseModel's
+    light k (row of `lights`, lights.light_table) and hit: the diffuse response diffuse[k, :, i] at n.l (DiffuseModel's
     kind, wrap, row_r, shifts, skin; `sphere` skin.sphere_blend_table), reached[k, i], and for a light
     with shadows a shadow ray per reached hit: origin p + lift n, direction toward the light, tfar (inf, or the
     distance to a point light less lift), ray_hit its hit; light k's rays are [offsets[k], offsets[k + 1]).

@@ -38,8 +38,7 @@ import OpenImageIO as oiio
 from darthand.errors import InputError
 from darthand.jit import kernel
 from darthand.render.png import Png8, open_png8
-from darthand.textures.color import srgb8_table
-from darthand.textures.color import srgb_to_linear
+from darthand.textures.color import srgb8_table, srgb_to_linear
 
 BLEND = 0.25     # half-width of the band of fractional mip levels (around .5) in which two levels are blended
 # 8-bit pyramids kept by load_maps, least recently used dropped first, within a memory budget rather than a count:

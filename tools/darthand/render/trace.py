@@ -22,7 +22,7 @@ from darthand.jit import kernel
 from darthand.model.layout import FACE_LABEL_IDS
 from darthand.render.camera import Camera, point_bounds
 from darthand.render.indirect import VertexLight
-from darthand.render.scene import Scene, interpolate_scalar
+from darthand.render.scene import Scene, interpolate_columns
 from darthand.render.shade import DEFAULT_SKIN, shade, surface_hits
 from darthand.render.skin import surface_radius
 
@@ -275,7 +275,7 @@ def skin_at(at, surface, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> No
     radius = surface_radius(surface)
     if radius is None:
         return
-    at.radius = interpolate_scalar(radius, surface.faces, prim, bu, bv)
+    at.radius = interpolate_columns(radius[None], surface.faces, prim, bu, bv)[0]
     if surface.face_labels is not None:
         at.skin = surface.face_labels[prim] != NAIL
 
@@ -368,6 +368,33 @@ def _touch_kernel(uv, faces, c0, r0, tile, touched):
         for ty in range(ty0, ty1):
             for tx in range(tx0, tx1):
                 touched[ty, tx] = True
+
+
+def tile_pixels(tiles: np.ndarray, h: int, w: int, tile: int = TILE) -> np.ndarray:
+    """(M,) int64 ascending row-major indices of the pixels of an h x w region whose tile (tile x tile pixels) is
+    True in `tiles` (ceil(h / tile), ceil(w / tile)) bool."""
+    if tiles.shape != (-(-h // tile), -(-w // tile)):
+        raise ValueError(f"tiles {tiles.shape} do not cover {h} x {w} pixels in tiles of {tile}")
+    out = np.empty(h * w, np.int64)
+    return out[:_tile_pixels_kernel(np.ascontiguousarray(tiles, np.bool_), h, w, tile, out)]
+
+
+@kernel
+def _tile_pixels_kernel(tiles, h, w, tile, out):
+    m = 0
+    for r in range(h):
+        for c in range(w):
+            if tiles[r // tile, c // tile]:
+                out[m] = r * w + c
+                m += 1
+    return m
+
+
+def pixel_positions(index: np.ndarray, r0: int, c0: int, w: int) -> np.ndarray:
+    """(M, 2) float64 pixel-centre positions (u, v) of flat indices (M,) into the region of width w whose first
+    pixel is (row r0, column c0): as pixel_centres(r0, r1, c0, c1)[index]."""
+    rows, cols = np.divmod(index, w)
+    return np.stack([cols + (c0 + 0.5), rows + (r0 + 0.5)], axis=1)
 
 
 def pixel_centres(r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
