@@ -1,0 +1,116 @@
+"""What users see, fingerprinted: a fixed set of CLI commands run on the small build (tests/robustness/
+probe_fixtures.py: packages, a dataset of each source kind, its FreiHAND and WebDataset layouts, single renders,
+jobs files), every file they write hashed. A restructuring of the code must leave every hash as it was.
+
+    python tests/pipeline/golden_outputs.py WORKDIR > tests/pipeline/golden_outputs.json   (from the reference commit)
+
+Files are hashed with the fixture and output folders' paths replaced by '<fx>' and '<out>' (labels and records name
+their inputs by path) and,
+for JSON documents, without their wall-clock fields (`timings`, `seconds`, `wall_s`...): what the run measured, not
+what it made. Nothing else is normalised.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import json
+import sys
+import tarfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE.parent), str(HERE.parent / "robustness"), str(HERE.parent / "model")]
+
+# Keys of JSON documents whose values are measurements of the run (times, memory, process ids), not its output.
+VOLATILE = {"timings", "seconds", "wall_s", "cpu_s", "elapsed_s", "ms", "cpu_ms", "end", "pid", "maxrss_mb",
+            "open_s", "steps", "runner", "created", "date"}
+
+
+def commands(fx: Path, out: Path) -> list[list[str]]:
+    """The CLI commands (argv after `darthand`) whose outputs are fingerprinted, each writing under `out`."""
+    model, tex, acc = str(fx / "model" / "right.npz"), str(fx / "tex"), str(fx / "acc")
+    usd = str(fx / "usd" / "right")
+    common = ["--size", "64", "--processes", "1"]
+    return [
+        ["render-dataset", model, "--textures", tex, "--accessories", acc, "--count", "10", "--seed", "5",
+         "--accessory-share", "0.5", "--out", str(out / "ds_model"), *common, "--formats", "freihand,webdataset",
+         "--allow-non-mano"],
+        ["render-dataset", model, "--textures", tex, "--accessories", acc, "--count", "4", "--seed", "2",
+         "--sides", "left", "--shapes", "none", "--lights", "default", "--backgrounds", "none",
+         "--out", str(out / "ds_left"), *common],
+        ["render-dataset", usd, "--count", "4", "--seed", "3", "--sides", "right", "--out", str(out / "ds_usd"), *common],
+        ["render-dataset", model, "--textures", tex, "--accessories", acc, "--count", "6", "--seed", "9",
+         "--plan", str(out / "plan" / "jobs.json"), "--out", str(out / "plan")],
+        ["render", model, "--textures", tex, "--accessories", acc, "--pose", "fist", "--texture",
+         "light_tattoos_07", "--accessory", "ring_01_court_gold", "--size", "64", "--out", str(out / "r_model")],
+        ["render", usd, "--pose", "ok", "--size", "64", "--depth", "--out", str(out / "r_usd")],
+        ["dataset", "export", str(out / "ds_left"), "--format", "freihand", "--out", str(out / "ds_left_fh"), "--allow-non-mano"],
+    ]
+
+
+def run_all(fx: Path, out: Path) -> dict:
+    """{'fx/...' or 'out/...': sha256} of the small build in `fx` (built there if it is not) and of every command's
+    outputs, written under `out` (a new folder)."""
+    from darthand.cli import main
+    from probe_fixtures import build_fixtures
+
+    fx, out = build_fixtures(Path(fx).resolve()), Path(out).resolve()
+    for argv in commands(fx, out):
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()) as err:
+            code = main(argv)
+        if code != 0:
+            raise RuntimeError(f"darthand {' '.join(argv)} exited {code}: {err.getvalue()}")
+    markers = {str(fx).encode(): b"<fx>", str(out).encode(): b"<out>"}
+    return {**fingerprints(fx, "fx", markers), **fingerprints(out, "out", markers)}
+
+
+def fingerprints(root: Path, prefix: str, markers: dict) -> dict:
+    """{prefix/relative path: sha256} of the files under root, each with the `markers` replaced (bytes -> bytes)."""
+    result = {}
+    for path in sorted(p for p in Path(root).rglob("*") if p.is_file()):
+        rel = f"{prefix}/{path.relative_to(root).as_posix()}"
+        if rel.endswith((".lock", "fixtures-ok")):
+            continue
+        result[rel] = hashlib.sha256(_member_hashes(path, markers) if path.suffix == ".tar"
+                                     else _normalised(path.name, path.read_bytes(), markers)).hexdigest()
+    return result
+
+
+def _normalised(name: str, data: bytes, markers: dict) -> bytes:
+    for marker, replacement in markers.items():
+        data = data.replace(marker, replacement)
+    return _stable_json(data) if name.endswith(".json") else data
+
+
+def _member_hashes(path: Path, markers: dict) -> bytes:
+    """A tar file by its members (names, modes, times and normalised contents, in order): its headers record
+    sizes, which the path replacement would otherwise leave differing."""
+    lines = []
+    with tarfile.open(path) as tar:
+        for member in tar.getmembers():
+            data = tar.extractfile(member).read() if member.isfile() else b""
+            digest = hashlib.sha256(_normalised(member.name, data, markers)).hexdigest()
+            lines.append(f"{member.name} {member.mode:o} {member.mtime} {member.uid} {member.gid} {digest}")
+    return "\n".join(lines).encode()
+
+
+def _stable_json(data: bytes) -> bytes:
+    try:
+        doc = json.loads(data)
+    except ValueError:
+        return data
+    return json.dumps(_drop_volatile(doc), sort_keys=True).encode()
+
+
+def _drop_volatile(value):
+    if isinstance(value, dict):
+        return {k: _drop_volatile(v) for k, v in value.items() if k not in VOLATILE}
+    if isinstance(value, list):
+        return [_drop_volatile(v) for v in value]
+    return value
+
+
+if __name__ == "__main__":
+    print(json.dumps(run_all(Path(sys.argv[1]) / "fx", Path(sys.argv[1]) / "out"), indent=1, sort_keys=True))
