@@ -14,12 +14,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers_dataset import SIZE, files_of, render
+from helpers_dataset import SIZE, BakedPackage, files_of, render
 
 from darthand.cli import main
 from darthand.dataset import run
 from darthand.errors import InputError
 from darthand.model.forward import forward
+from darthand.render.source import FrameSource
 from darthand.schemas import check_schema
 
 
@@ -290,16 +291,8 @@ def test_chunks_group_frames_by_texture_across_sides():
 def test_usd_packages_plan_their_gestures_by_name():
     from darthand.dataset.plan import Planner
 
-    class Package:                           # what a plan asks of a USD package
-        gestures = ["flat", "fist"]
-        side = "right"
-
-        def texture_ids(self):
-            return ["light_a_00"]
-
-        def accessory_ids(self):
-            return ["none", "watch_01"]
-
+    Package = BakedPackage
+    assert isinstance(Package(), FrameSource)
     planner = Planner({"sides": ["right"]}, {"right": Package()})
     jobs = list(planner.jobs(0, 20))
     assert {j["pose"] for j in jobs} == {"flat", "fist"} and {j["gesture"] for j in jobs} == {"flat", "fist"}

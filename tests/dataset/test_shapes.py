@@ -14,6 +14,7 @@ import pytest
 from scipy import stats
 
 from darthand.dataset import plan
+from helpers_dataset import BakedPackage
 from darthand.dataset.shapes import ShapeSampler
 from darthand.errors import InputError
 from darthand.model.forward import forward
@@ -94,15 +95,8 @@ def test_rendered_frames_have_the_shape_of_their_labels(small_dataset, sources):
 
 
 def test_a_usd_package_cannot_sample_shapes(tmp_path):
-    class Package:                                      # what plan needs of a USD package source
-        gestures = ("fist",)
-        model = None
-
-        def texture_ids(self):
-            return ["plain"]
-
-        def accessory_ids(self):
-            return ["none"]
+    def Package():
+        return BakedPackage(("fist",), ("plain",), ("none",))
 
     planner = plan.Planner({"seed": 0}, {"right": Package()})                  # default: its baked shape
     assert "betas" not in planner.job(0) and planner.spec["shapes"]["mode"] == "none"

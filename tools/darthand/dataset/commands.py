@@ -24,7 +24,7 @@ def render_dataset(args) -> int:
         from darthand.dataset.jobs import load_jobs
 
         jobs, origin = load_jobs(args.jobs), {"file": str(args.jobs)}
-        own = first.side if hasattr(first, "gestures") else first.model.side
+        own = first.side
         sides = tuple(dict.fromkeys([own] + [j["side"] for j in jobs if j.get("side")]))
     else:
         sides = parse_sides(args.sides)
@@ -96,9 +96,7 @@ def _check_formats(args, sources: dict) -> list[str]:
             raise InputError(f"--formats: {fmt!r} is not one of {', '.join(writers.FORMATS)}")
     if "freihand" in formats:
         from darthand.dataset.freihand import check_mano
-        from darthand.dataset.run import model_info
-
-        check_mano({side: model_info(s) for side, s in sources.items()}, "--formats freihand",
+        check_mano({side: s.describe() for side, s in sources.items()}, "--formats freihand",
                    args.allow_non_mano)
     return formats
 

@@ -61,10 +61,10 @@ def render_job(renderer, job: dict, settings: dict):
     pose = job.get("pose")
     if isinstance(pose, list):
         pose = np.asarray(pose, np.float64)
-    elif isinstance(pose, str) and "pose_index" in job and hasattr(renderer.source, "model"):
+    elif isinstance(pose, str) and "pose_index" in job and renderer.source.pose_model() is not None:
         from darthand.render.poses import resolve_pose
 
-        pose = resolve_pose(renderer.source.model, pose, int(job["pose_index"]))[0]
+        pose = resolve_pose(renderer.source.pose_model(), pose, int(job["pose_index"]))[0]
     size = settings["size"]
     background, info = None, None
     t = time.perf_counter()
@@ -92,14 +92,14 @@ def dataset_labels(frame, job: dict, digest: str, source, background: dict | Non
         render["background"] = background
     labels["render"] = render
     labels["gesture"] = labels.get("gesture") or job.get("gesture")
-    model = getattr(source, "model", None)
+    model = source.pose_model()
     hand = frame.subject.hand
     wrist = (getattr(model, "meta", None) or {}).get("wrist") or {}
     labels["mesh"] = {"vertices": int(len(hand.vertices)), "base_vertices": int(wrist.get("base_vertices",
                                                                                               len(hand.vertices))),
                       "faces": "the model's faces (build/model/<side>.npz)", "frame": "camera", "units": "m"}
     labels["files"] = {**labels.get("files", {}), "vertices": "../" + names["vertices"]}
-    if model is not None and not hasattr(source, "gestures"):
+    if model is not None:
         labels["mano"] = mano_camera_parameters(model, frame.subject.pose, frame.camera.R, frame.camera.t,
                                                 job.get("betas"))
     worn = frame.subject.info.get("ring_worn")

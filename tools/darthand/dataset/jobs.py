@@ -99,13 +99,7 @@ def validate_jobs(sources: dict, jobs: list[dict], where: str = "jobs") -> None:
     checked_lights, checked_folders = set(), set()
     known = {}
     for side, source in sources.items():
-        model = getattr(source, "model", None)
-        if model is not None and not hasattr(source, "gestures"):
-            from darthand.model.gestures import model_gestures
-
-            gestures = set(model_gestures(model).names)
-        else:
-            model, gestures = None, set(source.gestures)
+        model, gestures = source.pose_model(), set(source.gesture_names())
         known[side] = (set(source.texture_ids()), set(source.accessory_ids()) | {"none"}, gestures, model)
     default_side = next(iter(sources))
     for job in jobs:

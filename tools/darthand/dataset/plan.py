@@ -220,10 +220,11 @@ def _pose_sampler(opts: dict, model, first):
     if model is None:                                       # a USD package: its gestures, as baked
         if mode not in ("auto", "gestures"):
             raise InputError(f"pose mode {mode!r}: a USD package renders its baked gestures only (use a model)")
-        names = list(first.gestures) if not opts["gestures"] else list(opts["gestures"])
+        known = first.gesture_names()
+        names = known if not opts["gestures"] else list(opts["gestures"])
         for name in names:
-            if name not in first.gestures:
-                raise InputError(f"poses: {name!r} is not a gesture of the package ({', '.join(first.gestures)})")
+            if name not in known:
+                raise InputError(f"poses: {name!r} is not a gesture of the package ({', '.join(known)})")
         return poses.GestureNames(names)
     reference = poses.load_reference(opts["reference"], model, float(opts["max_reference_mb"]),
                                      gestures=opts["gestures"])
@@ -244,14 +245,14 @@ def _shape_sampler(opts: dict, model) -> shapes.ShapeSampler:
 def _right_model(sources: dict):
     """The right-handed model poses are planned on (a left source's model mirrored); None for USD packages."""
     for side, source in sources.items():
-        model = getattr(source, "model", None)
-        if model is None or hasattr(source, "gestures"):
+        model = source.pose_model()
+        if model is None:
             return None
         if model.side == "right":
             return model
     from darthand.model.mirror import mirror_model
 
-    return mirror_model(next(iter(sources.values())).model)
+    return mirror_model(next(iter(sources.values())).pose_model())
 
 
 def _hand_centre(model) -> np.ndarray:
@@ -273,9 +274,7 @@ def _lights_mode(value):
 
 
 def _accessory_kind(source, accessory_id: str) -> str:
-    acc = getattr(source, "accessories", {}).get(accessory_id) if isinstance(getattr(source, "accessories", None),
-                                                                             dict) else None
-    return getattr(acc, "kind", "") or accessory_id.split("_")[0]
+    return source.accessory_type(accessory_id) or accessory_id.split("_")[0]
 
 
 def _choose(u: float, n: int) -> int:

@@ -130,7 +130,9 @@ def _reference(doc: dict) -> tuple[np.ndarray, str]:
     spec = (plan.get("poses") or {}).get("reference", "gestures")
     try:
         source = SourceSpec(doc["package"]).open()
-        model = source.model
+        model = source.pose_model()
+        if model is None:
+            raise InputError("a USD package has no model to pose the reference set with")
         if model.side != "right":
             from darthand.model.mirror import mirror_model
 

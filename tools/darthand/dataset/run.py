@@ -126,7 +126,7 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
         _render_shards(shards, runner, settings, resume, processes, chunk_size, stats, total, report)
     finally:
         runner.close()
-    models = {side: model_info(src) for side, src in (sources or {}).items()}
+    models = {side: src.describe() for side, src in (sources or {}).items()}
     doc = _write_dataset(out, package, jobs_source, planner, total, settings, stats, processes, models,
                          getattr(runner, "describe", lambda: {"kind": "local"})())
     return doc
@@ -416,19 +416,6 @@ def _progress_printer(stats: RunStats | None = None, every_s: float = 5.0):
             print(f"[render-dataset] {done}/{total} frames, {seconds:.1f} s, {rate:.1f} images/s{eta}{nodes}",
                   flush=True)
     return report
-
-
-def model_info(source) -> dict:
-    """What the writers need of a side's model without opening it: hands_mean (45,), betas, vertex counts, the
-    file format it was read from ("MANO pickle" for a MANO file: its parameters are MANO's)."""
-    model = getattr(source, "model", None)
-    if model is None or hasattr(source, "gestures"):
-        return {"source": str(getattr(source, "source", "usd")), "format": "usd"}
-    wrist = model.meta.get("wrist") or {}
-    return {"source": str(getattr(source, "source", "model")), "format": str(model.meta.get("format", "darthand")),
-            "hands_mean": np.asarray(model.hands_mean).tolist(),
-            "num_betas": model.num_betas, "vertices": model.num_vertices,
-            "base_vertices": int(wrist.get("base_vertices", model.num_vertices))}
 
 
 def _write_dataset(out: Path, package, jobs_source, planner, total, settings, stats: RunStats, processes,

@@ -51,8 +51,7 @@ def _worn_rings(source):
     """The source with rings worn per pose (accessories/wear: slid along the bone, digits turned aside where the
     ring needs room; the frame's labels follow the pose it shows) where it poses the hand itself (a model source);
     a USD package poses its rings rigidly, as every package does."""
-    if hasattr(source, "worn_rings"):
-        source.worn_rings = True
+    source.worn_rings = True
     return source
 
 
@@ -81,14 +80,14 @@ def source_specs(package, sides, *, textures=None, accessories=None, model=None,
     package = str(package)
     first = opened if opened is not None else open_source(package, textures=textures, accessories=accessories,
                                                           model=model)
-    own = first.side if hasattr(first, "side") else first.model.side
+    own = first.side
     specs = {}
     for side in sides:
         if side == own:
             specs[side] = SourceSpec(package, textures, accessories, model)
             continue
         twin = _twin_path(package, own, side)
-        if hasattr(first, "gestures"):                                                 # a USD package
+        if first.pose_model() is None:                                                  # a USD package
             if twin is None or not (twin / "asset.json").is_file():
                 raise InputError(f"sides: {package} is a {own} USD package and {twin or 'its ' + side + ' twin'} "
                                  f"is not a built package (build it, or render --sides {own})")

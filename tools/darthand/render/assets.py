@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -20,6 +21,7 @@ from darthand.errors import InputError
 from darthand.accessories.loader import Accessory, load_accessory_catalog
 from darthand.textures.loader import TextureSet, load_texture_catalog
 from darthand.model.forward import forward
+from darthand.model.gestures import model_gestures
 from darthand.model.hand_model import HandModel
 from darthand.model.topology import face_joints, vertex_normals
 from darthand.render.subject import PLAIN_SKIN, Material, Subject, Surface, checker_material, skin_material
@@ -32,7 +34,10 @@ NONE = "none"          # accessory id of no accessory
 
 @dataclass(eq=False)
 class HandAssets:
-    """A model (wrist-enhanced, with UVs) and its catalogues (ids -> TextureSet / Accessory)."""
+    """A model (wrist-enhanced, with UVs) and its catalogues (ids -> TextureSet / Accessory): a `FrameSource`
+    (render/source.py) of kind 'model', posed by darthand's forward pass."""
+
+    kind: ClassVar[str] = "model"
 
     model: HandModel
     textures: dict = field(default_factory=dict)
@@ -61,6 +66,30 @@ class HandAssets:
                    str(model) if not isinstance(model, HandModel) else m.meta.get("source", "model"))
 
     # ---------------------------------------------------------------------------------------------- ids
+
+    @property
+    def side(self) -> str:
+        return self.model.side
+
+    def pose_model(self) -> HandModel:
+        return self.model
+
+    def gesture_names(self) -> list[str]:
+        return list(model_gestures(self.model).names)
+
+    def accessory_type(self, accessory_id: str) -> str | None:
+        acc = self.accessories.get(accessory_id)
+        return acc.kind if acc is not None else None
+
+    def describe(self) -> dict:
+        """What a dataset's writers need of the model without opening it: hands_mean (45,), betas, vertex counts,
+        the file format it was read from ('MANO pickle' for a MANO file: its parameters are MANO's)."""
+        model = self.model
+        wrist = model.meta.get("wrist") or {}
+        return {"source": str(self.source), "format": str(model.meta.get("format", "darthand")),
+                "hands_mean": np.asarray(model.hands_mean).tolist(),
+                "num_betas": model.num_betas, "vertices": model.num_vertices,
+                "base_vertices": int(wrist.get("base_vertices", model.num_vertices))}
 
     def texture_ids(self) -> list[str]:
         return list(self.textures) + [PLAIN, CHECKER]

@@ -34,11 +34,12 @@ def render(args) -> int:
 
     source = open_source(args.package, textures=args.textures, accessories=args.accessories, model=args.model)
     pose = parse_pose(args.pose)
-    if isinstance(pose, str) and Path(pose).is_file() and args.pose_index and hasattr(source, "model"):
+    model = source.pose_model()
+    if isinstance(pose, str) and Path(pose).is_file() and args.pose_index and model is not None:
         from darthand.render.poses import resolve_pose
 
-        pose = resolve_pose(source.model, pose, args.pose_index)[0]
-    if isinstance(pose, int) and not hasattr(source, "gestures"):
+        pose = resolve_pose(model, pose, args.pose_index)[0]
+    if isinstance(pose, int) and model is not None:
         raise InputError("--pose: a time code needs a USD package; give a gesture name or a pose vector")
     width, height = args.width or args.size, args.height or args.size
     renderer = Renderer(source, args.threads)

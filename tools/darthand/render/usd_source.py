@@ -28,7 +28,11 @@ ROLE_KEY = "darthand:role"   # customData of the package's meshes: hand, forearm
 
 
 class UsdPackage:
-    """An opened package; `subject(...)` poses it for a gesture with the chosen variants."""
+    """An opened package; `subject(...)` poses it for a gesture with the chosen variants: a `FrameSource`
+    (render/source.py) of kind 'usd', its baked gestures and shape only."""
+
+    kind = "usd"
+    worn_rings = False            # a package poses its rings rigidly, as every package does
 
     def __init__(self, interface: Path, stage: Usd.Stage, info: dict, tip_ids: np.ndarray):
         self.interface = interface
@@ -54,6 +58,23 @@ class UsdPackage:
         if stage is None or not stage.GetDefaultPrim():
             raise InputError(f"{interface}: not a darthand USD package (no default prim)")
         return cls(interface, stage, info, _tip_ids(interface, info, model))
+
+    @property
+    def source(self) -> str:
+        return str(self.interface)
+
+    def pose_model(self) -> None:
+        return None
+
+    def gesture_names(self) -> list[str]:
+        return list(self.gestures)
+
+    def accessory_type(self, accessory_id: str) -> None:
+        return None
+
+    def describe(self) -> dict:
+        """What a dataset's writers need of the hand: a package's parameters are not MANO's."""
+        return {"source": "usd", "format": "usd"}
 
     def texture_ids(self) -> list[str]:
         return list(self.root.GetVariantSet("texture").GetVariantNames())

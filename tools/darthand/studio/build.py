@@ -44,7 +44,7 @@ class SideAssets:
 
     @property
     def model(self):
-        return self.source.model
+        return self.source.pose_model()
 
 
 class StudioBuild:
