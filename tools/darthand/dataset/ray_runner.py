@@ -499,7 +499,7 @@ class RayRunner:
     def _actor_lost(self, actor, entry) -> None:
         """An actor died with `entry` on it: keep the frames it finished, queue the rest again, ask for a
         replacement actor."""
-        from darthand.dataset.run import existing_frame
+        from darthand.dataset.frames import existing_frame
 
         if actor in self.actors:
             info = self.actors.pop(actor)["info"]

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from darthand.dataset.frames import frame_names, job_digest
+from darthand.dataset.frames import existing_frame, frame_names, job_digest
 from darthand.errors import InputError
 from darthand.fileio import read_json, write_json
 
@@ -220,23 +220,6 @@ def _shard_done(state: dict, jobs: list[dict]) -> bool:
         return False
     out = state["path"].parent.parent
     return all((out / name).is_file() for job in jobs for name in frame_names(job["index"]).values())
-
-
-def existing_frame(out: Path, job: dict, digest: str) -> dict | None:
-    """The summary of a frame already rendered from this job (all its files present, its labels carrying the job's
-    digest), or None."""
-    from darthand.dataset.frames import summary
-
-    names = frame_names(job["index"])
-    if not all((out / n).is_file() for n in names.values()):
-        return None
-    try:
-        labels = json.loads((out / names["labels"]).read_text())
-    except (OSError, ValueError):
-        return None
-    if labels.get("render", {}).get("dataset", {}).get("job_sha256") != digest:
-        return None
-    return summary(job, labels)
 
 
 def _write_shard_record(out: Path, state: dict) -> None:
