@@ -9,6 +9,10 @@ import logging
 import socket
 from pathlib import Path
 
+import embreex
+import numpy
+import OpenImageIO
+
 import darthand
 from darthand.errors import InputError
 
@@ -54,10 +58,7 @@ def _check_reachable(address: str | None) -> None:
 def code_digest() -> str:
     """sha256 (16 hex digits) of darthand's Python sources and the versions of the libraries a frame's bytes depend
     on: nodes must agree on it for frames to be the same bytes on every node."""
-    import embreex                            # the renderer's libraries: slow imports, loaded by then on a node
-    import numba
-    import numpy
-    import OpenImageIO
+    import numba                              # ~1 s to import, which only rendering needs (this needs its version)
 
     h = hashlib.sha256()
     root = Path(darthand.__file__).parent
