@@ -1,6 +1,6 @@
-"""Shared test set-up: the tests folder is importable (tests build their own fixtures from `synthetic`), under CI
-the property tests draw a fixed sequence of examples so a run is repeatable (locally they keep exploring), and
-`small_build` is one small real build shared by the whole session."""
+"""Shared test set-up: the tests folder and the repository root are importable (tests build their own fixtures from
+`synthetic`, and use testkit/), under CI the property tests draw a fixed sequence of examples so a run is repeatable
+(locally they keep exploring), and `small_build` is one small real build shared by the whole session."""
 
 import fcntl
 import os
@@ -12,6 +12,7 @@ from hypothesis import settings
 
 TESTS = Path(__file__).resolve().parent
 sys.path.insert(0, str(TESTS))
+sys.path.insert(1, str(TESTS.parent))
 
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
 if os.environ.get("CI"):

@@ -1,5 +1,5 @@
 """render-dataset on a real Ray cluster on 127.0.0.1: a head and worker nodes as separate `ray start` process trees
-(dataset/ray_local.LocalRayCluster, one CPU each), driven through the real command line.
+(testkit/ray_cluster.LocalRayCluster, one CPU each), driven through the real command line.
 
 Independent truths: the bytes of a local run (`--processes 1`, no Ray) for every output file; the kernel's record of
 renames into the output folders (inotify) for "nothing written twice"; a worker node started in its own mount
@@ -28,7 +28,7 @@ from helpers_dataset import SIZE, files_of
 from darthand.cli import main
 
 ray = pytest.importorskip("ray", reason="Ray is not installed (make test installs it: pip install '.[cluster]')")
-from darthand.dataset.ray_local import LocalRayCluster, can_hide_folders, free_port  # noqa: E402
+from testkit.ray_cluster import LocalRayCluster, can_hide_folders, free_port  # noqa: E402
 
 RUN_TIMEOUT_S = 240
 HIDE = can_hide_folders()

@@ -35,7 +35,7 @@ def run(frames: int | None = None) -> dict:
     import importlib.util
 
     from darthand.benchmarks.render_dataset import dataset_inputs
-    from darthand.dataset.ray_local import LocalRayCluster
+    from testkit.ray_cluster import LocalRayCluster
 
     if importlib.util.find_spec("ray") is None:
         return {"skipped": "Ray is not installed (pip install '.[cluster]'; make installs it)"}
@@ -172,7 +172,7 @@ class CpuMeter:
             self._sample()
 
     def _sample(self) -> None:
-        from darthand.dataset.ray_local import process_tree
+        from testkit.ray_cluster import process_tree
 
         tick = os.sysconf("SC_CLK_TCK")
         for proc in self.cluster.procs:

@@ -162,6 +162,21 @@ def summary(job: dict, labels: dict) -> dict:
             "background": bg.get("used"), "skipped_backgrounds": bg.get("skipped", [])}
 
 
+def existing_frame(out: Path, job: dict, digest: str) -> dict | None:
+    """The summary of a frame already rendered from this job (all its files present, its labels carrying the job's
+    digest), or None."""
+    names = frame_names(job["index"])
+    if not all((out / n).is_file() for n in names.values()):
+        return None
+    try:
+        labels = json.loads((out / names["labels"]).read_text())
+    except (OSError, ValueError):
+        return None
+    if labels.get("render", {}).get("dataset", {}).get("job_sha256") != digest:
+        return None
+    return summary(job, labels)
+
+
 def frame_error(index: int, error: Exception) -> InputError:
     """The one-line error of a failed frame: 'frame N: cause'."""
     if isinstance(error, InputError):

@@ -1,8 +1,8 @@
 """The local runner: chunks of frames rendered by worker processes on this machine (or in this process).
 
-A runner turns chunks (lists of (job, digest)) into results (`render_chunk`'s dicts); dataset/run.py owns the
-planning, resume, records and progress, so another runner (Ray's, for a cluster) is one module with the same
-`submit(chunk) -> concurrent.futures.Future` and `close()`.
+A runner (dataset/runner.Runner) turns chunks (lists of (job, digest)) into results (`render_chunk`'s dicts);
+dataset/run.py owns the planning, resume, records and progress. render_chunk is also what a Ray actor renders with
+(dataset/ray/node.py).
 
 Workers are started with 'spawn' (a fresh interpreter: nothing inherited from a parent that may hold an Embree
 device or thread pools); each opens its sources (dataset/sources.SourceSpec) on first use and renders
@@ -12,11 +12,17 @@ their parent dies (darthand.processes.init_worker), so a killed run leaves no or
 
 from __future__ import annotations
 
+import multiprocessing
 import os
+import resource
 import time
-from concurrent.futures import Future
+from concurrent.futures import Future, ProcessPoolExecutor
 
+from darthand.dataset.frames import frame_error, render_job, write_dataset_frame
+from darthand.dataset.runner import Runner
 from darthand.errors import InputError
+from darthand.processes import deaf_to_ctrl_c, init_worker
+from darthand.render.api import Renderer
 
 # The worker's state: set by _init_worker (spawned processes) or LocalRunner (in-process); renderers opened on use.
 _STATE: dict = {}
@@ -25,23 +31,19 @@ _STATE: dict = {}
 def set_worker_state(specs: dict, settings: dict, threads: int | None, stop=None) -> dict:
     """Make this process a worker that render_chunk renders with: {side: SourceSpec} opened on use, run.py's
     settings, render threads, a stop event (or None); returns the state (a spawned worker, the in-process runner and
-    a Ray actor, dataset/ray_runner.py, each set it)."""
+    a Ray actor, dataset/ray/node.py, each set it)."""
     _STATE.clear()
     _STATE.update(specs=dict(specs), settings=settings, threads=threads, stop=stop, renderers={}, open_s=0.0)
     return _STATE
 
 
 def _init_worker(specs: dict, settings: dict, threads: int, stop, parent: int) -> None:
-    from darthand.processes import init_worker
-
     init_worker(parent)        # the parent handles Ctrl-C and stops the workers; they end when it dies
     set_worker_state(specs, settings, threads, stop)
 
 
 def worker_renderer(side: str):
     """This worker's renderer of a side, its source opened on first use."""
-    from darthand.render.api import Renderer
-
     renderers = _STATE["renderers"]
     if side not in renderers:
         t = time.monotonic()
@@ -53,10 +55,6 @@ def worker_renderer(side: str):
 def render_chunk(items: list) -> dict:
     """Render and write one chunk [(job, digest)] with this process's renderers; per frame its summary, ms, cpu_ms,
     end (monotonic), and the chunk's per-step seconds and peak memory."""
-    import resource
-
-    from darthand.dataset.frames import frame_error, render_job, write_dataset_frame
-
     settings, stop = _STATE["settings"], _STATE.get("stop")
     default_side = next(iter(_STATE["specs"]))
     frames, steps = [], {}
@@ -81,22 +79,19 @@ def render_chunk(items: list) -> dict:
             "maxrss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}
 
 
-class LocalRunner:
-    """Chunks on `processes` spawned workers (1: in this process, in order)."""
+class LocalRunner(Runner):
+    """Chunks on `processes` spawned workers (default 1: in this process, in order, with `sources`, the opened
+    sources, when given); a runner.Runner. threads: render threads per worker (default 1 in spawned workers, all
+    cores in this process)."""
 
-    def __init__(self, specs: dict, settings: dict, processes: int, threads: int | None = None, opened=None):
-        self.processes = processes
+    def __init__(self, specs: dict, settings: dict, sources: dict | None = None, processes: int | None = None,
+                 threads: int | None = None):
+        self.processes = processes = processes or 1
         self._pool = None
         if processes == 1:
             set_worker_state(specs, settings, threads)
-            if opened:
-                from darthand.render.api import Renderer
-
-                _STATE["renderers"].update({side: Renderer(src, threads) for side, src in opened.items()})
+            _STATE["renderers"].update({side: Renderer(src, threads) for side, src in (sources or {}).items()})
             return
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
         ctx = multiprocessing.get_context("spawn")
         self._stop = ctx.Event()
         self._pool = ProcessPoolExecutor(processes, mp_context=ctx, initializer=_init_worker,
@@ -105,8 +100,6 @@ class LocalRunner:
 
     def submit(self, chunk: list) -> Future:
         if self._pool is not None:
-            from darthand.processes import deaf_to_ctrl_c
-
             with deaf_to_ctrl_c():          # submit may start a worker: Ctrl-C must not reach it while it imports
                 return self._pool.submit(render_chunk, chunk)
         future: Future = Future()
@@ -126,3 +119,6 @@ class LocalRunner:
             self._pool.shutdown(wait=True, cancel_futures=True)
         else:
             _STATE.clear()
+
+    def describe(self) -> dict:
+        return {"kind": "local"}

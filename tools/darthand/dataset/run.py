@@ -1,5 +1,5 @@
 """Rendering a dataset: shards of frames planned on demand, resumed, grouped into chunks for a runner
-(dataset/local.py), recorded, summarised in dataset.json.
+(dataset/runner.py), recorded, summarised in dataset.json.
 
     OUT/images/, masks/, labels/, meshes/   the frames (dataset/frames.py)
     OUT/shards/<first>-<last>.json          one record per finished shard: its digest and its frames' summaries
@@ -30,7 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from darthand.dataset.frames import frame_names, job_digest
+from darthand.dataset.frames import existing_frame, frame_names, job_digest
+from darthand.dataset.runner import Runner, make_runner
 from darthand.errors import InputError
 from darthand.fileio import read_json, write_json
 
@@ -112,27 +113,19 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
                 "shading": shading}
     stats = RunStats(t_start)
     report = _progress_printer(stats) if progress is True else (progress or None)
-    if cluster is not None:
-        from darthand.dataset.ray_runner import RayRunner
-
-        runner = RayRunner(specs, settings, sources, workers=workers, **cluster)
-        processes = runner.processes
-    else:
-        from darthand.dataset.local import LocalRunner
-
-        processes = max(1, min(processes, total))
-        runner = LocalRunner(specs, settings, processes, threads, opened=sources if processes == 1 else None)
+    runner = make_runner(cluster, specs, settings, sources, workers, threads, total)
+    processes = runner.processes
     try:
         _render_shards(shards, runner, settings, resume, processes, chunk_size, stats, total, report)
     finally:
         runner.close()
     models = {side: src.describe() for side, src in (sources or {}).items()}
     doc = _write_dataset(out, package, jobs_source, planner, total, settings, stats, processes, models,
-                         getattr(runner, "describe", lambda: {"kind": "local"})())
+                         runner.describe())
     return doc
 
 
-def _render_shards(shards, runner, settings, resume, processes, chunk_size, stats, total, report) -> None:
+def _render_shards(shards, runner: Runner, settings, resume, processes, chunk_size, stats, total, report) -> None:
     """Feed the shards' chunks to the runner, at most 2 per worker in flight; write each shard's record when its
     last chunk is in."""
     from concurrent.futures import FIRST_COMPLETED, wait
@@ -222,23 +215,6 @@ def _shard_done(state: dict, jobs: list[dict]) -> bool:
     return all((out / name).is_file() for job in jobs for name in frame_names(job["index"]).values())
 
 
-def existing_frame(out: Path, job: dict, digest: str) -> dict | None:
-    """The summary of a frame already rendered from this job (all its files present, its labels carrying the job's
-    digest), or None."""
-    from darthand.dataset.frames import summary
-
-    names = frame_names(job["index"])
-    if not all((out / n).is_file() for n in names.values()):
-        return None
-    try:
-        labels = json.loads((out / names["labels"]).read_text())
-    except (OSError, ValueError):
-        return None
-    if labels.get("render", {}).get("dataset", {}).get("job_sha256") != digest:
-        return None
-    return summary(job, labels)
-
-
 def _write_shard_record(out: Path, state: dict) -> None:
     if state["path"] is None:
         return
@@ -309,7 +285,7 @@ class RunStats:
 
     def add_result(self, result: dict) -> None:
         """A chunk's result (local.render_chunk's); frames without 'end' were rendered before a worker was lost
-        (ray_runner) and count without timings; 'node' (ray_runner) keys the per-node figures."""
+        (dataset/ray) and count without timings; 'node' (dataset/ray) keys the per-node figures."""
         pid = result["pid"]
         if pid is not None:
             self.open_s[pid] = result["open_s"]
@@ -400,7 +376,7 @@ class RunStats:
 
 def _progress_printer(stats: RunStats | None = None, every_s: float = 5.0):
     """A progress callback: frames done, images/s, ETA, at most every `every_s` seconds and at the end; with
-    several nodes (ray_runner), each node's frames and images/s."""
+    several nodes (dataset/ray), each node's frames and images/s."""
     last = [-math.inf]
 
     def report(done: int, total: int, seconds: float) -> None:
