@@ -47,5 +47,8 @@ class BakedPackage:
     def describe(self):
         return {"source": "usd", "format": "usd"}
 
+    def relabel(self, name):
+        self.source = name
+
     def subject(self, pose=None, **options):
         raise NotImplementedError("a plan never poses its sources")

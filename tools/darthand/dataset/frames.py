@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.render.scenes import Scene
 
 MIN_DIGITS = 6
 KINDS = ("image", "mask", "labels", "vertices")
@@ -54,28 +55,20 @@ def wears_ring(job: dict) -> bool:
 
 
 def render_job(renderer, job: dict, settings: dict):
-    """(api.Frame, background info or None) of one job. settings: size, samples, aa_shading, and optionally
-    shading (api.shading_options' dict; None: the renderer's defaults)."""
+    """(api.Frame, background info or None) of one job, rendered as its scene (render/scenes.py). settings: size,
+    samples, aa_shading, and optionally shading (api.shading_options' dict; None: the renderer's defaults)."""
     from darthand.dataset.backgrounds import background_pixels
 
-    pose = job.get("pose")
-    if isinstance(pose, list):
-        pose = np.asarray(pose, np.float64)
-    elif isinstance(pose, str) and "pose_index" in job and renderer.source.pose_model() is not None:
-        from darthand.render.poses import resolve_pose
-
-        pose = resolve_pose(renderer.source.pose_model(), pose, int(job["pose_index"]))[0]
+    scene = Scene.from_job(job)
     size = settings["size"]
     background, info = None, None
     t = time.perf_counter()
-    if job.get("background"):
-        background, info = background_pixels(job["background"], size, size)
+    if scene.background:
+        background, info = background_pixels(scene.background, size, size)
     t = time.perf_counter() - t
-    frame = renderer.render(pose, texture=job.get("texture"), skin_tone_offset=float(job.get("skin_tone_offset", 0)),
-                            accessory=job.get("accessory"), camera=job.get("camera") or "three_quarter",
-                            lights=job.get("lights"), background=background, width=size, height=size,
-                            samples=settings["samples"], aa_shading=settings["aa_shading"],
-                            shading=settings.get("shading"), betas=job.get("betas"))
+    frame = renderer.render_scene(scene, background=background, width=size, height=size,
+                                  samples=settings["samples"], aa_shading=settings["aa_shading"],
+                                  shading=settings.get("shading"))
     frame.timings["background"] = t
     return frame, info
 

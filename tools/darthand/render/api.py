@@ -27,7 +27,9 @@ from darthand.render.image import compose, encode_mask8, load_background, write_
 from darthand.render.indirect import VertexLight
 from darthand.render.labels import frame_labels
 from darthand.render.lights import Lighting, load_lighting, world_lights
-from darthand.render.scene import Scene, scene_for
+from darthand.render.poses import resolve_pose
+from darthand.render.scene import Scene as TraceScene, scene_for
+from darthand.render.scenes import Scene
 from darthand.render.shade import ShadingOptions
 from darthand.render.subject import Subject
 from darthand.render.trace import (Context, Samples, default_threads, pixel_positions, scene_bounds,
@@ -68,7 +70,7 @@ class Renderer:
     def __init__(self, source, threads: int | None = None):
         self.source = source
         self.threads = default_threads() if threads is None else max(1, int(threads))
-        self._scene: Scene | None = None
+        self._scene: TraceScene | None = None
         self._lights: tuple | None = None
 
     def _lighting(self, lights) -> Lighting:
@@ -99,6 +101,22 @@ class Renderer:
                                      keypoint_order=keypoint_order, betas=betas)
             return self._finish(prepared, background=background, samples=samples, aa_shading=aa_shading,
                                 shading=shading, labels=labels)
+
+    def render_scene(self, scene: Scene, *, background=None, **options) -> Frame:
+        """One frame of a scene (render/scenes.py): its hand posed, dressed and shaped as the scene says, seen by its
+        camera under its lights. background: pixels or an image path to composite under it (None: the scene's own
+        background when it is an image path, else transparent; a dataset resolves its background documents itself).
+        options: `render`'s width, height, samples, aa_shading, shading, labels, keypoint_order."""
+        hand = scene.single_hand()
+        pose = hand.pose_value()
+        model = self.source.pose_model()
+        if isinstance(pose, str) and hand.pose_index is not None and model is not None:
+            pose = resolve_pose(model, pose, int(hand.pose_index))[0]
+        if background is None and isinstance(scene.background, str):
+            background = scene.background
+        return self.render(pose, texture=hand.texture, skin_tone_offset=float(hand.skin_tone_offset),
+                           accessory=hand.accessory, camera=scene.camera or "three_quarter", lights=scene.lights,
+                           background=background, betas=hand.betas, **options)
 
     def render_many(self, poses, **options) -> Iterator[Frame]:
         """Frames of `poses` (an iterable of what `render` takes as pose), in order, with the other options of
@@ -168,7 +186,7 @@ def shading_options(shading) -> ShadingOptions:
     raise InputError(f"shading: expected ShadingOptions or a dict, got {type(shading).__name__}")
 
 
-def render_subject(subject: Subject, scene: Scene, cam: Camera, lighting: Lighting, *, background=None,
+def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: Lighting, *, background=None,
                    samples: int = DEFAULT_SAMPLES, aa_shading: str = "triangle", shading=None, threads: int = 1,
                    labels: bool = True, timings: dict | None = None) -> Frame:
     """Render a posed subject whose scene is built: primary samples in the projected bounds with indirect light at

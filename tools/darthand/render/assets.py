@@ -71,6 +71,9 @@ class HandAssets:
     def side(self) -> str:
         return self.model.side
 
+    def relabel(self, name: str) -> None:
+        self.source = name
+
     def pose_model(self) -> HandModel:
         return self.model
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.render.scenes import HandBody, Scene
 
 
 def parse_pose(text: str | None):
@@ -34,21 +35,18 @@ def render(args) -> int:
 
     source = open_source(args.package, textures=args.textures, accessories=args.accessories, model=args.model)
     pose = parse_pose(args.pose)
-    model = source.pose_model()
-    if isinstance(pose, str) and Path(pose).is_file() and args.pose_index and model is not None:
-        from darthand.render.poses import resolve_pose
-
-        pose = resolve_pose(model, pose, args.pose_index)[0]
-    if isinstance(pose, int) and model is not None:
+    if isinstance(pose, int) and source.pose_model() is not None:
         raise InputError("--pose: a time code needs a USD package; give a gesture name or a pose vector")
+    is_file = isinstance(pose, str) and Path(pose).is_file()
+    hand = HandBody(pose=tuple(pose) if isinstance(pose, np.ndarray) else pose,
+                    pose_index=args.pose_index if is_file and args.pose_index else None, texture=args.texture,
+                    skin_tone_offset=args.skin_tone_offset, accessory=args.accessory)
+    scene = Scene((hand,), args.camera, args.lights, args.background)
     width, height = args.width or args.size, args.height or args.size
-    renderer = Renderer(source, args.threads)
-    frame = renderer.render(pose, texture=args.texture, skin_tone_offset=args.skin_tone_offset,
-                            accessory=args.accessory, camera=args.camera, lights=args.lights,
-                            background=args.background, width=width, height=height, samples=args.samples,
-                            aa_shading=args.aa_shading, keypoint_order=args.keypoint_order,
-                            shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection,
-                                     "skin": args.skin})
+    frame = Renderer(source, args.threads).render_scene(
+        scene, width=width, height=height, samples=args.samples, aa_shading=args.aa_shading,
+        keypoint_order=args.keypoint_order,
+        shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin})
     paths = write_frame(frame, args.out, depth=args.depth)
     lab = frame.labels
     total = sum(frame.timings.values())

@@ -58,6 +58,10 @@ class FrameSource(Protocol):
         """The catalogue type of an accessory ('ring', 'watch', ...), or None when the source does not know it."""
         ...
 
+    def relabel(self, name: str) -> None:
+        """Record `name` as what the source was opened from (a cluster node opens the driver's file elsewhere)."""
+        ...
+
     def subject(self, pose=None, *, texture: str | None = None, skin_tone_offset: float = 0.0,
                 accessory: str | None = None, betas=None, keypoint_order: str = "openpose") -> Subject:
         """The posed hand (and accessory) of one frame: pose None (flat or rest), a gesture name, a pose file, a

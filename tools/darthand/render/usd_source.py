@@ -63,6 +63,9 @@ class UsdPackage:
     def source(self) -> str:
         return str(self.interface)
 
+    def relabel(self, name: str) -> None:
+        self.interface = Path(name)
+
     def pose_model(self) -> None:
         return None
 

@@ -114,10 +114,7 @@ class NodeWorker:
         source = local.worker_renderer(side).source
         label = self.labels.get(side)
         if label is not None:
-            if hasattr(source, "interface"):
-                source.interface = Path(label)
-            else:
-                source.source = label
+            source.relabel(label)
         self.opened.add(side)
 
     def _take_staged(self, frames: list) -> list:
