@@ -7,12 +7,15 @@ TEXTURES = ("light_moles_00", "dark_moles_01")
 
 
 def render(planner, sources, out, count, **kw):
-    from darthand.dataset.run import render_dataset
+    """Frames 0 .. count - 1 of `planner` rendered into `out` at SIZE (kw: more DatasetOptions fields)."""
+    from darthand.dataset.options import DatasetOptions
+    from darthand.dataset.run import render_frames
 
     opened, specs = sources
     kw.setdefault("processes", 1)
-    return render_dataset(specs["right"].package, out, planner=planner, count=count, specs=specs, sources=opened,
-                          size=SIZE, samples=4, progress=False, **kw)
+    options = DatasetOptions(specs["right"].package, str(out), count=count, size=SIZE, samples=4, progress=False,
+                             **kw)
+    return render_frames(options, opened, specs, planner)
 
 
 def files_of(folder) -> dict:

@@ -18,6 +18,7 @@ from helpers_dataset import SIZE, BakedPackage, files_of, render
 
 from darthand.cli import main
 from darthand.dataset import run
+from darthand.dataset.options import DatasetOptions
 from darthand.errors import InputError
 from darthand.model.forward import forward
 from darthand.render.source import FrameSource
@@ -102,8 +103,8 @@ def test_a_failing_frame_stops_the_run_with_its_index(package, sources, tmp_path
     validate_jobs(opened, check_jobs(jobs))
     bad.write_text("{not json")                                           # broken by the time it renders
     with pytest.raises(InputError, match=r"^frame 7: .*pose.json: not valid JSON"):
-        run.render_dataset(package[0], tmp_path / "out", jobs, specs=specs, sources=opened, processes=1, size=SIZE,
-                           samples=4, progress=False)
+        run.render_frames(DatasetOptions(package[0], str(tmp_path / "out"), jobs=jobs, processes=1, size=SIZE,
+                                         samples=4, progress=False), opened, specs)
 
 
 def _cli(package, *args):

@@ -9,7 +9,6 @@ import argparse
 import math
 import os
 import sys
-from pathlib import Path
 
 from darthand.errors import DarthandError
 
@@ -73,8 +72,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     # -- stage command groups are added here (one function per stage, below), with the names they add --
     groups = [(("model",), _add_model_commands), (("template",), _add_template_commands),
               (("textures",), _add_textures_commands), (("accessories",), _add_accessories_commands),
-              (("export",), _add_export_commands), (("render", "render-checks", "render-dataset"), _add_render_commands),
-              (("dataset", "eval"), _add_dataset_commands), (("validate",), _add_validate_command),
+              (("export",), _add_export_commands), (("render", "render-checks"), _add_render_commands),
+              (("render-dataset", "dataset", "eval"), _add_dataset_commands), (("validate",), _add_validate_command),
               (("manifest", "verify"), _add_manifest_command), (("studio",), _add_studio_command)]
     chosen = [add for names, add in groups if command in names]
     for add in chosen or [add for _, add in groups]:
@@ -138,6 +137,11 @@ def numbers(n: int, kind=float, lo: float | None = None, hi: float | None = None
 
     parse.__name__ = "numbers"
     return parse
+
+
+def _listed(values) -> str:
+    """A default of several values as the option is written: -0.15,0.15; random."""
+    return ",".join(f"{v:g}" if isinstance(v, float) else str(v) for v in values)
 
 
 def _range(lo, hi, lo_open) -> str:
@@ -431,17 +435,11 @@ def _add_render_commands(sub) -> None:
     p = sub.add_parser("render-checks", help=text, description=text)
     _add_checks_arguments(p)
     p.set_defaults(run=commands.checks)
-    from darthand.dataset import commands as dataset_commands
-
-    text = ("render a labelled dataset (OUT/images/, masks/, labels/, meshes/, dataset.json): frames planned from a "
-            "seed as DART samples them, or read from a jobs file, rendered in parallel worker processes")
-    p = sub.add_parser("render-dataset", help=text, description=text)
-    _add_dataset_arguments(p)
-    p.set_defaults(run=dataset_commands.render_dataset)
 
 
 def _add_render_arguments(p) -> None:
     from darthand.model.preview import VIEWS
+    from darthand.render.aa import DEFAULT_SAMPLES
 
     p.add_argument("package", metavar="PACKAGE", help=RENDER_PACKAGE_HELP)
     p.add_argument("--out", required=True, metavar="DIR", help="output folder for image.png, mask.png, labels.json")
@@ -469,7 +467,7 @@ def _add_render_arguments(p) -> None:
     p.add_argument("--size", type=PIXELS, default=512, metavar="N", help="square image size in pixels (default 512)")
     p.add_argument("--width", type=PIXELS, default=None, metavar="W", help="image width (overrides --size)")
     p.add_argument("--height", type=PIXELS, default=None, metavar="H", help="image height (overrides --size)")
-    _add_antialiasing_options(p)
+    _add_antialiasing_options(p, DEFAULT_SAMPLES)
     _add_shading_options(p)
     p.add_argument("--depth", action="store_true", help="also write depth.exr (camera z in metres, 0 = background)")
     p.add_argument("--keypoint-order", default="openpose", choices=("openpose", "mano"),
@@ -479,18 +477,20 @@ def _add_render_arguments(p) -> None:
 
 
 def _add_dataset_arguments(p) -> None:
-    from darthand.dataset import plan, poses, run
+    from darthand.dataset import options as o
+    from darthand.dataset.plan import PlanOptions
     from darthand.model.preview import VIEWS
 
-    d = plan.DEFAULTS
+    plan, run = PlanOptions(), o.DatasetOptions("", "")           # the defaults, defined there
+    d = plan.poses
     p.add_argument("package", metavar="PACKAGE", help=RENDER_PACKAGE_HELP)
     p.add_argument("--out", required=True, metavar="DIR",
                    help="output folder: images/, masks/, labels/, meshes/ (NNNNNN.png/.json/.npy), shards/, "
                         "dataset.json")
-    p.add_argument("--count", type=COUNT, default=100, metavar="N", help="frames to plan (default 100)")
-    p.add_argument("--seed", type=SEED, default=0, metavar="S",
-                   help="seed of the plan: frame i depends only on (seed, i) (default 0)")
-    p.add_argument("--start", type=number(int, 0, 10 ** 12), default=0, metavar="K",
+    p.add_argument("--count", type=COUNT, default=run.count, metavar="N", help=f"frames to plan (default {run.count})")
+    p.add_argument("--seed", type=SEED, default=plan.seed, metavar="S",
+                   help=f"seed of the plan: frame i depends only on (seed, i) (default {plan.seed})")
+    p.add_argument("--start", type=number(int, 0, 10 ** 12), default=run.start, metavar="K",
                    help="first frame index: frames K .. K+N-1 (to extend a dataset or split it over machines)")
     p.add_argument("--jobs", default=None, metavar="JOBS.json",
                    help="render the frames of a jobs file (schemas/dataset_jobs.schema.json) instead of planning")
@@ -499,79 +499,82 @@ def _add_dataset_arguments(p) -> None:
     p.add_argument("--sides", default="both", metavar="right|left|both",
                    help="hands to render, drawn uniformly; the other side renders PACKAGE's twin (build/model/"
                         "left.npz, build/usd/left) or the model mirrored (default both)")
-    p.add_argument("--pose-mode", default="auto", choices=("auto", "dart", "jitter", "gestures"),
+    p.add_argument("--pose-mode", default=d.mode, choices=("auto", "dart", "jitter", "gestures"),
                    help="dart: DART's base poses from a grid of joint angles, each walked by slerp toward the most "
                         "different of --reference-draws reference poses; jitter: reference poses perturbed by "
                         "--pose-jitter; gestures: reference poses as they are (auto: dart for a model, the baked "
                         "gestures for a USD package)")
-    p.add_argument("--poses", default="gestures", metavar="gestures|POSES.json|training_mano.json",
+    p.add_argument("--poses", default=d.reference, metavar="gestures|POSES.json|training_mano.json",
                    help="the reference poses: the gesture library (default), a pose file (schemas/pose.schema.json) "
                         "or FreiHAND's training_mano.json")
     p.add_argument("--gestures", default=None, metavar="NAMES",
                    help="comma-separated gesture names: the gesture library restricted to them")
-    p.add_argument("--grid-levels", type=number(int, 2, 16), default=d["poses"]["levels"], metavar="L",
-                   help=f"dart: values per joint axis of the base-pose grid (default {poses.DEFAULT_LEVELS})")
-    p.add_argument("--reference-draws", type=number(int, 1, 100_000), default=d["poses"]["draws"], metavar="K",
+    p.add_argument("--grid-levels", type=number(int, 2, 16), default=d.levels, metavar="L",
+                   help=f"dart: values per joint axis of the base-pose grid (default {d.levels})")
+    p.add_argument("--reference-draws", type=number(int, 1, 100_000), default=d.draws, metavar="K",
                    help=f"dart: reference poses drawn per base pose, the most different kept "
-                        f"(default {poses.DEFAULT_DRAWS}, DART's)")
-    p.add_argument("--slerp-steps", type=number(int, 1, 1000), default=d["poses"]["steps"], metavar="S",
+                        f"(default {d.draws}, DART's)")
+    p.add_argument("--slerp-steps", type=number(int, 1, 1000), default=d.steps, metavar="S",
                    help=f"dart: frames per slerp path from a base pose to its reference pose "
-                        f"(default {poses.DEFAULT_STEPS}, DART's)")
-    p.add_argument("--pose-jitter", type=number(float, 0, 45), default=d["poses"]["jitter_deg"], metavar="DEG",
+                        f"(default {d.steps}, DART's)")
+    p.add_argument("--pose-jitter", type=number(float, 0, 45), default=d.jitter_deg, metavar="DEG",
                    help="jitter: std of a random change to each finger joint's twist, spread and bend, kept within "
-                        f"the joint limits (default {poses.DEFAULT_JITTER_DEG:g})")
+                        f"the joint limits (default {d.jitter_deg:g})")
     p.add_argument("--max-reference-mb", type=number(float, 0, 10 ** 6, lo_open=True),
-                   default=d["poses"]["max_reference_mb"], metavar="MB",
-                   help=f"largest reference pose file read (default {poses.DEFAULT_MAX_REFERENCE_MB})")
+                   default=d.max_reference_mb, metavar="MB",
+                   help=f"largest reference pose file read (default {d.max_reference_mb})")
     p.add_argument("--texture-ids", default="all", metavar="IDS|all",
                    help="comma-separated texture ids to draw from, or 'all' (default: every catalogue texture)")
-    p.add_argument("--skin-tone-range", type=numbers(2, float, -0.5, 0.5, ordered=True), default="-0.15,0.15",
-                   metavar="LO,HI",
+    p.add_argument("--skin-tone-range", type=numbers(2, float, -0.5, 0.5, ordered=True),
+                   default=plan.skin_tone_range, metavar="LO,HI",
                    help="range of the sRGB skin-tone offset; write --skin-tone-range=-0.2,0.1 when LO is negative "
-                        "(default -0.15,0.15, DART's)")
-    p.add_argument("--skin-tone-steps", type=number(int, 1, 1000), default=None, metavar="N",
+                        f"(default {_listed(plan.skin_tone_range)}, DART's)")
+    p.add_argument("--skin-tone-steps", type=number(int, 1, 1000), default=plan.skin_tone_steps, metavar="N",
                    help="draw the offset from N evenly spaced levels of the range (default: uniform in the range)")
     p.add_argument("--accessory-ids", default="all", metavar="IDS|all|none",
                    help="comma-separated accessory ids to draw from, 'all' (default) or 'none' (no accessories)")
-    p.add_argument("--accessory-share", type=number(float, 0, 1), default=d["accessory_share"], metavar="X",
-                   help="share of the frames with an accessory (default 0.25, DART's)")
-    p.add_argument("--shapes", default=d["shapes"]["mode"], choices=("normal", "uniform", "none"),
+    p.add_argument("--accessory-share", type=number(float, 0, 1), default=plan.accessory_share, metavar="X",
+                   help=f"share of the frames with an accessory (default {plan.accessory_share:g}, DART's)")
+    p.add_argument("--shapes", default=plan.shapes.mode, choices=("normal", "uniform", "none"),
                    help="hand shape per frame: betas ~ N(0, sigma^2) truncated at +-limit (normal, the default: the "
                         "open hand's shape space is calibrated so that N(0, I) spans adult hands), uniform in "
                         "+-limit, or none (the model's own shape, as DART); a USD package renders its baked shape")
-    p.add_argument("--shape-sigma", type=number(float, 0, 100, lo_open=True), default=d["shapes"]["sigma"],
+    p.add_argument("--shape-sigma", type=number(float, 0, 100, lo_open=True), default=plan.shapes.sigma,
                    metavar="S",
-                   help="standard deviation of the normal shape distribution (default 1)")
-    p.add_argument("--shape-limit", type=number(float, 0, 100, lo_open=True), default=d["shapes"]["limit"],
+                   help=f"standard deviation of the normal shape distribution (default {plan.shapes.sigma:g})")
+    p.add_argument("--shape-limit", type=number(float, 0, 100, lo_open=True), default=plan.shapes.limit,
                    metavar="L",
-                   help="largest |beta| drawn (default 3, the extreme shapes `make shapes` checks)")
-    p.add_argument("--shape-dims", type=number(int, 0, 300), default=None, metavar="N",
+                   help=f"largest |beta| drawn (default {plan.shapes.limit:g}, the extreme shapes `make shapes` checks)")
+    p.add_argument("--shape-dims", type=number(int, 0, 300), default=plan.shapes.dims, metavar="N",
                    help="draw only the first N shape directions, the rest 0 (default all)")
-    p.add_argument("--views", default="random", metavar="random|VIEWS",
+    p.add_argument("--views", default=_listed(plan.views), metavar="random|VIEWS",
                    help=f"'random' (directions uniform over the sphere by equal-area cells, not along the forearm) "
                         f"and/or views ({', '.join(VIEWS)}), comma-separated, one drawn per frame (default random)")
-    p.add_argument("--roll-range", type=numbers(2, float, -180, 180, ordered=True), default="-45,45",
+    p.add_argument("--roll-range", type=numbers(2, float, -180, 180, ordered=True), default=plan.roll_range_deg,
                    metavar="LO,HI",
-                   help="camera roll about its axis, degrees; write --roll-range=-90,90 (default -45,45)")
-    p.add_argument("--fov-range", type=numbers(2, float, 1, 120, ordered=True), default="30,60", metavar="LO,HI",
-                   help="field of view across the image, degrees (default 30,60)")
-    p.add_argument("--margin-range", type=numbers(2, float, 0, 0.45, ordered=True), default="0.03,0.15",
+                   help=f"camera roll about its axis, degrees; write --roll-range=-90,90 (default "
+                        f"{_listed(plan.roll_range_deg)})")
+    p.add_argument("--fov-range", type=numbers(2, float, 1, 120, ordered=True), default=plan.fov_range_deg,
                    metavar="LO,HI",
-                   help="free border around the hand, fraction of the image: the hand's size (default 0.03,0.15)")
-    p.add_argument("--distance-range", type=numbers(2, float, 0.01, 100, ordered=True), default=None,
+                   help=f"field of view across the image, degrees (default {_listed(plan.fov_range_deg)})")
+    p.add_argument("--margin-range", type=numbers(2, float, 0, 0.45, ordered=True), default=plan.margin_range,
+                   metavar="LO,HI",
+                   help="free border around the hand, fraction of the image: the hand's size (default "
+                        f"{_listed(plan.margin_range)})")
+    p.add_argument("--distance-range", type=numbers(2, float, 0.01, 100, ordered=True), default=plan.distance_range,
                    metavar="LO,HI",
                    help="camera distance in metres instead of --margin-range (the hand kept in frame)")
-    p.add_argument("--lights", default="random", metavar="random|default|LIGHTS.json",
+    p.add_argument("--lights", default=plan.lights, metavar="random|default|LIGHTS.json",
                    help="random: ambient, a key light and sometimes a second light, colours from real light "
                         "sources (default); default: the renderer's rig; or one lights file for every frame")
-    p.add_argument("--backgrounds", default="builtin", metavar="builtin|none|DIR|IMAGE",
+    p.add_argument("--backgrounds", default=plan.backgrounds, metavar="builtin|none|DIR|IMAGE",
                    help="backgrounds composited under the hand with random crop, zoom and flip: the built-in "
                         "procedural set (default), none (transparent), a folder of images (e.g. COCO's) or one image")
-    p.add_argument("--split", type=numbers(3, float, 0, 1), default="0.8,0.1,0.1", metavar="TRAIN,VAL,TEST",
-                   help="deterministic split fractions (by pose group) (default 0.8,0.1,0.1)")
-    p.add_argument("--size", type=number(int, 8, run.MAX_SIZE), default=512, metavar="N",
-                   help="square image size in pixels (default 512)")
-    _add_antialiasing_options(p, run.DEFAULT_SAMPLES)
+    p.add_argument("--split", type=numbers(3, float, 0, 1), default=plan.split, metavar="TRAIN,VAL,TEST",
+                   help=f"deterministic split fractions (by pose group) (default {_listed(plan.split)})")
+    p.add_argument("--size", type=number(int, 8, o.MAX_SIZE), default=run.size, metavar="N",
+                   help=f"square image size in pixels (default {run.size})")
+    _add_antialiasing_options(p, run.samples, run.aa_shading)
     _add_shading_options(p)
     p.add_argument("--processes", type=number(int, 1, 100_000), default=None, metavar="N",
                    help="worker processes, each rendering whole frames (default: the number of cores; 1 renders "
@@ -582,14 +585,14 @@ def _add_dataset_arguments(p) -> None:
                    help="render on a Ray cluster: the head node's HOST:PORT, 'auto', or nothing (RAY_ADDRESS, else "
                         "the cluster started on this machine, else a new local one); --processes is then the "
                         "number of Ray workers (default: the cluster's CPUs). Needs `pip install darthand[cluster]`")
-    p.add_argument("--ray-files", default="auto", choices=("auto", "shared", "ship"),
+    p.add_argument("--ray-files", default=o.ClusterOptions().files, choices=("auto", "shared", "ship"),
                    help="how inputs reach the Ray nodes and frames the output folder: auto (a shared filesystem "
                         "where a node sees it, else through Ray, only the files its frames use), shared (every "
                         "node must see them), ship (always through Ray) (default auto)")
-    p.add_argument("--shard-size", type=number(int, 1, 10 ** 7), default=run.DEFAULT_SHARD_SIZE, metavar="N",
-                   help=f"frames per shard, the unit of planning and resume records (default {run.DEFAULT_SHARD_SIZE})")
-    p.add_argument("--max-frames", type=COUNT, default=run.DEFAULT_MAX_FRAMES, metavar="N",
-                   help=f"frame budget of one run (default {run.DEFAULT_MAX_FRAMES})")
+    p.add_argument("--shard-size", type=number(int, 1, 10 ** 7), default=run.shard_size, metavar="N",
+                   help=f"frames per shard, the unit of planning and resume records (default {run.shard_size})")
+    p.add_argument("--max-frames", type=COUNT, default=run.max_frames, metavar="N",
+                   help=f"frame budget of one run (default {run.max_frames})")
     p.add_argument("--formats", default=None, metavar="freihand,webdataset",
                    help="also write these layouts after rendering (as `darthand dataset export`)")
     _add_layout_options(p)
@@ -613,6 +616,11 @@ def _add_layout_options(p) -> None:
 def _add_dataset_commands(sub) -> None:
     from darthand.dataset import commands
 
+    text = ("render a labelled dataset (OUT/images/, masks/, labels/, meshes/, dataset.json): frames planned from a "
+            "seed as DART samples them, or read from a jobs file, rendered in parallel worker processes")
+    p = sub.add_parser("render-dataset", help=text, description=text)
+    _add_dataset_arguments(p)
+    p.set_defaults(run=commands.render_dataset)
     g = _group(sub, "dataset", "look at and convert rendered datasets")
     p = g.add_parser("report", help="one page to judge a dataset by: contact sheet with keypoints, counts, "
                                     "visibility rates, pose coverage against the reference set")
@@ -639,12 +647,12 @@ def _add_dataset_commands(sub) -> None:
     p.set_defaults(run=commands.evaluate)
 
 
-def _add_antialiasing_options(p, samples: int = 8) -> None:
+def _add_antialiasing_options(p, samples: int, aa_shading: str = "triangle") -> None:
     from darthand.render.aa import PATTERNS, SHADING
 
     p.add_argument("--samples", type=int, default=samples, choices=sorted(PATTERNS),
                    help=f"sub-samples per silhouette or material-edge pixel (default {samples})")
-    p.add_argument("--aa-shading", default="triangle", choices=SHADING,
+    p.add_argument("--aa-shading", default=aa_shading, choices=SHADING,
                    help="shade the sub-samples once per pixel per triangle, as GPU multisampling does (triangle, "
                         "default), or each one (sample: slower, exact supersampling)")
 
@@ -703,6 +711,8 @@ def _add_validate_command(sub) -> None:
 
 # ---------------------------------------------------------------- manifest
 def _add_manifest_command(sub) -> None:
+    from darthand import manifest_commands as commands
+
     p = sub.add_parser("manifest", help="write build/manifest.json: outputs with sha256, step seconds, checks",
                        description="write build/manifest.json: outputs with sha256, step seconds, checks")
     p.add_argument("--build", default="build", help="build folder (default: build)")
@@ -710,17 +720,7 @@ def _add_manifest_command(sub) -> None:
     p.add_argument("--check", action="store_true",
                    help="write nothing: print the checks the manifest records as failed, exit 1 if there are any")
 
-    def run(args):
-        from darthand.manifest import check_manifest, write_manifest
-        if args.check:
-            return check_manifest(args.out or f"{args.build}/manifest.json")
-        m = write_manifest(args.build, args.out)
-        total = sum(e["bytes"] for e in m["outputs"])
-        print(f"manifest: {len(m['outputs'])} outputs, {total / 1e6:.1f} MB, checks: {sorted(m['checks'])}"
-              + (f", {len(m['failed_checks'])} failed" if m["failed_checks"] else ""))
-        return 0
-
-    p.set_defaults(run=run)
+    p.set_defaults(run=commands.manifest)
 
     text = ("check every output of build/manifest.json against its size and sha256 (exit 1 when one is missing or "
             "differs)")
@@ -732,27 +732,7 @@ def _add_manifest_command(sub) -> None:
                    help="remove the damaged files and mark their steps out of date, so `make assets` rebuilds "
                         "them (exit 0); without a manifest, do nothing")
 
-    def verify(args):
-        from darthand.manifest import invalidate, verify_outputs
-
-        if args.repair and not (Path(args.build) / "manifest.json").is_file():
-            return 0
-        damaged = verify_outputs(args.build, full=args.full)
-        for rel, why in damaged[:20]:
-            print(f"damaged: {Path(args.build) / rel}: {why}")
-        if len(damaged) > 20:
-            print(f"damaged: ... and {len(damaged) - 20} more")
-        if not damaged:
-            if not args.repair:        # make assets runs --repair each time: silent when nothing is wrong
-                print(f"{Path(args.build) / 'manifest.json'}: every output matches")
-            return 0
-        if args.repair:
-            steps = invalidate(args.build, damaged)
-            print(f"{len(damaged)} damaged outputs removed; rebuilding with the steps writing {', '.join(steps)}")
-            return 0
-        return 1
-
-    p.set_defaults(run=verify)
+    p.set_defaults(run=commands.verify)
 
 
 # ---------------------------------------------------------------- studio

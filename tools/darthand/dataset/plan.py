@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import copy
 import math
+from dataclasses import dataclass, field, fields, is_dataclass
 
 import numpy as np
 
@@ -43,21 +44,77 @@ LIGHTS = VIEW + 6                            # lighting.UNIFORMS
 BACKGROUND = LIGHTS + lighting.UNIFORMS      # backgrounds.UNIFORMS
 UNIFORMS = BACKGROUND + backgrounds.UNIFORMS
 
-DEFAULTS = {
-    "seed": 0,
-    "poses": {"mode": "auto", "reference": "gestures", "gestures": None, "levels": poses.DEFAULT_LEVELS,
-              "draws": poses.DEFAULT_DRAWS, "steps": poses.DEFAULT_STEPS, "jitter_deg": poses.DEFAULT_JITTER_DEG,
-              "max_reference_mb": poses.DEFAULT_MAX_REFERENCE_MB},
-    "textures": None, "skin_tone_range": [-0.15, 0.15], "skin_tone_steps": None,
-    "accessories": None, "accessory_share": 0.25,
-    "sides": ["right", "left"],
-    "views": ["random"], "roll_range_deg": [-45.0, 45.0], "fov_range_deg": [30.0, 60.0],
-    "margin_range": [0.03, 0.15], "distance_range": None,
-    "lights": "random",
-    "backgrounds": "builtin",
-    "split": [0.8, 0.1, 0.1],
-    "shapes": dict(shapes.DEFAULTS),
-}
+
+
+@dataclass
+class PoseOptions:
+    """How poses are drawn (dataset/poses.py): mode 'auto' (dart for a model, the baked gestures for a USD package),
+    'dart', 'jitter' or 'gestures'; reference 'gestures', a pose file or FreiHAND's training_mano.json; gestures: the
+    library restricted to these names; levels, draws, steps: DART's grid and slerp; jitter_deg: std of the jitter
+    (degrees); max_reference_mb: the largest reference file read."""
+
+    mode: str = "auto"
+    reference: str = "gestures"
+    gestures: list | None = None
+    levels: int = poses.DEFAULT_LEVELS
+    draws: int = poses.DEFAULT_DRAWS
+    steps: int = poses.DEFAULT_STEPS
+    jitter_deg: float = poses.DEFAULT_JITTER_DEG
+    max_reference_mb: float = poses.DEFAULT_MAX_REFERENCE_MB
+
+
+@dataclass
+class ShapeOptions:
+    """Betas per frame (dataset/shapes.py): mode 'normal' (N(0, sigma^2) truncated at +-limit), 'uniform' in
+    +-limit or 'none' (the model's own shape); dims: only the first N directions drawn (None: all)."""
+
+    mode: str = shapes.DEFAULTS["mode"]
+    sigma: float = shapes.DEFAULTS["sigma"]
+    limit: float = shapes.DEFAULTS["limit"]
+    dims: int | None = shapes.DEFAULTS["dims"]
+
+
+@dataclass
+class PlanOptions:
+    """A plan's options, with their defaults (the module docstring says what each draws): the one place they are
+    defined. `spec()` is the plan document recorded in dataset.json and jobs files. Ranges are (lo, hi); textures
+    and accessories: ids to draw from (None: every one of the catalogue; accessories [] for none); lights 'random',
+    'default' or a lights document or file; backgrounds 'builtin', 'none', a folder or an image; split the
+    train/val/test fractions."""
+
+    seed: int = 0
+    poses: PoseOptions = field(default_factory=PoseOptions)
+    textures: list | None = None
+    skin_tone_range: tuple = (-0.15, 0.15)
+    skin_tone_steps: int | None = None
+    accessories: list | None = None
+    accessory_share: float = 0.25
+    sides: tuple = ("right", "left")
+    views: tuple = ("random",)
+    roll_range_deg: tuple = (-45.0, 45.0)
+    fov_range_deg: tuple = (30.0, 60.0)
+    margin_range: tuple = (0.03, 0.15)
+    distance_range: tuple | None = None
+    lights: str | dict = "random"
+    backgrounds: str = "builtin"
+    split: tuple = (0.8, 0.1, 0.1)
+    shapes: ShapeOptions = field(default_factory=ShapeOptions)
+
+    def spec(self) -> dict:
+        """The plan document (plain JSON values: lists for tuples)."""
+        return plan_spec(**{f.name: _plain(getattr(self, f.name)) for f in fields(self)})
+
+
+def _plain(value):
+    """A dataclass as a dict, tuples as lists, recursively (the plan document's JSON form)."""
+    if is_dataclass(value):
+        return {f.name: _plain(getattr(value, f.name)) for f in fields(value)}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+DEFAULTS = _plain(PlanOptions())
 
 
 def plan_spec(**options) -> dict:

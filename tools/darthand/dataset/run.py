@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.dataset.options import MAX_SIZE, DatasetOptions, bounded_int
 from darthand.dataset.frames import existing_frame, frame_names, job_digest
 from darthand.dataset.runner import Runner, make_runner
 from darthand.errors import InputError
@@ -37,59 +38,40 @@ from darthand.fileio import read_json, write_json
 
 DATASET_FORMAT = "darthand-dataset"
 DATASET_VERSION = 2
-# 16,384 frames: a shard's chunks load each catalogue texture about once (325 textures of 2048^2, ~0.1 s of CPU
-# each), so the larger the shard the fewer loads per frame. Simulated over the benchmark's plan (32,768 frames, two
-# workers, the 512 MB texture cache): 8,192-frame shards and 32-frame tasks load 1,405 textures (4.7 ms of CPU a
-# frame), 16,384 and 64 load 661 (2.2 ms). A shard's plan in memory is ~6 kB a job (~100 MB at 16,384); frames
-# inside an unfinished shard still resume one by one.
-DEFAULT_SHARD_SIZE = 16384
-# Dataset render settings, chosen from benchmarks/dataset_settings.py (CPU per 512^2 frame against error, 24 frames
-# of the default plan, against 16 sub-samples shaded each and 64 indirect rays; quiet machine): 4 edge sub-samples
-# instead of the renderer's 8 save 7.2 of 56.6 ms a frame for +0.05 sRGB codes of mean error (0.62 -> 0.67); 8
-# indirect rays instead of 16 would save 1.6 ms more for +0.18 codes (0.67 -> 0.85), so the shading defaults stay.
-DEFAULT_SAMPLES = 4
 MAX_CHUNK = 64                    # frames per task: ~3-6 s of work (progress stays live; a stop is seen per frame),
                                   # and a texture's frames in a 16,384-frame shard (~50) fit one task
-DEFAULT_MAX_FRAMES = 1_000_000    # a budget: more needs max_frames= (--max-frames)
-MAX_SIZE = 4096
 FOLDERS = ("images", "masks", "labels", "meshes", "shards")
 
 
-def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0, count: int | None = None,
-                   specs: dict | None = None, sources: dict | None = None, processes: int | None = None,
-                   threads: int | None = None, size: int = 512, samples: int = DEFAULT_SAMPLES,
-                   aa_shading: str = "triangle", shading: dict | None = None, resume: bool = True, progress=True,
-                   shard_size: int = DEFAULT_SHARD_SIZE,
-                   chunk_size: int | None = None, max_frames: int = DEFAULT_MAX_FRAMES,
-                   jobs_source: dict | None = None, cluster: dict | None = None) -> dict:
-    """Render frames into out_dir (module docstring); returns the dataset.json document.
+def render_frames(options: DatasetOptions, sources: dict, specs: dict, planner=None, jobs=None,
+                  jobs_source: dict | None = None) -> dict:
+    """Render a run's frames into options.out (module docstring); returns the dataset.json document.
 
-    The frames: `jobs` (a list of job dicts or a jobs file), or frames start .. start + count - 1 of `planner`
-        (dataset/plan.Planner). package: what the run is of (recorded); specs: {side: SourceSpec} the workers open;
-        sources: {side: opened source} (used to check jobs, and for processes=1).
-    processes: worker processes (default: the cores available; 1 renders in this process); threads: render threads
-        per process (default 1 with workers, all cores with processes=1).
-    resume: skip what is already rendered from the same jobs (module docstring). samples, aa_shading: edge
-        anti-aliasing (api.Renderer.render); shading: api.shading_options' fields (None: the renderer's defaults).
-    progress: False, True (a line at most every 5 s) or a callable(done, total, seconds).
-    cluster: render on a Ray cluster instead of local processes (dataset/ray_runner.RayRunner: {'address': ...,
-        'files': 'auto'|'shared'|'ship'}); processes, when given, is then the number of Ray workers.
-    A frame that fails stops the run with an InputError 'frame N: cause'.
+    The frames: `jobs` (a list of job dicts or a jobs file; default options.jobs) when `planner` is None, else frames
+        options.start .. start + count - 1 of `planner` (dataset/plan.Planner). sources: {side: opened source}
+        (used to check jobs, and for processes=1); specs: {side: SourceSpec} the workers open. jobs_source: what
+        dataset.json records the frames came from (default: the jobs file, or the plan).
+    A frame that fails stops the run with an InputError 'frame N: cause'. `dataset.api.render_dataset` opens the
+    sources and plans; this is the part below it.
     """
     from darthand.dataset.jobs import check_jobs, load_jobs, validate_jobs
     from darthand.render import aa
     from darthand.render.api import shading_options
 
+    o = options
+    samples, aa_shading, processes, threads = o.samples, o.aa_shading, o.processes, o.threads
+    jobs = o.jobs if jobs is None else jobs
+    max_frames, cluster = o.max_frames, None if o.cluster is None else o.cluster.runner_options()
     t_start = time.monotonic()
     aa.check_options(samples, aa_shading)
-    shading = shading_options(shading).to_json()
-    size = _bounded_int(size, "size", 8, MAX_SIZE, "pixels")
+    shading = shading_options(o.shading).to_json()
+    size = bounded_int(o.size, "size", 8, MAX_SIZE, "pixels")
     if cluster is None:
-        processes = _bounded_int(len(os.sched_getaffinity(0)) if processes is None else processes, "processes", 1,
+        processes = bounded_int(len(os.sched_getaffinity(0)) if processes is None else processes, "processes", 1,
                                  256)
-    workers = None if processes is None else _bounded_int(processes, "processes", 1, 100_000)
-    threads = None if threads is None else _bounded_int(threads, "threads", 1, 256)
-    shard_size = _bounded_int(shard_size, "shard size", 1, 10_000_000)
+    workers = None if processes is None else bounded_int(processes, "processes", 1, 100_000)
+    threads = None if threads is None else bounded_int(threads, "threads", 1, 256)
+    shard_size = bounded_int(o.shard_size, "shard size", 1, 10_000_000)
     if planner is None:
         if isinstance(jobs, (str, Path)):
             jobs_source = jobs_source or {"file": str(jobs)}
@@ -100,27 +82,27 @@ def render_dataset(package, out_dir, jobs=None, *, planner=None, start: int = 0,
         total = len(jobs)
         shards = [jobs[k:k + shard_size] for k in range(0, total, shard_size)]
     else:
-        count = _bounded_int(count, "count", 0, max_frames, "frames",
+        count = bounded_int(o.count, "count", 0, max_frames, "frames",
                              "(the frame budget; --max-frames raises it, a frame takes ~80 kB of disk)")
-        start = _bounded_int(start, "start", 0, 10**12 - count)
+        start = bounded_int(o.start, "start", 0, 10**12 - count)
         total = count
         shards = (planner.jobs(a, min(a + shard_size, start + count)) for a in range(start, start + count, shard_size))
     if total > max_frames:
         raise InputError(f"jobs: {total} frames are over the frame budget of {max_frames} (--max-frames raises it)")
-    out = Path(out_dir)
+    out = Path(o.out)
     _prepare_folders(out)
     settings = {"out_dir": str(out), "size": size, "samples": int(samples), "aa_shading": aa_shading,
                 "shading": shading}
     stats = RunStats(t_start)
-    report = _progress_printer(stats) if progress is True else (progress or None)
+    report = _progress_printer(stats) if o.progress is True else (o.progress or None)
     runner = make_runner(cluster, specs, settings, sources, workers, threads, total)
     processes = runner.processes
     try:
-        _render_shards(shards, runner, settings, resume, processes, chunk_size, stats, total, report)
+        _render_shards(shards, runner, settings, o.resume, processes, o.chunk_size, stats, total, report)
     finally:
         runner.close()
     models = {side: src.describe() for side, src in (sources or {}).items()}
-    doc = _write_dataset(out, package, jobs_source, planner, total, settings, stats, processes, models,
+    doc = _write_dataset(out, o.package, jobs_source, planner, total, settings, stats, processes, models,
                          runner.describe())
     return doc
 
@@ -407,43 +389,3 @@ def _write_dataset(out: Path, package, jobs_source, planner, total, settings, st
            "summary": stats.summary(), "timings": stats.timings(processes), "runner": runner}
     write_json(out / "dataset.json", doc)
     return doc
-
-
-def _bounded_int(value, what: str, lo: int, hi: int, unit: str = "", hint: str = "") -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        try:
-            ok = float(value).is_integer()
-        except (TypeError, ValueError, OverflowError):
-            ok = False
-        if not ok:
-            raise InputError(f"{what}: {value!r} is not an integer")
-        value = int(float(value))
-    if not lo <= value <= hi:
-        raise InputError(f"{what}: {value} {unit + ' ' if unit else ''}is outside {lo}..{hi}"
-                         + (f" {hint}" if hint else ""))
-    return int(value)
-
-
-
-def render_package(package, out_dir, jobs=None, *, count: int = 100, start: int = 0, plan: dict | None = None,
-                   sides=None, textures=None, accessories=None, model=None, **options) -> dict:
-    """The Python entry of `darthand render-dataset`: open PACKAGE (render.api.open_source, with the catalogue paths
-    textures/accessories and the USD path's `model`) for the sides asked (default: the plan's, both), then render
-    `jobs` (a list or a jobs file) or frames start .. start + count - 1 of the plan `plan` (dataset/plan.plan_spec
-    options) into out_dir. `options` are render_dataset's. Worker processes are spawned: a script calling this needs
-    the usual `if __name__ == "__main__":` guard."""
-    from darthand.dataset.plan import Planner, plan_spec
-    from darthand.dataset.sources import parse_sides, source_specs
-
-    spec = plan_spec(**(plan or {}))
-    if jobs is not None:
-        from darthand.dataset.jobs import load_jobs
-
-        jobs = load_jobs(jobs) if isinstance(jobs, (str, Path)) else list(jobs)
-        sides = sides or tuple(dict.fromkeys(j.get("side") or "right" for j in jobs)) or ("right",)
-    specs = source_specs(package, parse_sides(sides or spec["sides"]), textures=textures, accessories=accessories,
-                         model=model)
-    sources = {side: s.open() for side, s in specs.items()}
-    planner = None if jobs is not None else Planner({**spec, "sides": list(sources)}, sources)
-    return render_dataset(package, out_dir, jobs, planner=planner, start=start, count=count, specs=specs,
-                          sources=sources, **options)

@@ -31,6 +31,7 @@ PATTERNS = {
          (-8, 0), (7, -4), (6, 7), (-7, -8)],
 }
 SHADING = ("triangle", "sample")
+DEFAULT_SAMPLES = 8               # sub-samples per edge pixel of a single render (datasets: dataset/options.py)
 DEPTH_STEP = 4.0
 NORMAL_ANGLE_DEG = 40.0
 

@@ -35,7 +35,7 @@ from darthand.render.subject import Subject
 from darthand.render.trace import (Context, Samples, default_threads, pixel_positions, scene_bounds,
                                    single_threaded_blas, tile_pixels, touched_tiles, trace_parallel)
 
-DEFAULT_SAMPLES = 8
+DEFAULT_SAMPLES = aa.DEFAULT_SAMPLES
 # Peak memory per image pixel while rendering (measured about 115 bytes at 2048^2 with the hand filling the frame).
 BYTES_PER_PIXEL = 200
 IMAGE, MASK, LABELS, DEPTH = "image.png", "mask.png", "labels.json", "depth.exr"

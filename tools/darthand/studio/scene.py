@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from darthand.dataset.run import DEFAULT_SAMPLES
+from darthand.dataset.options import DEFAULT_SAMPLES
 from darthand.errors import InputError
 from darthand.model.anatomy import angles_to_axis_angle
 from darthand.model.layout import NUM_JOINTS
