@@ -22,6 +22,9 @@ import tempfile
 from pathlib import Path
 from typing import Iterator
 
+from darthand.budget import check_memory
+from darthand.errors import InputError
+
 MAX_JSON_DEPTH = 64            # darthand's deepest contract nests about 6 levels
 MAX_JSON_INT_DIGITS = 40       # 2**128 has 39 digits: seeds fit, integers of hundreds of digits do not
 JSON_BYTES_PER_FILE_BYTE = 16  # parsed JSON takes up to this many bytes of memory per byte of text
@@ -48,7 +51,6 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
         try:
             os.replace(tmp, path)
         except IsADirectoryError:
-            from darthand.errors import InputError
             raise InputError(f"{path}: cannot write this file: a folder is in the way") from None
         # rename() is a no-op when both names are hard links to one file (re-placing a linked texture).
         tmp.unlink(missing_ok=True)
@@ -80,7 +82,6 @@ def write_json(path: str | os.PathLike, obj, indent: int = 2) -> None:
     try:
         text = json.dumps(obj, indent=indent, sort_keys=True, allow_nan=False)
     except ValueError:
-        from darthand.errors import InputError
         raise InputError(f"{path}: not written: field '{first_non_finite(obj)}' is not a finite number") from None
     write_bytes(path, (text + "\n").encode())
 
@@ -118,8 +119,6 @@ def field_key(key) -> str:
 def regular_file(path: str | os.PathLike, what: str = "file") -> os.stat_result:
     """stat of `path` (symlinks followed), after checking it is a regular file; InputError naming it otherwise.
     Nothing is opened."""
-    from darthand.errors import InputError
-
     path = Path(path)
     try:
         st = path.stat()
@@ -151,9 +150,6 @@ def open_regular(path: str | os.PathLike, what: str = "file", max_bytes: int | N
     """A binary file object for a regular file. Opened without blocking and checked on the open descriptor, so a
     FIFO or device put in its place after a check is refused too; InputError naming the file when it is missing,
     not a regular file, or larger than `max_bytes` (default: the memory budget)."""
-    from darthand.budget import check_memory
-    from darthand.errors import InputError
-
     path = Path(path)
     regular_file(path, what)
     try:
@@ -180,8 +176,6 @@ def read_bytes(path: str | os.PathLike, what: str = "file", max_bytes: int | Non
 def read_json(path: str | os.PathLike, what: str = "JSON file", max_bytes: int | None = None):
     """The parsed JSON of `path`; InputError naming the file (and `what` it should be) when it is missing, not a
     regular file, too large for the memory budget, not UTF-8 text or not valid JSON (see `parse_json`)."""
-    from darthand.budget import check_memory
-
     path = Path(path)
     st = regular_file(path, what)
     check_memory(f"parsing {path} ({what}, {st.st_size} bytes)", st.st_size * JSON_BYTES_PER_FILE_BYTE)
@@ -234,8 +228,6 @@ def parse_json(data: bytes | str, source, what: str = "JSON file", max_depth: in
     """Strict JSON from bytes or text: UTF-8, nested at most `max_depth` deep, no NaN or Infinity, no number too
     large for a float64, no integer of more than MAX_JSON_INT_DIGITS digits. InputError naming `source` (and the
     field) otherwise."""
-    from darthand.errors import InputError
-
     raw = data.encode("utf-8", "surrogatepass") if isinstance(data, str) else bytes(data)
     if raw.startswith(b"\xef\xbb\xbf"):
         raw = raw[3:]
@@ -268,8 +260,6 @@ def file_in(folder: str | os.PathLike, name: str, what: str = "file", must_exist
     """folder/name after checking that `name` is relative, stays inside `folder` (symlinks resolved) and is a
     regular file (or, without `must_exist`, nothing yet): for file names read from a document (a catalogue's
     entries), which must not lead anywhere else."""
-    from darthand.errors import InputError
-
     folder = Path(folder)
     path = Path(os.path.normpath(folder / name))
     real, real_folder = os.path.realpath(path), os.path.realpath(folder)
@@ -291,7 +281,6 @@ def make_folder(folder: str | os.PathLike) -> Path:
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except FileExistsError:
-        from darthand.errors import InputError
         raise InputError(f"{folder}: cannot make this folder: a file is in the way") from None
     except OSError as e:
         raise _write_error(folder, e) from None
@@ -299,8 +288,6 @@ def make_folder(folder: str | os.PathLike) -> Path:
 
 
 def _write_error(path: Path, e: OSError):
-    from darthand.errors import InputError
-
     return InputError(describe_os_error(e, path))
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 import jsonschema
 
 from darthand.errors import InputError
+from darthand.fileio import field_key, first_non_finite, read_json
 
 SCHEMA_DIR = Path(__file__).resolve().parents[2] / "schemas"
 
@@ -28,8 +29,6 @@ def _validator(name: str) -> jsonschema.protocols.Validator:
 def check_schema(doc, name: str, source: str) -> None:
     """Raise InputError '<source>: field '<path>' <message>' for the most relevant violation of schemas/<name>, or
     for a NaN or infinite number anywhere in `doc` (a dict given through the API may hold them)."""
-    from darthand.fileio import field_key, first_non_finite
-
     bad = first_non_finite(doc)
     if bad:     # JSON has no NaN or Infinity, and a schema's bounds do not catch NaN (every comparison is false)
         raise InputError(f"{source}: field '{bad}' is not a finite number")
@@ -47,8 +46,6 @@ def check_schema(doc, name: str, source: str) -> None:
 def read_catalog(path, what: str, schema: str) -> tuple[Path, dict]:
     """A stage's catalogue, given as its file or its folder (catalog.json inside): (the file, its contents checked
     against schemas/<schema>); InputError naming the file and field."""
-    from darthand.fileio import read_json
-
     path = Path(path)
     path = path / "catalog.json" if path.is_dir() else path
     data = read_json(path, f"{what} catalogue (build it with the {what} stage)")

@@ -23,6 +23,7 @@ import numpy as np
 
 from darthand.errors import InputError
 from darthand.jit import kernel
+from darthand.textures.color import srgb_to_linear
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".exr", ".tif", ".tiff", ".bmp", ".webp", ".hdr")
 BUILTIN_COUNT = 24
@@ -140,7 +141,6 @@ def decode_image(path: str) -> np.ndarray:
     so its longer side is at most MAX_DECODE_SIDE; InputError when it cannot be read completely."""
     import OpenImageIO as oiio
 
-    from darthand.textures.color import srgb_to_linear
 
     try:
         buf = oiio.ImageBuf(path)

@@ -15,7 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.dataset.frames import frame_names
 from darthand.dataset.metrics import evaluate
+from darthand.dataset.run import read_shard_records
 from darthand.errors import InputError
 from darthand.fileio import read_json, write_bytes, write_json
 
@@ -74,9 +76,6 @@ def _freihand_points(xyz_path: Path):
 
 
 def _dataset_points(folder: Path):
-    from darthand.dataset.frames import frame_names
-    from darthand.dataset.run import read_shard_records
-
     frames = read_shard_records(folder)
     if not frames:
         raise InputError(f"{folder}: no rendered frames")

@@ -19,8 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.dataset.backgrounds import background_pixels
 from darthand.errors import InputError
+from darthand.fileio import atomic_path
+from darthand.model.shape import shaped_vertices
+from darthand.render.api import shading_options, write_frame
+from darthand.render.labels import mano_camera_parameters
 from darthand.render.scenes import Scene
+from darthand.template.anthropometry import hand_sizes
 
 MIN_DIGITS = 6
 KINDS = ("image", "mask", "labels", "vertices")
@@ -38,8 +44,6 @@ def job_digest(job: dict, settings: dict) -> str:
     """sha256 (hex, 16 digits) of what a frame's files depend on: the job and the render settings (with the
     shading options in full, the renderer's defaults filled in: frames rendered before a default changed are
     rendered again)."""
-    from darthand.render.api import shading_options
-
     key = {"job": job, **{k: settings[k] for k in ("size", "samples", "aa_shading")},
            "shading": shading_options(settings.get("shading")).to_json()}
     if wears_ring(job):
@@ -57,8 +61,6 @@ def wears_ring(job: dict) -> bool:
 def render_job(renderer, job: dict, settings: dict):
     """(api.Frame, background info or None) of one job, rendered as its scene (render/scenes.py). settings: size,
     samples, aa_shading, and optionally shading (api.shading_options' dict; None: the renderer's defaults)."""
-    from darthand.dataset.backgrounds import background_pixels
-
     scene = Scene.from_job(job)
     size = settings["size"]
     background, info = None, None
@@ -75,8 +77,6 @@ def render_job(renderer, job: dict, settings: dict):
 
 def dataset_labels(frame, job: dict, digest: str, source, background: dict | None) -> dict:
     """The frame's labels with the dataset's fields added (see the module docstring)."""
-    from darthand.render.labels import mano_camera_parameters
-
     labels = frame.labels
     names = frame_names(job["index"])
     render = dict(labels.get("render", {}))
@@ -111,9 +111,6 @@ def shape_record(model, betas) -> dict:
     """The frame's hand shape: betas relative to the source model (as labels.mano), the betas the model was built
     with, their sum (the shape in the model's shape space), and the shaped hand's length and breadth (mm, the
     anthropometric landmarks of template/anthropometry.py)."""
-    from darthand.model.shape import shaped_vertices
-    from darthand.template.anthropometry import hand_sizes
-
     b = np.zeros(model.num_betas)
     given = np.asarray(betas if betas is not None else [], np.float64)
     b[:len(given)] = given
@@ -128,9 +125,6 @@ def shape_record(model, betas) -> dict:
 def write_dataset_frame(frame, job: dict, digest: str, out_dir, source, background: dict | None) -> dict:
     """Write the frame's four files (atomically, the labels last: a frame is whole once its labels exist);
     returns its summary for the shard record."""
-    from darthand.fileio import atomic_path
-    from darthand.render.api import write_frame
-
     names = frame_names(job["index"])
     labels = dataset_labels(frame, job, digest, source, background)
     vertices = frame.camera.to_camera(frame.subject.hand.vertices).astype(np.float32)

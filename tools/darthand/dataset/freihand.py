@@ -38,9 +38,13 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.dataset.frames import frame_names
+from darthand.dataset.run import read_shard_records
 from darthand.errors import InputError
 from darthand.fileio import atomic_path, read_json, write_bytes
 from darthand.model.mano_pkl import MANO_FORMAT
+from darthand.model.mirror import mirror_points, mirror_pose
+from darthand.render.image import read_png
 
 SETS = {"train": "training", "val": "validation", "test": "evaluation"}
 ROOT = 9
@@ -95,8 +99,6 @@ def freihand_K(K) -> np.ndarray:
 def mirror_labels(labels: dict) -> dict:
     """The labels FreiHAND's writer reads (K, keypoints_3d, mano) of a frame mirrored left-right: the right hand
     that is the mirror image of the frame's left hand, seen in the image flipped left-right."""
-    from darthand.model.mirror import mirror_points, mirror_pose
-
     K = np.array(labels["K"], float)
     K[0, 2] = labels["image_size"][0] - K[0, 2]         # pixel column u -> W - u (pixel-corner origin)
     K[0, 1] = -K[0, 1]                                    # (a skew, were there one)
@@ -135,8 +137,6 @@ def check_mano(models: dict, where, allow_non_mano: bool) -> bool:
 
 def right_hands_mean(models: dict) -> np.ndarray:
     """(45,) the right model's mean hand: its own, else the left model's mirrored (a left-only dataset)."""
-    from darthand.model.mirror import mirror_pose
-
     if "hands_mean" in models.get("right", {}):
         return np.asarray(models["right"]["hands_mean"], float)
     if "hands_mean" in models.get("left", {}):
@@ -148,10 +148,6 @@ def write_freihand(dataset, out=None, *, left: str = "mirror", allow_non_mano: b
     """Write the FreiHAND layout of a rendered dataset folder into `out` (default DATASET/freihand); left: "mirror"
     (left-hand frames become right ones) or "skip". Refuses a dataset whose hand is not MANO unless
     allow_non_mano (module docstring)."""
-    from darthand.dataset.frames import frame_names
-    from darthand.dataset.run import read_shard_records
-    from darthand.model.mirror import mirror_points
-
     if left not in LEFT_MODES:
         raise InputError(f"--left: {left!r} is not one of {', '.join(LEFT_MODES)}")
     root = Path(dataset)
@@ -235,7 +231,6 @@ def _readme(models: dict, is_mano: bool, counts: dict, left: str) -> str:
 def _write_jpegs(image_png: Path, mask_png: Path, folder: Path, row: int, flip: bool = False) -> None:
     import OpenImageIO as oiio
 
-    from darthand.render.image import read_png
 
     rgba = read_png(image_png).astype(np.float32) / 255
     rgb = rgba[..., :3] * (rgba[..., 3:4] if rgba.shape[2] == 4 else 1)    # over black (sRGB, like FreiHAND's gs)

@@ -10,6 +10,9 @@ from pathlib import Path
 
 from darthand.errors import InputError
 from darthand.fileio import atomic_path, read_json
+from darthand.model.preview import VIEWS
+from darthand.render.lights import load_lighting
+from darthand.schemas import check_schema
 
 JOBS_SCHEMA = "dataset_jobs.schema.json"
 MAX_INDEX = 10**12 - 1                 # frame names have at most 12 digits
@@ -53,8 +56,6 @@ def check_jobs(doc, source: str = "jobs") -> list[dict]:
     """The frames of a jobs document (list or {"frames": [...]}) checked against the schema, with an 'index' each
     (its position when not given); InputError naming the field for a non-finite number, an index over MAX_INDEX or a
     repeated index."""
-    from darthand.schemas import check_schema
-
     check_schema(doc, JOBS_SCHEMA, source)
     frames = doc["frames"] if isinstance(doc, dict) else doc
     prefix = "frames." if isinstance(doc, dict) else ""
@@ -92,10 +93,6 @@ def validate_jobs(sources: dict, jobs: list[dict], where: str = "jobs") -> None:
     """InputError (naming the frame and field) for what the sources ({side: source}) cannot render: a side without a
     source, unknown texture, accessory or gesture ids, poses a USD package cannot take, bad camera, lights or
     background documents. Runs before any rendering."""
-    from darthand.model.preview import VIEWS
-    from darthand.render.lights import load_lighting
-    from darthand.schemas import check_schema
-
     checked_lights, checked_folders = set(), set()
     known = {}
     for side, source in sources.items():

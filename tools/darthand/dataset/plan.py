@@ -32,6 +32,9 @@ import numpy as np
 
 from darthand.dataset import backgrounds, lighting, poses, shapes, views
 from darthand.errors import InputError
+from darthand.fileio import read_json
+from darthand.model.mirror import mirror_model, mirror_pose
+from darthand.render.lights import load_lighting
 
 PLAN_VERSION = 2
 FRAME_STREAM = 0
@@ -230,7 +233,6 @@ class Planner:
             if pose_record["mode"] == "jitter" else None
         if not isinstance(pose, str):
             if side == "left":
-                from darthand.model.mirror import mirror_pose
 
                 pose = mirror_pose(pose)
             pose = np.asarray(pose, np.float64).tolist()
@@ -307,7 +309,6 @@ def _right_model(sources: dict):
             return None
         if model.side == "right":
             return model
-    from darthand.model.mirror import mirror_model
 
     return mirror_model(next(iter(sources.values())).pose_model())
 
@@ -322,8 +323,6 @@ def _hand_centre(model) -> np.ndarray:
 def _lights_mode(value):
     if value in ("random", "default", None):
         return value or "default"
-    from darthand.fileio import read_json
-    from darthand.render.lights import load_lighting
 
     doc = read_json(value, "lights file") if isinstance(value, str) else value
     load_lighting(doc, str(value) if isinstance(value, str) else "lights")

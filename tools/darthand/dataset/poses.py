@@ -29,7 +29,11 @@ from pathlib import Path
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.fileio import read_json
+from darthand.model.anatomy import angles_to_axis_angle, axis_angle_to_angles, joint_frames, limits_radians
+from darthand.model.gestures import model_gestures
 from darthand.model.layout import FINGER_JOINTS, FINGERS, NUM_JOINTS
+from darthand.model.poses import load_pose_file
 from darthand.model.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle, slerp
 
 POSE_STREAM = 1
@@ -85,10 +89,7 @@ def load_reference(spec, model, max_mb: float = DEFAULT_MAX_REFERENCE_MB, gestur
     """The reference set named by `spec`: 'gestures' (or None) for the gesture library on `model` (right hand;
     `gestures`: some of its names), or a path to a darthand pose file or a FreiHAND training_mano.json. `max_mb`:
     the largest file read (InputError naming the budget and how to raise it otherwise)."""
-    from darthand.fileio import read_json
-
     if spec in (None, "gestures"):
-        from darthand.model.gestures import model_gestures
 
         known = model_gestures(model)                      # the model's own (fitted) gestures
         for name in gestures or ():
@@ -112,8 +113,6 @@ def load_reference(spec, model, max_mb: float = DEFAULT_MAX_REFERENCE_MB, gestur
 def pose_file_vectors_any_betas(model, path) -> np.ndarray:
     """(N, 48) poses of a darthand pose file relative to the flat hand; betas, if any, are ignored (a reference set
     only needs the articulation)."""
-    from darthand.model.poses import load_pose_file
-
     poses, _, flat_hand_mean = load_pose_file(path)
     poses = np.array(poses, np.float64)
     if not flat_hand_mean:
@@ -160,8 +159,6 @@ class GridSlerp:
 
     def __init__(self, model, reference: ReferenceSet, *, levels: int = DEFAULT_LEVELS, draws: int = DEFAULT_DRAWS,
                  steps: int = DEFAULT_STEPS):
-        from darthand.model.anatomy import joint_frames, limits_radians
-
         if not 2 <= int(levels) <= 16:
             raise InputError(f"grid levels: {levels} must be within 2..16")
         if not 1 <= int(draws) <= 100_000:
@@ -196,7 +193,6 @@ class GridSlerp:
         kept, so a group's frames (consecutive indices) compute it once."""
         if self._group is not None and self._group[0] == (seed, g):
             return self._group[1]
-        from darthand.model.anatomy import angles_to_axis_angle
 
         rng = np.random.default_rng([seed, POSE_STREAM, g])
         cells = {f: int(rng.integers(self.cells[f])) for f in FINGERS}
@@ -231,16 +227,12 @@ class GestureJitter:
     clipped to the joint limits (widened to the unperturbed angle where that lies outside them)."""
 
     def __init__(self, model, reference: ReferenceSet, jitter_deg: float = DEFAULT_JITTER_DEG):
-        from darthand.model.anatomy import joint_frames, limits_radians
-
         if not (math.isfinite(float(jitter_deg)) and 0 <= float(jitter_deg) <= 45):
             raise InputError(f"pose jitter: {jitter_deg} degrees is outside 0..45")
         self.model, self.reference, self.jitter = model, reference, math.radians(float(jitter_deg))
         self.frames, self.limits = joint_frames(model), limits_radians()
 
     def sample(self, seed: int, index: int) -> tuple[np.ndarray, dict]:
-        from darthand.model.anatomy import angles_to_axis_angle, axis_angle_to_angles
-
         rng = np.random.default_rng([seed, JITTER_STREAM, int(index)])
         k = int(rng.integers(len(self.reference)))
         noise = rng.standard_normal((NUM_JOINTS - 1, 3))

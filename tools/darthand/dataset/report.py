@@ -20,8 +20,16 @@ from pathlib import Path
 import numpy as np
 
 from darthand.dataset.embedding import PERPLEXITY, tsne
+from darthand.dataset.frames import frame_names
+from darthand.dataset.poses import load_reference
+from darthand.dataset.run import read_shard_records
+from darthand.dataset.sources import SourceSpec
 from darthand.errors import InputError
 from darthand.fileio import read_json, write_json
+from darthand.model.mirror import mirror_model, mirror_pose
+from darthand.model.rotations import axis_angle_to_quaternion
+from darthand.render.image import read_png
+from darthand.render.labels import keypoint_names
 
 MAX_POSES = 3000
 MAX_REFERENCE = 3000
@@ -39,7 +47,6 @@ def write_report(dataset, out=None, sheet: int = 24) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from darthand.dataset.run import read_shard_records
 
     root = Path(dataset)
     doc = read_json(root / "dataset.json", "dataset.json")
@@ -107,10 +114,6 @@ def dataset_figures(frames: list[dict]) -> dict:
 def pose_sets(root: Path, doc: dict, frames: list[dict]) -> tuple[np.ndarray, np.ndarray, str]:
     """((n, 15, 4) finger-joint quaternions of up to MAX_POSES frames, right-hand convention; the plan's reference
     set's (m, 15, 4), up to MAX_REFERENCE; its name)."""
-    from darthand.dataset.frames import frame_names
-    from darthand.model.mirror import mirror_pose
-    from darthand.model.rotations import axis_angle_to_quaternion
-
     pick = spread_index(len(frames), MAX_POSES)
     poses = []
     for k in pick:
@@ -123,9 +126,6 @@ def pose_sets(root: Path, doc: dict, frames: list[dict]) -> tuple[np.ndarray, np
 
 
 def _reference(doc: dict) -> tuple[np.ndarray, str]:
-    from darthand.dataset.poses import load_reference
-    from darthand.dataset.sources import SourceSpec
-
     plan = (doc.get("jobs") or {}).get("plan") or {}
     spec = (plan.get("poses") or {}).get("reference", "gestures")
     try:
@@ -134,7 +134,6 @@ def _reference(doc: dict) -> tuple[np.ndarray, str]:
         if model is None:
             raise InputError("a USD package has no model to pose the reference set with")
         if model.side != "right":
-            from darthand.model.mirror import mirror_model
 
             model = mirror_model(model)
         ref = load_reference(spec, model, float((plan.get("poses") or {}).get("max_reference_mb", 256)))
@@ -199,9 +198,6 @@ def coverage_figures(poses: np.ndarray, reference: np.ndarray) -> dict:
 
 
 def _contact_sheet(ax, root: Path, frames: list[dict], count: int) -> None:
-    from darthand.dataset.frames import frame_names
-    from darthand.render.image import read_png
-
     pick = spread_index(len(frames), count)
     cols = min(8, len(pick))
     rows = -(-len(pick) // cols)
@@ -242,8 +238,6 @@ def _bars(ax, table: dict, title: str) -> None:
 
 
 def _visibility(ax, figures: dict) -> None:
-    from darthand.render.labels import keypoint_names
-
     rates = figures["visibility_rate"]
     ax.bar(range(21), rates, color=["#808080"] + [c for c in FINGER_COLOURS for _ in range(4)])
     ax.set_xticks(range(21), keypoint_names("openpose"), rotation=90, fontsize=8)

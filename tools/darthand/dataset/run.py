@@ -30,11 +30,14 @@ from pathlib import Path
 
 import numpy as np
 
-from darthand.dataset.options import MAX_SIZE, DatasetOptions, bounded_int
 from darthand.dataset.frames import existing_frame, frame_names, job_digest
+from darthand.dataset.jobs import check_jobs, load_jobs, validate_jobs
+from darthand.dataset.options import MAX_SIZE, DatasetOptions, bounded_int
 from darthand.dataset.runner import Runner, make_runner
 from darthand.errors import InputError
 from darthand.fileio import read_json, write_json
+from darthand.render import aa
+from darthand.render.api import shading_options
 
 DATASET_FORMAT = "darthand-dataset"
 DATASET_VERSION = 2
@@ -54,10 +57,6 @@ def render_frames(options: DatasetOptions, sources: dict, specs: dict, planner=N
     A frame that fails stops the run with an InputError 'frame N: cause'. `dataset.api.render_dataset` opens the
     sources and plans; this is the part below it.
     """
-    from darthand.dataset.jobs import check_jobs, load_jobs, validate_jobs
-    from darthand.render import aa
-    from darthand.render.api import shading_options
-
     o = options
     samples, aa_shading, processes, threads = o.samples, o.aa_shading, o.processes, o.threads
     jobs = o.jobs if jobs is None else jobs

@@ -12,6 +12,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from darthand.errors import InputError
+from darthand.model.load import load_model
+from darthand.model.mirror import mirror_model
+from darthand.render.api import open_source
+from darthand.render.assets import HandAssets, default_catalogues
 
 SIDES = ("right", "left")
 
@@ -28,14 +32,9 @@ class SourceSpec:
     mirror: bool = False
 
     def open(self):
-        from darthand.render.api import open_source
-
         if not self.mirror:
             return _worn_rings(open_source(self.package, textures=self.textures, accessories=self.accessories,
                                           model=self.model))
-        from darthand.model.load import load_model
-        from darthand.model.mirror import mirror_model
-        from darthand.render.assets import HandAssets, default_catalogues
 
         path = Path("build") / "model" / f"{self.package}.npz" if self.package in SIDES else Path(self.package)
         tex, acc = self.textures, self.accessories
@@ -75,8 +74,6 @@ def parse_sides(text) -> tuple[str, ...]:
 
 def source_specs(package, sides, *, textures=None, accessories=None, model=None, opened=None) -> dict:
     """{side: SourceSpec} for the sides asked. opened: PACKAGE already opened (its side is read from it)."""
-    from darthand.render.api import open_source
-
     package = str(package)
     first = opened if opened is not None else open_source(package, textures=textures, accessories=accessories,
                                                           model=model)

@@ -18,6 +18,7 @@ import math
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.model.preview import VIEWS
 
 WRIST_CONE_COS = 0.8                # about 37 degrees about +X are excluded
 BANDS, SECTORS = 8, 16              # 128 equal-area cells
@@ -78,8 +79,6 @@ class ViewSampler:
 
     def __init__(self, views=None, *, roll_deg=(-45.0, 45.0), fov_deg=(30.0, 60.0), margin=(0.03, 0.15),
                  distance=None):
-        from darthand.model.preview import VIEWS
-
         names = [RANDOM_VIEW] if views is None else ([views] if isinstance(views, str) else list(views))
         for name in names:
             if name != RANDOM_VIEW and name not in VIEWS:

@@ -17,6 +17,8 @@ import io
 import tarfile
 from pathlib import Path
 
+from darthand.dataset.frames import frame_names
+from darthand.dataset.run import read_shard_records
 from darthand.errors import InputError
 from darthand.fileio import atomic_path, read_json
 
@@ -26,9 +28,6 @@ SPLITS = ("train", "val", "test")
 
 def write_webdataset(dataset, out=None, samples_per_shard: int = SAMPLES_PER_SHARD) -> Path:
     """Write the shards of a rendered dataset folder into `out` (default DATASET/webdataset)."""
-    from darthand.dataset.frames import frame_names
-    from darthand.dataset.run import read_shard_records
-
     root = Path(dataset)
     read_json(root / "dataset.json", "dataset.json")
     out = Path(out) if out is not None else root / "webdataset"

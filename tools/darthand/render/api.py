@@ -22,18 +22,30 @@ from darthand.errors import InputError
 from darthand.fileio import write_json
 from darthand.jit import kernel
 from darthand.render import aa
+from darthand.render.assets import HandAssets, default_catalogues
 from darthand.render.camera import Camera, load_camera
 from darthand.render.image import compose, encode_mask8, load_background, write_exr, write_png
 from darthand.render.indirect import VertexLight
 from darthand.render.labels import frame_labels
 from darthand.render.lights import Lighting, load_lighting, world_lights
 from darthand.render.poses import resolve_pose
-from darthand.render.scene import Scene as TraceScene, scene_for
+from darthand.render.scene import Scene as TraceScene
+from darthand.render.scene import scene_for
 from darthand.render.scenes import Scene
 from darthand.render.shade import ShadingOptions
 from darthand.render.subject import Subject
-from darthand.render.trace import (Context, Samples, default_threads, pixel_positions, scene_bounds,
-                                   single_threaded_blas, tile_pixels, touched_tiles, trace_parallel)
+from darthand.render.trace import (
+    Context,
+    Samples,
+    default_threads,
+    pixel_positions,
+    scene_bounds,
+    single_threaded_blas,
+    tile_pixels,
+    touched_tiles,
+    trace_parallel,
+)
+from darthand.render.usd_source import UsdPackage
 
 DEFAULT_SAMPLES = aa.DEFAULT_SAMPLES
 # Peak memory per image pixel while rendering (measured about 115 bytes at 2048^2 with the hand filling the frame).
@@ -358,11 +370,8 @@ def open_source(package, *, textures=None, accessories=None, model=None):
     """The frame source of PACKAGE: a USD package (its folder or interface .usda/.usd) -> usd_source.UsdPackage;
     a model (.npz, .pkl, 'open', 'right'/'left' for build/model/<side>.npz) -> assets.HandAssets with the texture
     and accessory catalogues (default: the build's, next to build/model/)."""
-    from darthand.render.assets import HandAssets, default_catalogues
-
     path = Path(str(package))
     if path.is_dir() and os.path.lexists(path / "asset.json") or path.suffix in (".usda", ".usd", ".usdc"):
-        from darthand.render.usd_source import UsdPackage
 
         return UsdPackage.open(path, model=model)
     if str(package) in ("right", "left"):

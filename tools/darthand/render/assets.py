@@ -17,15 +17,23 @@ from typing import ClassVar
 
 import numpy as np
 
-from darthand.errors import InputError
+from darthand.accessories.attach import pose_skinned
 from darthand.accessories.loader import Accessory, load_accessory_catalog
-from darthand.textures.loader import TextureSet, load_texture_catalog
+from darthand.accessories.reshape import ShapeRefitter
+from darthand.accessories.wear import wear_ring
+from darthand.errors import InputError
+from darthand.model.cap import forearm_cap
 from darthand.model.forward import forward
 from darthand.model.gestures import model_gestures
 from darthand.model.hand_model import HandModel
+from darthand.model.layout import NUM_POSE_FEATURES
+from darthand.model.load import load_model
 from darthand.model.topology import face_joints, vertex_normals
+from darthand.render.poses import resolve_pose
 from darthand.render.subject import PLAIN_SKIN, Material, Subject, Surface, checker_material, skin_material
 from darthand.render.texture import constant_texture, load_maps
+from darthand.textures.color import linear_to_srgb, srgb_to_linear
+from darthand.textures.loader import TextureSet, load_texture_catalog
 
 PLAIN = "plain"        # texture id of the untextured hand (a constant skin colour)
 CHECKER = "checker"    # texture id of the UV checker
@@ -57,8 +65,6 @@ class HandAssets:
     def load(cls, model, textures=None, accessories=None) -> "HandAssets":
         """From a model (HandModel or a path/name for model.load.load_model) and catalogue paths (file or folder;
         None: none). Accessories fitted to the other hand are mirrored."""
-        from darthand.model.load import load_model
-
         m = model if isinstance(model, HandModel) else load_model(model)
         sets, default = texture_catalog(textures) if textures else ([], None)
         accs = load_accessory_catalog(accessories, side=m.side) if accessories else []
@@ -122,13 +128,10 @@ class HandAssets:
                 accessory: str | None = None, betas=None, keypoint_order: str = "openpose") -> Subject:
         """The posed hand (and accessory) for a pose: None (flat), a gesture name, a pose file, or (48,) axis-angle
         relative to the flat hand."""
-        from darthand.render.poses import resolve_pose
-
         pose_vec, gesture = resolve_pose(self.model, pose, cache=self._gestures)
         texture, accessory = self.resolve_texture(texture), self.resolve_accessory(accessory)
         worn = None
         if self.worn_rings and accessory != NONE and self.accessories[accessory].kind == "ring":
-            from darthand.accessories.wear import wear_ring
 
             pose_vec, worn = wear_ring(self.model, *self.fitted_accessory(accessory, betas), pose_vec, betas)
         key = (pose_vec.tobytes(), None if betas is None else np.asarray(betas, np.float64).tobytes(), keypoint_order)
@@ -164,7 +167,6 @@ class HandAssets:
     def skin(self, texture: str, offset: float = 0.0) -> Material:
         """The hand's material for a texture id and skin-tone offset (added to the sRGB albedo)."""
         if texture == PLAIN:
-            from darthand.textures.color import linear_to_srgb, srgb_to_linear
 
             plain = srgb_to_linear(np.clip(linear_to_srgb(np.array(PLAIN_SKIN)) + offset, 0, 1))
             return skin_material(constant_texture(plain), name=PLAIN)
@@ -190,8 +192,6 @@ class HandAssets:
 
     def posed_cap(self, posed, betas, material: Material) -> Surface:
         """The forearm cap (model/cap.py) for a forward-pass result, in the hand's material."""
-        from darthand.model.cap import forearm_cap
-
         if "cap" not in self._face_joints:
             cap = forearm_cap(self.model)
             self._face_joints["cap"] = (cap, face_joints(cap.faces, cap.weights), *(
@@ -217,7 +217,6 @@ class HandAssets:
             self._refits = (b.tobytes(), {})
         fitted = self._refits[1]
         if accessory not in fitted:
-            from darthand.accessories.reshape import ShapeRefitter
 
             if self._refitter is None:
                 self._refitter = ShapeRefitter(self.model, list(self.accessories.values()))
@@ -243,9 +242,6 @@ class HandAssets:
             if local is None:
                 local = self._rest_normals["f32", key] = np.ascontiguousarray(acc.vertices, np.float32)
         else:
-            from darthand.accessories.attach import pose_skinned
-            from darthand.model.layout import NUM_POSE_FEATURES
-
             posedirs = acc.posedirs if acc.posedirs is not None else np.zeros((len(acc.vertices), 3,
                                                                                  NUM_POSE_FEATURES))
             if ("f32", key) not in self._face_joints:

@@ -19,7 +19,10 @@ from pxr import Usd, UsdGeom, UsdShade, UsdSkel
 from darthand.errors import InputError
 from darthand.export.influences import dense_weights
 from darthand.export.package_files import check_usd_package, read_asset_info
+from darthand.export.usd_evaluate import skinned_points
+from darthand.model.hand_model import HandModel
 from darthand.model.layout import KEYPOINT_ORDERS, NUM_JOINTS
+from darthand.model.load import load_model
 from darthand.model.topology import face_joints, vertex_normals
 from darthand.render.subject import Material, Subject, Surface, skin_material
 from darthand.render.texture import constant_texture, load_maps
@@ -115,8 +118,6 @@ class UsdPackage:
     def subject(self, pose=None, *, texture: str | None = None, skin_tone_offset: float = 0.0,
                 accessory: str | None = None, keypoint_order: str = "openpose", betas=None) -> Subject:
         """The package posed at the gesture's time code with the chosen variants."""
-        from darthand.export.usd_evaluate import skinned_points
-
         if betas is not None:
             raise InputError("betas: a USD package carries no shape space")
         t, gesture = self.time_code(pose)
@@ -270,7 +271,6 @@ def _tip_ids(interface: Path, info: dict, model) -> np.ndarray:
     tips = (info.get("model") or {}).get("tip_ids")
     if tips is not None:
         return np.asarray(tips, np.int64)
-    from darthand.model.hand_model import HandModel
 
     if isinstance(model, HandModel):
         return model.tip_ids
@@ -278,7 +278,6 @@ def _tip_ids(interface: Path, info: dict, model) -> np.ndarray:
     candidates = [Path(model)] if model is not None else [interface.parent.parent.parent / "model" / f"{side}.npz"]
     for path in candidates:
         if path.is_file():
-            from darthand.model.load import load_model
 
             return load_model(path).tip_ids
     raise InputError(f"{interface}: the package does not list its fingertip vertices (asset.json model.tip_ids); "

@@ -14,7 +14,12 @@ import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from darthand.dataset.backgrounds import BUILTIN_COUNT, list_images
+from darthand.dataset.lighting import PALETTE, PALETTE_K
+from darthand.dataset.plan import texture_tags
 from darthand.errors import InputError
+from darthand.model.preview import VIEWS
+from darthand.render.api import open_source
 
 SIDES = ("right", "left")
 
@@ -60,7 +65,6 @@ class StudioBuild:
                              "model/<side>.npz; run `make assets`)")
         self.background_folder, self.background_files = None, []
         if backgrounds is not None:
-            from darthand.dataset.backgrounds import list_images
 
             self.background_folder = Path(backgrounds).resolve()
             self.background_files = list_images(self.background_folder, max_files=10_000)
@@ -106,11 +110,6 @@ class StudioBuild:
     def catalogue(self) -> dict:
         """What the page lists: sides, textures (id, tone, category) and accessories (id, type) of the first side,
         gestures per side, light palette, named views, backgrounds."""
-        from darthand.dataset.backgrounds import BUILTIN_COUNT
-        from darthand.dataset.lighting import PALETTE, PALETTE_K
-        from darthand.dataset.plan import texture_tags
-        from darthand.model.preview import VIEWS
-
         first = next(iter(self.sides.values()))
         return {
             "sides": list(self.sides),
@@ -128,8 +127,6 @@ def _has_side(root: Path, side: str) -> bool:
 
 
 def _open_side(root: Path, side: str) -> SideAssets:
-    from darthand.render.api import open_source
-
     gltf = root / "gltf" / side / f"{side}.gltf"
     try:
         doc = json.loads(gltf.read_text())

@@ -14,8 +14,20 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.accessories.preview import render_view
+from darthand.dataset.backgrounds import background_pixels, decode_image
+from darthand.export.correctives import export_correctives
+from darthand.export.gltf_accessories import add_accessory
+from darthand.export.gltf_document import GltfDocument
+from darthand.export.gltf_materials import MaterialBuilder
+from darthand.export.gltf_rig import add_skeleton, add_skin
+from darthand.export.influences import parse_influences
+from darthand.export.skeleton import export_skeleton
+from darthand.model.topology import vertex_normals
 from darthand.render.image import write_png
+from darthand.textures import sheet
 from darthand.textures.color import encode_srgb8
+from darthand.textures.imageio import read_small
 
 THUMB_SIZE = 96
 BACKGROUND_SIZE = 512
@@ -35,18 +47,12 @@ def cached_file(path: Path, make) -> bytes:
 
 def texture_thumbnail(side, texture_id: str, path: Path) -> None:
     """Write the THUMB_SIZE PNG of the hand wearing a texture (back above, palm below)."""
-    from darthand.textures import sheet
-    from darthand.textures.imageio import read_small
-
     maps = _preview_maps(side)
     albedo = read_small(side.source.textures[texture_id].albedo, 256)[..., :3]
     write_png(path, sheet.thumbnail(np.ascontiguousarray(albedo), maps))
 
 
 def _preview_maps(side):
-    from darthand.model.topology import vertex_normals
-    from darthand.textures import sheet
-
     if side.preview is None:
         m = side.model
         mesh = {"vertices": m.v_template, "faces": m.faces, "uvs": m.uvs, "faces_uv": m.faces_uv,
@@ -57,9 +63,6 @@ def _preview_maps(side):
 
 def accessory_thumbnail(side, accessory_id: str, path: Path) -> None:
     """Write the THUMB_SIZE PNG of an accessory on the rest hand, framed on the accessory."""
-    from darthand.accessories.preview import render_view
-    from darthand.dataset.backgrounds import decode_image
-
     acc = side.source.accessories[accessory_id]
     model = side.model
     mesh = {"vertices": acc.vertices, "faces": acc.faces, "metallic": float(acc.material.get("metallic", 0.0))}
@@ -82,13 +85,6 @@ def accessory_glb(side, accessory_id: str, package: dict) -> bytes:
     the package's influences and corrective encoding (its asset.extras.darthand)."""
     import pygltflib as gl
 
-    from darthand.export.correctives import export_correctives
-    from darthand.export.gltf_accessories import add_accessory
-    from darthand.export.gltf_document import GltfDocument
-    from darthand.export.gltf_materials import MaterialBuilder
-    from darthand.export.gltf_rig import add_skeleton, add_skin
-    from darthand.export.influences import parse_influences
-    from darthand.export.skeleton import export_skeleton
 
     extras = package.get("asset", {}).get("extras", {}).get("darthand", {})
     model = side.model
@@ -111,7 +107,5 @@ def accessory_glb(side, accessory_id: str, package: dict) -> bytes:
 def background_image(spec: dict, path: Path, size: int = BACKGROUND_SIZE) -> None:
     """Write the size x size sRGB PNG of a background spec (dataset/backgrounds.py) as a dataset frame of that size
     would show it."""
-    from darthand.dataset.backgrounds import background_pixels
-
     pixels, _ = background_pixels(spec, size, size)
     write_png(path, encode_srgb8(pixels))

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from darthand.export.gestures import gesture_poses
 from darthand.model.anatomy import AXES, axis_angle_to_angles, joint_frames, limits_radians
 from darthand.model.bones import bone_frames
 from darthand.model.hand_model import HandModel
@@ -25,8 +26,6 @@ def rig_document(model: HandModel) -> dict:
     """The side's rig for the page: joint names and parents, frames F (16, 3, 3) and O (16, 3, 3) as nested lists
     (rows of the matrices, columns the axes), limits in degrees (16, 3, 2), gestures {name: angles in degrees
     (16, 3)} in library order (the rest pose first)."""
-    from darthand.export.gestures import gesture_poses
-
     names, poses = gesture_poses(model)
     F = joint_frames(model)
     angles = np.rad2deg(axis_angle_to_angles(model, poses, F))

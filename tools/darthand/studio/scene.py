@@ -16,10 +16,19 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.dataset.frames import render_job
+from darthand.dataset.jobs import check_jobs
 from darthand.dataset.options import DEFAULT_SAMPLES
 from darthand.errors import InputError
+from darthand.fileio import write_json
 from darthand.model.anatomy import angles_to_axis_angle
 from darthand.model.layout import NUM_JOINTS
+from darthand.model.mirror import mirror_pose
+from darthand.render.api import Renderer
+from darthand.render.camera import Camera
+from darthand.render.image import encode_mask8, write_png
+from darthand.render.lights import load_lighting
+from darthand.schemas import check_schema
 from darthand.studio.build import RequestError, StudioBuild
 
 SCENE_SCHEMA = "studio_scene.schema.json"
@@ -34,10 +43,6 @@ NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 def check_scene(build: StudioBuild, scene) -> dict:
     """The scene checked (schema, ids from the build's catalogues, a square camera with a rotation R, lights);
     RequestError 400/404 naming the field otherwise."""
-    from darthand.render.camera import Camera
-    from darthand.render.lights import load_lighting
-    from darthand.schemas import check_schema
-
     _checked(lambda: check_schema(scene, SCENE_SCHEMA, "scene"))
     side = build.side(scene["side"])
     if "texture" in scene:
@@ -99,10 +104,6 @@ def _job_background(build: StudioBuild, background):
 def render_scene(build: StudioBuild, scene: dict) -> dict:
     """Render the scene as its dataset job would be: {'image', 'mask' (PNG bytes, base64), 'labels', 'job',
     'seconds'}."""
-    from darthand.dataset.frames import render_job
-    from darthand.render.image import encode_mask8
-    from darthand.render.api import Renderer
-
     check_scene(build, scene)
     job = scene_job(build, scene)
     side = build.side(scene["side"])
@@ -127,7 +128,6 @@ def _png64(pixels: np.ndarray, srgb: bool = True) -> str:
     """Base64 PNG bytes of (H, W[, C]) uint8 pixels (render/image.write_png's encoding)."""
     import tempfile
 
-    from darthand.render.image import write_png
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "frame.png"
@@ -149,8 +149,6 @@ def right_hand_poses(build: StudioBuild, angles_deg) -> np.ndarray:
     """(N, 48) right-hand MANO poses of joint angles (N, 16, 3) degrees: the reference poses `render-dataset
     --poses` samples for right hands (and mirrors for left frames). The angles are mirror-symmetric
     (model/anatomy.py), so a pose authored on a left hand gives its right-hand twin."""
-    from darthand.model.mirror import mirror_pose
-
     angles = np.deg2rad(np.asarray(angles_deg, np.float64))
     if "right" in build.sides:
         return angles_to_axis_angle(build.sides["right"].model, angles).reshape(-1, 3 * NUM_JOINTS)
@@ -183,9 +181,6 @@ def export_name(doc, default: str) -> str:
 def write_export(build: StudioBuild, kind: str, name: str, doc) -> Path:
     """Write an export atomically as BUILD/studio/<kind>/<name>.json (kind: poses, pose_lists, scenes); returns its
     path. The document is checked against its schema first."""
-    from darthand.fileio import write_json
-    from darthand.schemas import check_schema
-
     schema = {"poses": "pose.schema.json", "pose_lists": "pose.schema.json",
               "scenes": "dataset_jobs.schema.json"}[kind]
     check_schema(doc, schema, f"{kind} export")
@@ -197,8 +192,6 @@ def write_export(build: StudioBuild, kind: str, name: str, doc) -> Path:
 
 def scene_export(build: StudioBuild, scene: dict, path_hint: str) -> dict:
     """The one-frame jobs file of a scene, with how to render it."""
-    from darthand.dataset.jobs import check_jobs
-
     job = scene_job(build, scene)
     size = int(scene["camera"]["width"]) if scene.get("camera") else 512
     model = build.side(scene["side"]).source.source

@@ -23,8 +23,16 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
+from darthand.dataset.backgrounds import BUILTIN_COUNT
 from darthand.errors import InputError
+from darthand.fileio import write_bytes
+from darthand.model.preview import VIEWS
+from darthand.render.camera import load_camera
+from darthand.studio import media
+from darthand.studio import scene as sc
 from darthand.studio.build import RequestError, StudioBuild
+from darthand.studio.rig import rig_document
+from darthand.studio.scene import check_scene, scene_pose
 
 STATIC = Path(__file__).resolve().parent / "static"
 REPO_ROOT = Path(__file__).resolve().parents[3]
@@ -50,8 +58,6 @@ class Studio:
         self._made = threading.Lock()
 
     def rig(self, side: str) -> dict:
-        from darthand.studio.rig import rig_document
-
         if side not in self._rigs:
             self._rigs[side] = rig_document(self.build.side(side).model)
         return self._rigs[side]
@@ -209,15 +215,12 @@ class StudioHandler(BaseHTTPRequestHandler):
         self._file(self.studio.build.package_file(side, "/".join(rest[1:])), cache=True)
 
     def get_media(self, rest):
-        from darthand.studio import media
-
         build = self.studio.build
         cache = build.out_dir / "cache"
         if len(rest) == 3 and rest[0] == "background":
             kind, name = rest[1], _strip(rest[2], ".png")
             index = _index(name)
             if kind == "builtin":
-                from darthand.dataset.backgrounds import BUILTIN_COUNT
 
                 if index is None or index >= BUILTIN_COUNT:
                     raise RequestError(404, f"built-in background {name!r} is not in 0..{BUILTIN_COUNT - 1}")
@@ -257,8 +260,6 @@ class StudioHandler(BaseHTTPRequestHandler):
     # ---------------------------------------------------------------------------------------------- POST
 
     def post_api(self, rest, body):
-        from darthand.studio import scene as sc
-
         build = self.studio.build
         if rest == ["render"]:
             return self._json(sc.render_scene(build, body))
@@ -292,10 +293,6 @@ POST_ROUTES = {"api": StudioHandler.post_api}
 def view_camera(build: StudioBuild, body) -> dict:
     """A named view framed on the posed hand (render/camera.py, as a job's view camera is): {side, angles_deg,
     view, size, accessory?} -> the camera's K, R, t, width, height and the point it frames."""
-    from darthand.model.preview import VIEWS
-    from darthand.render.camera import load_camera
-    from darthand.studio.scene import check_scene, scene_pose
-
     if not isinstance(body, dict):
         raise RequestError(400, "camera: the body must be an object")
     view, size = body.get("view"), body.get("size", 512)
@@ -340,8 +337,6 @@ def _index(text: str) -> int | None:
 
 
 def _write(path: Path, data: bytes) -> None:
-    from darthand.fileio import write_bytes
-
     write_bytes(path, data)
 
 
