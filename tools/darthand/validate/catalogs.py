@@ -12,7 +12,6 @@ from __future__ import annotations
 from functools import lru_cache
 from pathlib import Path
 
-from darthand.accessories import catalog as accessory_catalog
 from darthand.errors import DarthandError
 from darthand.fileio import read_json
 
@@ -72,4 +71,6 @@ def _spec_texture_ids() -> frozenset:
 
 @lru_cache(maxsize=1)
 def _spec_accessory_ids() -> frozenset:
-    return frozenset(item["id"] for item in accessory_catalog.load_spec()["items"])
+    from darthand.accessories.catalog import load_spec  # lazy: as above, only for packages that record accessory ids
+
+    return frozenset(item["id"] for item in load_spec()["items"])
