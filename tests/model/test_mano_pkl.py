@@ -19,13 +19,14 @@ from darthand.model.layout import FINGER_JOINTS, FINGERS, MANO_PARENTS, MANO_TIP
 from darthand.model.mano_pkl import (
     ALLOWED_GLOBALS,
     LEFT_SHAPEDIRS_FIX,
+    MANO_FORMAT,
     evaluate,
     is_mano_pkl,
     load_mano_pkl,
-    read_pickle,
     shapedirs_x_sign_wrong,
 )
 from darthand.model.npz_io import load_npz, save_npz
+from darthand.safe_pickle import read_pickle
 from model.mano_fixture import (
     MALICIOUS_KINDS,
     add_vertices,
@@ -177,7 +178,7 @@ def test_left_bug_detected_and_fixed(tmp_path):
     source = with_size_direction(tube_hand(seed=5))
     path = write_mano_pkl(tmp_path / "MANO_LEFT.pkl", source, side="left", left_bug=True)
     expected = mirror_x(source)
-    in_file = evaluate(read_pickle(path)[0]["shapedirs"])
+    in_file = evaluate(read_pickle(path, ALLOWED_GLOBALS, MANO_FORMAT)[0]["shapedirs"])
     assert np.array_equal(in_file[:, 0], -expected.shapedirs[:, 0])  # the file has the bug ...
     assert np.array_equal(in_file[:, 1:], expected.shapedirs[:, 1:])
     loaded = load_mano_pkl(path)

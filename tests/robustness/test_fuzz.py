@@ -146,7 +146,8 @@ def test_pickle_loader_never_fails_unhandled(mano_bytes, tmp_path_factory, data)
 @FUZZ
 @given(depth=st.integers(101, 300_000), container=st.sampled_from(["tuple", "frozenset", "list", "dict"]))
 def test_pickles_nested_too_deep_are_refused_before_unpickling(tmp_path_factory, depth, container):
-    from darthand.model.mano_pkl import MAX_PICKLE_DEPTH, load_mano_pkl
+    from darthand.model.mano_pkl import load_mano_pkl
+    from darthand.safe_pickle import MAX_PICKLE_DEPTH
 
     body = {"tuple": b"K\x00" + b"\x85" * depth, "frozenset": b"(" * depth + b"\x91" * depth,
             "list": b"](" * depth + b"e" * depth, "dict": b"}K\x01" * depth + b"s" * depth}[container]

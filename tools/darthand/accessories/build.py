@@ -35,6 +35,7 @@ from darthand.errors import InputError
 from darthand.fileio import atomic_path, write_bytes, write_json
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import JOINT_NAMES
+from darthand.model.preview import contact_sheet, write_png
 from darthand.model.topology import vertex_normals
 
 FORMAT, FORMAT_VERSION = "darthand-accessory", 1
@@ -250,8 +251,6 @@ def write_image(path: str | Path, image: np.ndarray, srgb: bool) -> None:
 def write_contact_sheet(model: HandModel, built: list[Built], path: Path, tile: int = 192) -> None:
     """All accessories on the rest hand, one tile each (rings close up from the back of the hand, wrist items
     three-quarter, gloves the whole hand), labelled with their ids."""
-    from darthand.model.preview import contact_sheet, write_png
-
     hand = {"vertices": model.v_template, "faces": model.faces}
     images, labels = [], []
     for b in built:

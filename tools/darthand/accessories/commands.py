@@ -1,4 +1,5 @@
-"""Thin command functions for `darthand accessories ...` (arguments are defined in cli.py)."""
+"""Thin command functions for `darthand accessories ...` (arguments are defined in cli.py). Each handler imports
+lazily what only it uses, so that building the CLI (and `darthand --help`) loads none of it."""
 
 from __future__ import annotations
 

@@ -15,6 +15,7 @@ import numpy as np
 from darthand.errors import InputError
 from darthand.fileio import file_in, open_regular
 from darthand.model.layout import NUM_JOINTS, NUM_POSE_FEATURES
+from darthand.model.mirror import mirror_points, mirror_posedirs
 from darthand.schemas import read_catalog
 
 
@@ -114,8 +115,6 @@ def mirror_accessory(acc: Accessory) -> Accessory:
     """The accessory for the mirror-image hand (x -> -x, winding reversed, correctives and shape directions as in
     mirror_model). A rest frame [R | t] becomes [S R D | S t], S = diag(-1, 1, 1), D = diag(1, 1, -1): the
     mirrored bone frame, still right-handed (x along the bone, y dorsal, z = x cross y)."""
-    from darthand.model.mirror import mirror_points, mirror_posedirs
-
     flip = [0, 2, 1]
     S = np.diag([-1.0, 1.0, 1.0])
     rest = None

@@ -42,6 +42,7 @@ from darthand.accessories.fit import WRIST_JOINT, wrist_axis
 from darthand.accessories.wear import RingWear, slide_matrix
 from darthand.model.anatomy import bone_ends, rest_joints, sample_poses
 from darthand.model.forward import forward
+from darthand.model.gestures import model_gestures
 from darthand.model.hand_model import HandModel
 from darthand.model.intersections import joint_parts
 from darthand.model.layout import MANO_PARENTS
@@ -58,13 +59,11 @@ def sweep_poses(model: HandModel, seed: int, n_sampled: int, gestures: list[str]
     from the generator of (seed, `stream`) in which the hand does not pass through itself (two digits inside each
     other: model/self_crossing), unless `skip_crossing` is False. A sample keeps the name of its draw (`sample_017`),
     so the names say which were left out."""
-    from darthand.model.gestures import model_gestures
-
     g = model_gestures(model, gestures)
     sampled = sample_poses(model, n_sampled, cat.item_rng(seed, stream)) if n_sampled else np.zeros((0, 48))
     kept = np.arange(n_sampled)
     if skip_crossing and n_sampled:
-        from darthand.model.self_crossing import SelfCrossing
+        from darthand.model.self_crossing import SelfCrossing  # lazy: kept off `darthand --help`'s path
 
         kept = np.flatnonzero([c is None for c in SelfCrossing(model).crossing_poses(sampled)])
     names = ["rest"] + list(g.names) + [f"sample_{i:03d}" for i in kept]

@@ -190,7 +190,7 @@ class RingWear:
             if candidate[0] >= unturned[0] - TIE:
                 break
             if self._crossing is None:
-                from darthand.model.self_crossing import SelfCrossing
+                from darthand.model.self_crossing import SelfCrossing  # lazy: kept off `darthand --help`'s path
 
                 self._crossing = SelfCrossing(self.model)
             found = self._crossing.crossing(candidate[3].vertices[0])

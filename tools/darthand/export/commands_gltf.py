@@ -1,5 +1,6 @@
 """The `darthand export gltf | gltf-validate | blend` commands: each takes parsed arguments (cli.py defines them),
-calls the stage, prints a short report."""
+calls the stage, prints a short report. Each handler imports lazily what only it uses, so that
+building the CLI (and `darthand --help`) loads none of it."""
 
 from __future__ import annotations
 

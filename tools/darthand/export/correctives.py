@@ -32,6 +32,7 @@ import numpy as np
 from darthand.errors import InputError
 from darthand.export.blendshapes import ShapeEncoding, encode_channels, linear_ranges
 from darthand.export.influences import pruned_model
+from darthand.model.anatomy import sample_poses
 from darthand.model.forward import forward, pose_feature
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import JOINT_NAMES, NUM_JOINTS, NUM_POSE_FEATURES
@@ -137,8 +138,6 @@ def export_correctives(model: HandModel, mode: str = "full") -> Correctives:
 def pose_feature_sqrt_covariance(model: HandModel) -> np.ndarray:
     """(135, 135) L with L L^T = E[f f^T], the second moment of the pose feature over POSE_PCA_SAMPLES anatomical
     poses of `model` (seeded, so the export is deterministic); a tiny ridge keeps the Cholesky factor defined."""
-    from darthand.model.anatomy import sample_poses
-
     poses = sample_poses(model, POSE_PCA_SAMPLES, np.random.default_rng(POSE_PCA_SEED))
     f = pose_feature(axis_angle_to_matrix(poses.reshape(-1, NUM_JOINTS, 3)))
     C = f.T @ f / len(f)

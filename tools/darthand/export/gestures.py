@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from darthand.model.gestures import model_gestures
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import NUM_JOINTS
 
@@ -18,8 +19,6 @@ def gesture_poses(model: HandModel) -> tuple[list[str], np.ndarray]:
     Sorted by name except that `flat` (the rest pose) comes first, so that an animation's first frame is the rest
     pose. Without any gesture the animation holds only the rest pose: (['rest'], zeros (1, 48)).
     """
-    from darthand.model.gestures import model_gestures
-
     gestures = model_gestures(model)
     names, poses = list(gestures.names), gestures.poses
     if not names:

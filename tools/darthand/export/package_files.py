@@ -25,7 +25,7 @@ from pathlib import Path
 from urllib.parse import unquote
 
 from darthand.errors import InputError
-from darthand.fileio import file_kind
+from darthand.fileio import file_kind, read_json
 
 MAX_LAYERS = 100_000
 _URI = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]+:")
@@ -53,8 +53,6 @@ def read_asset_info(folder: str | os.PathLike) -> dict:
     """A package folder's asset.json ({} when there is none), after checking the fields readers use: interface (a
     .usd* file name at the package's top), side, options and model (objects), model.tip_ids (5 vertex indices),
     gestures.names (strings). InputError naming the file and field otherwise; nothing else in it is trusted."""
-    from darthand.fileio import read_json
-
     path = Path(folder) / ASSET_INFO
     if not os.path.lexists(path):
         return {}

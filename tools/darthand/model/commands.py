@@ -1,4 +1,7 @@
-"""The `darthand model ...` commands: each takes parsed arguments, calls the stage, prints a short report."""
+"""The `darthand model ...` commands: each takes parsed arguments, calls the stage, prints a short report.
+
+Each handler imports lazily what only it uses, so that building the CLI (and `darthand --help`) loads none of it.
+"""
 
 from __future__ import annotations
 

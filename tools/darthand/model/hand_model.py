@@ -27,6 +27,7 @@ import scipy.sparse as sp
 
 from darthand.errors import InputError
 from darthand.model.layout import FACE_LABELS, NUM_JOINTS, NUM_POSE_FEATURES
+from darthand.model.shape import check_betas, shaped_vertices
 
 SIDES = ("right", "left")
 # Largest magnitude a float field may hold: a hand in metres is far below it, and products of such values stay finite.
@@ -100,9 +101,17 @@ class HandModel:
         return HandModel.create(source=self.meta.get("source", "model"), **fields)
 
     def shaped(self, betas) -> "HandModel":
-        """The model of one shape, betas (S,): see `model.shape.shaped_model`."""
-        from darthand.model.shape import shaped_model
-        return shaped_model(self, betas)
+        """The model of one shape, betas (S,): template = `shape.shaped_vertices`, everything else kept; the betas
+        are recorded in meta['betas'] (added to any already baked in)."""
+        b = check_betas(self, betas)
+        if b.ndim != 1:
+            raise InputError(f"betas: one shape expected, got shape {b.shape}")
+        baked = np.zeros(self.num_betas)
+        baked[:len(b)] = b
+        previous = np.asarray(self.meta.get("betas", np.zeros(self.num_betas)), dtype=np.float64)
+        if previous.shape == baked.shape:
+            baked = baked + previous
+        return self.replace(v_template=shaped_vertices(self, b), meta={**self.meta, "betas": baked.tolist()})
 
 
 def _converted(convert, value, key: str, source: str) -> np.ndarray:

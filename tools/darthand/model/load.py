@@ -6,6 +6,9 @@ from pathlib import Path
 
 from darthand.errors import InputError
 from darthand.model.hand_model import HandModel
+from darthand.model.mano_pkl import load_mano_pkl
+from darthand.model.mirror import mirror_model
+from darthand.model.npz_io import load_npz
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
 TEMPLATE_DIR = REPO_ROOT / "assets_src" / "template"
@@ -19,10 +22,8 @@ def load_model(spec: str | Path) -> HandModel:
         return open_hand(BUILTIN[name])
     path = Path(name)
     if path.suffix == ".pkl":
-        from darthand.model.mano_pkl import load_mano_pkl
         return load_mano_pkl(path)
     if path.suffix == ".npz":
-        from darthand.model.npz_io import load_npz
         return load_npz(path)
     if not path.exists():
         raise InputError(f"{name}: no such model file, and not a built-in name ({', '.join(BUILTIN)})")
@@ -31,9 +32,6 @@ def load_model(spec: str | Path) -> HandModel:
 
 def open_hand(side: str = "right") -> HandModel:
     """The committed open CC0 template (without the wrist), right or mirrored left."""
-    from darthand.model.mirror import mirror_model
-    from darthand.model.npz_io import load_npz
-
     path = TEMPLATE_DIR / "open_right.npz"
     if not path.is_file():
         raise InputError(f"{path}: the open hand template is missing from this checkout")

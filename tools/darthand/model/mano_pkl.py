@@ -11,194 +11,37 @@ The official files are Python 2 pickles of a dict (read with ``encoding='latin1'
     kintree_table     (2, 16)         row 0 parents (root: 2**32 - 1), row 1 joint ids
     hands_components  (45, 45), hands_mean (45,), hands_coeffs, J (16, 3), bs_style 'lbs', bs_type 'lrotmin'
 
-A pickle can call any importable function while it loads, so it is read by `SafeManoUnpickler`, which resolves
-globals only from `ALLOWED_GLOBALS` (an explicit list of (module, name) pairs). numpy names map to wrappers that
-check their arguments before calling the real constructor; scipy's sparse classes and chumpy's classes map to small
-stand-ins that only record their pickled state; everything else raises `UnsafePickleError` at the moment the global
-is looked up, before it can be called. chumpy itself is never imported (it does not import on modern numpy); its
+A pickle can call any importable function while it loads, so it is read by `safe_pickle.read_pickle` with
+`ALLOWED_GLOBALS`: safe_pickle's numpy and builtin guards plus small stand-ins for scipy's sparse classes and chumpy's
+classes that only record their pickled state; everything else raises `UnsafePickleError` at the moment the global is
+looked up, before it can be called. chumpy itself is never imported (it does not import on modern numpy); its
 objects are evaluated from their recorded state (`Ch.x`, `Select.a[idxs]`, ...) into float64 arrays.
 """
 
 from __future__ import annotations
 
-import hashlib
-import io
-import pickle
-import pickletools
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
-from darthand.budget import check_memory
-from darthand.errors import InputError, UnsafePickleError
-from darthand.fileio import read_bytes
+from darthand.errors import InputError
 from darthand.model.hand_model import HandModel, check_parents
 from darthand.model.layout import FINGER_JOINTS, FINGERS, MANO_TIP_IDS, NUM_JOINTS, NUM_POSE_FEATURES
+from darthand.safe_pickle import BASE_GLOBALS, Guard, StandIn, first_line, printable, read_pickle
 
 MANO_NUM_VERTICES = 778
-MANO_FORMAT = "MANO pickle"       # meta["format"] of a model read from a MANO file (datasets record it)
+MANO_FORMAT = "MANO pickle"       # meta["format"] of a model read from a MANO file (datasets record it); in errors
 LEFT_SHAPEDIRS_FIX = "left shapedirs x sign flipped"
 # |Pearson correlation| above which an axis counts in the left-shapedirs test (see `shapedirs_x_sign_wrong`).
 _DECISIVE_CORRELATION = 0.5
-
-
-class _Refused(Exception):
-    """Raised inside the unpickler when a global or a call is not allowed; the loader adds the file name."""
-
-
-# --------------------------------------------------------------------------------------------------------------------
-# Guards: what the unpickler gets instead of an allowed global.
-
-
-class _Guard:
-    """A callable standing in for an allowed global: it checks the arguments a REDUCE gives it, then builds the value.
-
-    It has no __dict__ and refuses BUILD, so a pickle cannot change it; being shared between loads is safe.
-    """
-
-    __slots__ = ("qualname", "_build")
-
-    def __init__(self, qualname: str, build):
-        self.qualname = qualname
-        self._build = build
-
-    def __call__(self, *args):
-        value = self._build(*args)
-        if value is _REFUSE:
-            kinds = ", ".join(a.qualname if isinstance(a, _Guard) else type(a).__name__ for a in args)
-            raise _Refused(f"refused call {self.qualname}({kinds}): not a constructor call this loader expects")
-        return value
-
-    def __setstate__(self, state):
-        raise _Refused(f"refused BUILD on {self.qualname}")
-
-    def __repr__(self):
-        return f"<allowed {self.qualname}>"
-
-
-_REFUSE = object()  # returned by a guard's builder when the arguments are not the expected ones
-
-
-def _token(qualname: str) -> _Guard:
-    """A global that may only appear as an argument (numpy.ndarray, builtins.object): calling it is refused."""
-    return _Guard(qualname, lambda *args: _REFUSE)
-
-
-_NDARRAY = _token("numpy.ndarray")
-_OBJECT = _token("builtins.object")
-
-# The real numpy functions, taken from what numpy itself pickles (their module moved from numpy.core to
-# numpy._core in numpy 2; asking the objects avoids importing either path).
-_NP_RECONSTRUCT = np.ndarray.__reduce__(np.empty(0))[0]
-_NP_SCALAR = np.float64(0).__reduce__()[0]
-_NP_FROMBUFFER = np.zeros(1).__reduce_ex__(5)[0]
-
-
-def _is_shape(shape) -> bool:
-    return isinstance(shape, tuple) and all(isinstance(n, int) and n >= 0 for n in shape)
-
-
-def _latin1_bytes(data):
-    """Python 2 `str` payloads arrive as latin-1 decoded text; numpy wants the original bytes."""
-    return data.encode("latin1") if isinstance(data, str) else data
-
-
-def _build_reconstruct(subtype=None, shape=None, typecode=None, *extra):
-    # numpy pickles every ndarray as _reconstruct(ndarray, (0,), b'b') followed by BUILD(state).
-    if extra or subtype is not _NDARRAY or not _is_shape(shape) or _latin1_bytes(typecode) != b"b":
-        return _REFUSE
-    return _NP_RECONSTRUCT(np.ndarray, shape, b"b")
-
-
-def _build_dtype(spec=None, align=False, copy=True, *extra):
-    if extra or not isinstance(spec, (str, bytes)) or not isinstance(align, (bool, int)):
-        return _REFUSE
-    spec = spec.decode("latin1") if isinstance(spec, bytes) else spec
-    # Always a copy: BUILD then sets the state on it, never on numpy's shared builtin dtype.
-    return np.dtype(spec, align=bool(align), copy=True)
-
-
-def _build_scalar(dtype=None, data=None, *extra):
-    if extra or not isinstance(dtype, np.dtype) or dtype.hasobject or not isinstance(data, (str, bytes)):
-        return _REFUSE
-    return _NP_SCALAR(dtype, _latin1_bytes(data))
-
-
-def _build_frombuffer(buf=None, dtype=None, shape=None, order="C", *extra):
-    # numpy >= 1.16 with pickle protocol 5: _frombuffer(buffer, dtype, shape, order).
-    if (extra or not isinstance(buf, (bytes, bytearray, memoryview, pickle.PickleBuffer))
-            or not isinstance(dtype, np.dtype) or dtype.hasobject or not _is_shape(shape) or order not in ("C", "F")):
-        return _REFUSE
-    return _NP_FROMBUFFER(buf, dtype, shape, order)
-
-
-def _build_set(items=(), *extra):
-    if extra or not isinstance(items, (list, tuple)):
-        return _REFUSE
-    return set(items)
-
-
-def _build_empty_bytes(*args):
-    # Python 3 pickles b'' at protocol < 3 as bytes().
-    return b"" if not args else _REFUSE
-
-
-def _build_codecs_encode(text=None, encoding=None, *extra):
-    # Python 3 pickles non-empty bytes at protocol < 3 as _codecs.encode(text, 'latin1').
-    if extra or not isinstance(text, str) or encoding not in ("latin1", "latin-1"):
-        return _REFUSE
-    return text.encode("latin1")
-
-
-def _build_reconstructor(cls=None, base=None, state=None, *extra):
-    # Protocol 0/1 pickles a new-style object as copy_reg._reconstructor(cls, object, None) followed by BUILD.
-    if extra or not _is_stand_in_class(cls) or base is not _OBJECT or state is not None:
-        return _REFUSE
-    return cls.__new__(cls)
-
-
-def _build_newobj(cls=None, *args):
-    if args or not _is_stand_in_class(cls):
-        return _REFUSE
-    return cls.__new__(cls)
 
 
 # --------------------------------------------------------------------------------------------------------------------
 # Stand-ins for chumpy and scipy.sparse objects: they record their pickled state and nothing else.
 
 
-class _StandIn:
-    """Base of the stand-in classes. NEWOBJ creates one empty; BUILD records the pickled state dict."""
-
-    __slots__ = ("state",)
-    qualname = "?"
-
-    def __new__(cls, *args, **kwargs):
-        if args or kwargs:
-            raise _Refused(f"refused call {cls.qualname} with arguments")
-        obj = object.__new__(cls)
-        obj.state = {}
-        return obj
-
-    def __init__(self, *args, **kwargs):
-        # Only reached when a pickle calls the class directly (REDUCE/INST); NEWOBJ does not call __init__.
-        raise _Refused(f"refused call {self.qualname}(...): only NEWOBJ/copy_reg reconstruction is expected")
-
-    def __setstate__(self, state):
-        if isinstance(state, tuple) and len(state) == 2:  # (dict state, slot state)
-            state = {**(state[0] or {}), **(state[1] or {})}
-        if not isinstance(state, dict):
-            raise ValueError(f"{self.qualname} state is a {type(state).__name__}, expected a dict")
-        self.state = {k.decode("latin1") if isinstance(k, bytes) else k: v for k, v in state.items()}
-
-    def term(self, key: str):
-        if key not in self.state:
-            raise ValueError(f"{self.qualname} has no '{key}'")
-        return self.state[key]
-
-
-class _Chumpy(_StandIn):
+class _Chumpy(StandIn):
     """A chumpy node; `value` evaluates it from its recorded terms (chumpy drops its caches when pickling)."""
 
     __slots__ = ()
@@ -254,7 +97,7 @@ class _ChumpyTranspose(_Chumpy):
         return np.transpose(evaluate(self.term("a"), seen), axes=self.state.get("axes"))
 
 
-class _Sparse(_StandIn):
+class _Sparse(StandIn):
     """A pickled scipy compressed sparse matrix; rebuilt from its parts and fully checked before use."""
 
     __slots__ = ()
@@ -283,10 +126,6 @@ class _SparseCsr(_Sparse):
     format = "csr"
 
 
-def _is_stand_in_class(cls) -> bool:
-    return isinstance(cls, type) and issubclass(cls, _StandIn) and cls not in (_StandIn, _Chumpy, _Sparse)
-
-
 def evaluate(obj, seen: frozenset = frozenset()) -> np.ndarray:
     """The array a pickled value stands for: ndarrays as they are, chumpy stand-ins evaluated, lists converted."""
     if isinstance(obj, _Chumpy):
@@ -295,30 +134,17 @@ def evaluate(obj, seen: frozenset = frozenset()) -> np.ndarray:
         return np.asarray(obj.value(seen | {id(obj)}))
     if isinstance(obj, _Sparse):
         return obj.matrix().toarray()
-    if isinstance(obj, (_StandIn, _Guard)):
+    if isinstance(obj, (StandIn, Guard)):
         raise ValueError(f"{obj!r} is not an array")
     return np.asarray(obj)
 
 
 # --------------------------------------------------------------------------------------------------------------------
-# The allow-list and the unpickler.
+# The allow-list.
 
-_set = _Guard("builtins.set", _build_set)
-_bytes = _Guard("builtins.bytes", _build_empty_bytes)
-_reconstructor = _Guard("copyreg._reconstructor", _build_reconstructor)
-_newobj = _Guard("copyreg.__newobj__", _build_newobj)
-
-#: Every global a MANO pickle may reference, by the exact (module, name) written in the file. Python 2 names
-#: (__builtin__, copy_reg) are listed as such: the unpickler's own Python 2 renaming is bypassed on purpose.
+#: Every global a MANO pickle may reference, by the exact (module, name) written in the file.
 ALLOWED_GLOBALS = {
-    ("numpy.core.multiarray", "_reconstruct"): _Guard("numpy.core.multiarray._reconstruct", _build_reconstruct),
-    ("numpy._core.multiarray", "_reconstruct"): _Guard("numpy._core.multiarray._reconstruct", _build_reconstruct),
-    ("numpy.core.multiarray", "scalar"): _Guard("numpy.core.multiarray.scalar", _build_scalar),
-    ("numpy._core.multiarray", "scalar"): _Guard("numpy._core.multiarray.scalar", _build_scalar),
-    ("numpy.core.numeric", "_frombuffer"): _Guard("numpy.core.numeric._frombuffer", _build_frombuffer),
-    ("numpy._core.numeric", "_frombuffer"): _Guard("numpy._core.numeric._frombuffer", _build_frombuffer),
-    ("numpy", "ndarray"): _NDARRAY,
-    ("numpy", "dtype"): _Guard("numpy.dtype", _build_dtype),
+    **BASE_GLOBALS,
     ("scipy.sparse.csc", "csc_matrix"): _SparseCsc,
     ("scipy.sparse._csc", "csc_matrix"): _SparseCsc,
     ("scipy.sparse.csr", "csr_matrix"): _SparseCsr,
@@ -328,135 +154,7 @@ ALLOWED_GLOBALS = {
     ("chumpy.reordering", "Reshape"): _ChumpyReshape,
     ("chumpy.reordering", "Ravel"): _ChumpyRavel,
     ("chumpy.reordering", "Transpose"): _ChumpyTranspose,
-    ("__builtin__", "set"): _set,
-    ("builtins", "set"): _set,
-    ("__builtin__", "bytes"): _bytes,
-    ("builtins", "bytes"): _bytes,
-    ("__builtin__", "object"): _OBJECT,
-    ("builtins", "object"): _OBJECT,
-    ("copy_reg", "_reconstructor"): _reconstructor,
-    ("copyreg", "_reconstructor"): _reconstructor,
-    ("copy_reg", "__newobj__"): _newobj,
-    ("copyreg", "__newobj__"): _newobj,
-    ("_codecs", "encode"): _Guard("_codecs.encode", _build_codecs_encode),
 }
-
-
-def _printable(text: str, limit: int = 120) -> str:
-    """A name from an untrusted file, made safe for a one-line message."""
-    return str(text).encode("unicode_escape").decode("ascii")[:limit]
-
-
-class SafeManoUnpickler(pickle.Unpickler):
-    """An Unpickler that resolves only `ALLOWED_GLOBALS`; any other global raises before anything is called.
-
-    Read with ``encoding='latin1'`` (Python 2 `str` payloads are bytes). Raises `_Refused`; `read_pickle` turns
-    that into an `UnsafePickleError` naming the file.
-    """
-
-    def __init__(self, file):
-        super().__init__(file, encoding="latin1")
-
-    def find_class(self, module, name):
-        try:
-            return ALLOWED_GLOBALS[(module, name)]
-        except (KeyError, TypeError):
-            raise _Refused(f"refused global '{_printable(module)}.{_printable(name)}' "
-                           "(not on the MANO pickle allow-list)") from None
-
-    def persistent_load(self, pid):
-        raise _Refused("refused persistent id (not used by MANO pickles)")
-
-
-def read_pickle(path: str | Path) -> tuple[object, str]:
-    """Safely unpickle the file at `path`; return (the object, sha256 hex of the bytes that were read).
-
-    Raises UnsafePickleError for a refused global or call, InputError for a missing, unreadable or corrupt file.
-    """
-    path = Path(path)
-    data = read_bytes(path, "file")
-    check_memory(f"unpickling {path}", 4 * len(data))
-    try:
-        depth = pickle_depth(data, MAX_PICKLE_DEPTH)
-    except Exception as e:  # noqa: BLE001 - pickletools parsing untrusted bytes: any failure is a corrupt file
-        raise InputError(f"{path}: not a readable pickle, truncated or corrupt ({_first_line(e)})") from None
-    if depth > MAX_PICKLE_DEPTH:
-        raise InputError(f"{path}: not a MANO pickle: its objects nest more than {MAX_PICKLE_DEPTH} levels deep; "
-                         "nothing in the file was executed")
-    try:
-        obj = SafeManoUnpickler(io.BytesIO(data)).load()
-    except _Refused as e:
-        raise UnsafePickleError(f"{path}: {e}; nothing in the file was executed") from None
-    except (EOFError, pickle.UnpicklingError) as e:
-        raise InputError(f"{path}: not a readable pickle, truncated or corrupt ({_first_line(e)})") from None
-    except Exception as e:  # noqa: BLE001 - anything an untrusted byte stream provokes is bad input, not a bug
-        raise InputError(f"{path}: not a readable MANO pickle ({type(e).__name__}: {_first_line(e)})") from None
-    return obj, hashlib.sha256(data).hexdigest()
-
-
-# Objects may nest this deep (a MANO pickle nests about 6: dict, Ch, state dict, ndarray, state tuple, shape).
-MAX_PICKLE_DEPTH = 100
-# Opcodes that add to an object already on the stack (the object stays, one level above what it receives).
-_IN_PLACE = {"APPEND", "APPENDS", "SETITEM", "SETITEMS", "ADDITEMS", "BUILD"}
-_MEMO_PUT = {"PUT", "BINPUT", "LONG_BINPUT", "MEMOIZE"}
-_MEMO_GET = {"GET", "BINGET", "LONG_BINGET"}
-
-
-def pickle_depth(data: bytes, limit: int | None = None) -> int:
-    """How deeply the objects a pickle builds nest, from its opcodes alone (nothing is built or called).
-
-    Hashing or comparing a tuple nested a million deep recurses in C and overflows the stack, so such a file must
-    be refused before it is unpickled. Each stack entry carries the depth of the object it stands for; an opcode
-    that builds a container from entries pushes one more than the deepest of them. Stops as soon as the depth
-    passes `limit`. ValueError for bytes that are not a pickle (pickletools' own checks).
-    """
-    mark = object()
-    stack: list = []
-    memo: dict = {}
-    deepest = 0
-    for op, arg, _ in pickletools.genops(data):
-        name = op.name
-        if name == "MARK":
-            stack.append(mark)
-            continue
-        if name in _MEMO_PUT:
-            memo[len(memo) if name == "MEMOIZE" else arg] = stack[-1] if stack else 0
-            continue
-        if name in _MEMO_GET:
-            stack.append(memo.get(arg, 0))
-            continue
-        if name in ("STOP", "PROTO", "FRAME"):
-            continue
-        if name == "POP":
-            if stack:
-                stack.pop()
-            continue
-        if name == "DUP":
-            stack.append(stack[-1] if stack else 0)
-            continue
-        taken = []
-        before = op.stack_before
-        if pickletools.markobject in before:
-            while stack and stack[-1] is not mark:
-                taken.append(stack.pop())
-            if stack:
-                stack.pop()
-            below = before.index(pickletools.markobject)
-        else:
-            below = len(before)
-        for _ in range(below):
-            if stack and stack[-1] is not mark:
-                taken.append(stack.pop())
-        if name in _IN_PLACE and taken:           # the container (popped last: lowest on the stack) stays
-            depth = max(taken[-1], 1 + max(taken[:-1], default=-1))
-            stack.append(depth)
-        else:
-            depth = 1 + max(taken, default=-1)
-            stack += [depth] * len(op.stack_after)
-        deepest = max(deepest, depth)
-        if limit is not None and deepest > limit:
-            break
-    return deepest
 
 
 def is_mano_pkl(path: str | Path) -> bool:
@@ -495,7 +193,7 @@ def _field_array(raw: dict, key: str, path: Path) -> np.ndarray:
     try:
         arr = evaluate(raw[key])
     except (ValueError, TypeError, IndexError, RecursionError) as e:
-        raise InputError(f"{path}: field '{key}' cannot be read as an array ({_first_line(e)})") from None
+        raise InputError(f"{path}: field '{key}' cannot be read as an array ({first_line(e)})") from None
     return arr
 
 
@@ -529,7 +227,7 @@ def _regressor(raw: dict, V: int, path: Path) -> sp.csr_matrix:
     try:
         matrix = value.matrix() if isinstance(value, _Sparse) else sp.csr_matrix(evaluate(value))
     except (ValueError, TypeError, IndexError, RecursionError) as e:
-        raise InputError(f"{path}: field 'J_regressor' is not a valid sparse matrix ({_first_line(e)})") from None
+        raise InputError(f"{path}: field 'J_regressor' is not a valid sparse matrix ({first_line(e)})") from None
     matrix = sp.csr_matrix(matrix, dtype=np.float64)
     if matrix.shape != (NUM_JOINTS, V):
         raise InputError(f"{path}: field 'J_regressor' has shape {matrix.shape[0]}x{matrix.shape[1]}, "
@@ -561,7 +259,7 @@ def _check_text_fields(raw: dict, path: Path) -> None:
         if key in raw:
             value = raw[key].decode("latin1") if isinstance(raw[key], bytes) else raw[key]
             if value != expected:
-                raise InputError(f"{path}: field '{key}' is {_printable(repr(value), 60)}, this loader supports "
+                raise InputError(f"{path}: field '{key}' is {printable(repr(value), 60)}, this loader supports "
                                  f"only '{expected}'")
 
 
@@ -676,7 +374,7 @@ def load_mano_pkl(path: str | Path) -> HandModel:
     InputError naming the file (and field) for a missing, corrupt or inconsistent file.
     """
     path = Path(path)
-    raw, sha256 = read_pickle(path)
+    raw, sha256 = read_pickle(path, ALLOWED_GLOBALS, MANO_FORMAT)
     if not isinstance(raw, dict):
         raise InputError(f"{path}: not a MANO model: the pickle holds a {type(raw).__name__}, expected a dict")
     raw = {k.decode("latin1") if isinstance(k, bytes) else k: v for k, v in raw.items()}
@@ -727,7 +425,3 @@ def load_mano_pkl(path: str | Path) -> HandModel:
         side=side,
         meta=meta,
     )
-
-
-def _first_line(e: BaseException) -> str:
-    return (str(e).splitlines() or [type(e).__name__])[0][:200]

@@ -20,6 +20,7 @@ import numpy as np
 from darthand.errors import InputError
 from darthand.fileio import read_json
 from darthand.model.anatomy import AXES, LIMITS, angles_to_axis_angle
+from darthand.model.forward import MAX_MAGNITUDE
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import JOINT_NAMES, NUM_JOINTS
 from darthand.schemas import load_schema
@@ -92,8 +93,6 @@ def _short(x, n: int = 40) -> str:
 
 def _check_finite(path: Path, field: str, arr: np.ndarray) -> None:
     """Every value finite and within the forward pass's bound for the field (radians for poses)."""
-    from darthand.model.forward import MAX_MAGNITUDE
-
     limit = MAX_MAGNITUDE[field]
     with np.errstate(invalid="ignore"):
         bad = ~(np.abs(arr) <= limit)

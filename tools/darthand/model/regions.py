@@ -13,6 +13,7 @@ import numpy as np
 
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import FACE_LABEL_IDS, FINGER_JOINTS, FINGERS
+from darthand.model.mirror import mirror_model
 
 PALM_NORMAL = np.array([0.0, -1.0, 0.0])
 FOREARM_AXIS = np.array([1.0, 0.0, 0.0])
@@ -172,8 +173,6 @@ def ensure_face_labels(model: HandModel) -> HandModel:
     if model.face_labels is not None and (model.face_labels >= 0).all():
         return model
     if model.side == "left":
-        from darthand.model.mirror import mirror_model
-
         derived = derive_face_labels(mirror_model(model))
     else:
         derived = derive_face_labels(model)

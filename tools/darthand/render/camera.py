@@ -21,6 +21,7 @@ import numpy as np
 from darthand.errors import InputError
 from darthand.fileio import read_json
 from darthand.model.preview import VIEWS, camera_basis
+from darthand.schemas import check_schema
 
 DEFAULT_FOV_DEG = 30.0
 DEFAULT_MARGIN = 0.08
@@ -237,6 +238,4 @@ def load_camera(spec, points=None, *, width: int | None = None, height: int | No
 
 
 def _validate(spec, source: str) -> None:
-    from darthand.schemas import check_schema
-
     check_schema(spec, "camera.schema.json", source)

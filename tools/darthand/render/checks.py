@@ -28,10 +28,14 @@ from scipy import ndimage
 from darthand.errors import InputError
 from darthand.fileio import write_json
 from darthand.model.layout import MANO_PARENTS
+from darthand.model.preview import contact_sheet, write_png
 from darthand.render.api import Frame, Renderer, render_subject
+from darthand.render.camera import load_camera
+from darthand.render.lights import default_lighting
 from darthand.render.scene import Scene
 from darthand.render.subject import Subject, checker_material
 from darthand.render.texture import MipTexture, mip_levels
+from darthand.textures.raster import rasterize
 
 COVERAGE_RANGE = (0.02, 0.75)
 KEYPOINT_SLACK_PX = 3.0
@@ -51,7 +55,7 @@ def run_checks(build: str | Path = "build", out: str | Path | None = None, *, si
                all_accessories: bool = True) -> dict:
     """Check every package build/usd/<side> (or `sides`); write OUT/<side>.png, OUT/<side>_accessories.png and
     OUT/report.json (OUT = build/checks); return the report."""
-    from darthand.render.usd_source import UsdPackage
+    from darthand.render.usd_source import UsdPackage  # lazy: OpenUSD takes 0.6 s to import
 
     build = Path(build)
     out = Path(out) if out is not None else build / "checks"
@@ -212,8 +216,6 @@ def position_texture(surface, res: int = SEAM_RES) -> tuple[MipTexture, float]:
     """A (res, res) texture storing, at every texel, the rest-pose position of the surface point the package's UVs
     map there (rasterised with textures.raster, a 2-texel margin, then every other texel filled from its nearest
     covered texel); and the median texel size in metres on the surface."""
-    from darthand.textures.raster import rasterize
-
     uv = surface.uvs[surface.faces_uv].astype(np.float64)               # (F, 3, 2)
     tri = np.stack([uv[..., 0] * res, (1 - uv[..., 1]) * res], -1)      # pixel units, v up (bake.py's convention)
     frags = rasterize(tri, res, res, margin=2.0)
@@ -238,9 +240,6 @@ def check_uv_seams(renderer: Renderer, size: int) -> dict:
     checker = dataclasses.replace(hand, material=checker_material())
     subj = Subject((checker,), subject.joints, subject.keypoints, subject.side, subject.pose, subject.keypoint_order,
                    {**subject.info, "texture": "checker"})
-    from darthand.render.camera import load_camera
-    from darthand.render.lights import default_lighting
-
     scene = Scene(subj)
     cam = load_camera("three_quarter", subj.all_vertices(), width=size, height=size, side=subj.side)
     frame = render_subject(subj, scene, cam, default_lighting(), samples=8)
@@ -290,8 +289,6 @@ def annotated(frame: Frame) -> np.ndarray:
 
 def write_sheet(path: Path, tiles: list, cols: int) -> None:
     """A contact sheet of (frame, label) tiles, all resized to the first tile's size."""
-    from darthand.model.preview import contact_sheet, write_png
-
     if not tiles:
         return
     h, w = tiles[0][0].camera.height, tiles[0][0].camera.width

@@ -10,7 +10,7 @@ rtcAttachGeometry. Embree receives the same numbers, so the scene it builds, and
 embreex does not expose a scene's RTCScene handle to Python; it is the first field of its EmbreeScene object.
 `_Api.load` checks that layout before trusting it (the object's size, and a value written through the public
 `is_committed` attribute read back at the next field's offset); when anything differs (another embreex), meshes
-go through TriangleMesh as before.
+go through TriangleMesh as before. `device` is the process's one Embree device, for these scenes and scene.py's.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
+from embreex.rtcore import EmbreeDevice
 
 # Embree 4 (include/embree4/rtcore_common.h, rtcore_buffer.h, rtcore_geometry.h)
 GEOMETRY_TYPE_TRIANGLE = 0
@@ -30,6 +31,15 @@ FORMAT_UINT3, FORMAT_FLOAT3 = 0x5003, 0x9003
 VERTEX_STRIDE, INDEX_STRIDE = 16, 12          # as embreex's Vertex (x, y, z, pad) and Triangle (v0, v1, v2)
 _SCENE_OFFSET = 16                            # EmbreeScene: PyObject header, then RTCScene scene_i, int is_committed
 _PROBE = 0x5AD17E13
+_DEVICE = None
+
+
+def device() -> EmbreeDevice:
+    """One Embree device for the process (creating one per scene costs more than building the hand)."""
+    global _DEVICE
+    if _DEVICE is None:
+        _DEVICE = EmbreeDevice()
+    return _DEVICE
 
 
 class _Api:
@@ -64,8 +74,6 @@ class _Api:
             api = cls(ctypes.CDLL(str(libs[0])))
         except (OSError, AttributeError):
             return None
-        from darthand.render.scene import device
-
         probe = rtcore_scene.EmbreeScene(device())
         probe.is_committed = _PROBE
         ok = ctypes.c_int.from_address(id(probe) + _SCENE_OFFSET + 8).value == _PROBE

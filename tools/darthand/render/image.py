@@ -18,6 +18,7 @@ import numpy as np
 import OpenImageIO as oiio
 from isal import isal_zlib
 
+from darthand.budget import check_memory
 from darthand.errors import InputError
 from darthand.fileio import atomic_path, regular_file
 from darthand.jit import kernel
@@ -95,8 +96,6 @@ def read_image_buf(path: str | os.PathLike, what: str = "image") -> oiio.ImageBu
     """An image file decoded whole into an ImageBuf, after checking that it is a regular file and that its declared
     size fits the memory budget; InputError naming the file when it is truncated or corrupt (OpenImageIO reads
     lazily and would otherwise hand back the pixels decoded before the damage)."""
-    from darthand.budget import check_memory
-
     regular_file(path, what)
     inp = oiio.ImageInput.open(str(path))
     if inp is None:

@@ -45,6 +45,7 @@ import numpy as np
 from darthand.jit import kernel
 from darthand.render.lights import light_table
 from darthand.render.scene import FaceData, interpolate_columns
+from darthand.render.shade import vertex_albedo
 
 GEOMETRIC = FaceData.GEOMETRIC
 
@@ -248,8 +249,6 @@ class VertexLight:
 
     def _albedo(self, g: int, ids: np.ndarray) -> None:
         """Make the albedo of surface g's vertices `ids` that have none yet."""
-        from darthand.render.shade import vertex_albedo
-
         ids = ids[~self.has_albedo[g][ids]]
         if not len(ids):
             return

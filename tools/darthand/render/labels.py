@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from darthand.model.layout import FINGER_JOINTS, FINGERS, JOINT_NAMES, KEYPOINT_ORDERS, MANO_PARENTS
+from darthand.model.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from darthand.render.camera import Camera
 from darthand.render.scene import Scene
 from darthand.render.subject import Subject
@@ -147,8 +148,6 @@ def mano_camera_parameters(model, pose, R, t, betas=None) -> dict:
     MANO rotates about the shaped rest root joint J0 (the forward pass puts a point x of the root's part at
     R0 (x - J0) + J0 + trans), so the camera's rotation composes with the global rotation, R0' = R R0, and the
     translation absorbs the rest: trans' = R J0 + t - J0 (for the world pose's trans of zero)."""
-    from darthand.model.rotations import axis_angle_to_matrix, matrix_to_axis_angle
-
     pose = np.asarray(pose, np.float64).reshape(-1)
     R, t = np.asarray(R, np.float64), np.asarray(t, np.float64)
     n_betas = model.num_betas

@@ -20,6 +20,7 @@ import numpy as np
 
 from darthand.errors import InputError
 from darthand.fileio import read_json
+from darthand.schemas import check_schema
 
 
 @dataclass(frozen=True)
@@ -91,8 +92,6 @@ def load_lighting(spec, source: str = "lights") -> Lighting:
     if isinstance(spec, (str, Path)):
         path = Path(spec)
         spec, source = read_json(path, "lights file"), str(path)
-    from darthand.schemas import check_schema
-
     check_schema(spec, "lights.schema.json", source)
     amb = spec.get("ambient", {})
     lights = []

@@ -8,8 +8,10 @@ import numpy as np
 
 from darthand.errors import InputError
 from darthand.model.forward import MAX_MAGNITUDE
+from darthand.model.gestures import model_gestures
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import NUM_JOINTS
+from darthand.model.poses import load_pose_file
 
 
 def resolve_pose(model: HandModel, pose, index: int = 0, cache: dict | None = None) -> tuple[np.ndarray, str | None]:
@@ -19,8 +21,6 @@ def resolve_pose(model: HandModel, pose, index: int = 0, cache: dict | None = No
         a pose file path (schemas/pose.schema.json; pose number `index` of it); or 48 numbers.
     cache: a dict the caller keeps per model, gesture name -> pose (reading and converting a gesture costs ms).
     """
-    from darthand.model.gestures import model_gestures
-
     if pose is None:
         return np.zeros(3 * NUM_JOINTS), None
     if isinstance(pose, (str, Path)):
@@ -56,8 +56,6 @@ def pose_file_vectors(model: HandModel, path) -> np.ndarray:
     """(N, 48) float64 the poses of a pose file (schemas/pose.schema.json) relative to the flat hand (the model's
     hands_mean added where the file is relative to it); a file with betas is refused (the renderer poses the
     model as built)."""
-    from darthand.model.poses import load_pose_file
-
     poses, betas, flat_hand_mean = load_pose_file(path)
     if betas is not None:
         raise InputError(f"{path}: field 'betas' is not supported by the renderer (shape the model instead)")

@@ -16,22 +16,11 @@ import copy
 
 import numpy as np
 from embreex import rtcore_scene
-from embreex.rtcore import EmbreeDevice
 
 from darthand.jit import kernel
 from darthand.render.camera import point_bounds
-from darthand.render.embree_mesh import add_triangles
+from darthand.render.embree_mesh import add_triangles, device
 from darthand.render.subject import Subject, Surface
-
-_DEVICE = None
-
-
-def device() -> EmbreeDevice:
-    """One Embree device for the process (creating one per scene costs more than building the hand)."""
-    global _DEVICE
-    if _DEVICE is None:
-        _DEVICE = EmbreeDevice()
-    return _DEVICE
 
 
 class FaceData:

@@ -34,6 +34,8 @@ import weakref
 import numpy as np
 import scipy.sparse as sp
 
+from darthand.model.topology import boundary_loops
+
 SKIN_MFP_MM = (1.30, 0.95, 0.67)     # mean free path 1 / sigma_t per channel, mm (Jensen et al. 2001, skin 1)
 FLAT_RADIUS = 1.0                    # m: radius standing for flat or concave (far past the table's flat end)
 MIN_RADIUS = 1e-3                    # m: curvature radii below a millimetre are mesh noise, not anatomy
@@ -165,8 +167,6 @@ def curvature_radius(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     np.add.at(normals, f.ravel(), np.repeat(fn, 3, axis=0))
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
     H = -0.5 * np.einsum("ij,ij->i", lap, normals)
-    from darthand.model.topology import boundary_loops
-
     radius = np.where(H > 0, 1 / np.maximum(H, 1e-30), FLAT_RADIUS)
     for loop in boundary_loops(f):
         radius[loop] = FLAT_RADIUS

@@ -35,7 +35,9 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
+from darthand.budget import check_memory
 from darthand.errors import InputError
+from darthand.fileio import regular_file
 from darthand.jit import kernel
 from darthand.render.png import Png8, open_png8
 from darthand.textures.color import srgb8_table, srgb_to_linear
@@ -444,7 +446,7 @@ def srgb8_to_linear_lut(offset: float = 0.0) -> np.ndarray:
 
 
 def _open(path: Path) -> oiio.ImageBuf:
-    from darthand.render.image import read_image_buf
+    from darthand.render.image import read_image_buf  # lazy: it and isal kept off `darthand --help`'s path
 
     return read_image_buf(path, "texture")
 
@@ -574,9 +576,6 @@ def _build_code_maps(albedo_key, data_key, channels: tuple) -> MipTexture:
 def _open_codes(path: str) -> Png8 | np.ndarray:
     """A file's 8-bit codes for _build_code_maps: a Png8 to decode straight into the pyramid when render/png.py
     reads the file, else its (H, W, C) codes read through OpenImageIO."""
-    from darthand.budget import check_memory
-    from darthand.fileio import regular_file
-
     st = regular_file(path, "texture")
     check_memory(f"reading {path}", st.st_size)
     try:

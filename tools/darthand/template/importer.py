@@ -219,6 +219,7 @@ def add_shape_space(wheel_path: Path, hm08: Hm08, model: HandModel, p: ImportPar
 def fit_correctives(model: HandModel, p: ImportParams) -> tuple[HandModel, dict]:
     """Fit the 135 pose-corrective directions against DQS with `template.correctives` when it is present."""
     try:
+        # lazy: an optional module (the except below), and kept off `darthand --help`'s path
         from darthand.template.correctives import fit_pose_correctives
     except ModuleNotFoundError as e:
         if e.name != "darthand.template.correctives":

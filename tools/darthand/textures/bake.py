@@ -26,6 +26,7 @@ import numpy as np
 from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.model.hand_model import HandModel
+from darthand.model.mirror import mirror_model
 from darthand.model.topology import vertex_normals
 from darthand.textures import anatomy, noise, padding
 from darthand.textures.raster import rasterize
@@ -123,8 +124,6 @@ def prepare_model(model: HandModel) -> HandModel:
         raise InputError(f"{model.meta.get('source', 'model')}: field 'uvs' missing: give the model an atlas first "
                          "(darthand.model.atlas.ensure_uvs)")
     if model.side == "left":
-        from darthand.model.mirror import mirror_model
-
         model = mirror_model(model)
     return ensure_face_labels(model)
 

@@ -38,6 +38,7 @@ from darthand.model.hand_model import HandModel
 from darthand.processes import deaf_to_ctrl_c, init_worker, keep_freed_memory
 from darthand.textures import sheet as sheet_mod
 from darthand.model.atlas import ensure_uvs
+from darthand.model.npz_io import save_npz
 from darthand.textures.bake import Bake, cached_bake, load_bake, source_digest
 from darthand.textures.catalog import Entry, expand_catalog, select
 from darthand.textures.imageio import block_mean, mip_pyramid, read_small, write_png, write_tx
@@ -68,8 +69,6 @@ def build_textures(model: HandModel, spec: dict, out_dir: str | Path, res: int =
     had_uvs = model.has_uvs
     model = ensure_uvs(model, res)
     if not had_uvs:
-        from darthand.model.npz_io import save_npz
-
         save_npz(model, out_dir / "model_uv.npz")
     bake, bake_path = cached_bake(model, res, out_dir)
     maps = write_bake_maps(bake, out_dir)

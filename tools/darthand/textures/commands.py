@@ -7,6 +7,7 @@
     textures atlas MODEL --out OUT.npz [--res N]                                    -> atlas
 
 `add_commands(group)` declares them on an argparse sub-parsers group (cli.py: `_group(sub, "textures", ...)`).
+Each handler imports lazily what only it uses, so that building the CLI (and `darthand --help`) loads none of it.
 """
 
 from __future__ import annotations

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
+from darthand.textures.imageio import write_png
 from darthand.textures.raster import rasterize
 
 BACKGROUND = np.array([52, 54, 58], np.uint8)
@@ -103,8 +104,6 @@ def contact_sheet(tiles: list[tuple[str, str, np.ndarray]], path: str | Path, co
     """Lay out (group, label, tile image) triples in catalogue order: each group starts a new row under a header
     with its name and size, each tile has its label below. Writes the PNG atomically and returns the sheet
     (H, W, 3) uint8."""
-    from darthand.textures.imageio import write_png
-
     if not tiles:
         raise ValueError("contact sheet needs at least one tile")
     th, tw = tiles[0][2].shape[:2]

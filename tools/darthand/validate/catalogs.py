@@ -63,6 +63,7 @@ def _catalog_ids(path: str, keys: tuple[str, ...]) -> frozenset:
 
 @lru_cache(maxsize=1)
 def _spec_texture_ids() -> frozenset:
+    # lazy: the texture catalogue loads the model stack (0.13 s in the CLI, 1.5 s alone), only for recorded ids
     from darthand.textures.catalog import expand_catalog, load_spec
 
     return frozenset(e.id for e in expand_catalog(load_spec()))
@@ -70,6 +71,6 @@ def _spec_texture_ids() -> frozenset:
 
 @lru_cache(maxsize=1)
 def _spec_accessory_ids() -> frozenset:
-    from darthand.accessories.catalog import load_spec
+    from darthand.accessories.catalog import load_spec  # lazy: as above, only for packages that record accessory ids
 
     return frozenset(item["id"] for item in load_spec()["items"])

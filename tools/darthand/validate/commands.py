@@ -1,6 +1,7 @@
 """`darthand validate PATH... [--json] [--render] [--deep] [--out REPORT.json]`: the thin command over
 `run.validate_paths`. Exit code 0 clean, 1 problems found, 2 a file could not be read (or --render without the
-renderer). Its options are defined in cli.py."""
+renderer). Its options are defined in cli.py. Each handler imports lazily
+what only it uses, so that building the CLI (and `darthand --help`) loads none of it."""
 
 from __future__ import annotations
 

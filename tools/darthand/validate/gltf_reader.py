@@ -30,6 +30,7 @@ import numpy as np
 
 from darthand.errors import DarthandError
 from darthand.fileio import file_kind, parse_json
+from darthand.model.rotations import quaternion_to_matrix
 from darthand.validate.asset import BlendShape, Limits, Mesh, Package, Skeleton, Skin, TextureRef
 from darthand.validate.findings import Finding, finding
 
@@ -316,8 +317,6 @@ class GltfReader:
 
     def local(self, i: int) -> np.ndarray:
         """(4, 4) column-vector local transform of node i."""
-        from darthand.model.rotations import quaternion_to_matrix
-
         n = self.nodes[i]
         if "matrix" in n:
             m = np.asarray(n["matrix"], dtype=np.float64)

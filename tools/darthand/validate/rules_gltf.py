@@ -14,6 +14,7 @@ import re
 from pathlib import Path
 
 from darthand.errors import DarthandError
+from darthand.export.gltf_validator import ValidatorUnavailable, validate
 from darthand.validate.asset import Limits, Package
 from darthand.validate.findings import Finding, finding
 from darthand.validate.gltf_reader import read_gltf
@@ -29,8 +30,6 @@ def check_gltf(path: Path, limits: Limits = Limits()) -> tuple[Package, list[Fin
 
 
 def khronos_findings(path: Path) -> list[Finding]:
-    from darthand.export.gltf_validator import ValidatorUnavailable, validate
-
     try:
         report = validate(path, timeout=VALIDATOR_TIMEOUT)
     except ValidatorUnavailable as e:

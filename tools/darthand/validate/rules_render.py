@@ -22,6 +22,7 @@ import tempfile
 from pathlib import Path
 
 from darthand.errors import DarthandError
+from darthand.export.package_files import read_asset_info
 from darthand.validate.findings import SEVERITIES, Finding, finding
 
 
@@ -31,6 +32,7 @@ SEARCH_DEPTH = 3
 
 def renderer():
     """The check function (path, out_dir) -> checks of the reference renderer."""
+    # lazy: the renderer (embreex, OpenImageIO, its kernels: ~1.2 s alone) only for `validate --render`
     from darthand.render.checks import check_package
 
     return lambda path, out_dir: package_checks(check_package, Path(path))
@@ -41,7 +43,7 @@ def package_checks(check_package, path: Path) -> list[dict]:
     if path.suffix.lower() in (".glb", ".gltf", ".usdz"):
         return [{"id": "unsupported", "passed": False, "severity": "info",
                  "message": "the reference renderer reads USD packages (a folder or its .usda), not this file"}]
-    from darthand.render.api import open_source
+    from darthand.render.api import open_source  # lazy: the renderer, as above
 
     source = open_source(path, model=nearby_model(path))
     result = check_package(source, size=RENDER_SIZE, all_accessories=False)
@@ -51,8 +53,6 @@ def package_checks(check_package, path: Path) -> list[dict]:
 
 def nearby_model(path: Path) -> Path | None:
     """<dir>/model/<side>.npz for the package's side, in its folder or up to SEARCH_DEPTH folders above."""
-    from darthand.export.package_files import read_asset_info
-
     folder = path if path.is_dir() else path.parent
     try:
         side = read_asset_info(folder).get("side", folder.name)

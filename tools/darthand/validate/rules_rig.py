@@ -22,6 +22,8 @@ import re
 
 import numpy as np
 
+from darthand.export.blendshapes import encode_channels
+from darthand.export.correctives import corrective_names, pose_feature_ranges
 from darthand.model.layout import JOINT_NAMES, MANO_PARENTS, NUM_JOINTS
 from darthand.validate.asset import Mesh, Package, Skeleton
 from darthand.validate.findings import Finding, examples, finding
@@ -189,7 +191,4 @@ def check_correctives(mesh: Mesh) -> list[Finding]:
 
 def corrective_shape_names() -> tuple[str, ...]:
     """The blend-shape names of the full correctives (each channel's _pos and _neg shapes, export/blendshapes.py)."""
-    from darthand.export.blendshapes import encode_channels
-    from darthand.export.correctives import corrective_names, pose_feature_ranges   # imports the forward pass
-
     return encode_channels(corrective_names(), *pose_feature_ranges()).names

@@ -8,6 +8,7 @@ lengths converted to metres. The glove generator also takes the hand model (`glo
 
 def rigid_generator(kind: str):
     """The generator function of a rigid accessory type: ring, watch or bracelet."""
+    # lazy: item.py is on `darthand --help`'s path, the generators (~45 ms) only where an accessory is built
     from darthand.accessories.generators import bracelet, ring, watch
 
     return {"ring": ring.ring, "watch": watch.watch, "bracelet": bracelet.bracelet}[kind]
