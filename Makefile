@@ -192,7 +192,7 @@ $(BENCH_STAMP): pyproject.toml | $(STAMP)
 	 || echo "bench extra not installed: the render_reference benchmark will be skipped"
 
 bench: $(STAMP) $(BENCH_STAMP) $(NODE_STAMP) build/model/right.npz
-	@$(PY) -m darthand.bench --out build/bench
+	@$(PY) -m benchmarks --out build/bench
 
 clean:
 	rm -rf build

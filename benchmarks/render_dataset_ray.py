@@ -34,7 +34,7 @@ SIZE = 512
 def run(frames: int | None = None) -> dict:
     import importlib.util
 
-    from darthand.benchmarks.render_dataset import dataset_inputs
+    from benchmarks.render_dataset import dataset_inputs
     from darthand.dataset.ray_local import LocalRayCluster
 
     if importlib.util.find_spec("ray") is None:

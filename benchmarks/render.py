@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[1]
 TEXTURE = "light_moles_00"
 ACCESSORY = "ring_01_court_gold"
 LIGHTS = {"ambient": {"color": [0.85, 0.9, 1.0], "intensity": 0.2},

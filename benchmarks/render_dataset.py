@@ -23,7 +23,7 @@ GOAL_IMAGES_PER_SECOND = 25.0
 def dataset_inputs(tmp: Path) -> tuple:
     """(model, texture catalogue, accessories folder, where from): the build's whole catalogue, else one texture
     and one accessory built in `tmp`."""
-    from darthand.benchmarks.render import ROOT, _sources
+    from benchmarks.render import ROOT, _sources
 
     model = ROOT / "build" / "model" / "right.npz"
     tex = ROOT / "build" / "textures" / "catalog.json"

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from darthand.benchmarks.render import ACCESSORY, LIGHTS, ROOT, _sources
+from benchmarks.render import ACCESSORY, LIGHTS, ROOT, _sources
 
 OUT = ROOT / "build" / "bench" / "reference"
 REF_SIZE, REF_SPP = 256, 512
@@ -100,7 +100,7 @@ def noise_corrected_rmse(image: np.ndarray, half1: np.ndarray, half2: np.ndarray
 
 def reference(subject, camera, lighting, spp: int, skin: str = "surface", inversion=None) -> tuple:
     """(half 1, half 2) (H, W, 4) of the path-traced reference, cached under OUT/cache by the scene's digest."""
-    from darthand.benchmarks import _pathtrace as pt
+    from benchmarks import _pathtrace as pt
 
     key = pt.scene_digest(subject, camera, lighting, spp=spp, skin=skin,
                           inversion=None if inversion is None else np.round(inversion.table[1], 6).tolist())
@@ -252,7 +252,7 @@ def surface_table(renderer, lighting, frames, tmp: Path) -> dict:
 
 def subsurface_table(renderer, lighting, tmp: Path) -> dict:
     """Skin models against a path-traced scattering volume (plain-colour skin, indirect light on in darthand)."""
-    from darthand.benchmarks import _pathtrace as pt
+    from benchmarks import _pathtrace as pt
 
     inversion = pt.albedo_inversion(OUT / "albedo_inversion.json")
     rows = {name: {"rmse": [], "img": []} for name in SSS_CONFIGS}
@@ -288,7 +288,7 @@ def subsurface_table(renderer, lighting, tmp: Path) -> dict:
 
 def run() -> dict:
     try:
-        from darthand.benchmarks import _pathtrace as pt
+        from benchmarks import _pathtrace as pt
 
         pt.mitsuba()
     except ImportError as e:

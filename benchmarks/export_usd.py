@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from pxr import Usd
 
-from darthand.benchmarks._common import bench_model
+from benchmarks._common import bench_model
 from darthand.export.correctives import export_correctives, exported_model, rig_error
 from darthand.export.gestures import gesture_poses
 from darthand.export.influences import parse_influences

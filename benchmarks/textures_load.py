@@ -26,7 +26,7 @@ from unittest import mock
 
 import numpy as np
 
-from darthand.benchmarks.render import ACCESSORY, LIGHTS, _sources
+from benchmarks.render import ACCESSORY, LIGHTS, _sources
 
 OFFSETS = (0.0, -0.1)
 
