@@ -41,7 +41,7 @@ def run(frames: int | None = None) -> dict:
         tmp = Path(tmp)
         model, textures, accessories, where = dataset_inputs(tmp)
 
-        def progress(done: int, total: int, seconds: float, last=[-60.0]) -> None:
+        def progress(done: int, total: int, seconds: float, last=[-60.0]) -> None:  # noqa: B006 (a static: the last report)
             if seconds - last[0] >= 30 or done == total:
                 last[0] = seconds
                 print(f"[bench] render_dataset {done}/{total} frames, {seconds:.0f} s", file=sys.stderr, flush=True)

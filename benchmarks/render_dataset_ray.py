@@ -85,7 +85,8 @@ def summary(res: dict) -> str:
              f"{res['local_images_per_second']:.2f}; goal >= {res['goal_ratio']}); CPU of every process per frame, "
              f"local / Ray: {res['ratio_cpu']:.2f} ({local['cpu_ms_per_image_all']:.0f} against "
              f"{ray['cpu_ms_per_image_all']:.0f} ms).** {res['frames']} frames of {res['size']}², machine load "
-             f"{res['machine_load_1min']} at the end (images/s on a loaded machine measure the CPU share each run got).",
+             f"{res['machine_load_1min']} at the end (images/s on a loaded machine measure the CPU share each run "
+             "got).",
              "", "| run | images/s | with start-up | start-up s | CPU ms/frame (workers) | CPU ms/frame (all) |",
              "|---|---|---|---|---|---|"]
     for name, r in (("local processes", local), ("Ray, files auto", ray), ("Ray, files ship", ship)):
@@ -107,7 +108,7 @@ def _render(model, textures, accessories, plan, frames, out, cluster, nodes) -> 
 
     label = "local" if cluster is None else f"ray ({cluster.get('files', 'auto')})"
 
-    def progress(done: int, total: int, seconds: float, last=[-60.0]) -> None:
+    def progress(done: int, total: int, seconds: float, last=[-60.0]) -> None:  # noqa: B006 (a static: the last report)
         if seconds - last[0] >= 30 or done == total:
             last[0] = seconds
             print(f"[bench] render_dataset_ray {label}: {done}/{total} frames, {seconds:.0f} s", file=sys.stderr,
@@ -188,8 +189,8 @@ class CpuMeter:
 
 
 def _unit_costs(model, textures, accessories, plan, tmp: Path) -> dict:
-    """ms to plan and digest a shard (DEFAULT_SHARD_SIZE jobs) on the driver; ms to decode a catalogue texture the first time
-    (the albedo and roughness of three textures, no cache); MB of a texture's files."""
+    """ms to plan and digest a shard (DEFAULT_SHARD_SIZE jobs) on the driver; ms to decode a catalogue texture the
+    first time (the albedo and roughness of three textures, no cache); MB of a texture's files."""
     from darthand.dataset.frames import job_digest
     from darthand.dataset.plan import Planner, plan_spec
     from darthand.dataset.run import DEFAULT_SAMPLES, DEFAULT_SHARD_SIZE

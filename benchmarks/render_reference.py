@@ -223,7 +223,8 @@ def surface_table(renderer, lighting, frames, tmp: Path) -> dict:
         ref_alpha = (a[..., 3] + b[..., 3]) / 2
         ref = over_grey((a[..., :3] + b[..., :3]) / 2, ref_alpha)
         mask = (base.alpha > 0) | (ref_alpha > 0)
-        ious.append(float(((base.alpha > 0.5) & (ref_alpha > 0.5)).sum() / ((base.alpha > 0.5) | (ref_alpha > 0.5)).sum()))
+        ious.append(float(((base.alpha > 0.5) & (ref_alpha > 0.5)).sum()
+                          / ((base.alpha > 0.5) | (ref_alpha > 0.5)).sum()))
         noise.append(np.abs(over_grey(a[..., :3], a[..., 3]) - over_grey(b[..., :3], b[..., 3]))[mask] / 2)
         refs.append(ref)
         masks.append(mask)
@@ -360,8 +361,9 @@ def summary(res: dict) -> str:
         lines.append(f"| {name} | {r['mean_linear']:.4f} | {r['p99_linear']:.3f} | {r['mean_srgb_codes']:.2f} | "
                      f"{r['p99_srgb_codes']:.0f} | {bias} | {r.get('ms_512_one_thread', '')} | "
                      f"{r.get('indirect_ms', '')} | {r.get('indirect_rays', '')} |")
-    lines += ["", "Indirect light: rays per hand vertex (accessory vertices a quarter, at least 4) against the same estimate with 512 rays (the many-ray truth of "
-              "the estimator) and against the path tracer (lambert skin):", "",
+    lines += ["", "Indirect light: rays per hand vertex (accessory vertices a quarter, at least 4) against the same "
+              "estimate with 512 rays (the many-ray truth of the estimator) and against the path tracer (lambert "
+              "skin):", "",
               "| rays | mean lin vs 512 | p99 lin vs 512 | mean sRGB vs 512 | mean lin vs path tracer |",
               "|---|---|---|---|---|"]
     for r in s["indirect_rays_curve"]:

@@ -339,7 +339,7 @@ def remove_stale_temporaries(folder: str | os.PathLike, recursive: bool = True) 
     """Remove, under `folder` (or in it only), the temporary files and staging folders (`temporary_prefix` names)
     of processes that are no longer running: what an interrupted or killed run left. Returns what was removed."""
     removed = []
-    for root, dirs, files in os.walk(folder):
+    for root, dirs, files in os.walk(os.fspath(folder)):
         for name in dirs + files:
             m = _TEMPORARY.match(name)
             if m and not _process_alive(int(m.group(1))):

@@ -62,7 +62,7 @@ DEFAULTS = {
 
 def plan_spec(**options) -> dict:
     """DEFAULTS updated with `options` (None leaves a default; 'poses' merges), checked for unknown names."""
-    spec = copy.deepcopy(DEFAULTS)
+    spec: dict = copy.deepcopy(DEFAULTS)
     for key, value in options.items():
         if key not in spec:
             raise InputError(f"plan: unknown option {key!r} (known: {', '.join(spec)})")
@@ -243,7 +243,7 @@ def _shape_sampler(opts: dict, model) -> shapes.ShapeSampler:
 
 def _right_model(sources: dict):
     """The right-handed model poses are planned on (a left source's model mirrored); None for USD packages."""
-    for side, source in sources.items():
+    for source in sources.values():
         model = getattr(source, "model", None)
         if model is None or hasattr(source, "gestures"):
             return None

@@ -191,7 +191,7 @@ class GestureProblem:
             at = np.searchsorted(ids, h.sample)
             d[at] = h.distance
             grad[at] = self.distance_gradient(v, h, velocity, posed.transforms[0])
-            key = tuple(sorted((p, q)))
+            key = (min(p, q), max(p, q))
             margin = 0.0 if key in self.contacts else self.clearance
             short = d < margin
             r = np.where(short, (margin - d) / PENALTY_SCALE, 0.0)
@@ -344,6 +344,7 @@ def fit_gesture(model: HandModel, surfaces: PartSurfaces, frames: np.ndarray, na
         if best is not None and between_digits(crossing) >= between_digits(best.crossing):
             break  # more clearance did not help: the crossing is not one the fit can move apart
         best = result
+    assert best is not None, "ROUNDS > 0"
     best.status = "unresolved"
     return best
 
