@@ -74,7 +74,7 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> None:
         tmp.write_bytes(data)
 
 
-def write_json(path: str | os.PathLike, obj, indent: int = 2) -> None:
+def write_json(path: str | os.PathLike, obj, indent: int | None = 2) -> None:
     """Write `obj` as JSON (sorted keys, trailing newline) to `path` atomically. NaN and Infinity are not JSON: a
     document holding them is refused (InputError naming the file and field), never written."""
     try:

@@ -59,7 +59,8 @@ def render_chunk(items: list) -> dict:
 
     settings, stop = _STATE["settings"], _STATE.get("stop")
     default_side = next(iter(_STATE["specs"]))
-    frames, steps = [], {}
+    frames: list = []
+    steps: dict = {}
     for job, digest in items:
         if stop is not None and stop.is_set():
             break

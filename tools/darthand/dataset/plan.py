@@ -43,7 +43,7 @@ LIGHTS = VIEW + 6                            # lighting.UNIFORMS
 BACKGROUND = LIGHTS + lighting.UNIFORMS      # backgrounds.UNIFORMS
 UNIFORMS = BACKGROUND + backgrounds.UNIFORMS
 
-DEFAULTS = {
+DEFAULTS: dict = {
     "seed": 0,
     "poses": {"mode": "auto", "reference": "gestures", "gestures": None, "levels": poses.DEFAULT_LEVELS,
               "draws": poses.DEFAULT_DRAWS, "steps": poses.DEFAULT_STEPS, "jitter_deg": poses.DEFAULT_JITTER_DEG,
@@ -62,7 +62,7 @@ DEFAULTS = {
 
 def plan_spec(**options) -> dict:
     """DEFAULTS updated with `options` (None leaves a default; 'poses' merges), checked for unknown names."""
-    spec: dict = copy.deepcopy(DEFAULTS)
+    spec = copy.deepcopy(DEFAULTS)
     for key, value in options.items():
         if key not in spec:
             raise InputError(f"plan: unknown option {key!r} (known: {', '.join(spec)})")

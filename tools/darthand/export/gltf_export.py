@@ -94,7 +94,7 @@ class GltfExport:
 
 
 def export_gltf(model: HandModel, out: str | Path, *, options: GltfOptions = GltfOptions(),
-                textures: list[TextureSet] = (), accessories: list[Accessory] = (),
+                textures: list[TextureSet] | tuple = (), accessories: list[Accessory] | tuple = (),
                 gestures: tuple[list[str], np.ndarray] | None = None, name: str | None = None) -> GltfExport:
     """Write `model` as glTF 2.0 to `out` (.glb: one file; .gltf: JSON + .bin + textures/ beside it).
 

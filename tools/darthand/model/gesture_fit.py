@@ -183,7 +183,7 @@ class GestureProblem:
         v, n, posed = self.pose(angles)
         velocity = self.angular_velocities(angles, posed)                          # (n, 3), (n, 3) pivots
         res, jac = [x / self.sigma[self.free]], [np.diag(1.0 / self.sigma[self.free])]
-        contact_terms: dict[tuple[int, int], list] = {}
+        contact_terms: dict[tuple[int, ...], list] = {}
         for (p, q), ids in sorted(self.sets.items()):
             h = self.hits(v, n, p, q, samples=ids)
             d = np.full(len(ids), np.inf)
@@ -191,7 +191,7 @@ class GestureProblem:
             at = np.searchsorted(ids, h.sample)
             d[at] = h.distance
             grad[at] = self.distance_gradient(v, h, velocity, posed.transforms[0])
-            key = (min(p, q), max(p, q))
+            key = tuple(sorted((p, q)))
             margin = 0.0 if key in self.contacts else self.clearance
             short = d < margin
             r = np.where(short, (margin - d) / PENALTY_SCALE, 0.0)

@@ -126,7 +126,7 @@ def pose_checks(model: HandModel, poses: np.ndarray, names: list[str], contacts:
                 self_intersecting_faces=inter["faces"], between_fingers_faces=between_digits(between),
                 finger_palm_faces=sum(n for k, n in between.items() if "palm" in k),
                 within=inter["within"], between=between)
-            if surfaces is not None:
+            if surfaces is not None and contacts is not None:
                 entry.update(part_distances(surfaces, v, model.faces, contacts[g]))
         report[name] = entry
     return posed.vertices, crossing, report

@@ -157,8 +157,11 @@ def image_info(ref: TextureRef) -> ImageInfo:
 
 def verify_image(ref: TextureRef) -> None:
     """The deep check: every PNG chunk's CRC, then a full decode by OpenImageIO."""
-    assert ref.data is not None or ref.file is not None, "a texture is embedded or in a file"
-    data = ref.data if ref.data is not None else Path(ref.file).read_bytes()
+    if ref.data is not None:
+        data = ref.data
+    else:
+        assert ref.file is not None, "a texture is embedded or in a file"
+        data = Path(ref.file).read_bytes()
     if data[:8] == PNG_SIGNATURE:
         check_png_chunks(data)
     if ref.file is not None and ref.data is None:
