@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 AUC_RANGE_M = (0.0, 0.05)
 AUC_STEPS = 100
 F_THRESHOLDS_M = (0.005, 0.015)
-_trapezoid = getattr(np, "trapezoid", None) or np.trapz  # type: ignore[attr-defined]  # numpy < 2 calls it trapz
+_trapezoid = getattr(np, "trapezoid", None) or np.trapz  # type: ignore[attr-defined, unused-ignore]  # numpy < 2 calls it trapz
 
 
 def align_similarity(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:

@@ -221,8 +221,8 @@ class HandAssets:
             if ("f32", key) not in self._face_joints:
                 self._face_joints["f32", key] = tuple(np.ascontiguousarray(a, np.float32)
                                                       for a in (acc.vertices, acc.weights, posedirs))
-            vertices, weights, posedirs = self._face_joints["f32", key]
-            v = pose_skinned(vertices, weights, posedirs, posed.rotations, posed.transforms)[0]
+            v32, w32, d32 = self._face_joints["f32", key]
+            v = pose_skinned(v32, w32, d32, posed.rotations, posed.transforms)[0]
             v = v.astype(np.float32)
             n = vertex_normals(v, acc.faces)
             if acc.id not in self._face_joints:
