@@ -7,6 +7,8 @@ writes build/ and *.egg-info beside its sources; build/ is the assets' folder), 
 
 from __future__ import annotations
 
+import json
+import os
 import shutil
 import subprocess
 import sys
@@ -89,3 +91,15 @@ def test_package_discovery_as_configured_finds_darthand_only():
         folder = REPO / find["where"][0] / package.replace(".", "/")
         for pattern in patterns:
             assert list(folder.glob(pattern)), f"package-data {package}: {pattern} matches nothing"
+
+
+def test_benchmarks_run_from_the_repository_root(tmp_path):
+    """`make bench` runs `python -m benchmarks` from the repository root; its cheapest benchmark writes its JSON and
+    the markdown table."""
+    paths = [str(REPO / "tools"), *filter(None, [os.environ.get("PYTHONPATH")])]     # this checkout's darthand
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
+    proc = subprocess.run([sys.executable, "-m", "benchmarks", "--only", "rotations", "--out", str(tmp_path)],
+                          cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads((tmp_path / "rotations.json").read_text())["num_vectors"] > 0
+    assert "## rotations" in (tmp_path / "README.md").read_text()
