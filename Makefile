@@ -43,7 +43,7 @@ POSES        := $(wildcard assets_src/poses/*.json)
 # A stage's outputs depend on its own code too, so editing a generator rebuilds what it made.
 src = $(wildcard tools/darthand/$(1)/*.py tools/darthand/$(1)/*/*.py)
 
-.PHONY: assets verify-build shapes test test-all bench usdz clean venv node blender chromium FORCE
+.PHONY: assets verify-build shapes test test-all lint bench usdz clean venv node blender chromium FORCE
 .DEFAULT_GOAL := assets
 # A step that fails leaves no output make would take as up to date next time (grouped targets: all of them), so a
 # failed step fails again on every run until its cause is fixed.
@@ -179,11 +179,19 @@ usdz: build/usd/right/right.usda
 # --dist loadgroup keeps the tests marked xdist_group (the Ray cluster's) on one worker, with one cluster.
 TEST_ENV := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
-test: $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP) chromium
+# Lint first: ruff and mypy (settings in pyproject.toml) take seconds, the tests minutes.
+test: lint $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP) chromium
 	@$(TEST_ENV) $(PY) -m pytest -q -m "not slow" -n 2 --dist loadgroup $(PYTEST_ARGS)
 
-test-all: $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP) chromium
+test-all: lint $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP) chromium
 	@$(TEST_ENV) $(PY) -m pytest -q -n 2 --dist loadgroup $(PYTEST_ARGS)
+
+# Zero findings: ruff over the package, the tests, the benchmarks and testkit; mypy over the package (about a minute
+# on the first run, a few seconds from its cache, .mypy_cache/).
+LINT_PATHS := tools/darthand tests benchmarks testkit
+lint: $(STAMP)
+	@$(PY) -m ruff check --quiet $(LINT_PATHS)
+	@$(PY) -m mypy
 
 # The benchmarks' own dependencies (the bench extra: Mitsuba, the path-traced reference); without them the
 # render_reference benchmark reports itself skipped.
@@ -192,7 +200,7 @@ $(BENCH_STAMP): pyproject.toml | $(STAMP)
 	 || echo "bench extra not installed: the render_reference benchmark will be skipped"
 
 bench: $(STAMP) $(BENCH_STAMP) $(NODE_STAMP) build/model/right.npz
-	@$(PY) -m darthand.bench --out build/bench
+	@$(PY) -m benchmarks --out build/bench
 
 clean:
 	rm -rf build

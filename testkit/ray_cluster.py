@@ -7,7 +7,7 @@ Several such clusters (other test sessions, a user's own) can run on one machine
 (the `ray start` process, its raylet, GCS and agents, the raylet's workers), found through /proc.
 
     with LocalRayCluster(nodes=2, cpus=1) as cluster:      # head + one worker node, one CPU each
-        render_dataset(..., cluster={"address": cluster.address})
+        render_dataset(DatasetOptions(..., cluster=ClusterOptions(cluster.address)))
         cluster.kill_node(1)                               # a node lost: SIGKILL of its whole tree
 
 `hide=[paths]` starts a worker node in its own mount namespace with an empty tmpfs over those folders (root and

@@ -1,6 +1,7 @@
-"""Shared test set-up: the tests folder and the repository root are importable (tests build their own fixtures from
-`synthetic`, and use testkit/), under CI the property tests draw a fixed sequence of examples so a run is repeatable
-(locally they keep exploring), and `small_build` is one small real build shared by the whole session."""
+"""Shared test set-up: the tests folder is importable (tests build their own fixtures from `synthetic`), so is the
+repository root (`testkit` and `benchmarks`, kept out of the wheel, whatever the working directory), under CI
+the property tests draw a fixed sequence of examples so a run is repeatable (locally they keep exploring), and
+`small_build` is one small real build shared by the whole session."""
 
 import fcntl
 import os
@@ -11,8 +12,10 @@ import pytest
 from hypothesis import settings
 
 TESTS = Path(__file__).resolve().parent
+REPO = TESTS.parent
 sys.path.insert(0, str(TESTS))
-sys.path.insert(1, str(TESTS.parent))
+if str(REPO) not in sys.path:
+    sys.path.insert(1, str(REPO))
 
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
 if os.environ.get("CI"):

@@ -135,7 +135,8 @@ def test_quick_ring_build_is_valid_and_repeatable(hand, tmp_path):
 def test_cli_parser_wiring():
     from darthand.cli import build_parser
 
-    args = build_parser().parse_args(["accessories", "build", "m.npz", "--out", "o", "--ids", "a", "b", "--type", "ring"])
+    args = build_parser().parse_args(["accessories", "build", "m.npz", "--out", "o", "--ids", "a", "b",
+                                      "--type", "ring"])
     assert args.ids == ["a", "b"] and args.type == ["ring"] and args.poses == 300 and callable(args.run)
 
 

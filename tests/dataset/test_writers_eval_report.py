@@ -48,7 +48,7 @@ def test_freihand_of_a_mano_model_is_manos_convention(mano_dataset, tmp_path, ca
     assert "left-hand frames mirrored" in capsys.readouterr().out
     mano = load_model(str(right_pkl))
     rows, mirrored = 0, 0
-    for name, s in freihand_sets(tmp_path).items():
+    for s in freihand_sets(tmp_path).values():
         for k, frame in enumerate(s["frames"]):
             labels = json.loads((out / "labels" / f"{frame:06d}.json").read_text())
             theta = np.asarray(s["mano"][k][0])

@@ -198,7 +198,8 @@ def test_rigid_accessory_follows_its_joint(model, package, sources, gestures):
     stage = open_with(out, accessory="ring_01")
     binding = stage.GetPrimAtPath("/RightHand/RightHandAccessory/Right_ring_01")
     indices = UsdSkel.BindingAPI(binding).GetJointIndicesPrimvar()
-    assert indices.GetInterpolation() == UsdGeom.Tokens.vertex and set(indices.Get()) == {5}  # per point: Blender reads it
+    # per point: Blender reads it
+    assert indices.GetInterpolation() == UsdGeom.Tokens.vertex and set(indices.Get()) == {5}
     points = skinned_points(stage)["/RightHand/RightHandAccessory/Right_ring_01"]
     G = forward(model, gestures[1]).transforms[:, 5]                          # (B, 4, 4)
     expected = np.einsum("bij,nj->bni", G[:, :3, :3], ring.vertices) + G[:, None, :3, 3]

@@ -110,7 +110,8 @@ def test_pose_layouts_agree(model):
     p = rng.normal(size=(3, 48))
     a = forward(model, p).vertices
     np.testing.assert_array_equal(a, forward(model, p.reshape(3, 16, 3)).vertices)
-    np.testing.assert_allclose(a[1:2], forward(model, p[1]).vertices, rtol=0, atol=1e-15)  # BLAS kernels differ by batch size
+    # BLAS kernels differ by batch size
+    np.testing.assert_allclose(a[1:2], forward(model, p[1]).vertices, rtol=0, atol=1e-15)
 
 
 def test_float32_close_to_float64(model):

@@ -2,8 +2,8 @@
 
 The pickle is tests/model/mano_fixture's realistic MANO-format model (778 vertices, 1538 faces, 16-vertex wrist
 loop, protocol 2, chumpy-style shapedirs, CSC regressor, no UVs, no face labels). The build runs in a copy of the
-tree (Makefile, pyproject, tools, assets_src, schemas; .venv, .venv-blender and node_modules linked, PYTHONPATH on the copy's
-tools), so the developer's own build/ is never touched, at RES=64.
+tree (Makefile, pyproject, tools, assets_src, schemas; .venv, .venv-blender and node_modules linked, PYTHONPATH on the
+copy's tools), so the developer's own build/ is never touched, at RES=64.
 
 Besides the finished build -- manifest, gesture report, validation of every package -- it checks the two failure
 rules of `make assets`: a step that fails leaves nothing make takes as up to date, so it fails again on the next
@@ -142,7 +142,8 @@ def test_make_assets_from_a_mano_pickle(tree):
     assert manifest["failed_checks"] == []
     steps = set(manifest["steps_seconds"])
     assert {"model", "gestures", "textures", "accessories", "checks", "validate"} <= steps
-    assert {f"{kind}-{side}" for kind in ("usd", "gltf", "gltf-variants", "blend") for side in ("right", "left")} <= steps
+    kinds = ("usd", "gltf", "gltf-variants", "blend")
+    assert {f"{kind}-{side}" for kind in kinds for side in ("right", "left")} <= steps
 
     # The gestures: fitted to this model, no digit through another on either side, the contacts touching.
     report = manifest["checks"]["gestures"]

@@ -167,7 +167,10 @@ def materials(rng):
     }
 
 
-def compare(material, hits, lights, skin_model, ambient=np.float32([0.1, 0.12, 0.15]), extent=0.3):
+AMBIENT = np.float32([0.1, 0.12, 0.15])
+
+
+def compare(material, hits, lights, skin_model, ambient=AMBIENT, extent=0.3):
     want_occ, got_occ = Occluder(), Occluder()
     want_counters, got_counters = {}, {}
     want = reference_shade(material, hits, lights, ambient, want_occ, extent, want_counters, skin_model)
@@ -187,7 +190,7 @@ def compare(material, hits, lights, skin_model, ambient=np.float32([0.1, 0.12, 0
 def test_the_compiled_shading_is_the_numpy_shading_to_the_bit(skin_model):
     rng = np.random.default_rng(13)
     direction = (0.3, -0.8, 0.5)
-    for name, material in materials(rng).items():
+    for material in materials(rng).values():
         for near in (False, True):
             hits = random_hits(rng, 3000, direction, indirect=not near)
             # point light: 10 um off one hit's surface, or a kilometre away

@@ -228,7 +228,7 @@ def test_mip_texels_are_linear_light_box_averages_within_8bit_quantisation(shape
     for k in range(1, len(tex.levels)):
         stored = tex.texels(k).astype(np.float64)
         bh, bw = h // stored.shape[0], w // stored.shape[1]           # level-0 texels under one level-k texel
-        blocks = lambda a: a.reshape(stored.shape[0], bh, stored.shape[1], bw, -1).mean(axis=(1, 3))
+        blocks = lambda a, s=stored.shape, bh=bh, bw=bw: a.reshape(s[0], bh, s[1], bw, -1).mean(axis=(1, 3))
         colour_err = np.abs(stored[..., :3] - 255 * srgb_encode64(blocks(linear)))
         data_err = np.abs(stored[..., 3:] - blocks(codes[..., 3:].astype(np.float64)))
         assert colour_err.max() <= ENCODE_BOUND, (k, colour_err.max())
@@ -356,9 +356,10 @@ def reference_sample(tex: MipTexture, u: float, v: float, lod: float) -> np.ndar
 @pytest.mark.parametrize("shape,coded", [((37, 64, 4), True), ((64, 37, 4), False), ((1, 1, 3), True),
                                           ((1, 9, 2), False), ((16, 16, 5), True)])
 def test_lookups_match_the_definition_on_random_uvs_and_levels(shape, coded):
-    """(MipTexture's lookup is a compiled loop, render/texture._lookup_kernel.) Random uv (outside [0, 1] too: edge clamping), random levels (below 0, past the last level, on and around
-    the blend band's edges) on non-square, 1-texel-high and 1 x 1 pyramids, 8-bit (with a skin-tone offset's
-    table) and float: the compiled lookup equals the per-sample float64 definition within float32 rounding."""
+    """(MipTexture's lookup is a compiled loop, render/texture._lookup_kernel.) Random uv (outside [0, 1] too: edge
+    clamping), random levels (below 0, past the last level, on and around the blend band's edges) on non-square,
+    1-texel-high and 1 x 1 pyramids, 8-bit (with a skin-tone offset's table) and float: the compiled lookup equals the
+    per-sample float64 definition within float32 rounding."""
     rng = np.random.default_rng(sum(shape))
     h, w, c = shape
     if coded:

@@ -13,7 +13,6 @@ from render_scenes import quad, subject, surface, top_camera
 
 from darthand.render import aa, api, trace
 from darthand.render.embree_mesh import _Api, add_triangles, device
-from darthand.render.lights import Lighting
 from darthand.render.scene import FaceData, Scene, interpolate, interpolate_columns
 from darthand.render.trace import Context, RayHits, Samples
 

@@ -1,11 +1,11 @@
 """The hostile-input corpus: bad inputs for every command, by input class, each with what handling it means.
 
 A `Case` is a darthand command line (placeholders `{t}`: the case's own folder, `{fx}`: the fixture folder of
-probe_fixtures.py), an optional `setup(t, fx)` that writes its bad input, the exit codes that count as handled (2, a one-line
-error, by default), files that must never be opened (`watch`: files outside a package), and an optional `check` of
-what the command left behind. The probe (probe.py) runs every case through the real CLI in a subprocess and judges
-it: hang, crash (signal), outside file opened, payload executed, traceback, wrong exit code, orphan processes, noise
-on stderr, or the case's own check failing -- else handled.
+probe_fixtures.py), an optional `setup(t, fx)` that writes its bad input, the exit codes that count as handled (2, a
+one-line error, by default), files that must never be opened (`watch`: files outside a package), and an optional `check`
+of what the command left behind. The probe (probe.py) runs every case through the real CLI in a subprocess and judges
+it: hang, crash (signal), outside file opened, payload executed, traceback, wrong exit code, orphan processes, noise on
+stderr, or the case's own check failing -- else handled.
 
 Cases that need more than one command (interrupting a run, a SIGKILL and a re-run, damaging a build) have a `run`
 function instead; the probe gives it the same judging helpers.
@@ -723,7 +723,8 @@ DATASET = ["render-dataset", "{fx}/model/right.npz", "--textures", "{fx}/tex", "
            "{t}/ds", "--size", "32", "--processes", "1", "--jobs", "{t}/jobs.json"]
 case("jobs files (JSON only)", "1,000 nested brackets", DATASET, setup=writer("jobs.json", deep(1000)))
 case("jobs files (JSON only)", "100,000 nested objects", DATASET, setup=writer("jobs.json", deep(100_000, "0", "dict")))
-case("jobs files (JSON only)", "int of 5000 digits", DATASET, setup=writer("jobs.json", '{"frames": ' + "9" * 5000 + "}"))
+case("jobs files (JSON only)", "int of 5000 digits", DATASET,
+     setup=writer("jobs.json", '{"frames": ' + "9" * 5000 + "}"))
 case("jobs files (JSON only)", "invalid UTF-8", DATASET, setup=writer("jobs.json", b"\xff\xfe{"))
 case("jobs files (JSON only)", "jobs file is a FIFO", DATASET, setup=fifo_at("jobs.json"), timeout=30)
 

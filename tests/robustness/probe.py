@@ -1,4 +1,4 @@
-"""Run the hostile-input corpus (hostile_corpus.py) through the real `darthand` CLI and print what was handled, by class.
+"""Run the hostile-input corpus (hostile_corpus.py) through the real `darthand` CLI; print what was handled, by class.
 
     .venv/bin/python tests/robustness/probe.py [--work DIR] [--jobs N] [--only TEXT] [--json OUT] [--no-make]
                                                [--source CHECKOUT]

@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from studio_build import GLOVE, RING, make_build  # noqa: E402
 
-from darthand.studio.browser import BrowserUnavailable, StudioProcess, chromium, drive  # noqa: E402
+from testkit.browser import BrowserUnavailable, StudioProcess, chromium, drive  # noqa: E402
 
 INDEX1_BEND = 20.0                       # degrees: 40 ArrowRight presses on a 0.5-degree slider
 STEPS = [

@@ -112,7 +112,8 @@ def project(model, offsets):
 
 PEOPLE = {
     "woman, 30, slight": dict(gender=0.28, years=30, muscle=0.45, weight=0.45, height=0.45,
-                              local={"hands/r-hand-fingers-diameter-decr": 0.3, "hands/r-hand-fingers-distance-decr": 0.3}),
+                              local={"hands/r-hand-fingers-diameter-decr": 0.3,
+                                     "hands/r-hand-fingers-distance-decr": 0.3}),
     "man, 55, large": dict(gender=0.72, years=55, muscle=0.55, weight=0.6, height=0.56, proportions=0.6,
                            local={"hands/r-hand-fingers-diameter-incr": 0.3, "hands/r-hand-fingers-distance-incr": 0.3,
                                   "hands/r-hand-scale-incr": 0.1}),

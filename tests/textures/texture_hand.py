@@ -164,7 +164,7 @@ def _island_uvs(parts, params, faces):
     """One island per tube (u = angle * radius, v = axial, metres), placed on two shelves: palm and thumb, then
     the four fingers; one texel density everywhere; corners with equal UVs share a UV vertex."""
     islands = []
-    for (off, n, foff, fn, radius), p in zip(parts, params):
+    for (off, _n, foff, fn, radius), p in zip(parts, params):
         c = _island_corners(p[faces[foff:foff + fn] - off])
         c[..., 0] *= radius
         islands.append(c - c.reshape(-1, 2).min(0))

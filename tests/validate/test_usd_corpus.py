@@ -233,8 +233,9 @@ CASES = {
         layer, f"{GEOM.format(RING_ID)}.primvars:skel:jointIndices", np.array([99], np.int32)))),
     "ring-floating": ("acc.distance", ring(lambda layer: change(
         layer, f"{GEOM.format(RING_ID)}.points", lambda p: (p + [0.0, 0.11, 0.0]).astype(np.float32)))),
-    "ring-unbound": ("acc.binding", ring(lambda layer: [remove_property(layer, f"{GEOM.format(RING_ID)}.primvars:skel:{p}")
-                                                        for p in ("jointIndices", "jointWeights")])),
+    "ring-unbound": ("acc.binding", ring(lambda layer: [
+        remove_property(layer, f"{GEOM.format(RING_ID)}.primvars:skel:{p}")
+        for p in ("jointIndices", "jointWeights")])),
     "accessory-id": ("acc.unknown-id", interface(lambda layer: add_variant(layer, "accessory", "mystery_ring",
                                                                             RING_ID))),
     "glove-weights": ("rig.weights-sum", lambda pkg: edit(pkg / GLOVE_LAYER, lambda layer: change(

@@ -76,7 +76,7 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> None:
         tmp.write_bytes(data)
 
 
-def write_json(path: str | os.PathLike, obj, indent: int = 2) -> None:
+def write_json(path: str | os.PathLike, obj, indent: int | None = 2) -> None:
     """Write `obj` as JSON (sorted keys, trailing newline) to `path` atomically. NaN and Infinity are not JSON: a
     document holding them is refused (InputError naming the file and field), never written."""
     try:
@@ -326,7 +326,7 @@ def remove_stale_temporaries(folder: str | os.PathLike, recursive: bool = True) 
     """Remove, under `folder` (or in it only), the temporary files and staging folders (`temporary_prefix` names)
     of processes that are no longer running: what an interrupted or killed run left. Returns what was removed."""
     removed = []
-    for root, dirs, files in os.walk(folder):
+    for root, dirs, files in os.walk(os.fspath(folder)):
         for name in dirs + files:
             m = _TEMPORARY.match(name)
             if m and not _process_alive(int(m.group(1))):

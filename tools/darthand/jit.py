@@ -64,5 +64,5 @@ def kernel(func=None, *, error_model: str = "python"):
                     return result
         return compiled(*args)
 
-    call.py_func = func
+    call.py_func = func  # type: ignore[attr-defined]
     return call

@@ -42,9 +42,9 @@ def file_entries(build: Path, manifest_path: Path, previous: dict) -> list[dict]
         st = f.stat()
         rel = f.relative_to(build).as_posix()
         prev = old.get(rel)
-        same = prev and prev.get("bytes") == st.st_size and prev.get("mtime_ns") == st.st_mtime_ns
+        same = prev is not None and prev.get("bytes") == st.st_size and prev.get("mtime_ns") == st.st_mtime_ns
         out.append({"path": rel, "bytes": st.st_size, "mtime_ns": st.st_mtime_ns,
-                    "sha256": prev["sha256"] if same else sha256_file(f)})
+                    "sha256": prev["sha256"] if prev is not None and same else sha256_file(f)})
     return out
 
 
@@ -73,7 +73,7 @@ def _read(path: Path):
 
 def model_used(build: Path) -> dict:
     source = build / "model" / "source.txt"
-    info = {"source": source.read_text().strip() if source.is_file() else None}
+    info: dict = {"source": source.read_text().strip() if source.is_file() else None}
     right = build / "model" / "right.npz"
     if right.is_file():
         from darthand.model.npz_io import load_npz  # lazy: verify and manifest --check, run by every `make assets`,

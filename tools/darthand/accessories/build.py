@@ -109,12 +109,12 @@ def penetration_table(entries: list[dict]) -> dict:
     table = {}
     for kind in sorted({e["type"] for e in entries}):
         pens = {e["id"]: e["max_penetration_mm"] for e in entries if e["type"] == kind}
-        row = {"items": len(pens)}
+        row: dict = {"items": len(pens)}
         for column, field in TABLE_COLUMNS["glove" if kind == "glove" else "rigid"].items():
             worst = {i: p[field] for i, p in pens.items() if p.get(field) is not None}
             p99 = {i: p[field + "_p99"] for i, p in pens.items() if p.get(field + "_p99") is not None}
             if worst and p99:
-                top, top99 = max(worst, key=worst.get), max(p99, key=p99.get)
+                top, top99 = max(worst, key=worst.__getitem__), max(p99, key=p99.__getitem__)
                 row[column] = {"max": round(worst[top], 4), "item": top, "worst_p99": round(p99[top99], 4),
                                "worst_p99_item": top99}
         worn = [e["worn"] for e in entries if e["type"] == kind and "worn" in e]
@@ -207,7 +207,7 @@ def _style(entry: dict) -> str:
 
 def _write_npz(path: Path, b: Built, world: np.ndarray, normals: np.ndarray, material: dict) -> None:
     m = b.mesh
-    arrays = dict(format=np.array(FORMAT), format_version=np.array(FORMAT_VERSION), id=np.array(b.id),
+    arrays: dict = dict(format=np.array(FORMAT), format_version=np.array(FORMAT_VERSION), id=np.array(b.id),
                   type=np.array(b.entry["type"]), vertices=world, local_vertices=m.vertices,
                   faces=m.faces.astype(np.int64), normals=normals, uvs=m.uvs, faces_uv=m.faces_uv.astype(np.int64),
                   parent_joint=np.array(-1 if b.fit is None else b.fit.joint, np.int64), rest_transform=b.rest,

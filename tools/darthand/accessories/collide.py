@@ -93,8 +93,8 @@ class Solid:
         TriangleMesh(self.scene, np.ascontiguousarray(self.vertices, np.float32),
                      np.ascontiguousarray(self.faces, np.int32))
         self.lo, self.hi = self.vertices.min(0), self.vertices.max(0)
-        self._trees = None
-        self._ray = None
+        self._trees: tuple | None = None
+        self._ray: RayMeshIntersector | None = None
 
     @property
     def ray(self) -> RayMeshIntersector:
@@ -135,7 +135,9 @@ class Solid:
             ok = (hit >= 0) & (travelled[todo] + tfar <= reach)
             todo, hit = todo[ok], hit[ok]
             travelled[todo] += tfar[ok]
-            rays.append(todo), faces.append(hit), dists.append(travelled[todo].copy())
+            rays.append(todo)
+            faces.append(hit)
+            dists.append(travelled[todo].copy())
             travelled[todo] += eps
         rays, faces, dists = np.concatenate(rays), np.concatenate(faces), np.concatenate(dists)
         order = np.lexsort((dists, rays))

@@ -81,8 +81,8 @@ def accessory_factors(acc: Accessory) -> tuple[tuple[float, float, float, float]
     """The constant look of an accessory's material: base colour (linear RGBA), metallic, roughness, from its
     catalogue material (defaults: light grey, 0, 0.5). Writers use them where the accessory has no texture."""
     m = acc.material
-    color = [float(c) for c in m.get("base_color", (0.8, 0.8, 0.8))][:4]
-    return tuple(color + [1.0] * (4 - len(color))), float(m.get("metallic", 0.0)), float(m.get("roughness", 0.5))
+    color = [float(c) for c in m.get("base_color", (0.8, 0.8, 0.8))][:4] + [1.0]
+    return (color[0], color[1], color[2], color[3]), float(m.get("metallic", 0.0)), float(m.get("roughness", 0.5))
 
 
 def check_accessory(acc: Accessory, source: str = "accessory") -> None:

@@ -34,7 +34,7 @@ def section_points(vertices: np.ndarray, faces: np.ndarray, frame: np.ndarray, o
         if skip_open and any(lp is not None for lp in loops):
             return np.concatenate([lp for lp in loops if lp is not None])
         if all(lp is not None for lp in loops):
-            return np.concatenate(loops)
+            return np.concatenate([lp for lp in loops if lp is not None])
     out = []
     for x in offsets:
         loop = _cut(whole, x)

@@ -14,7 +14,8 @@ SKIN = np.array([0.62, 0.42, 0.33])   # linear
 
 
 def render_view(meshes: list[dict], centre, view_dir, up, extent: float, size: int = 256) -> np.ndarray:
-    """(size, size, 3) float32 linear RGB image of `meshes` seen along `view_dir` (orthographic, `extent` metres across).
+    """(size, size, 3) float32 linear RGB image of `meshes` seen along `view_dir` (orthographic, `extent` metres
+    across).
 
     meshes: dicts with vertices (N, 3), faces (F, 3), and either "color" (3,) linear or
     "uvs" (T, 2) + "faces_uv" (F, 3) + "texture" (H, W, 3) linear, and optional "metallic" (scalar).

@@ -77,7 +77,8 @@ class ShapeRefitter:
         """The tracked section of a rigid accessory (made once, shared by the items that sit alike)."""
         key = self.keys[acc_id]
         if key not in self._sections:
-            self._sections[key] = track_section(self.model, *key, loop=self.loop)
+            kind, finger, t, offset, width = key
+            self._sections[key] = track_section(self.model, kind, finger, t, offset, width, loop=self.loop)
         return self._sections[key]
 
     def prepare(self) -> "ShapeRefitter":
@@ -126,6 +127,7 @@ def section_key(model: HandModel, acc: Accessory, loop: np.ndarray) -> tuple | N
     if acc.parent_joint != 0 and acc.parent_joint not in RING_JOINTS.values():
         return None
     rest = acc.rest_transform
+    assert rest is not None, "rigid accessories have a rest transform"
     local = (acc.vertices - rest[:3, 3]) @ rest[:3, :3]
     width = round(float(2 * np.abs(local[:, 0]).max()), 5)
     if acc.parent_joint == 0:
@@ -143,6 +145,7 @@ def track_section(model: HandModel, kind: str, finger: str | None, t: float, off
                   width: float, loop: np.ndarray) -> TrackedSection:
     """Cut the built hand where the item sits (as fit.py does) and tie the section points to the surface."""
     if kind == "ring":
+        assert finger is not None, "a ring sits on a finger"
         bone = finger_frame(model, finger, t)
         own = finger_faces(model, RING_JOINTS[finger])
     else:
@@ -186,7 +189,7 @@ def on_surface(model: HandModel, points: np.ndarray, k: int = 8) -> tuple[np.nda
 def _fit_points(model: HandModel, sec: TrackedSection, points: np.ndarray,
                 loop: np.ndarray) -> tuple[np.ndarray, tuple]:
     """The fit frame (rest transform of the fitted centre) and bore of tracked points on a hand."""
-    bone = finger_frame(model, sec.finger, sec.t) if sec.kind == "ring" else wrist_frame(model, sec.offset, loop)
+    bone = finger_frame(model, sec.finger, sec.t) if sec.finger is not None else wrist_frame(model, sec.offset, loop)
     # The item sits where its tracked skin is: along the bone at the points' mean, which on another shape need
     # not be the same fraction of the phalanx or distance from the wrist (a forearm tapers).
     bone[:3, 3] += float(((points - bone[:3, 3]) @ bone[:3, 0]).mean()) * bone[:3, 0]

@@ -106,7 +106,7 @@ class GloveProbe:
 
 def probes(built) -> list:
     """Light, picklable probes of built accessories (`build.Built`: entry, mesh, fit)."""
-    out = []
+    out: list = []
     for b in built:
         m = b.mesh
         if b.fit is None:
@@ -165,7 +165,7 @@ def measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool 
 
 
 def _measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool) -> dict:
-    out = {i.id: {**{key: np.zeros(len(poses)) for key in PER_POSE}, "drift": 0.0} for i in items}
+    out: dict[str, dict] = {i.id: {**{key: np.zeros(len(poses)) for key in PER_POSE}, "drift": 0.0} for i in items}
     rigid = [i for i in items if isinstance(i, RigidProbe)]
     gloves = [i for i in items if isinstance(i, GloveProbe)]
     rings = [i for i in rigid if worn and i.part >= 0]
@@ -182,7 +182,7 @@ def _measure_probes(model: HandModel, items: list, poses: np.ndarray, worn: bool
         views = {i.id: posed for i in fixed}            # the posed batch each item is measured on
         placed = {i.id: posed.transforms[:, i.joint] @ i.rest for i in fixed}
         turned = {}
-        worn_by = {i.id: [] for i in rings}
+        worn_by: dict[str, list] = {i.id: [] for i in rings}
         for p in poses[s:s + CHUNK]:                   # pose by pose: every ring wears the same posed hand
             for i in rings:
                 worn_by[i.id].append(wear[i.id].worn(p))

@@ -171,7 +171,7 @@ def atlas(tiles: dict[int, tuple[np.ndarray, np.ndarray]], size: int) -> dict[st
     first = next(iter(tiles.values()))
     base = np.zeros((size, size, 3), np.float32)
     mr = np.zeros((size, size, 3), np.float32)
-    for slot, (u0, v0, u1, v1) in ATLAS_SLOTS.items():
+    for slot, (u0, _v0, _u1, v1) in ATLAS_SLOTS.items():
         b, m = tiles.get(slot, first)
         r0, c0 = int(round((1 - v1) * size)), int(round(u0 * size))
         base[r0:r0 + half, c0:c0 + half] = b

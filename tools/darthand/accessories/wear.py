@@ -30,6 +30,8 @@ the pose sweep measures the result exactly (accessories/sweep).
 
 from __future__ import annotations
 
+from typing import Any
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -116,7 +118,7 @@ class RingWear:
         self.subtree = subtree_mask(model.parents)
         self.digit = int(joint_parts()[self.joint]) - 1                  # index into FINGERS
         self._last: tuple | None = None
-        self._crossing = None        # model/self_crossing.SelfCrossing, made when a turn is first checked
+        self._crossing: Any = None   # model/self_crossing.SelfCrossing, made when a turn is first checked
 
     def worn_once(self, pose) -> Worn:
         """`worn`, remembered for the last pose (a frame rendered again from another view)."""
@@ -130,7 +132,8 @@ class RingWear:
         """The ring worn in `pose` ((48,) MANO axis-angle, flat-hand relative)."""
         pose = np.asarray(pose, np.float64).reshape(-1)
         slid = self._slid(pose)                       # the same for every try: only the turns differ
-        links, held = frozenset(), frozenset()
+        links: frozenset = frozenset()
+        held: frozenset = frozenset()
         for _ in range(MAX_RETRIES + 1):
             choice, crossed = self._worn(pose, slid, links, held)
             retry = self._retry(crossed, links, held)
@@ -162,7 +165,7 @@ class RingWear:
         pose's best slide `slid` (`_slid`), with the finger pairs in `links` turned together and the digits in
         `held` (FINGERS indices) not turned."""
         posed, (s, depth, contact) = slid
-        unturned = (depth, pose, s, posed, {})
+        unturned: tuple = (depth, pose, s, posed, {})
         turned = []
         if depth > TARGET:
             start = axis_angle_to_angles(self.model, pose, self.frames)
@@ -246,6 +249,7 @@ class RingWear:
                 best = (float(s), depth)
             if depth <= TARGET:
                 break
+        assert best is not None                       # SLIDES is not empty
         s, depth = best
         return posed, (s, depth, self._contact(hand, s)[1] if depth > TARGET else None)
 

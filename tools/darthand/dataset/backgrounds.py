@@ -114,7 +114,7 @@ def background_pixels(spec: dict, width: int, height: int) -> tuple[np.ndarray, 
     for name in spec.get("files", []):
         path = str(Path(spec["folder"]) / name)
         try:
-            image = _cached(("file", path), lambda: decode_image(path))
+            image = _cached(("file", path), lambda path=path: decode_image(path))
         except InputError:
             skipped.append(name)
             continue
@@ -202,9 +202,9 @@ def crop(image: np.ndarray, spec: dict, width: int, height: int) -> np.ndarray:
 
 @kernel
 def _bilinear_kernel(image, y_lo, y_hi, fy, x_lo, x_hi, fx, out):
-    """out (h, w, C) float32: image (H, W, C) (float32, or float64: the built-in stripes) read bilinearly at rows y_lo + fy (h,) and columns x_lo + fx
-    (w,), the next row and column being y_hi and x_hi; the rows blended first, then the columns (float32, in the
-    order of the separable numpy resampling it replaced; in float64 for a float64 image)."""
+    """out (h, w, C) float32: image (H, W, C) (float32, or float64: the built-in stripes) read bilinearly at rows
+    y_lo + fy (h,) and columns x_lo + fx (w,), the next row and column being y_hi and x_hi; the rows blended first, then
+    the columns (float32, in the order of the separable numpy resampling it replaced; float64 for a float64 image)."""
     for i in range(out.shape[0]):
         a, b, f = y_lo[i], y_hi[i], fy[i]
         for j in range(out.shape[1]):

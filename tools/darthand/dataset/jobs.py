@@ -59,7 +59,8 @@ def check_jobs(doc, source: str = "jobs") -> list[dict]:
     check_schema(doc, JOBS_SCHEMA, source)
     frames = doc["frames"] if isinstance(doc, dict) else doc
     prefix = "frames." if isinstance(doc, dict) else ""
-    out, seen = [], {}
+    out: list = []
+    seen: dict = {}
     for k, job in enumerate(frames):
         job = dict(job)
         job.setdefault("index", k)

@@ -70,7 +70,7 @@ def random_rig(u: np.ndarray, hand_centre=(0.0, 0.0, 0.0)) -> tuple[dict, dict]:
     a point light (world frame) at POINT_DISTANCE from `hand_centre` with its intensity scaled by the squared
     distance, so that it lights the hand like a directional light of the same nominal intensity."""
     names = [_NAMES[min(int(x * len(_NAMES)), len(_NAMES) - 1)] for x in u[:3]]
-    doc = {"ambient": {"color": PALETTE[names[0]], "intensity": _lerp(AMBIENT_RANGE, u[3])}, "lights": []}
+    doc: dict = {"ambient": {"color": PALETTE[names[0]], "intensity": _lerp(AMBIENT_RANGE, u[3])}, "lights": []}
     toward = _sphere(u[4], u[5], -1.0, KEY_MAX_Z)
     doc["lights"].append({"type": "directional", "direction": [-c for c in toward], "color": PALETTE[names[1]],
                           "intensity": _lerp(KEY_RANGE, u[6]), "shadows": True, "frame": "camera"})

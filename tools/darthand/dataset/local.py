@@ -57,7 +57,8 @@ def render_chunk(items: list) -> dict:
     end (monotonic), and the chunk's per-step seconds and peak memory."""
     settings, stop = _STATE["settings"], _STATE.get("stop")
     default_side = next(iter(_STATE["specs"]))
-    frames, steps = [], {}
+    frames: list = []
+    steps: dict = {}
     for job, digest in items:
         if stop is not None and stop.is_set():
             break

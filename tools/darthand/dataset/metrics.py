@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 AUC_RANGE_M = (0.0, 0.05)
 AUC_STEPS = 100
 F_THRESHOLDS_M = (0.005, 0.015)
-_trapezoid = getattr(np, "trapezoid", None) or np.trapz      # numpy < 2 calls it trapz
+_trapezoid = getattr(np, "trapezoid", None) or np.trapz  # type: ignore[attr-defined, unused-ignore]  # numpy < 2 calls it trapz
 
 
 def align_similarity(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
@@ -67,7 +67,7 @@ def f_score(pred: np.ndarray, gt: np.ndarray, threshold: float) -> float:
 def evaluate(pred_xyz, gt_xyz, pred_verts=None, gt_verts=None) -> dict:
     """FreiHAND's figures (millimetres; AUC and F-scores in 0..1) for keypoints (B, 21, 3) and optionally vertices
     (B, V, 3), metres."""
-    out = {"samples": int(len(gt_xyz))}
+    out: dict = {"samples": int(len(gt_xyz))}
     for name, pred, gt in (("keypoints", pred_xyz, gt_xyz), ("vertices", pred_verts, gt_verts)):
         if pred is None or gt is None:
             continue

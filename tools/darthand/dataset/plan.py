@@ -117,7 +117,7 @@ def _plain(value):
     return value
 
 
-DEFAULTS = _plain(PlanOptions())
+DEFAULTS: dict = _plain(PlanOptions())
 
 
 def plan_spec(**options) -> dict:
@@ -303,7 +303,7 @@ def _shape_sampler(opts: dict, model) -> shapes.ShapeSampler:
 
 def _right_model(sources: dict):
     """The right-handed model poses are planned on (a left source's model mirrored); None for USD packages."""
-    for side, source in sources.items():
+    for source in sources.values():
         model = source.pose_model()
         if model is None:
             return None
@@ -323,7 +323,6 @@ def _hand_centre(model) -> np.ndarray:
 def _lights_mode(value):
     if value in ("random", "default", None):
         return value or "default"
-
     doc = read_json(value, "lights file") if isinstance(value, str) else value
     load_lighting(doc, str(value) if isinstance(value, str) else "lights")
     return doc

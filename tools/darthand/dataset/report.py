@@ -181,7 +181,7 @@ def coverage_figures(poses: np.ndarray, reference: np.ndarray) -> dict:
     """How well the dataset's poses cover the reference set: per reference pose, the mean rotation angle (degrees)
     over the 15 finger joints to its nearest dataset pose; and the dataset's own spread (the same to the nearest
     other dataset pose)."""
-    result = {"dataset_poses": int(len(poses)), "reference_poses": int(len(reference))}
+    result: dict = {"dataset_poses": int(len(poses)), "reference_poses": int(len(reference))}
     if len(reference):
         d = pose_distances(reference, poses).min(1)
         result.update({"reference_to_dataset_deg": d.round(3).tolist(),

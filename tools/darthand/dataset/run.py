@@ -114,7 +114,7 @@ def _render_shards(shards, runner: Runner, settings, resume, processes, chunk_si
     out = Path(settings["out_dir"])
     inflight: dict = {}                      # future -> shard state
     limit = 2 * processes + 1
-    pending_shards = []
+    pending_shards: list = []
 
     def collect(block: bool) -> None:
         finished = wait(list(inflight), timeout=None if block else 0, return_when=FIRST_COMPLETED)[0] \
@@ -168,6 +168,7 @@ def shard_record_path(out: Path, jobs: list[dict]) -> Path:
 def _open_shard(out: Path, jobs: list[dict], settings: dict, resume: bool) -> dict:
     """A shard's state: the frames to render (with their digests), the summaries of those already there."""
     digests = [job_digest(j, settings) for j in jobs]
+    state: dict
     state = {"jobs": len(jobs), "first": jobs[0]["index"] if jobs else 0, "last": jobs[-1]["index"] if jobs else 0,
              "digest": shard_digest(digests), "summaries": [], "todo": [], "left": 0, "path": None}
     if not jobs:
@@ -254,8 +255,13 @@ class RunStats:
 
     def __init__(self, t_start: float):
         self.t_start, self.done, self.skipped, self.rendered = t_start, 0, 0, 0
-        self.first_end, self.last_end, self.open_s, self.rss = {}, {}, {}, {}
-        self.frame_ms, self.cpu_ms, self.ends = [], [], []
+        self.first_end: dict = {}
+        self.last_end: dict = {}
+        self.open_s: dict = {}
+        self.rss: dict = {}
+        self.frame_ms: list = []
+        self.cpu_ms: list = []
+        self.ends: list = []
         self.steps: dict = {}
         self.counts: dict = {}
         self.visible = np.zeros(21)
@@ -312,7 +318,7 @@ class RunStats:
         the first worker to finish waited for the last; worker_peak_rss_mb: each worker's peak resident memory."""
         t_end = time.monotonic()
         n = self.rendered
-        out = {"processes": processes, "wall_s": round(t_end - self.t_start, 3), "frames": n}
+        out: dict = {"processes": processes, "wall_s": round(t_end - self.t_start, 3), "frames": n}
         if not n or not self.first_end:
             return out
         warm = max(self.first_end.values())

@@ -123,6 +123,7 @@ def export_correctives(model: HandModel, mode: str = "full") -> Correctives:
     if kind == "none":
         return Correctives("none", np.zeros((V, 3, 0)), np.zeros((0, NUM_POSE_FEATURES)), (),
                            encode_channels((), [], []))
+    assert k is not None, "parse_correctives gives a count with pca:K and pose-pca:K"
     A = model.posedirs.reshape(3 * V, NUM_POSE_FEATURES)
     names = tuple(f"pose_pca{i:03d}" for i in range(k))
     if kind == "pca":

@@ -33,6 +33,7 @@ def add_accessory(doc: GltfDocument, acc: Accessory, *, materials: MaterialBuild
     if acc.skinned:
         channels = channel_offsets(acc.posedirs, correctives, len(acc.vertices))
         offsets = correctives.shape_offsets(channels) if channels.shape[2] else np.zeros((len(acc.vertices), 3, 0))
+        assert acc.weights is not None, "a skinned accessory has weights"
         surface = split_surface(name, acc.vertices, acc.faces, acc.uvs, acc.faces_uv, acc.weights, offsets)
         mesh = add_surface_mesh(doc, surface, influences=influences, material=material,
                                 target_names=correctives.names if offsets.shape[2] else (), vertex_ids=vertex_ids)
@@ -40,12 +41,13 @@ def add_accessory(doc: GltfDocument, acc: Accessory, *, materials: MaterialBuild
         doc.gltf.nodes[node].extras = {"darthand": {"accessory": acc.id}}
         return node, offsets.shape[2] > 0
     j = acc.parent_joint
+    assert j is not None, "a rigid accessory follows one joint"
     local = (acc.vertices - skeleton.joints[j]) @ skeleton.frames[j]
     surface = split_surface(name, local, acc.faces, acc.uvs, acc.faces_uv, np.zeros((len(local), 0)),
                             np.zeros((len(local), 3, 0)))
     mesh = add_surface_mesh(doc, surface, influences=None, material=material, vertex_ids=False, skinned=False)
     node = doc.add("nodes", gl.Node(name=name, mesh=mesh, extras={"darthand": {"accessory": acc.id}}))
-    doc.gltf.nodes[joint_nodes[acc.parent_joint]].children.append(node)
+    doc.gltf.nodes[joint_nodes[j]].children.append(node)
     return node, False
 
 

@@ -94,7 +94,7 @@ class GltfExport:
 
 
 def export_gltf(model: HandModel, out: str | Path, *, options: GltfOptions = GltfOptions(),
-                textures: list[TextureSet] = (), accessories: list[Accessory] = (),
+                textures: list[TextureSet] | tuple = (), accessories: list[Accessory] | tuple = (),
                 gestures: tuple[list[str], np.ndarray] | None = None, name: str | None = None) -> GltfExport:
     """Write `model` as glTF 2.0 to `out` (.glb: one file; .gltf: JSON + .bin + textures/ beside it).
 
@@ -146,6 +146,7 @@ def export_gltf(model: HandModel, out: str | Path, *, options: GltfOptions = Glt
                                               channel_offsets(cap.posedirs, correctives, len(cap.vertices)),
                                               dials, cap.shapedirs))
     # The cap's _VERTEX_ID continues after the hand's: V + cap vertex.
+    assert cap_surface.source is not None                         # split_surface maps every vertex to its source
     cap_surface = dataclasses.replace(cap_surface, source=cap_surface.source + model.num_vertices)
     cap_primitive = surface_primitive(doc, cap_surface, influences=options.influences, material=skin_materials[0],
                                       extensions=extensions, vertex_ids=options.vertex_ids)

@@ -163,7 +163,7 @@ def influence_sets(weights: np.ndarray, influences: int | None) -> tuple[np.ndar
 def add_surface_mesh(doc: GltfDocument, surface: SkinnedSurface, *, influences: int | None, material: int | None,
                      target_names: tuple[str, ...] = (), extensions: dict | None = None,
                      vertex_ids: bool = True, skinned: bool = True, name: str | None = None,
-                     more: list = ()) -> int:
+                     more: list | tuple = ()) -> int:
     """A mesh named `name` (default surface.name) with one primitive for `surface` (`surface_primitive`) and the
     primitives `more` after it; morph target names in mesh.extras.targetNames, default weights 0."""
     primitive = surface_primitive(doc, surface, influences=influences, material=material, extensions=extensions,
@@ -186,7 +186,7 @@ def surface_primitive(doc: GltfDocument, surface: SkinnedSurface, *, influences:
         NORMAL=doc.accessor(surface.normals.astype(np.float32), name=f"{surface.name}_normal"))
     if surface.texcoords is not None:
         attributes.TEXCOORD_0 = doc.accessor(surface.texcoords.astype(np.float32), name=f"{surface.name}_uv")
-    joints, weights = influence_sets(surface.weights, influences) if skinned else (np.zeros((0, 0)), None)
+    joints, weights = influence_sets(surface.weights, influences) if skinned else (np.zeros((0, 0)), np.zeros((0, 0)))
     for s in range(joints.shape[1] // INFLUENCES_PER_SET):
         cols = slice(INFLUENCES_PER_SET * s, INFLUENCES_PER_SET * (s + 1))
         setattr(attributes, f"JOINTS_{s}", doc.accessor(joints[:, cols], name=f"{surface.name}_joints{s}"))

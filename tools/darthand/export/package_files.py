@@ -149,7 +149,7 @@ class _FolderWalk:
                                                                         "cannot resolve"
                 if reason and reason != "does not exist":      # a missing file is safe: the readers report it
                     self.problems.append(Problem(role, self.label(layer), asset, str(target), reason))
-                elif role == "layer" and not reason and target not in seen:
+                elif role == "layer" and not reason and target is not None and target not in seen:
                     seen.add(target)
                     todo.append(target)
         return self.problems

@@ -86,7 +86,7 @@ def _write_image(buf, path: Path, src: Path) -> None:
 
 
 
-def check_textures_fit(model: HandModel, textures: list) -> None:
+def check_textures_fit(model: HandModel, textures: list | tuple) -> None:
     """InputError when skin textures are asked for a model without UVs (they could not be mapped)."""
     if textures and not model.has_uvs:
         raise InputError(f"{model.meta.get('source', 'model')}: the model has no UVs, so the skin textures cannot "

@@ -69,8 +69,8 @@ class ExportOptions:
         check_export_options(self.influences, self.correctives, self.texture_size)
 
 
-def export_usd(model: HandModel, out: str | os.PathLike, *, textures: list[TextureSet] = (),
-               default_texture: str | None = None, accessories: list[Accessory] = (),
+def export_usd(model: HandModel, out: str | os.PathLike, *, textures: list[TextureSet] | tuple = (),
+               default_texture: str | None = None, accessories: list[Accessory] | tuple = (),
                options: ExportOptions = ExportOptions(), gestures: tuple[list[str], np.ndarray] | None = None,
                name: str | None = None) -> dict:
     """Write the asset package of `model` (wrist-enhanced, with UVs) to the folder `out`; returns asset.json's dict

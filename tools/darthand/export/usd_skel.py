@@ -112,6 +112,7 @@ def define_mesh(stage: Usd.Stage, path: Sdf.Path, vertices: np.ndarray, faces: n
     mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
     mesh.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*vertices.min(0)), Gf.Vec3f(*vertices.max(0))]))
     if uvs is not None:
+        assert faces_uv is not None, "uvs come with faces_uv"
         st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
                                                      UsdGeom.Tokens.faceVarying)
         st.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(uvs, dtype=np.float32)))
@@ -136,6 +137,7 @@ def bind_skin(prim: Usd.Prim, weights: np.ndarray | None, influences: int | None
         binding.CreateJointIndicesPrimvar(False, 1).Set(Vt.IntArray.FromNumpy(np.full(n, int(joint), np.int32)))
         binding.CreateJointWeightsPrimvar(False, 1).Set(Vt.FloatArray.FromNumpy(np.ones(n, np.float32)))
         return 1
+    assert weights is not None, "a skinned binding has weights"
     needed = influences_needed(weights)
     k = needed if influences is None else min(influences, needed)
     idx, w = top_k_influences(weights, k)
@@ -294,7 +296,7 @@ def define_rig(stage: Usd.Stage, root: Sdf.Path, model: HandModel, correctives: 
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
         [anims[ALL_GESTURES].GetPath()])
 
-    max_w = correctives.weights_of_poses(poses).max(axis=0) if correctives.count else []
+    max_w = correctives.weights_of_poses(poses).max(axis=0) if correctives.count else np.zeros(0)
     mesh = define_mesh(stage, root.AppendChild(rig_names.hand), model.v_template, model.faces, model.uvs,
                        model.faces_uv)
     mesh.GetPrim().SetCustomDataByKey("darthand:role", "hand")

@@ -62,7 +62,7 @@ def check_variant_id(name: str, what: str) -> str:
 
 def package_material(spec: MaterialSpec, folder: Path, rel: str, size: int | None = None) -> MaterialSpec:
     """Copy `spec`'s texture files into `folder` and return the spec with asset paths `./<rel>/<file name>`."""
-    changes = {}
+    changes: dict = {}
     for field in ("albedo", "roughness", "metallic_roughness", "normal"):
         src = getattr(spec, field)
         if src:

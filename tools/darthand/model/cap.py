@@ -87,6 +87,7 @@ def _rim_uvs(model: HandModel, loop: np.ndarray) -> np.ndarray:
     edges = directed_edges(model.faces).reshape(-1, 3, 2)          # (F, 3, 2): corner k's edge (k -> k + 1)
     starts = {(int(a), int(b)): (f, k) for f, tri in enumerate(edges) for k, (a, b) in enumerate(tri)}
     out = np.empty((len(loop), 2, 2))
+    assert model.uvs is not None and model.faces_uv is not None
     for i, v in enumerate(loop):
         f, k = starts[(int(v), int(loop[(i + 1) % len(loop)]))]
         out[i] = model.uvs[model.faces_uv[f, [k, (k + 1) % 3]]]

@@ -183,7 +183,7 @@ class GestureProblem:
         v, n, posed = self.pose(angles)
         velocity = self.angular_velocities(angles, posed)                          # (n, 3), (n, 3) pivots
         res, jac = [x / self.sigma[self.free]], [np.diag(1.0 / self.sigma[self.free])]
-        contact_terms: dict[tuple[int, int], list] = {}
+        contact_terms: dict[tuple[int, ...], list] = {}
         for (p, q), ids in sorted(self.sets.items()):
             h = self.hits(v, n, p, q, samples=ids)
             d = np.full(len(ids), np.inf)
@@ -344,6 +344,7 @@ def fit_gesture(model: HandModel, surfaces: PartSurfaces, frames: np.ndarray, na
         if best is not None and between_digits(crossing) >= between_digits(best.crossing):
             break  # more clearance did not help: the crossing is not one the fit can move apart
         best = result
+    assert best is not None, "ROUNDS > 0"
     best.status = "unresolved"
     return best
 

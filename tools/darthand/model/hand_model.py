@@ -198,6 +198,7 @@ def check_model(m: HandModel, source: str = "model") -> None:
     if m.uvs is not None or m.faces_uv is not None:
         if m.uvs is None or m.faces_uv is None:
             fail("uvs", "and 'faces_uv' must be given together")
+        assert m.uvs is not None and m.faces_uv is not None
         shape("uvs", m.uvs, (None, 2))
         finite("uvs", m.uvs)
         shape("faces_uv", m.faces_uv, (F, 3))

@@ -66,7 +66,7 @@ def part_intersections(vertices: np.ndarray, faces: np.ndarray, parts: np.ndarra
     "between": {"a-b": faces of a or b that intersect the other part}} (counts).
     """
     everywhere, alone = intersections_within_parts(vertices, faces, parts) if masks is None else masks
-    out = {"faces": int(everywhere.sum()),
+    out: dict = {"faces": int(everywhere.sum()),
            "within": {PARTS[p]: int(alone[parts == p].sum()) for p in np.unique(parts[alone])},
            "between": {}}
     for p, q in itertools.combinations(np.unique(parts[everywhere & ~alone]), 2):

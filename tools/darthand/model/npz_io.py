@@ -79,7 +79,7 @@ def load_npz(path: str | Path) -> HandModel:
         if "meta_json" in data else {}
     if not isinstance(meta, dict):
         raise InputError(f"{path}: field 'meta_json' holds a {type(meta).__name__}, expected a JSON object")
-    fields = {name: data[name] for name in _DENSE}
+    fields: dict[str, np.ndarray | None] = {name: data[name] for name in _DENSE}
     fields.update({name: data.get(name) for name in _OPTIONAL})
     meta.setdefault("source", str(path))
     return HandModel.create(source=str(path), J_regressor=regressor, side=str(data["side"]), meta=meta, **fields)

@@ -98,7 +98,9 @@ def render_mesh(vertices: np.ndarray, faces: np.ndarray, *, view="three_quarter"
 def _resize(image: np.ndarray, size: int) -> np.ndarray:
     buf = oiio.ImageBuf(np.ascontiguousarray(image))
     out = oiio.ImageBufAlgo.resize(buf, roi=oiio.ROI(0, size, 0, size, 0, 1, 0, 3))
-    return out.get_pixels(oiio.FLOAT).reshape(size, size, 3)
+    pixels = out.get_pixels(oiio.FLOAT)
+    assert pixels is not None, out.geterror()
+    return pixels.reshape(size, size, 3)
 
 
 def contact_sheet(images: list[np.ndarray], labels: list[str], cols: int, label_height: int = 22,
@@ -115,7 +117,9 @@ def contact_sheet(images: list[np.ndarray], labels: list[str], cols: int, label_
         y0, x0 = pad + (k // cols) * cell_h, pad + (k % cols) * cell_w
         sheet.set_pixels(oiio.ROI(x0, x0 + w, y0, y0 + h, 0, 1, 0, 3), np.ascontiguousarray(img, dtype=np.float32))
         oiio.ImageBufAlgo.render_text(sheet, x0 + 4, y0 + h + label_height - 6, label, 16, "", (1.0, 1.0, 1.0))
-    return sheet.get_pixels(oiio.FLOAT).reshape(sheet.spec().height, sheet.spec().width, 3)
+    pixels = sheet.get_pixels(oiio.FLOAT)
+    assert pixels is not None, sheet.geterror()
+    return pixels.reshape(sheet.spec().height, sheet.spec().width, 3)
 
 
 def write_png(path: str | Path, image: np.ndarray) -> None:

@@ -80,14 +80,26 @@ def skeleton_from_joints(joints: np.ndarray, tips: np.ndarray, forearm_length: f
         chain = [joints[j] for j in FINGER_JOINTS[name]] + [tips[f]]
         up = _dorsal_direction(chain[-1] - chain[0], thumb_nail_roll if name == "thumb" else 0.0)
         for k in range(3):
-            start.append(chain[k]), end.append(chain[k + 1]), finger.append(f), kind.append(0), level.append(k)
+            start.append(chain[k])
+            end.append(chain[k + 1])
+            finger.append(f)
+            kind.append(0)
+            level.append(k)
             dorsal.append(_perpendicular(up, chain[k + 1] - chain[k]))
     for f, name in enumerate(FINGERS):
         root = joints[FINGER_JOINTS[name][0]]
-        start.append(joints[0]), end.append(root), finger.append(f), kind.append(1), level.append(-1)
+        start.append(joints[0])
+        end.append(root)
+        finger.append(f)
+        kind.append(1)
+        level.append(-1)
         dorsal.append(_perpendicular(-PALM_NORMAL, root - joints[0]))
-    start.append(joints[0]), end.append(joints[0] + forearm_length * FOREARM_AXIS)
-    finger.append(-1), kind.append(2), level.append(-1), dorsal.append(-PALM_NORMAL)
+    start.append(joints[0])
+    end.append(joints[0] + forearm_length * FOREARM_AXIS)
+    finger.append(-1)
+    kind.append(2)
+    level.append(-1)
+    dorsal.append(-PALM_NORMAL)
     return Skeleton(joints=joints, tips=tips, start=np.array(start), end=np.array(end),
                     finger=np.array(finger, np.int64), kind=np.array(kind, np.int64),
                     level=np.array(level, np.int64), dorsal=np.array(dorsal))

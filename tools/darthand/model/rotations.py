@@ -11,7 +11,7 @@ vanishes) and far beyond 2 pi.
 
 Why not scipy.spatial.transform.Rotation (used as an independent check in the tests): it always computes and
 returns float64, while the forward pass runs in float32 on B x 16 vectors per call, where this Rodrigues kernel is
-also 1.5-3x faster (see darthand.benchmarks.rotations); the rest follows so the conventions (w first, dtype
+also 1.5-3x faster (see benchmarks/rotations.py); the rest follows so the conventions (w first, dtype
 kept, angle ranges) are the same across the module.
 """
 

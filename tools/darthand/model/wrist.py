@@ -166,6 +166,7 @@ def wrist_uvs(model: HandModel, ring_ids: np.ndarray, length: float, radius: flo
     anywhere two UV islands meet.
     """
     uvs = model.uvs
+    assert uvs is not None and model.faces_uv is not None, "wrist UVs extend the model's own"
     band = model.meta.get("wrist_uv_band")
     if band is None:
         h = float(np.clip(length / (2 * np.pi * radius), 0.05, 0.25))

@@ -342,7 +342,7 @@ class FrameWriter:
         from concurrent.futures import ThreadPoolExecutor
 
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="darthand-write")
-        self._futures = deque()
+        self._futures: deque = deque()
         self.pending = max(1, int(pending))
 
     def submit(self, frame: Frame, out_dir: str | Path, *, depth: bool = False):

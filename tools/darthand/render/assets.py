@@ -11,6 +11,8 @@ shape stays. Textures are decoded once per file pair; a skin-tone offset is a de
 
 from __future__ import annotations
 
+from typing import Any
+
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
@@ -57,7 +59,7 @@ class HandAssets:
     _last_accessory: tuple | None = field(default=None, repr=False)
     _gestures: dict = field(default_factory=dict, repr=False)
     _face_joints: dict = field(default_factory=dict, repr=False)    # also float32 glove arrays, ("f32", id)
-    _refitter: object = field(default=None, repr=False)          # accessories.reshape.ShapeRefitter, made once
+    _refitter: Any = field(default=None, repr=False)          # accessories.reshape.ShapeRefitter, made once
     _refits: tuple | None = field(default=None, repr=False)       # (shape key, {id: refitted Accessory})
     worn_rings: bool = False     # rings worn per pose (accessories/wear), as dataset frames show them
 
@@ -247,10 +249,12 @@ class HandAssets:
             if ("f32", key) not in self._face_joints:
                 self._face_joints["f32", key] = tuple(np.ascontiguousarray(a, np.float32)
                                                       for a in (acc.vertices, acc.weights, posedirs))
-            v = pose_skinned(*self._face_joints["f32", key], posed.rotations, posed.transforms)[0]
+            v32, w32, d32 = self._face_joints["f32", key]
+            v = pose_skinned(v32, w32, d32, posed.rotations, posed.transforms)[0]
             v = v.astype(np.float32)
             n = vertex_normals(v, acc.faces)
             if acc.id not in self._face_joints:
+                assert acc.weights is not None, "a skinned accessory has weights"
                 self._face_joints[acc.id] = face_joints(acc.faces, acc.weights)
         faces, uvs, faces_uv = self._static_arrays(("acc", acc.id), acc)
         return Surface(acc.id, v, faces, n, accessory_material(acc), uvs, faces_uv, acc.vertices, "accessory",

@@ -64,7 +64,7 @@ def run_checks(build: str | Path = "build", out: str | Path | None = None, *, si
     sides = list(sides) if sides else found
     if not sides:
         raise InputError(f"{usd}: no USD packages to check (run the export step first)")
-    report = {"format": REPORT_FORMAT, "version": 1, "build": str(build), "size": size, "packages": {},
+    report: dict = {"format": REPORT_FORMAT, "version": 1, "build": str(build), "size": size, "packages": {},
               "thresholds": {"coverage": list(COVERAGE_RANGE), "keypoint_slack_px": KEYPOINT_SLACK_PX,
                              "min_accessory_pixels": MIN_ACCESSORY_PIXELS, "next_to_bone_m": NEXT_TO_BONE_M,
                              "glove_cover": GLOVE_COVER, "seam_texels": SEAM_TEXELS}}
@@ -97,7 +97,7 @@ def check_package(package, *, size: int = 256, all_accessories: bool = True) -> 
     gestures = set(getattr(package, "gestures", None) or [])
     textures = [t for t in package.texture_ids() if t not in ("plain", "checker")] or package.texture_ids()
     accessories = [a for a in package.accessory_ids() if a != "none"]
-    checks = {name: {"ok": True, "failures": []} for name in
+    checks: dict[str, dict] = {name: {"ok": True, "failures": []} for name in
               ("finite", "coverage", "keypoints", "accessories", "uv_seams")}
     tiles, renders = [], 0
     pairs = [(g, v) for g, v in GESTURE_VIEWS if not gestures or g in gestures]
@@ -135,6 +135,7 @@ def check_package(package, *, size: int = 256, all_accessories: bool = True) -> 
                     best, seen = frame, pixels
             if seen >= MIN_ACCESSORY_PIXELS:
                 break
+        assert best is not None                     # at least one view was rendered
         accessory_tiles.append((best, acc_id[:20]))
         _check_accessory(best, acc_id, seen, acc)
     for c in checks.values():

@@ -47,6 +47,14 @@ class _Api:
 
     _loaded: "_Api | None | bool" = False
     _lock = threading.Lock()
+    # set by __init__ from the library: rtcNewGeometry as NewGeometry, ...
+    NewGeometry: ctypes._NamedFuncPointer
+    SetNewGeometryBuffer: ctypes._NamedFuncPointer
+    CommitGeometry: ctypes._NamedFuncPointer
+    AttachGeometry: ctypes._NamedFuncPointer
+    ReleaseGeometry: ctypes._NamedFuncPointer
+    GetSceneDevice: ctypes._NamedFuncPointer
+    ReleaseDevice: ctypes._NamedFuncPointer
 
     def __init__(self, lib: ctypes.CDLL):
         p, u, i, z = ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_size_t
@@ -63,7 +71,7 @@ class _Api:
         with cls._lock:
             if cls._loaded is False:
                 cls._loaded = cls._open()
-            return cls._loaded
+            return cls._loaded if isinstance(cls._loaded, _Api) else None
 
     @classmethod
     def _open(cls) -> "_Api | None":

@@ -118,16 +118,18 @@ def _background(path: str, mtime: int, width: int, height: int) -> np.ndarray:
     # Scale to cover the frame, keeping the aspect ratio, then crop the centre.
     scale = max(width / spec.width, height / spec.height)
     w, h = max(width, round(spec.width * scale)), max(height, round(spec.height * scale))
+    linear = buf.get_pixels(oiio.FLOAT)
+    assert linear is not None, buf.geterror()         # read_image_buf read the pixels
     if spec.format == oiio.UINT8:
-        linear = srgb_to_linear(buf.get_pixels(oiio.FLOAT))
-    else:
-        linear = buf.get_pixels(oiio.FLOAT)
+        linear = srgb_to_linear(linear)
     if linear.shape[2] == 1:
         linear = np.repeat(linear, 3, axis=2)
     lin = oiio.ImageBuf(np.ascontiguousarray(linear[..., :3], np.float32))
     resized = oiio.ImageBufAlgo.resize(lin, roi=oiio.ROI(0, w, 0, h, 0, 1, 0, 3))
     x0, y0 = (w - width) // 2, (h - height) // 2
-    pixels = resized.get_pixels(oiio.FLOAT).reshape(h, w, 3)
+    pixels = resized.get_pixels(oiio.FLOAT)
+    assert pixels is not None, resized.geterror()
+    pixels = pixels.reshape(h, w, 3)
     return np.ascontiguousarray(pixels[y0:y0 + height, x0:x0 + width], np.float32)
 
 
@@ -196,6 +198,7 @@ def write_exr(path: str | os.PathLike, values: np.ndarray, channel: str = "Z") -
 def read_png(path: str | os.PathLike) -> np.ndarray:
     """(H, W, C) uint8 pixels of a PNG (for checks and tests)."""
     buf = oiio.ImageBuf(str(path))
-    if buf.has_error:
+    pixels = None if buf.has_error else buf.get_pixels(oiio.UINT8)
+    if pixels is None:                               # the pixels are read here: a truncated file fails now
         raise InputError(f"{path}: cannot read image ({buf.geterror()})")
-    return buf.get_pixels(oiio.UINT8)
+    return pixels

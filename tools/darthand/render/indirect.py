@@ -31,9 +31,9 @@ frame's CPU besides Embree's 3 (the numpy chains they replaced took 4-5 ms, with
 
 Directions: one stratified set of K cosine-weighted directions (a Fibonacci spiral on the unit disk lifted to the
 hemisphere, Malley's method), turned about each vertex's normal and shifted radially by amounts hashed from (surface
-index, vertex index), mirrored for a left hand. No random state: a frame's result depends only on its geometry and lights, whatever the
-process, thread or order it is rendered in, and which of its vertices happen to be computed; a vertex gets the same
-directions in every frame (no flicker in a sequence).
+index, vertex index), mirrored for a left hand. No random state: a frame's result depends only on its geometry and
+lights, whatever the process, thread or order it is rendered in, and which of its vertices happen to be computed; a
+vertex gets the same directions in every frame (no flicker in a sequence).
 """
 
 from __future__ import annotations
@@ -50,7 +50,8 @@ from darthand.render.shade import vertex_albedo
 GEOMETRIC = FaceData.GEOMETRIC
 
 GOLDEN = (np.sqrt(5.0) - 1) / 2      # Fibonacci spiral angle step, in turns
-LIFT = 2e-3                          # ray origins lifted off the surface by this x the scene's diagonal (shade.SHADOW_LIFT)
+LIFT = 2e-3                          # ray origins lifted off the surface by this x the scene's diagonal
+                                     # (shade.SHADOW_LIFT)
 MAX_BOUNCE_ALBEDO = 0.95             # keeps the sphere series finite where an albedo texel is white and V is 0
 # Accessory meshes are far denser than the hand (a ring's 3,216 vertices on 2 cm, a chain's 9,408): their vertices
 # get a quarter of the rays (at least 4), so that a chain does not cost several hands.

@@ -43,8 +43,9 @@ class Light:
     def to_json(self) -> dict:
         d = {"type": self.type, "color": list(self.color), "intensity": self.intensity, "shadows": self.shadows,
              "frame": self.frame}
-        d["direction" if self.type == "directional" else "position"] = list(
-            self.direction if self.type == "directional" else self.position)
+        where = self.direction if self.type == "directional" else self.position
+        assert where is not None, "a light has the direction or position its type needs (checked when parsed)"
+        d["direction" if self.type == "directional" else "position"] = list(where)
         return d
 
 

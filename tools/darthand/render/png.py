@@ -99,6 +99,8 @@ def open_png8(path: str | os.PathLike) -> Png8 | None:
         elif idat:
             after_idat = True
         pos = end
+    if header is None:
+        return None                                       # no IHDR chunk
     width, height, depth, colour, compression, filtering, interlace = header
     if (depth != 8 or colour not in CHANNELS or compression or filtering or interlace or not idat
             or not 0 < width < 2 ** 31 or not 0 < height < 2 ** 31):

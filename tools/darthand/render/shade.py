@@ -43,7 +43,8 @@ SHADOW_LIFT = 2e-3          # shadow-ray origin offset, relative to the scene's 
 MIN_ROUGHNESS = 0.045       # GGX is singular at alpha = 0
 DEFAULT_AO_RAYS = 16        # ambient-occlusion rays per vertex (benchmarks/render_reference.py: speed against error)
 SKIN_MODELS = ("subsurface", "wrap", "lambert")
-FACE_ROWS = (0, 9, 18, 21, 27)  # scene.FaceData's POSITION, NORMAL, GEOMETRIC, UV, UV_SCALE rows, as _hits_kernel reads them
+# scene.FaceData's POSITION, NORMAL, GEOMETRIC, UV, UV_SCALE rows, as _hits_kernel reads them
+FACE_ROWS = (0, 9, 18, 21, 27)
 DEFAULT_SKIN = "subsurface"
 
 
@@ -172,6 +173,7 @@ def material_params(material: Material, hits: Hits) -> SurfaceParams:
     if hits.uv is None or maps.width * maps.height == 1:
         texels = np.repeat(maps.levels[-1].reshape(-1, 1), M, axis=1)
     else:
+        assert hits.footprint is not None, "hits with UVs carry their footprint"
         texels = maps.sample(hits.uv, maps.lod_of_footprint(hits.footprint))
     albedo = texels[:3]
     rc, mc = material.roughness_channel, material.metallic_channel

@@ -137,7 +137,8 @@ def skin_width(material) -> np.ndarray:
         tone = np.median(level, axis=0)[:, None]
         if len(_WIDTHS) > 256:
             _WIDTHS.clear()
-        entry = _WIDTHS[key] = (weakref.ref(maps.flat), profile_width(tone, np.asarray(material.mfp_mm, np.float32) * 1e-3)[:, 0])
+        width = profile_width(tone, np.asarray(material.mfp_mm, np.float32) * 1e-3)[:, 0]
+        entry = _WIDTHS[key] = (weakref.ref(maps.flat), width)
     return entry[1]
 
 

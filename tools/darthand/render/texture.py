@@ -453,7 +453,10 @@ def _open(path: Path) -> oiio.ImageBuf:
 
 def read_codes(path: str | os.PathLike) -> np.ndarray:
     """(H, W, C) uint8 codes of an 8-bit image file."""
-    return _open(Path(path)).get_pixels(oiio.UINT8)
+    buf = _open(Path(path))
+    codes = buf.get_pixels(oiio.UINT8)
+    assert codes is not None, buf.geterror()         # _open read the pixels
+    return codes
 
 
 def is_8bit(path: str | os.PathLike) -> bool:
@@ -473,10 +476,12 @@ def read_image(path: str | os.PathLike, *, srgb: bool, offset: float = 0.0) -> n
     buf = _open(Path(path))
     if buf.spec().format == oiio.UINT8:
         codes = buf.get_pixels(oiio.UINT8)
+        assert codes is not None, buf.geterror()     # _open read the pixels
         if srgb:
             return srgb8_to_linear_lut(offset)[codes]
         return codes.astype(np.float32) * np.float32(1 / 255)
     pixels = buf.get_pixels(oiio.FLOAT)
+    assert pixels is not None, buf.geterror()
     return srgb_to_linear(np.clip(pixels + np.float32(offset), 0, 1)) if srgb else pixels
 
 
@@ -559,7 +564,9 @@ def _build_code_maps(albedo_key, data_key, channels: tuple) -> MipTexture:
     data = _open_codes(data_key[0]) if data_key else None
     if data is not None:
         _check_channels(data_key[0], _channel_count(data), channels)
-    h, w = _size(rgb) if rgb is not None else _size(data)
+    first = rgb if rgb is not None else data
+    assert first is not None, "load_maps asks for an albedo, a data image or both"
+    h, w = _size(first)
     if data is not None and _size(data) != (h, w):
         data, channels = _resize(_codes(data)[..., list(channels)], w, h), tuple(range(len(channels)))
     tex = MipTexture.empty(h, w, 3 + len(channels), np.uint8, decode_tables(3 + len(channels), 3))
@@ -644,7 +651,9 @@ def _resize(image: np.ndarray, width: int, height: int) -> np.ndarray:
     fmt = oiio.UINT8 if image.dtype == np.uint8 else oiio.FLOAT
     buf = oiio.ImageBuf(np.ascontiguousarray(image))
     out = oiio.ImageBufAlgo.resize(buf, roi=oiio.ROI(0, width, 0, height, 0, 1, 0, image.shape[2]))
-    return out.get_pixels(fmt).reshape(height, width, image.shape[2])
+    pixels = out.get_pixels(fmt)
+    assert pixels is not None, out.geterror()
+    return pixels.reshape(height, width, image.shape[2])
 
 
 @functools.lru_cache(maxsize=2)

@@ -132,7 +132,7 @@ class RayHits:
     depth: np.ndarray
     directions: np.ndarray
 
-    def take(self, index: np.ndarray) -> "RayHits":
+    def take(self, index: np.ndarray | slice) -> "RayHits":
         return RayHits(self.geom[index], self.prim[index], self.u[index], self.v[index], self.depth[index],
                        self.directions[:, index])
 
@@ -299,7 +299,7 @@ def in_chunks(ctx: Context, n: int, work, stats: dict | None = None) -> list:
     if chunks == 1:
         return [work(0, n, stats)]
     bounds = np.linspace(0, n, chunks + 1).astype(int)
-    part_stats = [dict() for _ in range(chunks)]
+    part_stats: list[dict] = [dict() for _ in range(chunks)]
     futures = [pool(ctx.threads).submit(work, a, b, s) for a, b, s in zip(bounds[:-1], bounds[1:], part_stats)]
     parts = [f.result() for f in futures]
     if stats is not None:
@@ -331,7 +331,8 @@ def shade_parallel(ctx: Context, hits: RayHits, footprint: float = 1.0,
     prepare_shading(ctx, hits, stats)
     parts = in_chunks(ctx, len(hits.geom), lambda a, b, s: shade_hits(ctx, hits.take(slice(a, b)), footprint, s),
                       stats)
-    return tuple(np.concatenate(p, axis=1) for p in zip(*parts))
+    normal, radiance = (np.concatenate(p, axis=1) for p in zip(*parts))
+    return normal, radiance
 
 
 def touched_tiles(camera: Camera, surfaces, bounds: tuple[int, int, int, int], tile: int = TILE) -> np.ndarray:

@@ -9,6 +9,8 @@ a path.
 
 from __future__ import annotations
 
+from typing import Any
+
 import json
 import threading
 from dataclasses import dataclass, field
@@ -41,7 +43,7 @@ class SideAssets:
     side: str
     gltf: Path
     files: frozenset
-    source: object
+    source: Any                   # render/assets.HandAssets
     variants: list
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     renderer: object = field(default=None, repr=False)

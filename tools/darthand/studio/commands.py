@@ -20,8 +20,9 @@ def studio(args) -> int:
                          "given (it serves the build folder to anyone who can reach the address)")
     build = StudioBuild(args.build, backgrounds=args.backgrounds)
     server = make_server(Studio(build), args.host, args.port or 0)
-    server.RequestHandlerClass.quiet = not args.verbose
+    server.RequestHandlerClass.quiet = not args.verbose  # type: ignore[attr-defined]  # StudioHandler.quiet
     host, port = server.server_address[:2]
+    assert isinstance(host, str), "an IP server's host is a string"
     print(f"[studio] {build.root}: sides {', '.join(build.sides)}; open http://{host}:{port}/ (Ctrl-C stops)",
           flush=True)
     previous = signal.signal(signal.SIGTERM, _interrupt)

@@ -113,7 +113,7 @@ class StudioHandler(BaseHTTPRequestHandler):
         try:
             self._check_host()
             parts = _path_parts(self.path)
-            route = GET_ROUTES if method == "GET" else POST_ROUTES
+            route: dict = GET_ROUTES if method == "GET" else POST_ROUTES
             key = parts[0] if parts else ""
             if key not in route:
                 raise RequestError(404, f"no such {'page' if method == 'GET' else 'API call'}: {self.path[:100]!r}")
@@ -135,6 +135,7 @@ class StudioHandler(BaseHTTPRequestHandler):
             self.studio.active.release()
 
     def _check_host(self) -> None:
+        assert isinstance(self.server.server_address, tuple), "an IP server's address is (host, port, ...)"
         host, port = self.server.server_address[:2]
         given = (self.headers.get("Host") or "").strip().lower()
         allowed = {f"{host}:{port}", f"localhost:{port}"} if host in ("127.0.0.1", "localhost") else None

@@ -11,9 +11,10 @@ from darthand.errors import InputError
 from darthand.template.importer import ImportParams, command_line, import_open_hand
 
 # argparse attribute -> ImportParams field, for the options `template import` accepts.
-IMPORT_OPTIONS = ("cut_distance", "hand_length", "target_vertices", "tip_tilt_deg", "nail_threshold", "weight_smoothing",
-                  "uv_resolution", "uv_padding", "correctives", "corrective_train", "corrective_test",
-                  "corrective_shapes", "shape_components", "shape_people", "shape_calibration_people", "seed")
+IMPORT_OPTIONS = ("cut_distance", "hand_length", "target_vertices", "tip_tilt_deg", "nail_threshold",
+                  "weight_smoothing", "uv_resolution", "uv_padding", "correctives", "corrective_train",
+                  "corrective_test", "corrective_shapes", "shape_components", "shape_people",
+                  "shape_calibration_people", "seed")
 
 
 def import_command(args) -> int:
@@ -28,7 +29,8 @@ def import_command(args) -> int:
                  f"{corr.get('corrected_mean_mm', float('nan')):.3f} mm)" if corr.get("fitted")
                  else f"correctives not fitted: {corr.get('reason')}")
     shapes = fig["shape_space"]
-    shape_text = (f"{shapes['components']} shape directions ({100 * shapes['explained_variance'][shapes['components'] - 1]:.2f} "
+    explained = shapes["explained_variance"][shapes["components"] - 1] if shapes["components"] else 0.0
+    shape_text = (f"{shapes['components']} shape directions ({100 * explained:.2f} "
                   f"% of the population's variance)" if shapes["components"] else "no shape space")
     print(f"{out}/open_right.npz: {fig['vertices']} vertices, {fig['faces']} faces, wrist loop "
           f"{fig['wrist_loop_vertices']}, hand length {fig['hand_length_m'] * 100:.1f} cm, regressor error "
@@ -73,5 +75,6 @@ def shapes_command(args) -> int:
     length, breadth = sizes["hand_length_mm"]["shapes"], sizes["hand_breadth_mm"]["shapes"]
     print(f"{args.out_dir}/shapes.json: {model.num_betas} shape directions at +-{args.magnitude:g}, "
           f"{len(report['problems'])} problems; beta ~ N(0, I): hand length {length['mean']:.1f} +- {length['sd']:.1f} "
-          f"mm (1-99 %: {length['p1']:.0f}-{length['p99']:.0f}), breadth {breadth['mean']:.1f} +- {breadth['sd']:.1f} mm")
+          f"mm (1-99 %: {length['p1']:.0f}-{length['p99']:.0f}), breadth {breadth['mean']:.1f} +- "
+          f"{breadth['sd']:.1f} mm")
     return 1 if report["problems"] else 0

@@ -77,6 +77,7 @@ def fit_pose_correctives(model: HandModel, n_train: int = 3000, n_test: int = 50
             validation[f"restrict={r},ridge={lam:g}"] = err
             if best is None or err < best[0]:
                 best = (err, r, lam, P)
+    assert best is not None, "no corrective fit was tried"
     _, best_restrict, best_ridge, posedirs = best
     fit_seconds = time.perf_counter() - t0
 

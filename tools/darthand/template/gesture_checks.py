@@ -81,15 +81,15 @@ def checked_gestures(model: HandModel, names: list[str] | None = None, poses_dir
     gestures = model_gestures(model, names, poses_dir)
     names = list(gestures.names)
     record = fitted_record(model)
-    contacts = [record["gestures"][n]["contacts"] if gestures.fitted else gesture_contacts(n, poses_dir)
-                for n in names]
+    fits = record["gestures"] if record is not None and gestures.fitted else None
+    contacts = [fits[n]["contacts"] if fits is not None else gesture_contacts(n, poses_dir) for n in names]
     surfaces = PartSurfaces(model)
     vertices, crossing, report = pose_checks(model, gestures.poses, names, contacts, surfaces)
-    if gestures.fitted:
+    if fits is not None:
         _, authored = gesture_poses(model, names)
         before = pose_checks(model, authored, names, contacts, surfaces)[2]
         for name in names:
-            fit = record["gestures"][name]
+            fit = fits[name]
             report[name]["fit"] = {k: fit[k] for k in ("status", "changed_deg", "at_bound", "clearance_mm")}
             report[name]["before"] = {k: before[name].get(k) for k in BEFORE_FIELDS}
     mirror = mirror_model(model)
@@ -126,7 +126,7 @@ def pose_checks(model: HandModel, poses: np.ndarray, names: list[str], contacts:
                 self_intersecting_faces=inter["faces"], between_fingers_faces=between_digits(between),
                 finger_palm_faces=sum(n for k, n in between.items() if "palm" in k),
                 within=inter["within"], between=between)
-            if surfaces is not None:
+            if surfaces is not None and contacts is not None:
                 entry.update(part_distances(surfaces, v, model.faces, contacts[g]))
         report[name] = entry
     return posed.vertices, crossing, report
@@ -137,7 +137,7 @@ def part_distances(surfaces: PartSurfaces, vertices: np.ndarray, faces: np.ndarr
     not meant to touch (None when none come within 5 mm)}; signed distances, negative = passing through."""
     normals = vertex_normals(vertices, faces)
     meant = {tuple(sorted(PARTS.index(p) for p in pair)) for pair in contacts}
-    out = {"contacts": {}, "closest": None}
+    out: dict = {"contacts": {}, "closest": None}
     for p, q in itertools.combinations(range(len(PARTS)), 2):
         d = surfaces.distance(vertices, normals, p, q)
         if (p, q) in meant:

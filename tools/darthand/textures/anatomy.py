@@ -50,7 +50,7 @@ def knuckle_points(vertices: np.ndarray, skel: Skeleton) -> tuple[np.ndarray, np
     at the depth of the vertex closest to the ray.
     """
     points, radii = [], []
-    for f, name in enumerate(FINGERS):
+    for name in FINGERS:
         for level, radius in KNUCKLES:
             if name == "thumb" and level == 0:
                 continue

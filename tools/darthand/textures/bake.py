@@ -156,6 +156,7 @@ def bake(model: HandModel, res: int) -> Bake:
         raise InputError(f"texture resolution {res} outside 16..16384")
     model = prepare_model(model)
     key = bake_key(model, res)
+    assert model.uvs is not None and model.faces_uv is not None and model.face_labels is not None  # prepare_model
     uv = model.uvs[model.faces_uv]  # (F, 3, 2)
     tri = np.stack([uv[..., 0] * res, (1.0 - uv[..., 1]) * res], -1)
     frags = rasterize(tri, res, res, margin=MARGIN)
@@ -197,8 +198,8 @@ def noise_bank(position: np.ndarray) -> dict[str, np.ndarray]:
 # ------------------------------------------------------------------------------------------------- cache
 def save_bake(b: Bake, path: str | Path) -> None:
     """Write a bake to `path` (uncompressed .npz: it is a cache, read often) atomically."""
-    arrays = {"key": np.array(b.key), "res": np.array(b.res), "texel": b.texel, "face": b.face, "inside": b.inside,
-              "position": b.position, "normal": b.normal, "label": b.label}
+    arrays: dict = {"key": np.array(b.key), "res": np.array(b.res), "texel": b.texel, "face": b.face,
+                    "inside": b.inside, "position": b.position, "normal": b.normal, "label": b.label}
     arrays.update({f"field_{k}": v.astype(np.float16) if k.startswith("noise_") else v for k, v in b.fields.items()})
     arrays.update({f"mesh_{k}": v for k, v in b.mesh.items()})
     with atomic_path(path) as tmp:

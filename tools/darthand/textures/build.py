@@ -209,8 +209,9 @@ def _render_one(job) -> tuple[dict, np.ndarray]:
     entry_json, out_dir, res, bake_key, tx, roughness = job
     entry = Entry(**entry_json)
     out_dir = Path(out_dir)
+    assert _WORKER_BAKE is not None, "the pool's initializer loads the bake"
     v = render_variant(_WORKER_BAKE, entry)
-    files = {"albedo": f"{entry.id}.png", "roughness": None, "tx": None}
+    files: dict = {"albedo": f"{entry.id}.png", "roughness": None, "tx": None}
     write_png(out_dir / files["albedo"], v.albedo)
     record = {k: entry_json[k] for k in ("id", "category", "kind", "tone", "mst", "tone_srgb", "offset", "seed",
                                          "index")}
@@ -259,6 +260,7 @@ def make_contact_sheet(out_dir: str | Path, catalog: dict, bake: Bake | None = N
             raise InputError(f"{bake_path}: no baked maps for the contact sheet; run 'darthand textures build' first")
         bake = load_bake(bake_path)
     for record in missing:
+        assert bake is not None
         f = record["files"].get("tx") or record["files"]["albedo"]
         tiles[record["id"]] = sheet_mod.thumbnail(read_small(out_dir / f, THUMB_SOURCE), _preview_maps(bake))
     path = out_dir / "contact_sheet.png"

@@ -110,9 +110,10 @@ def _write_levels(path, specs, what: str) -> None:
 def read_image(path: str | os.PathLike, miplevel: int = 0) -> np.ndarray:
     """(H, W, C) uint8 pixels of an image file (a given MIP level of a .tx)."""
     buf = oiio.ImageBuf(str(path), 0, miplevel)
-    if buf.has_error:
+    pixels = None if buf.has_error else buf.get_pixels(oiio.UINT8)
+    if pixels is None:                               # the pixels are read here: a truncated file fails now
         raise InputError(f"{path}: cannot read image ({buf.geterror()})")
-    return buf.get_pixels(oiio.UINT8)
+    return pixels
 
 
 def mip_levels(path: str | os.PathLike) -> list[tuple[int, int]]:

@@ -225,7 +225,8 @@ def apply_palm_prints(canvas: Canvas, surface: Surface, p: dict, rng) -> None:
     for ctrl, dep in curves:
         pts = to_xz(bezier(np.array(ctrl), 160))
         t = np.linspace(0.0, 1.0, len(pts))
-        samples.append(pts), depth.append(dep * np.sin(np.pi * t) ** 0.35)  # creases fade out at their ends
+        samples.append(pts)
+        depth.append(dep * np.sin(np.pi * t) ** 0.35)  # creases fade out at their ends
     samples, depth = np.concatenate(samples), np.concatenate(depth)
     width = p["width_mm"] * MM
     # The palm's skin runs past the knuckle joints: take the first finger segments' palm side too.

@@ -62,7 +62,8 @@ def preview_maps(mesh: dict, tile: int = TILE) -> PreviewMaps:
         shade = 0.3 + 0.7 * np.clip(n @ light, 0.0, 1.0)
         r, c = np.divmod(frags.pixel, w)
         pixels.append((r + row * h) * w + c)
-        uv_all.append(uv), shade_all.append(shade)
+        uv_all.append(uv)
+        shade_all.append(shade)
     return PreviewMaps(w, 2 * h, np.concatenate(pixels), np.concatenate(uv_all), np.concatenate(shade_all))
 
 
@@ -130,5 +131,7 @@ def contact_sheet(tiles: list[tuple[str, str, np.ndarray]], path: str | Path, co
     for x, y, text, size, colour in texts:
         oiio.ImageBufAlgo.render_text(buf, x, y, text, size, "DroidSans", colour)
     sheet = buf.get_pixels(oiio.UINT8)
+    if sheet is None:
+        raise RuntimeError(f"OpenImageIO could not draw the contact sheet's labels: {buf.geterror()}")
     write_png(path, sheet)
     return sheet

@@ -63,7 +63,7 @@ class Surface:
         self.face_labels = m["face_labels"]
         self.vertex_normals = m["vertex_normals"]
         self.joints, self.tips = m["joints"], m["tips"]
-        self._face_geom = None
+        self._face_geom: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     @property
     def skeleton(self):

@@ -20,7 +20,7 @@ ALWAYS_ACCESSORIES = {"none"}
 SEARCH_DEPTH = 3
 
 
-def known_texture_ids(package_root: Path) -> tuple[set[str], str]:
+def known_texture_ids(package_root: Path) -> tuple[frozenset[str], str]:
     """(ids, where they came from)."""
     found = _nearby(package_root, ("textures/catalog.json",))
     if found is not None:
@@ -30,7 +30,7 @@ def known_texture_ids(package_root: Path) -> tuple[set[str], str]:
     return _spec_texture_ids() | ALWAYS_TEXTURES, "the texture catalogue spec (assets_src/textures/catalog.json)"
 
 
-def known_accessory_ids(package_root: Path, side: str | None = None) -> tuple[set[str], str]:
+def known_accessory_ids(package_root: Path, side: str | None = None) -> tuple[frozenset[str], str]:
     names = ([f"accessories/{side}/catalog.json"] if side else []) + ["accessories/catalog.json"]
     found = _nearby(package_root, tuple(names))
     if found is not None:

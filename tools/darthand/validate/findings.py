@@ -38,7 +38,8 @@ RULES: dict[str, Rule] = {
     "rig.joint-count": Rule("error", "the skeleton does not have MANO's 16 joints"),
     "rig.hierarchy": Rule("error", "the joint parents differ from MANO's"),
     "rig.joint-names": Rule("warning", "the joint names differ from MANO's (wrist, index1, ...)"),
-    "rig.bind-transform": Rule("error", "a bind transform is not rigid (an orthonormal rotation with det +1 and a translation)"),
+    "rig.bind-transform": Rule("error", "a bind transform is not rigid (an orthonormal rotation with det +1 and a "
+                                        "translation)"),
     "rig.rest-transform": Rule("error", "a rest transform is not rigid"),
     "rig.bind-rest-mismatch": Rule("error", "bind transforms are not the composition of the rest transforms"),
     "rig.skin-layout": Rule("error", "joint indices and weights have inconsistent sizes or interpolation"),

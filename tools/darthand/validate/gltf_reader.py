@@ -13,8 +13,8 @@ How darthand's glTF maps onto the neutral form (gltf_export's layout, and what a
         moved by the node's global rest transform into the hand's frame;
     morph targets -> dense BlendShapes named by mesh.extras.targetNames; images -> TextureRefs (colour: base
         colour and emissive textures; data: metallic-roughness, normal, occlusion);
-    ids: KHR_materials_variants names (or the single skin material's extras `darthand.texture`) are texture ids, accessory
-        node names are accessory ids.
+    ids: KHR_materials_variants names (or the single skin material's extras `darthand.texture`) are texture ids,
+        accessory node names are accessory ids.
 """
 
 from __future__ import annotations
@@ -146,7 +146,7 @@ class Buffers:
         if uri.startswith("data:"):
             return decode_data_uri(uri)
         target, problem = package_file(uri, base, root)
-        if problem:
+        if problem or target is None:
             self.findings.append(finding("gltf.buffer-path", f"/buffers/{i}", f"buffer {uri!r} {problem}"))
             return None
         if target.stat().st_size > self.limits.max_elements * 4:

@@ -28,7 +28,7 @@ def check_accessories(pkg: Package) -> list[Finding]:
     trees = hand_trees(hand)
     for acc in pkg.accessories:
         out += check_binding(acc, num_joints)
-        if trees is not None and acc.layout_ok:
+        if trees is not None and hand is not None and acc.layout_ok:
             out += check_distance(acc, hand, trees)
     return out + check_ids(pkg)
 

@@ -116,6 +116,7 @@ def chain_error(skel: Skeleton) -> np.ndarray:
 
 def check_skin(mesh: Mesh) -> list[Finding]:
     skin = mesh.skin
+    assert skin is not None, "called for skinned meshes"
     idx, w = skin.indices, skin.weights
     rows = 1 if skin.rigid else len(mesh.points)
     if idx.shape != w.shape or idx.ndim != 2 or idx.shape[0] != rows:

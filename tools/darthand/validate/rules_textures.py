@@ -117,7 +117,7 @@ def _rel(path: Path, root: Path) -> str:
 
 def check_image(ref: TextureRef, root: Path, limits: Limits, deep: bool) -> list[Finding]:
     """tex.unreadable, file.array-too-large and tex.not-power-of-two for one image."""
-    where = _rel(Path(ref.file), root) if ref.data is None else ref.path
+    where = ref.path if ref.data is not None or ref.file is None else _rel(ref.file, root)
     try:
         info = image_info(ref)
         if info.width * info.height > limits.max_image_pixels:
@@ -145,6 +145,7 @@ def image_info(ref: TextureRef) -> ImageInfo:
             return png_info(ref.data[:33], ref.data[-12:])
         with _as_file(ref.data) as path:
             return oiio_info(path)
+    assert ref.file is not None, "a texture is embedded or in a file"
     path = Path(ref.file)
     with open(path, "rb") as f:
         head = f.read(33)
@@ -156,10 +157,14 @@ def image_info(ref: TextureRef) -> ImageInfo:
 
 def verify_image(ref: TextureRef) -> None:
     """The deep check: every PNG chunk's CRC, then a full decode by OpenImageIO."""
-    data = ref.data if ref.data is not None else Path(ref.file).read_bytes()
+    if ref.data is not None:
+        data = ref.data
+    else:
+        assert ref.file is not None, "a texture is embedded or in a file"
+        data = Path(ref.file).read_bytes()
     if data[:8] == PNG_SIGNATURE:
         check_png_chunks(data)
-    if ref.data is None:
+    if ref.file is not None and ref.data is None:
         oiio_info(Path(ref.file), decode=True)
     else:
         with _as_file(data) as path:

@@ -16,7 +16,8 @@ What is composed and checked:
     whole composition, findings already seen not repeated; mesh, rig, texture and accessory rules on what the
     variant adds.
 
-Paths of findings inside a variant use USD's variant-selection syntax, e.g. `/RightHand{accessory=ring_01}RightHandAccessory/Right_ring_01`.
+Paths of findings inside a variant use USD's variant-selection syntax, e.g.
+`/RightHand{accessory=ring_01}RightHandAccessory/Right_ring_01`.
 
     usd.<validator name>        a finding of that OpenUSD validator (severity Error / Warn / Info as it reports)
     usd.layer-outside-package   a layer the asset composes lies outside the package folder (absolute or '..'

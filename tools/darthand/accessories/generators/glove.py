@@ -139,7 +139,7 @@ def smoothed_normals(vertices: np.ndarray, faces: np.ndarray, iterations: int = 
 
 def _hand_uvs(model: HandModel) -> tuple[np.ndarray, np.ndarray]:
     """The hand's UVs, or (for a model without them) a planar map of its x, z coordinates."""
-    if model.has_uvs:
+    if model.uvs is not None and model.faces_uv is not None:
         return model.uvs, model.faces_uv
     v = model.v_template[:, [0, 2]]
     uv = (v - v.min(0)) / np.maximum(np.ptp(v, axis=0), 1e-9)

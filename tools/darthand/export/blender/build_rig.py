@@ -68,7 +68,7 @@ def main(spec_path):
         action = bpy.data.actions.new(f"{names['root']}_{gesture}")
         action.use_fake_user = True
         arma.animation_data.action = action
-        for j, pb in enumerate(arma.pose.bones):
+        for pb in arma.pose.bones:
             pb.rotation_quaternion = a["gesture_quats"][g, spec["joint_names"].index(pb.name)].tolist()
             pb.keyframe_insert("rotation_quaternion", frame=1)
         action.asset_mark()

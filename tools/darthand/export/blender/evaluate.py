@@ -32,8 +32,8 @@ def main(spec_path):
     seconds = time.perf_counter() - t0
     scene = bpy.context.scene
     # Skinned meshes and meshes parented to the armature or its bones (rigid accessories)
-    meshes = [o for o in scene.objects if o.type == "MESH" and (any(m.type == "ARMATURE" for m in o.modifiers)
-                                                                or (o.parent is not None and o.parent.type == "ARMATURE"))]
+    meshes = [o for o in scene.objects if o.type == "MESH" and (
+        any(m.type == "ARMATURE" for m in o.modifiers) or (o.parent is not None and o.parent.type == "ARMATURE"))]
     arma = next((o for o in scene.objects if o.type == "ARMATURE"), None)
     out = {}
 

@@ -14,7 +14,7 @@ TARGETS = {"usable_ms": 2000.0, "redraw_ms": 50.0}       # issue 16: usable with
 
 
 def run() -> dict:
-    from darthand.studio.browser import BrowserUnavailable, StudioProcess, chromium, drive
+    from testkit.browser import BrowserUnavailable, StudioProcess, chromium, drive
 
     if not (BUILD / "gltf" / "right" / "right.gltf").is_file() or not (BUILD / "model" / "right.npz").is_file():
         return {"skipped": "no glTF variants package in build/ (run `make assets`)"}

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from darthand.benchmarks._common import bench_model
+from benchmarks._common import bench_model
 
 # A spread of categories (cheap and expensive overlays) for the per-variant figures.
 SAMPLE_IDS = ("dark_bandage_00", "brown_palm_prints_01", "light_scars_02", "dark_tattoos_03", "brown_moles_04",

@@ -23,7 +23,7 @@ GOAL_IMAGES_PER_SECOND = 25.0
 def dataset_inputs(tmp: Path) -> tuple:
     """(model, texture catalogue, accessories folder, where from): the build's whole catalogue, else one texture
     and one accessory built in `tmp`."""
-    from darthand.benchmarks.render import ROOT, _sources
+    from benchmarks.render import ROOT, _sources
 
     model = ROOT / "build" / "model" / "right.npz"
     tex = ROOT / "build" / "textures" / "catalog.json"
@@ -34,21 +34,22 @@ def dataset_inputs(tmp: Path) -> tuple:
 
 
 def run(frames: int | None = None) -> dict:
-    from darthand.dataset.run import render_package
+    from darthand.dataset.api import render_dataset
+    from darthand.dataset.options import DatasetOptions
 
     frames = int(os.environ.get("DARTHAND_BENCH_DATASET_FRAMES", frames or 10_000))
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         model, textures, accessories, where = dataset_inputs(tmp)
 
-        def progress(done: int, total: int, seconds: float, last=[-60.0]) -> None:
+        def progress(done: int, total: int, seconds: float, last=[-60.0]) -> None:  # noqa: B006 (a static: the last report)
             if seconds - last[0] >= 30 or done == total:
                 last[0] = seconds
                 print(f"[bench] render_dataset {done}/{total} frames, {seconds:.0f} s", file=sys.stderr, flush=True)
 
         t0 = time.perf_counter()
-        doc = render_package(str(model), tmp / "out", count=frames, plan={"seed": 0}, textures=str(textures),
-                             accessories=str(accessories), resume=False, progress=progress)
+        doc = render_dataset(DatasetOptions(str(model), str(tmp / "out"), count=frames, textures=str(textures),
+                                            accessories=str(accessories), resume=False, progress=progress))
         wall = time.perf_counter() - t0
         disk = sum(p.stat().st_size for p in (tmp / "out").rglob("*") if p.is_file())
     t = doc["timings"]

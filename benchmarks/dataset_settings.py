@@ -53,7 +53,7 @@ def frame_errors(frame, reference) -> dict:
 
 
 def run(frames: int | None = None) -> dict:
-    from darthand.benchmarks.render_dataset import dataset_inputs
+    from benchmarks.render_dataset import dataset_inputs
     from darthand.dataset.plan import Planner, plan_spec
     from darthand.dataset.sources import source_specs
     from darthand.render.api import Renderer

@@ -1,12 +1,12 @@
 """Benchmark of the renderer's skin textures: 8-bit (SRGB8-style) pyramids shared across skin-tone offsets against
 float32 pyramids decoded per (texture, offset) -- the earlier storage.
 
-Figures: load time of the skin texture + roughness map (cold: nothing cached, wall and CPU time; then a second
-offset of the same files; and the CPU of a cold load with the files read through OpenImageIO rather than
-render/png.py's decoder), memory per loaded texture, ms per 512^2 frame single-threaded (the scene of benchmarks/render.py) with the
-time spent in texture lookups, and the image difference between the two storages at skin-tone offsets 0 and -0.1
-over the pixels the hand covers, in 8-bit sRGB codes (the re-quantised mips and the offset applied after filtering
-at levels >= 1 are the lossy part).
+Figures: load time of the skin texture + roughness map (cold: nothing cached, wall and CPU time; then a second offset of
+the same files; and the CPU of a cold load with the files read through OpenImageIO rather than render/png.py's decoder),
+memory per loaded texture, ms per 512^2 frame single-threaded (the scene of benchmarks/render.py) with the time spent in
+texture lookups, and the image difference between the two storages at skin-tone offsets 0 and -0.1 over the pixels the
+hand covers, in 8-bit sRGB codes (the re-quantised mips and the offset applied after filtering at levels >= 1 are the
+lossy part).
 
 The reference ('before') is texture.load_maps(..., codes=False), the float32 storage of linear values with the
 offset applied at load; or, with `before` (the path of an earlier render/texture.py, e.g. a copy of it), that
@@ -26,7 +26,7 @@ from unittest import mock
 
 import numpy as np
 
-from darthand.benchmarks.render import ACCESSORY, LIGHTS, _sources
+from benchmarks.render import ACCESSORY, LIGHTS, _sources
 
 OFFSETS = (0.0, -0.1)
 

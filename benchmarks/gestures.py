@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from darthand.benchmarks._common import bench_model
+from benchmarks._common import bench_model
 
 
 def run() -> dict:

@@ -54,7 +54,7 @@ def forward_speed(model, batch: int = 1024, repeats: int = 5) -> dict:
     out = {}
     for name, b in (("no_betas", None), ("betas_per_pose", betas)):
         forward(model, pose[:8], None if b is None else b[:8], dtype=np.float32)
-        best = min(_timed(lambda: forward(model, pose, b, dtype=np.float32)) for _ in range(repeats))
+        best = min(_timed(lambda b=b: forward(model, pose, b, dtype=np.float32)) for _ in range(repeats))
         out[f"{name}_poses_per_s"] = round(batch / best)
     return out
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from darthand.benchmarks._common import bench_model
+from benchmarks._common import bench_model
 
 REPEATS = 3
 TEXTURES = 325

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from darthand.benchmarks._common import bench_model
+from benchmarks._common import bench_model
 
 RANDOM_POSES = 8
 

@@ -1,5 +1,6 @@
 """The studio page in a real browser: headless Chromium (Debian's `chromium`) driven by npm's puppeteer-core
-through driver/drive.mjs, and a `darthand studio` server in a child process. The tests and `make bench` use both.
+through testkit/driver/drive.mjs, and a `darthand studio` server in a child process. The tests and `make bench` use
+both; neither is installed by `pip install darthand`.
 
 Nothing here downloads a browser: `chromium()` finds the system one (or $DARTHAND_CHROMIUM) and says why not.
 """
@@ -19,7 +20,7 @@ from pathlib import Path
 from darthand.errors import InputError
 
 DRIVER = Path(__file__).resolve().parent / "driver" / "drive.mjs"
-REPO_ROOT = Path(__file__).resolve().parents[3]
+REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
 class BrowserUnavailable(InputError):

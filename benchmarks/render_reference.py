@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from darthand.benchmarks.render import ACCESSORY, LIGHTS, ROOT, _sources
+from benchmarks.render import ACCESSORY, LIGHTS, ROOT, _sources
 
 OUT = ROOT / "build" / "bench" / "reference"
 REF_SIZE, REF_SPP = 256, 512
@@ -100,7 +100,7 @@ def noise_corrected_rmse(image: np.ndarray, half1: np.ndarray, half2: np.ndarray
 
 def reference(subject, camera, lighting, spp: int, skin: str = "surface", inversion=None) -> tuple:
     """(half 1, half 2) (H, W, 4) of the path-traced reference, cached under OUT/cache by the scene's digest."""
-    from darthand.benchmarks import _pathtrace as pt
+    from benchmarks import _pathtrace as pt
 
     key = pt.scene_digest(subject, camera, lighting, spp=spp, skin=skin,
                           inversion=None if inversion is None else np.round(inversion.table[1], 6).tolist())
@@ -223,7 +223,8 @@ def surface_table(renderer, lighting, frames, tmp: Path) -> dict:
         ref_alpha = (a[..., 3] + b[..., 3]) / 2
         ref = over_grey((a[..., :3] + b[..., :3]) / 2, ref_alpha)
         mask = (base.alpha > 0) | (ref_alpha > 0)
-        ious.append(float(((base.alpha > 0.5) & (ref_alpha > 0.5)).sum() / ((base.alpha > 0.5) | (ref_alpha > 0.5)).sum()))
+        ious.append(float(((base.alpha > 0.5) & (ref_alpha > 0.5)).sum()
+                          / ((base.alpha > 0.5) | (ref_alpha > 0.5)).sum()))
         noise.append(np.abs(over_grey(a[..., :3], a[..., 3]) - over_grey(b[..., :3], b[..., 3]))[mask] / 2)
         refs.append(ref)
         masks.append(mask)
@@ -252,7 +253,7 @@ def surface_table(renderer, lighting, frames, tmp: Path) -> dict:
 
 def subsurface_table(renderer, lighting, tmp: Path) -> dict:
     """Skin models against a path-traced scattering volume (plain-colour skin, indirect light on in darthand)."""
-    from darthand.benchmarks import _pathtrace as pt
+    from benchmarks import _pathtrace as pt
 
     inversion = pt.albedo_inversion(OUT / "albedo_inversion.json")
     rows = {name: {"rmse": [], "img": []} for name in SSS_CONFIGS}
@@ -288,7 +289,7 @@ def subsurface_table(renderer, lighting, tmp: Path) -> dict:
 
 def run() -> dict:
     try:
-        from darthand.benchmarks import _pathtrace as pt
+        from benchmarks import _pathtrace as pt
 
         pt.mitsuba()
     except ImportError as e:
@@ -360,8 +361,9 @@ def summary(res: dict) -> str:
         lines.append(f"| {name} | {r['mean_linear']:.4f} | {r['p99_linear']:.3f} | {r['mean_srgb_codes']:.2f} | "
                      f"{r['p99_srgb_codes']:.0f} | {bias} | {r.get('ms_512_one_thread', '')} | "
                      f"{r.get('indirect_ms', '')} | {r.get('indirect_rays', '')} |")
-    lines += ["", "Indirect light: rays per hand vertex (accessory vertices a quarter, at least 4) against the same estimate with 512 rays (the many-ray truth of "
-              "the estimator) and against the path tracer (lambert skin):", "",
+    lines += ["", "Indirect light: rays per hand vertex (accessory vertices a quarter, at least 4) against the same "
+              "estimate with 512 rays (the many-ray truth of the estimator) and against the path tracer (lambert "
+              "skin):", "",
               "| rays | mean lin vs 512 | p99 lin vs 512 | mean sRGB vs 512 | mean lin vs path tracer |",
               "|---|---|---|---|---|"]
     for r in s["indirect_rays_curve"]:

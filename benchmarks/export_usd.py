@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from pxr import Usd
 
-from darthand.benchmarks._common import bench_model
+from benchmarks._common import bench_model
 from darthand.export.correctives import export_correctives, exported_model, rig_error
 from darthand.export.gestures import gesture_poses
 from darthand.export.influences import parse_influences
@@ -95,7 +95,7 @@ def texture_rows(folder: Path) -> list[dict] | str:
     for size in TEXTURE_SIZES:
         dst = folder / f"albedo_{size}.png"
         _, secs = timed(place_texture, src, dst, size, True)
-        _, load_s = timed(lambda: oiio.ImageBuf(str(dst)).get_pixels(oiio.UINT8))
+        _, load_s = timed(lambda dst=dst: oiio.ImageBuf(str(dst)).get_pixels(oiio.UINT8))
         rows.append({"size": size, "bytes": dst.stat().st_size, **resampling_error(src, dst),
                      "resample_s": round(secs, 4), "decode_s": round(load_s, 4)})
     return rows

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from darthand.benchmarks._common import bench_model
-from darthand.benchmarks.export_usd import CORRECTIVES, RANDOM_POSES, error_poses, resampling_error
+from benchmarks._common import bench_model
+from benchmarks.export_usd import CORRECTIVES, RANDOM_POSES, error_poses, resampling_error
 from darthand.export.correctives import export_correctives, option_errors
 from darthand.textures.loader import TextureSet
 from darthand.export.gltf_export import GltfOptions, export_gltf

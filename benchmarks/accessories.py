@@ -16,7 +16,7 @@ import numpy as np
 from darthand.accessories.build import generate
 from darthand.accessories.sweep import PER_POSE, measure, probes, sweep_poses
 from darthand.accessories.catalog import entries, load_spec
-from darthand.benchmarks._common import bench_model
+from benchmarks._common import bench_model
 
 
 def run(n_poses: int = 32) -> dict:

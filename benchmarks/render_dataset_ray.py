@@ -34,7 +34,7 @@ SIZE = 512
 def run(frames: int | None = None) -> dict:
     import importlib.util
 
-    from darthand.benchmarks.render_dataset import dataset_inputs
+    from benchmarks.render_dataset import dataset_inputs
     from testkit.ray_cluster import LocalRayCluster
 
     if importlib.util.find_spec("ray") is None:
@@ -85,7 +85,8 @@ def summary(res: dict) -> str:
              f"{res['local_images_per_second']:.2f}; goal >= {res['goal_ratio']}); CPU of every process per frame, "
              f"local / Ray: {res['ratio_cpu']:.2f} ({local['cpu_ms_per_image_all']:.0f} against "
              f"{ray['cpu_ms_per_image_all']:.0f} ms).** {res['frames']} frames of {res['size']}², machine load "
-             f"{res['machine_load_1min']} at the end (images/s on a loaded machine measure the CPU share each run got).",
+             f"{res['machine_load_1min']} at the end (images/s on a loaded machine measure the CPU share each run "
+             "got).",
              "", "| run | images/s | with start-up | start-up s | CPU ms/frame (workers) | CPU ms/frame (all) |",
              "|---|---|---|---|---|---|"]
     for name, r in (("local processes", local), ("Ray, files auto", ray), ("Ray, files ship", ship)):
@@ -103,20 +104,23 @@ def _render(model, textures, accessories, plan, frames, out, cluster, nodes) -> 
     """One run; its timings, and cpu_ms_per_image_all: the CPU time of every process of the run (this driver, and
     the local workers or the Ray nodes' processes: raylets, GCS, actors) per frame, which a shared machine's load
     does not change."""
-    from darthand.dataset.run import render_package
+    from darthand.dataset.api import render_dataset
+    from darthand.dataset.options import ClusterOptions, DatasetOptions
+    from darthand.dataset.plan import PlanOptions
 
     label = "local" if cluster is None else f"ray ({cluster.get('files', 'auto')})"
 
-    def progress(done: int, total: int, seconds: float, last=[-60.0]) -> None:
+    def progress(done: int, total: int, seconds: float, last=[-60.0]) -> None:  # noqa: B006 (a static: the last report)
         if seconds - last[0] >= 30 or done == total:
             last[0] = seconds
             print(f"[bench] render_dataset_ray {label}: {done}/{total} frames, {seconds:.0f} s", file=sys.stderr,
                   flush=True)
 
     with CpuMeter(nodes if cluster is not None else None) as cpu:
-        doc = render_package(str(model), out, count=frames, plan=plan, textures=str(textures),
-                             accessories=str(accessories), resume=False, progress=progress, size=SIZE,
-                             cluster=cluster)
+        doc = render_dataset(DatasetOptions(
+            str(model), str(out), count=frames, plan=PlanOptions(**plan), textures=str(textures),
+            accessories=str(accessories), resume=False, progress=progress, size=SIZE,
+            cluster=None if cluster is None else ClusterOptions(**cluster)))
     t = doc["timings"]
     disk = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
     result = {k: t.get(k) for k in ("images_per_second", "overall_images_per_second", "startup_s", "wall_s",
@@ -188,11 +192,11 @@ class CpuMeter:
 
 
 def _unit_costs(model, textures, accessories, plan, tmp: Path) -> dict:
-    """ms to plan and digest a shard (DEFAULT_SHARD_SIZE jobs) on the driver; ms to decode a catalogue texture the first time
-    (the albedo and roughness of three textures, no cache); MB of a texture's files."""
+    """ms to plan and digest a shard (DEFAULT_SHARD_SIZE jobs) on the driver; ms to decode a catalogue texture the
+    first time (the albedo and roughness of three textures, no cache); MB of a texture's files."""
     from darthand.dataset.frames import job_digest
     from darthand.dataset.plan import Planner, plan_spec
-    from darthand.dataset.run import DEFAULT_SAMPLES, DEFAULT_SHARD_SIZE
+    from darthand.dataset.options import DEFAULT_SAMPLES, DEFAULT_SHARD_SIZE
     from darthand.render.api import open_source
     from darthand.render.texture import load_maps
 

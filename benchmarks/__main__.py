@@ -1,8 +1,8 @@
 """`make bench`: run every benchmark module, write build/bench/<name>.json and a markdown table.
 
-A benchmark module is darthand.benchmarks.<name> with `run() -> dict` of JSON-serialisable figures, and optionally
-`summary(result) -> str`, its markdown section (instead of the table of every figure). Timings live here and never
-in tests.
+Run from the repository root: `python -m benchmarks --out build/bench [--only NAME ...]`. A benchmark module is
+benchmarks.<name> with `run() -> dict` of JSON-serialisable figures, and optionally `summary(result) -> str`, its
+markdown section (instead of the table of every figure). Timings live here and never in tests.
 """
 
 from __future__ import annotations
@@ -16,12 +16,12 @@ import sys
 import time
 from pathlib import Path
 
-import darthand.benchmarks
+import benchmarks
 from darthand.fileio import write_bytes, write_json
 
 
 def available() -> list[str]:
-    return sorted(m.name for m in pkgutil.iter_modules(darthand.benchmarks.__path__) if not m.name.startswith("_"))
+    return sorted(m.name for m in pkgutil.iter_modules(benchmarks.__path__) if not m.name.startswith("_"))
 
 
 def flatten(d, prefix: str = "") -> list[tuple[str, object]]:
@@ -64,7 +64,7 @@ def markdown(results: dict) -> str:
 def _summary(name: str, res: dict) -> str | None:
     """The benchmark module's own markdown section, if it has one."""
     try:
-        module = importlib.import_module(f"darthand.benchmarks.{name}")
+        module = importlib.import_module(f"benchmarks.{name}")
     except ImportError:
         return None
     return module.summary(res) if hasattr(module, "summary") else None
@@ -76,7 +76,7 @@ def _cores() -> int:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="darthand.bench", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__.splitlines()[0])
     p.add_argument("--out", default="build/bench", help="output folder")
     p.add_argument("--only", nargs="*", default=None, help=f"benchmarks to run (default: all of {available()})")
     args = p.parse_args(argv)
@@ -85,7 +85,7 @@ def main(argv=None) -> int:
     for name in args.only or available():
         print(f"[bench] {name} ...", file=sys.stderr, flush=True)
         t0 = time.perf_counter()
-        res = importlib.import_module(f"darthand.benchmarks.{name}").run()
+        res = importlib.import_module(f"benchmarks.{name}").run()
         res["bench_seconds"] = round(time.perf_counter() - t0, 2)
         write_json(out / f"{name}.json", res)
         results[name] = res

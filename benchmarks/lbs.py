@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from darthand.benchmarks._common import bench_model
+from benchmarks._common import bench_model
 from darthand.model.forward import forward
 
 BATCHES = (1, 64, 1024, 4096)

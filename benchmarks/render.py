@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[1]
 TEXTURE = "light_moles_00"
 ACCESSORY = "ring_01_court_gold"
 LIGHTS = {"ambient": {"color": [0.85, 0.9, 1.0], "intensity": 0.2},
@@ -131,12 +131,13 @@ def _antialiasing_error(renderer, gestures, texture_id: str) -> dict:
 def _processes(model, tex, acc, texture_id: str, gestures, out: Path, count: int, processes: int) -> dict:
     """The same frames rendered by `darthand render-dataset` over `processes` worker processes (each frame
     single-threaded, written by its worker): steady-state throughput after start-up (dataset/run.RunStats)."""
-    from darthand.dataset.run import render_package
+    from darthand.dataset.api import render_dataset
+    from darthand.dataset.options import DatasetOptions
 
     jobs = [{"index": i, "pose": gestures[i % len(gestures)], "texture": texture_id, "accessory": ACCESSORY,
              "camera": "three_quarter", "lights": LIGHTS} for i in range(count)]
-    doc = render_package(model, out, jobs, processes=processes, textures=tex, accessories=acc, resume=False,
-                         progress=False)
+    doc = render_dataset(DatasetOptions(str(model), str(out), jobs=jobs, processes=processes, textures=tex,
+                                        accessories=acc, resume=False, progress=False))
     t = doc["timings"]
     return {k: t[k] for k in ("ms_per_image", "cpu_ms_per_image", "frame_ms_median", "startup_s", "frames")}
 
