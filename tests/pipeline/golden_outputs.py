@@ -40,13 +40,15 @@ def commands(fx: Path, out: Path) -> list[list[str]]:
         ["render-dataset", model, "--textures", tex, "--accessories", acc, "--count", "4", "--seed", "2",
          "--sides", "left", "--shapes", "none", "--lights", "default", "--backgrounds", "none",
          "--out", str(out / "ds_left"), *common],
-        ["render-dataset", usd, "--count", "4", "--seed", "3", "--sides", "right", "--out", str(out / "ds_usd"), *common],
+        ["render-dataset", usd, "--count", "4", "--seed", "3", "--sides", "right", "--out", str(out / "ds_usd"),
+         *common],
         ["render-dataset", model, "--textures", tex, "--accessories", acc, "--count", "6", "--seed", "9",
          "--plan", str(out / "plan" / "jobs.json"), "--out", str(out / "plan")],
         ["render", model, "--textures", tex, "--accessories", acc, "--pose", "fist", "--texture",
          "light_tattoos_07", "--accessory", "ring_01_court_gold", "--size", "64", "--out", str(out / "r_model")],
         ["render", usd, "--pose", "ok", "--size", "64", "--depth", "--out", str(out / "r_usd")],
-        ["dataset", "export", str(out / "ds_left"), "--format", "freihand", "--out", str(out / "ds_left_fh"), "--allow-non-mano"],
+        ["dataset", "export", str(out / "ds_left"), "--format", "freihand", "--out", str(out / "ds_left_fh"),
+         "--allow-non-mano"],
     ]
 
 

@@ -1,6 +1,9 @@
 """`darthand` command line: argument parsing only; the work is done by the stage functions.
 
 Exit codes: 0 all is well, 1 a validation found problems, 2 a user-facing error (one line on stderr).
+
+Each command group's stage module is imported lazily, only for the command asked (build_parser), so a command starts
+with what it uses: `make assets` runs `verify` and `manifest` on every call.
 """
 
 from __future__ import annotations

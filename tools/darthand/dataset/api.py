@@ -37,6 +37,7 @@ def write_plan(options: DatasetOptions, path) -> int:
     if options.jobs is not None:
         raise InputError("--plan: writes planned jobs, so it cannot be given with --jobs")
     run = _open(options)
+    assert run.planner is not None                        # no jobs given: the frames are planned
     count = bounded_int(options.count, "count", 0, options.max_frames, "frames", "(--max-frames raises it)")
     return write_jobs(path, run.planner.jobs(options.start, options.start + count),
                       {"package": str(options.package), **run.origin})

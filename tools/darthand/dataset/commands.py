@@ -1,6 +1,6 @@
 """The `darthand render-dataset`, `darthand dataset report|export` and `darthand eval` commands: thin functions over
 the dataset stage (render-dataset: dataset/api.py). Their options are defined in cli.py. The handlers import the
-stage's modules when they run, so each command starts with only what it uses."""
+stage's modules lazily, when they run, so each command starts with only what it uses."""
 
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ from darthand.errors import InputError
 def render_dataset(args) -> int:
     """Plan the frames of a dataset (or read them from --jobs) and render them into --out; with --plan, write the
     planned jobs instead."""
-    from darthand.dataset.api import render_dataset as render, write_plan
+    from darthand.dataset.api import render_dataset as render
+    from darthand.dataset.api import write_plan
 
     options = dataset_options(args)
     if args.plan:
@@ -53,7 +54,7 @@ def dataset_options(args) -> DatasetOptions:
         textures=None if args.texture_ids == "all" else _names(args.texture_ids),
         skin_tone_range=args.skin_tone_range, skin_tone_steps=args.skin_tone_steps,
         accessories=_accessory_ids(args.accessory_ids), accessory_share=args.accessory_share,
-        views=_names(args.views), roll_range_deg=args.roll_range, fov_range_deg=args.fov_range,
+        views=tuple(_names(args.views) or ()), roll_range_deg=args.roll_range, fov_range_deg=args.fov_range,
         margin_range=args.margin_range, distance_range=args.distance_range, lights=args.lights,
         backgrounds=args.backgrounds, split=args.split)
     return DatasetOptions(

@@ -65,7 +65,7 @@ def render_job(renderer, job: dict, settings: dict):
     size = settings["size"]
     background, info = None, None
     t = time.perf_counter()
-    if scene.background:
+    if isinstance(scene.background, dict):
         background, info = background_pixels(scene.background, size, size)
     t = time.perf_counter() - t
     frame = renderer.render_scene(scene, background=background, width=size, height=size,

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field, fields, is_dataclass
 import numpy as np
 
 from darthand.dataset import backgrounds, lighting, poses, shapes, views
+from darthand.dataset.shapes import ShapeOptions
 from darthand.errors import InputError
 from darthand.fileio import read_json
 from darthand.model.mirror import mirror_model, mirror_pose
@@ -64,17 +65,6 @@ class PoseOptions:
     steps: int = poses.DEFAULT_STEPS
     jitter_deg: float = poses.DEFAULT_JITTER_DEG
     max_reference_mb: float = poses.DEFAULT_MAX_REFERENCE_MB
-
-
-@dataclass
-class ShapeOptions:
-    """Betas per frame (dataset/shapes.py): mode 'normal' (N(0, sigma^2) truncated at +-limit), 'uniform' in
-    +-limit or 'none' (the model's own shape); dims: only the first N directions drawn (None: all)."""
-
-    mode: str = shapes.DEFAULTS["mode"]
-    sigma: float = shapes.DEFAULTS["sigma"]
-    limit: float = shapes.DEFAULTS["limit"]
-    dims: int | None = shapes.DEFAULTS["dims"]
 
 
 @dataclass

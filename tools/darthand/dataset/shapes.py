@@ -18,6 +18,7 @@ never shifts other draws).
 from __future__ import annotations
 
 import math
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy.special import ndtr, ndtri
@@ -26,7 +27,20 @@ from darthand.errors import InputError
 
 SHAPE_STREAM = 5
 MODES = ("normal", "uniform", "none")
-DEFAULTS = {"mode": "normal", "sigma": 1.0, "limit": 3.0, "dims": None}
+
+
+@dataclass
+class ShapeOptions:
+    """Betas per frame: mode 'normal' (N(0, sigma^2) truncated at +-limit), 'uniform' in +-limit or 'none' (the
+    model's own shape); dims: only the first N directions drawn (None: all)."""
+
+    mode: str = "normal"
+    sigma: float = 1.0
+    limit: float = 3.0
+    dims: int | None = None
+
+
+DEFAULTS = asdict(ShapeOptions())
 
 
 class ShapeSampler:

@@ -1,7 +1,8 @@
 """The `darthand render` and `render-checks` commands: thin functions over render.api and render.checks
 (`render-dataset` is the dataset stage's: dataset/commands.py).
 
-Their options are defined in cli.py.
+Their options are defined in cli.py. The handlers import the renderer lazily, when they run (embreex, OpenImageIO
+and the compiled kernels: about a second), so `darthand --help` does not load it.
 """
 
 from __future__ import annotations

@@ -61,9 +61,10 @@ Body = HandBody            # the union of body kinds, one today
 
 @dataclass(frozen=True)
 class Scene:
-    """One frame's content: bodies, camera (a view name, a camera file path or document; None: three_quarter), lights (None: the
-    renderer's default rig, a lights file path or document), background (None, an image path, or a dataset's
-    background document, dataset/backgrounds.py), record (labels-only fields, see the module docstring)."""
+    """One frame's content: bodies, camera (a view name, a camera file path or document; None: three_quarter),
+    lights (None: the renderer's default rig, a lights file path or document), background (None, an image path, or
+    a dataset's background document, dataset/backgrounds.py), record (labels-only fields, see the module
+    docstring)."""
 
     bodies: tuple
     camera: str | dict | None = "three_quarter"

@@ -1,4 +1,5 @@
-"""The `darthand studio` command: open a build, serve the page until Ctrl-C. Its options are defined in cli.py."""
+"""The `darthand studio` command: open a build, serve the page until Ctrl-C. Its options are defined in cli.py. The
+handler imports the studio lazily, when it runs, so `darthand --help` does not load the renderer."""
 
 from __future__ import annotations
 
