@@ -4,10 +4,13 @@ jobs files), every file they write hashed. A restructuring of the code must leav
 
     python tests/pipeline/golden_outputs.py WORKDIR > tests/pipeline/golden_outputs.json   (from the reference commit)
 
-Files are hashed with the fixture and output folders' paths replaced by '<fx>' and '<out>' (labels and records name
-their inputs by path) and,
+Files are hashed with the fixture, output and checkout folders' paths replaced by '<fx>', '<out>' and '<repo>' (labels
+and records name their inputs by path) and,
 for JSON documents, without their wall-clock fields (`timings`, `seconds`, `wall_s`...): what the run measured, not
-what it made. Nothing else is normalised.
+what it made. Nor the texture stage's code digests (the bake's `key`, each catalogue entry's `fingerprint`): they hash
+the stage's own source files (textures/bake.BAKE_MODULES, textures/build.RENDER_MODULES) so that any edit of them
+re-renders the catalogue, as the Makefile does for any edit of the stage; the pixels they key are compared. Nothing
+else is normalised.
 """
 
 from __future__ import annotations
@@ -19,6 +22,8 @@ import json
 import sys
 import tarfile
 from pathlib import Path
+
+import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent), str(HERE.parent / "robustness"), str(HERE.parent / "model")]
@@ -64,8 +69,15 @@ def run_all(fx: Path, out: Path) -> dict:
             code = main(argv)
         if code != 0:
             raise RuntimeError(f"darthand {' '.join(argv)} exited {code}: {err.getvalue()}")
-    markers = {str(fx).encode(): b"<fx>", str(out).encode(): b"<out>"}
+    markers = {str(fx).encode(): b"<fx>", str(out).encode(): b"<out>", str(_checkout()).encode(): b"<repo>"}
     return {**fingerprints(fx, "fx", markers), **fingerprints(out, "out", markers)}
+
+
+def _checkout() -> Path:
+    """The checkout whose code runs (models record the template they were built from by its path)."""
+    import darthand
+
+    return Path(darthand.__file__).resolve().parents[2]
 
 
 def fingerprints(root: Path, prefix: str, markers: dict) -> dict:
@@ -75,8 +87,13 @@ def fingerprints(root: Path, prefix: str, markers: dict) -> dict:
         rel = f"{prefix}/{path.relative_to(root).as_posix()}"
         if rel.endswith((".lock", "fixtures-ok")):
             continue
-        result[rel] = hashlib.sha256(_member_hashes(path, markers) if path.suffix == ".tar"
-                                     else _normalised(path.name, path.read_bytes(), markers)).hexdigest()
+        if path.suffix == ".tar":
+            data = _member_hashes(path, markers)
+        elif path.suffix == ".npz":
+            data = _array_hashes(path, markers)
+        else:
+            data = _normalised(path.name, path.read_bytes(), markers)
+        result[rel] = hashlib.sha256(data).hexdigest()
     return result
 
 
@@ -84,6 +101,25 @@ def _normalised(name: str, data: bytes, markers: dict) -> bytes:
     for marker, replacement in markers.items():
         data = data.replace(marker, replacement)
     return _stable_json(data) if name.endswith(".json") else data
+
+
+def _array_hashes(path: Path, markers: dict) -> bytes:
+    """An .npz by its arrays (names, dtypes, shapes, bytes; text arrays with the markers replaced): compressed
+    members hide the paths the replacement must find."""
+    lines = []
+    with np.load(path, allow_pickle=False) as npz:
+        for name in sorted(npz.files):
+            if path.name.startswith("bake_") and name == "key":        # a code digest (module docstring)
+                continue
+            array = npz[name]
+            data = array.tobytes()
+            if array.dtype.kind == "U":                                  # text: as UTF-8, where the paths are
+                data = _normalised(name, "\n".join(array.ravel().tolist()).encode(), markers)
+            elif array.dtype.kind in "SV" or name.endswith("_json"):
+                data = _normalised(name, data, markers)
+            dtype = "text" if array.dtype.kind == "U" else array.dtype.str     # a text's length follows its paths
+            lines.append(f"{name} {dtype} {array.shape} {hashlib.sha256(data).hexdigest()}")
+    return "\n".join(lines).encode()
 
 
 def _member_hashes(path: Path, markers: dict) -> bytes:
@@ -103,6 +139,10 @@ def _stable_json(data: bytes) -> bytes:
         doc = json.loads(data)
     except ValueError:
         return data
+    if isinstance(doc, dict) and doc.get("format") == "darthand-texture-catalog":
+        doc["bake"].pop("key", None)
+        for entry in doc.get("entries", []):
+            entry.pop("fingerprint", None)
     return json.dumps(_drop_volatile(doc), sort_keys=True).encode()
 
 

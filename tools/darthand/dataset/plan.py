@@ -223,7 +223,6 @@ class Planner:
             if pose_record["mode"] == "jitter" else None
         if not isinstance(pose, str):
             if side == "left":
-
                 pose = mirror_pose(pose)
             pose = np.asarray(pose, np.float64).tolist()
         texture = self.textures[_choose(u[TEXTURE], len(self.textures))]

@@ -90,7 +90,6 @@ def load_reference(spec, model, max_mb: float = DEFAULT_MAX_REFERENCE_MB, gestur
     `gestures`: some of its names), or a path to a darthand pose file or a FreiHAND training_mano.json. `max_mb`:
     the largest file read (InputError naming the budget and how to raise it otherwise)."""
     if spec in (None, "gestures"):
-
         known = model_gestures(model)                      # the model's own (fitted) gestures
         for name in gestures or ():
             if name not in known.names:

@@ -134,7 +134,6 @@ def _reference(doc: dict) -> tuple[np.ndarray, str]:
         if model is None:
             raise InputError("a USD package has no model to pose the reference set with")
         if model.side != "right":
-
             model = mirror_model(model)
         ref = load_reference(spec, model, float((plan.get("poses") or {}).get("max_reference_mb", 256)))
     except (InputError, AttributeError, KeyError) as e:

@@ -176,7 +176,8 @@ def check_model(m: HandModel, source: str = "model") -> None:
         fail("v_template", f"has {V} vertices, need at least 4")
     shape("faces", m.faces, (None, 3))
     if F and (m.faces.min() < 0 or m.faces.max() >= V):
-        fail("faces", f"indexes vertex {int(m.faces.max() if m.faces.max() >= V else m.faces.min())}, outside 0..{V - 1}")
+        outside = int(m.faces.max() if m.faces.max() >= V else m.faces.min())
+        fail("faces", f"indexes vertex {outside}, outside 0..{V - 1}")
     shape("weights", m.weights, (V, NUM_JOINTS))
     shape("posedirs", m.posedirs, (V, 3, NUM_POSE_FEATURES))
     shape("J_regressor", m.J_regressor, (NUM_JOINTS, V))

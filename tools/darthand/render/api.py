@@ -29,23 +29,12 @@ from darthand.render.indirect import VertexLight
 from darthand.render.labels import frame_labels
 from darthand.render.lights import Lighting, load_lighting, world_lights
 from darthand.render.poses import resolve_pose
-from darthand.render.scene import Scene as TraceScene
-from darthand.render.scene import scene_for
+from darthand.render.scene import Scene as TraceScene, scene_for
 from darthand.render.scenes import Scene
 from darthand.render.shade import ShadingOptions
 from darthand.render.subject import Subject
-from darthand.render.trace import (
-    Context,
-    Samples,
-    default_threads,
-    pixel_positions,
-    scene_bounds,
-    single_threaded_blas,
-    tile_pixels,
-    touched_tiles,
-    trace_parallel,
-)
-from darthand.render.usd_source import UsdPackage
+from darthand.render.trace import (Context, Samples, default_threads, pixel_positions, scene_bounds,
+                                   single_threaded_blas, tile_pixels, touched_tiles, trace_parallel)
 
 DEFAULT_SAMPLES = aa.DEFAULT_SAMPLES
 # Peak memory per image pixel while rendering (measured about 115 bytes at 2048^2 with the hand filling the frame).
@@ -372,6 +361,7 @@ def open_source(package, *, textures=None, accessories=None, model=None):
     and accessory catalogues (default: the build's, next to build/model/)."""
     path = Path(str(package))
     if path.is_dir() and os.path.lexists(path / "asset.json") or path.suffix in (".usda", ".usd", ".usdc"):
+        from darthand.render.usd_source import UsdPackage  # lazy: OpenUSD takes 0.6 s to import, for packages only
 
         return UsdPackage.open(path, model=model)
     if str(package) in ("right", "left"):

@@ -11,11 +11,9 @@ shape stays. Textures are decoded once per file pair; a skin-tone offset is a de
 
 from __future__ import annotations
 
-from typing import Any
-
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -134,7 +132,6 @@ class HandAssets:
         texture, accessory = self.resolve_texture(texture), self.resolve_accessory(accessory)
         worn = None
         if self.worn_rings and accessory != NONE and self.accessories[accessory].kind == "ring":
-
             pose_vec, worn = wear_ring(self.model, *self.fitted_accessory(accessory, betas), pose_vec, betas)
         key = (pose_vec.tobytes(), None if betas is None else np.asarray(betas, np.float64).tobytes(), keypoint_order)
         if self._last is not None and self._last[0] == key:
@@ -169,7 +166,6 @@ class HandAssets:
     def skin(self, texture: str, offset: float = 0.0) -> Material:
         """The hand's material for a texture id and skin-tone offset (added to the sRGB albedo)."""
         if texture == PLAIN:
-
             plain = srgb_to_linear(np.clip(linear_to_srgb(np.array(PLAIN_SKIN)) + offset, 0, 1))
             return skin_material(constant_texture(plain), name=PLAIN)
         if texture == CHECKER:
@@ -219,7 +215,6 @@ class HandAssets:
             self._refits = (b.tobytes(), {})
         fitted = self._refits[1]
         if accessory not in fitted:
-
             if self._refitter is None:
                 self._refitter = ShapeRefitter(self.model, list(self.accessories.values()))
             fitted[accessory] = self._refitter.refit(b, [accessory])[0]

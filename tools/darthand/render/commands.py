@@ -66,7 +66,8 @@ def checks(args) -> int:
                         all_accessories=args.all_accessories)
     for side, pkg in report["packages"].items():
         failed = [name for name, c in pkg["checks"].items() if not c["ok"]]
-        print(f"[render] {side}: {pkg['renders']} renders, {'all checks pass' if not failed else 'FAILED: ' + ', '.join(failed)}"
+        verdict = "all checks pass" if not failed else "FAILED: " + ", ".join(failed)
+        print(f"[render] {side}: {pkg['renders']} renders, {verdict}"
               f" ({pkg['seconds']:.1f} s)")
     print(f"[render] {Path(report['report'])}: {'ok' if report['ok'] else 'problems found'}")
     return 0 if report["ok"] else 1

@@ -278,7 +278,6 @@ def _tip_ids(interface: Path, info: dict, model) -> np.ndarray:
     candidates = [Path(model)] if model is not None else [interface.parent.parent.parent / "model" / f"{side}.npz"]
     for path in candidates:
         if path.is_file():
-
             return load_model(path).tip_ids
     raise InputError(f"{interface}: the package does not list its fingertip vertices (asset.json model.tip_ids); "
                      f"give the model it was built from (--model build/model/{side}.npz)")

@@ -67,7 +67,6 @@ class StudioBuild:
                              "model/<side>.npz; run `make assets`)")
         self.background_folder, self.background_files = None, []
         if backgrounds is not None:
-
             self.background_folder = Path(backgrounds).resolve()
             self.background_files = list_images(self.background_folder, max_files=10_000)
 

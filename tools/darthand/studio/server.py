@@ -222,7 +222,6 @@ class StudioHandler(BaseHTTPRequestHandler):
             kind, name = rest[1], _strip(rest[2], ".png")
             index = _index(name)
             if kind == "builtin":
-
                 if index is None or index >= BUILTIN_COUNT:
                     raise RequestError(404, f"built-in background {name!r} is not in 0..{BUILTIN_COUNT - 1}")
                 spec = {"builtin": index}

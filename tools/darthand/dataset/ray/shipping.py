@@ -1,5 +1,4 @@
 """Which input files the nodes of a Ray run read, and how they get them (`--ray-files`, `files`):
-
     auto    per node, as found (default): a node that sees the driver's input files (same path, size and
             modification time: a shared filesystem) reads them there; one that does not gets them through Ray's
             object store, only those its chunks need (the model, the catalogue files, the textures, accessories,
