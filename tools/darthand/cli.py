@@ -500,6 +500,7 @@ def _add_render_arguments(p) -> None:
 def _add_dataset_arguments(p) -> None:
     from darthand.dataset import options as o
     from darthand.dataset.plan import PlanOptions
+    from darthand.dataset.writers import FORMATS
     from darthand.model.preview import VIEWS
 
     plan, run = PlanOptions(), o.DatasetOptions("", "")           # the defaults, defined there
@@ -615,8 +616,9 @@ def _add_dataset_arguments(p) -> None:
                    help=f"frames per shard, the unit of planning and resume records (default {run.shard_size})")
     p.add_argument("--max-frames", type=COUNT, default=run.max_frames, metavar="N",
                    help=f"frame budget of one run (default {run.max_frames})")
-    p.add_argument("--formats", default=None, metavar="freihand,webdataset",
-                   help="also write these layouts after rendering (as `darthand dataset export`)")
+    p.add_argument("--formats", default=None, metavar="freihand,webdataset,hamer",
+                   help=f"also write these layouts after rendering (as `darthand dataset export`): "
+                        f"{', '.join(FORMATS)}")
     _add_layout_options(p)
     p.add_argument("--no-resume", dest="resume", action="store_false",
                    help="render every frame again (default: skip frames whose files exist from the same job)")
@@ -628,15 +630,18 @@ def _add_layout_options(p) -> None:
 
     p.add_argument("--left", default="mirror", choices=LEFT_MODES,
                    help="freihand: left-hand frames mirrored into right hands (image, mask, K, points and MANO "
-                        "parameters; the default: FreiHAND is right-handed) or skipped")
+                        "parameters; the default: FreiHAND is right-handed) or skipped; hamer: left hands written "
+                        "as left ones (HaMeR's loader mirrors them) or skipped")
     p.add_argument("--allow-non-mano", action="store_true",
                    help="freihand: also for a hand that is not a MANO model (the open hand): training_mano.json's "
                         "shape slots are then 0 and MANO posed from its rows is not the rendered hand (README.md in "
-                        "the output says so); keypoints and vertices are exact either way")
+                        "the output says so); keypoints and vertices are exact either way. hamer: writes such a "
+                        "hand's pose (has_hand_pose 1; default: zeros, flag 0), never its betas")
 
 
 def _add_dataset_commands(sub) -> None:
     from darthand.dataset import commands
+    from darthand.dataset.writers import FORMATS
 
     text = ("render a labelled dataset (OUT/images/, masks/, labels/, meshes/, dataset.json): frames planned from a "
             "seed as DART samples them, or read from a jobs file, rendered in parallel worker processes")
@@ -651,9 +656,10 @@ def _add_dataset_commands(sub) -> None:
     p.add_argument("--sheet", type=number(int, 1, 1000), default=24, metavar="N",
                    help="frames on the contact sheet (default 24)")
     p.set_defaults(run=commands.report)
-    p = g.add_parser("export", help="write a dataset in another layout: FreiHAND's or WebDataset tar shards")
+    p = g.add_parser("export", help="write a dataset in another layout: FreiHAND's, WebDataset tar shards or "
+                                    "HaMeR's training tars and evaluation .npz")
     p.add_argument("dataset", metavar="DIR", help="a render-dataset output folder")
-    p.add_argument("--format", required=True, choices=("freihand", "webdataset"))
+    p.add_argument("--format", required=True, choices=tuple(FORMATS))
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default DIR/<format>)")
     _add_layout_options(p)
     p.set_defaults(run=commands.export)

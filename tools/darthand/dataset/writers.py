@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Protocol
 
 from darthand.dataset.freihand import write_freihand
+from darthand.dataset.hamer import write_hamer
 from darthand.dataset.webdataset import write_webdataset
 
 
@@ -31,4 +32,8 @@ def _webdataset(dataset, out, *, left: str = "mirror", allow_non_mano: bool = Fa
     return write_webdataset(dataset, out)
 
 
-FORMATS: dict[str, Writer] = {"freihand": _freihand, "webdataset": _webdataset}
+def _hamer(dataset, out, *, left: str = "mirror", allow_non_mano: bool = False) -> Path:
+    return write_hamer(dataset, out, left=left, allow_non_mano=allow_non_mano)
+
+
+FORMATS: dict[str, Writer] = {"freihand": _freihand, "webdataset": _webdataset, "hamer": _hamer}
