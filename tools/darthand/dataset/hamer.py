@@ -279,6 +279,8 @@ reads.
 
 - Synthetic images with exact labels: every keypoint has confidence 1 (HaMeR's data has 0 where unannotated).
 - The box comes from the exact keypoints, not from a detector or annotation.
+- HaMeR predicts every hand as a right one: its predictions for left rows (right = 0) are of the mirrored hand;
+  mirror them (x -> -x) before comparing with the left hand's keypoints_3d.
 """
 
 
