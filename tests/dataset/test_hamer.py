@@ -248,3 +248,17 @@ def test_bad_input_is_one_line(tmp_path):
         write_hamer(tmp_path, tmp_path / "out", left="flip")
     with pytest.raises(InputError, match="dataset.json"):
         write_hamer(tmp_path, tmp_path / "out")
+
+
+def test_render_dataset_writes_the_layout_after_rendering(package, tmp_path):
+    """`render-dataset --formats hamer`: the layout is written into OUT/hamer, a hand not of MANO accepted (its MANO
+    flags 0), as `dataset export` writes it."""
+    model, tex, acc = package
+    out = tmp_path / "out"
+    assert main(["render-dataset", model, "--textures", tex, "--accessories", acc, "--size", "48", "--samples", "4",
+                 "--processes", "1", "--count", "2", "--seed", "2", "--out", str(out), "--formats", "hamer"]) == 0
+    items = samples(out / "hamer")
+    assert len(items) == 2 and all(i["data.pyd"][0]["has_hand_pose"] == 0 for i in items)
+    again = export(out, tmp_path / "again")
+    for tar in (out / "hamer").rglob("*.tar"):
+        assert tar.read_bytes() == (again / tar.relative_to(out / "hamer")).read_bytes()
