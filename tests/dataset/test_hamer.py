@@ -262,3 +262,21 @@ def test_render_dataset_writes_the_layout_after_rendering(package, tmp_path):
     again = export(out, tmp_path / "again")
     for tar in (out / "hamer").rglob("*.tar"):
         assert tar.read_bytes() == (again / tar.relative_to(out / "hamer")).read_bytes()
+
+
+def test_a_folder_with_more_shards_is_refused_before_writing(open_export, tmp_path):
+    """Exporting over an earlier, larger export refuses in one line and writes nothing; over the same one it writes
+    the same files in place."""
+    from darthand.dataset import hamer
+
+    dataset, first = open_export
+    out = tmp_path / "out"
+    export(dataset, out)
+    (out / "train" / "000007.tar").write_bytes(b"earlier")
+    before = {p: p.stat().st_mtime_ns for p in out.rglob("*")}
+    with pytest.raises(InputError, match=r"train: holds 1 shards \(000007.tar ..\)"):
+        hamer.write_hamer(dataset, out)
+    assert {p: p.stat().st_mtime_ns for p in out.rglob("*")} == before
+    (out / "train" / "000007.tar").unlink()
+    export(dataset, out)
+    assert (out / "train" / "000000.tar").read_bytes() == (first / "train" / "000000.tar").read_bytes()

@@ -76,14 +76,26 @@ def write_hamer(dataset, out=None, *, left: str = "mirror", allow_non_mano: bool
         raise InputError(f"{root}: no rendered frames (shards/*.json)")
     kinds = model_kinds(doc.get("models") or {})
     out = Path(out) if out is not None else root / "hamer"
+    chosen = {split: [f for f in frames if f["split"] == split and (left != "skip" or f["side"] == "right")]
+              for split in SPLITS}
+    for split, some in chosen.items():
+        check_no_stale_shards(out / split, -(-len(some) // SAMPLES_PER_SHARD))
     counts: dict = {}
-    for split in SPLITS:
-        chosen = [f for f in frames if f["split"] == split and (left != "skip" or f["side"] == "right")]
-        rows = _write_split(root, out, split, chosen, kinds, allow_non_mano)
+    for split, some in chosen.items():
+        rows = _write_split(root, out, split, some, kinds, allow_non_mano)
         if rows is not None:
             counts[split] = rows
     write_bytes(out / "README.md", _readme(out, doc.get("models") or {}, counts, left, allow_non_mano).encode())
     return out
+
+
+def check_no_stale_shards(folder: Path, shards: int) -> None:
+    """Refuse (before anything is written) a folder holding shards numbered from `shards` on: an earlier, larger
+    export's, which a brace pattern or glob over the folder would read with this one's."""
+    stale = sorted(p.name for p in folder.glob("[0-9][0-9][0-9][0-9][0-9][0-9].tar") if int(p.name[:6]) >= shards)
+    if stale:
+        raise InputError(f"{folder}: holds {len(stale)} shards ({stale[0]} ..) beyond the {shards} this export "
+                         f"writes, from an earlier export: remove them or export into another folder")
 
 
 def _write_split(root: Path, out: Path, split: str, frames: list, kinds: dict, allow_non_mano: bool):
