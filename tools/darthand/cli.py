@@ -616,7 +616,8 @@ def _add_dataset_arguments(p) -> None:
     p.add_argument("--max-frames", type=COUNT, default=run.max_frames, metavar="N",
                    help=f"frame budget of one run (default {run.max_frames})")
     p.add_argument("--formats", default=None, metavar="freihand,webdataset",
-                   help="also write these layouts after rendering (as `darthand dataset export`)")
+                   help="also write these layouts after rendering (as `darthand dataset export`): freihand, "
+                        "webdataset, coco (mmpose's COCO-style hand keypoints)")
     _add_layout_options(p)
     p.add_argument("--no-resume", dest="resume", action="store_false",
                    help="render every frame again (default: skip frames whose files exist from the same job)")
@@ -653,7 +654,7 @@ def _add_dataset_commands(sub) -> None:
     p.set_defaults(run=commands.report)
     p = g.add_parser("export", help="write a dataset in another layout: FreiHAND's or WebDataset tar shards")
     p.add_argument("dataset", metavar="DIR", help="a render-dataset output folder")
-    p.add_argument("--format", required=True, choices=("freihand", "webdataset"))
+    p.add_argument("--format", required=True, choices=("freihand", "webdataset", "coco"))
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default DIR/<format>)")
     _add_layout_options(p)
     p.set_defaults(run=commands.export)

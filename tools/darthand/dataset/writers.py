@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Protocol
 
+from darthand.dataset.coco import write_coco
 from darthand.dataset.freihand import write_freihand
 from darthand.dataset.webdataset import write_webdataset
 
@@ -31,4 +32,8 @@ def _webdataset(dataset, out, *, left: str = "mirror", allow_non_mano: bool = Fa
     return write_webdataset(dataset, out)
 
 
-FORMATS: dict[str, Writer] = {"freihand": _freihand, "webdataset": _webdataset}
+def _coco(dataset, out, *, left: str = "mirror", allow_non_mano: bool = False) -> Path:
+    return write_coco(dataset, out)
+
+
+FORMATS: dict[str, Writer] = {"freihand": _freihand, "webdataset": _webdataset, "coco": _coco}
