@@ -13,10 +13,10 @@ from pycocotools import mask as mask_utils
 from pycocotools.coco import COCO
 
 from darthand.cli import main
-from darthand.dataset.coco import coco_keypoints
+from darthand.dataset.coco import MASK_THRESHOLD, _place_image, coco_keypoints, encode_mask
 from darthand.dataset.run import read_shard_records
 from darthand.errors import InputError
-from darthand.render.image import read_png
+from darthand.render.image import read_png, write_png
 from darthand.render.labels import keypoint_names
 
 FREIHAND2D_NAMES = [
@@ -152,6 +152,37 @@ def test_images_are_the_frames(coco_export):
             assert path.read_bytes() == (dataset / "images" / path.name).read_bytes()
         else:
             assert read_png(path).shape[2] == 3
+
+
+def test_rle_is_pycocotools_encoding():
+    """encode_mask (no pycocotools at run time) writes what pycocotools.mask.encode writes, decoded back exactly."""
+    rng = np.random.default_rng(7)
+    for case in range(200):
+        h, w = (int(n) for n in rng.integers(1, 40, 2))
+        coverage = (rng.random((h, w)) * 256 * (case % 4 + 1) / 4).astype(np.uint8)
+        if case % 17 == 0:
+            coverage[:] = 255 * (case % 2)
+        rle, area = encode_mask(coverage)
+        ref = mask_utils.encode(np.asfortranarray(coverage >= MASK_THRESHOLD, dtype=np.uint8))
+        assert rle["counts"] == ref["counts"].decode() and rle["size"] == [h, w]
+        assert area == int(mask_utils.area(ref))
+        assert np.array_equal(mask_utils.decode({**rle, "counts": rle["counts"].encode()}), coverage >= 128)
+
+
+def test_a_frame_without_background_is_composited_over_black(tmp_path):
+    """mmpose reads 3 channels and drops alpha: straight colour is composited over black in linear light."""
+    rgba = np.zeros((2, 3, 4), np.uint8)
+    rgba[..., :3] = [[200, 100, 50]]
+    rgba[..., 3] = [[0, 128, 255], [64, 192, 255]]
+    write_png(tmp_path / "in.png", rgba)
+    _place_image(tmp_path / "in.png", tmp_path / "out.png", opaque=False)
+    out = read_png(tmp_path / "out.png")
+    assert out.shape == (2, 3, 3)
+    lin = np.where(rgba[..., :3] / 255 <= 0.04045, rgba[..., :3] / 255 / 12.92,
+                   ((rgba[..., :3] / 255 + 0.055) / 1.055) ** 2.4) * rgba[..., 3:] / 255
+    srgb = np.where(lin <= 0.0031308, lin * 12.92, 1.055 * lin ** (1 / 2.4) - 0.055)
+    assert np.abs(out.astype(int) - np.rint(srgb * 255)).max() <= 1
+    assert np.all(out[0, 0] == 0) and np.array_equal(out[:, 2], rgba[:, 2, :3])
 
 
 def test_mano_ordered_labels_are_reordered_by_name(small_dataset):

@@ -46,6 +46,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import OpenImageIO as oiio
 
 from darthand.dataset.frames import frame_names
 from darthand.dataset.run import read_shard_records
@@ -219,10 +220,10 @@ def _write_split(root: Path, frames: list[dict], tmp: Path, split: str) -> list[
 
 
 def _place_image(src: Path, dst: Path, opaque: bool) -> None:
-    """The frame's image at dst: a hard link (a copy where the file system has none) when opaque, else composited
-    over black in linear light and written as RGB."""
+    """The frame's image at dst: a hard link (a copy where the file system has none) when opaque, else its straight
+    colour composited over black in linear light and written as RGB."""
     if not opaque:
-        rgba = read_png(src).astype(np.float64) / 255
+        rgba = _read_straight(src).astype(np.float64) / 255
         if rgba.shape[2] == 4:
             rgb = linear_to_srgb(srgb_to_linear(rgba[..., :3]) * rgba[..., 3:])
             write_png(dst, np.rint(np.clip(rgb, 0, 1) * 255).astype(np.uint8))
@@ -231,6 +232,19 @@ def _place_image(src: Path, dst: Path, opaque: bool) -> None:
         os.link(src, dst)
     except OSError:
         shutil.copyfile(src, dst)
+
+
+def _read_straight(path: Path) -> np.ndarray:
+    """(H, W, C) uint8 pixels of a PNG as stored: alpha not associated (read_png's OpenImageIO multiplies colour by
+    alpha on read)."""
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    buf = oiio.ImageBuf()
+    buf.reset(str(path), 0, 0, config)
+    pixels = None if buf.has_error else buf.get_pixels(oiio.UINT8)
+    if pixels is None:
+        raise InputError(f"{path}: cannot read image ({buf.geterror()})")
+    return pixels
 
 
 def _check_replaceable(out: Path) -> None:
