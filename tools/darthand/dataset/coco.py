@@ -40,6 +40,7 @@ refused.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import shutil
@@ -53,10 +54,12 @@ from darthand.dataset.run import read_shard_records
 from darthand.errors import InputError
 from darthand.fileio import read_json, staging_folder
 from darthand.render.image import read_png, write_png
+from darthand.render.png import open_png8
 from darthand.textures.color import linear_to_srgb, srgb_to_linear
 
 SPLITS = ("train", "val", "test")
 MASK_THRESHOLD = 128
+RLE_GROUPS = 13                  # 5-bit groups of a 64-bit run length or difference
 ANNOTATIONS = "annotations/darthand_{split}.json"
 README_TITLE = "# mmpose COCO-style hand layout of a darthand dataset"
 FINGERS = {"thumb": "thumb", "index": "forefinger", "middle": "middle_finger", "ring": "ring_finger",
@@ -124,17 +127,16 @@ def run_lengths(binary: np.ndarray) -> np.ndarray:
 
 def rle_text(counts) -> str:
     """COCO's compressed RLE string of run lengths (maskApi.c rleToString: from the third run on, the difference to
-    the run two before; each value in 5-bit groups, low first, 0x20 marking more, offset by 48)."""
-    out = []
-    for i, n in enumerate(int(c) for c in counts):
-        x = n - int(counts[i - 2]) if i > 2 else n
-        more = True
-        while more:
-            c = x & 0x1F
-            x >>= 5                                       # arithmetic shift: a negative difference ends at -1
-            more = x != -1 if c & 0x10 else x != 0
-            out.append(chr((c | 0x20 if more else c) + 48))
-    return "".join(out)
+    the run two before; each value in 5-bit groups, low first, 0x20 marking more, offset by 48), vectorised."""
+    x = np.asarray(counts, np.int64).copy()
+    x[3:] -= np.asarray(counts, np.int64)[1:-2]
+    shifts = 5 * np.arange(RLE_GROUPS)
+    groups = (x[:, None] >> shifts) & 0x1F                           # (R, G) 5-bit groups, low first
+    rest = x[:, None] >> (shifts + 5)                                # arithmetic: a negative value ends at -1
+    more = np.where(groups & 0x10, rest != -1, rest != 0)
+    emitted = np.concatenate([np.ones((len(x), 1), bool), np.cumprod(more, axis=1)[:, :-1].astype(bool)], axis=1)
+    chars = (groups | np.where(more, 0x20, 0)) + 48
+    return chars[emitted].astype(np.uint8).tobytes().decode("ascii")
 
 
 def annotation(index: int, labels: dict, coverage: np.ndarray) -> dict | None:
@@ -204,7 +206,7 @@ def _write_split(root: Path, frames: list[dict], tmp: Path, split: str) -> list[
             images.append({"id": index, "file_name": names["image"], "width": width, "height": height})
             opaque = bool(labels.get("render", {}).get("background"))
             _place_image(root / names["image"], tmp / names["image"], opaque)
-            ann = annotation(index, labels, read_png(root / names["mask"])[..., 0])
+            ann = annotation(index, labels, _read_mask(root / names["mask"]))
             if ann is not None:
                 f.write(json.dumps(ann) + "\n")
                 n_ann, n_left = n_ann + 1, n_left + (labels["side"] == "left")
@@ -223,15 +225,24 @@ def _place_image(src: Path, dst: Path, opaque: bool) -> None:
     """The frame's image at dst: a hard link (a copy where the file system has none) when opaque, else its straight
     colour composited over black in linear light and written as RGB."""
     if not opaque:
-        rgba = _read_straight(src).astype(np.float64) / 255
+        rgba = _read_straight(src)
         if rgba.shape[2] == 4:
-            rgb = linear_to_srgb(srgb_to_linear(rgba[..., :3]) * rgba[..., 3:])
-            write_png(dst, np.rint(np.clip(rgb, 0, 1) * 255).astype(np.uint8))
+            index = rgba[..., :3].astype(np.intp) * 256 + rgba[..., 3:]
+            write_png(dst, np.take(_over_black_table().ravel(), index))
             return
     try:
         os.link(src, dst)
     except OSError:
         shutil.copyfile(src, dst)
+
+
+@functools.cache
+def _over_black_table() -> np.ndarray:
+    """(256, 256) uint8: [sRGB code, alpha code] -> the sRGB code of that straight colour over black in linear
+    light."""
+    codes = np.arange(256) / 255
+    over = srgb_to_linear(codes)[:, None] * codes[None, :]
+    return np.rint(linear_to_srgb(over).astype(np.float64) * 255).astype(np.uint8)
 
 
 def _read_straight(path: Path) -> np.ndarray:
@@ -245,6 +256,16 @@ def _read_straight(path: Path) -> np.ndarray:
     if pixels is None:
         raise InputError(f"{path}: cannot read image ({buf.geterror()})")
     return pixels
+
+
+def _read_mask(path: Path) -> np.ndarray:
+    """(H, W) uint8 coverage of a frame's mask PNG (render/png.py's decoder, else OpenImageIO)."""
+    png = open_png8(path)
+    if png is not None and png.channels == 1:
+        out = np.empty((png.height, png.width, 1), np.uint8)
+        if png.decode_into(out, 0, [0]):
+            return out[..., 0]
+    return read_png(path)[..., 0]
 
 
 def _check_replaceable(out: Path) -> None:
