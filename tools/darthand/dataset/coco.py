@@ -17,9 +17,9 @@ skeleton is) and per frame one `annotations` entry:
     keypoints          21 x (x, y, v) in freihand2d's order (wrist, thumb1..4, forefinger1..4, middle_finger1..4,
                        ring_finger1..4, pinky_finger1..4: darthand's 'openpose' order; 'mano'-ordered labels are
                        reordered by name). x, y in pixels with pixel centres at integers (COCO's keypoints and
-                       mmpose's flip, x -> w - 1 - x): the labels' keypoints_2d - 0.5. v: 2 visible (in the image
-                       and labels.visibility true), 1 labelled but occluded (in the image, visibility false), 0 not
-                       labelled (outside the image: x = y = 0, as COCO writes it)
+                       mmpose's flip, x -> w - 1 - x): the labels' keypoints_2d - 0.5, to 1e-4 pixel. v: 2
+                       visible (in the image and labels.visibility true), 1 labelled but occluded (in the image,
+                       visibility false), 0 not labelled (outside the image: x = y = 0, as COCO writes it)
     num_keypoints      keypoints with v > 0
     segmentation       COCO RLE ({size: [h, w], counts}, pycocotools.mask.encode) of the mask's pixels covered at
                        least half (8-bit coverage >= MASK_THRESHOLD): hand and accessory
@@ -59,6 +59,7 @@ from darthand.textures.color import linear_to_srgb, srgb_to_linear
 
 SPLITS = ("train", "val", "test")
 MASK_THRESHOLD = 128
+KEYPOINT_DECIMALS = 4            # 1e-4 pixel
 RLE_GROUPS = 13                  # 5-bit groups of a 64-bit run length or difference
 ANNOTATIONS = "annotations/darthand_{split}.json"
 README_TITLE = "# mmpose COCO-style hand layout of a darthand dataset"
@@ -147,7 +148,7 @@ def annotation(index: int, labels: dict, coverage: np.ndarray) -> dict | None:
     if box is None:
         return None
     segmentation, area = encode_mask(coverage)
-    flat = [float(x) if i % 3 < 2 else int(x) for i, x in enumerate(kp.ravel())]
+    flat = [round(float(x), KEYPOINT_DECIMALS) if i % 3 < 2 else int(x) for i, x in enumerate(kp.ravel())]
     side = labels["side"]
     ann = {"id": index + 1, "image_id": index, "category_id": 1, "keypoints": flat,
            "num_keypoints": int((kp[:, 2] > 0).sum()), "segmentation": segmentation, "area": area, "bbox": box,
