@@ -19,6 +19,8 @@ from darthand.errors import InputError
 from darthand.render.image import read_png, write_png
 from darthand.render.labels import keypoint_names
 
+pytestmark = pytest.mark.filterwarnings("ignore:__array__ implementation:DeprecationWarning")   # pycocotools, numpy 2
+
 FREIHAND2D_NAMES = [
     "wrist", "thumb1", "thumb2", "thumb3", "thumb4", "forefinger1", "forefinger2", "forefinger3", "forefinger4",
     "middle_finger1", "middle_finger2", "middle_finger3", "middle_finger4", "ring_finger1", "ring_finger2",
@@ -220,3 +222,24 @@ def test_a_dataset_without_frames_is_refused(tmp_path):
     (tmp_path / "dataset.json").write_text("{}")
     with pytest.raises(InputError, match="no rendered frames"):
         write_coco(tmp_path)
+
+
+def test_render_dataset_formats_coco_without_background(package, tmp_path):
+    """`render-dataset --formats coco` writes the layout after rendering; frames without a background are RGB
+    composites, and their annotations hold as the exported dataset's do."""
+    model, tex, acc = package
+    out = tmp_path / "ds"
+    assert main(["render-dataset", model, "--textures", tex, "--accessories", acc, "--count", "4", "--seed", "2",
+                 "--size", "48", "--processes", "1", "--backgrounds", "none", "--split", "1,0,0", "--out", str(out),
+                 "--formats", "coco"]) == 0
+    coco = _load(out / "coco", "train")
+    assert sorted(coco.getImgIds()) == [0, 1, 2, 3]
+    for ann in coco.loadAnns(coco.getAnnIds()):
+        labels = _labels(out, ann["image_id"])
+        assert not labels["render"].get("background")
+        assert read_png(out / "coco" / "images" / f"{ann['image_id']:06d}.png").shape == (48, 48, 3)
+        coverage = read_png(out / "masks" / f"{ann['image_id']:06d}.png")[..., 0]
+        _check_mask(coco, ann, coverage)
+        kp = np.array(ann["keypoints"], float).reshape(21, 3)
+        _check_keypoints(kp, labels, ann)
+        _check_box(ann["bbox"], coverage, kp)
