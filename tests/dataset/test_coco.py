@@ -195,6 +195,8 @@ def test_mano_ordered_labels_are_reordered_by_name(small_dataset):
     for key in ("keypoints_2d", "in_image", "visibility"):
         mano[key] = [labels[key][i] for i in perm]
     np.testing.assert_array_equal(coco_keypoints(mano), coco_keypoints(labels))
+    with pytest.raises(InputError, match="x.json: keypoint_names lack 20 of freihand2d's keypoints"):
+        coco_keypoints({**labels, "keypoint_names": ["wrist"] + ["palm1"] * 20}, "x.json")
 
 
 def test_export_replaces_its_own_layout_and_refuses_other_folders(coco_export, tmp_path, capsys):

@@ -76,18 +76,20 @@ def category() -> dict:
             "skeleton": [[a + 1, b + 1] for a, b in SKELETON]}
 
 
-def keypoint_permutation(names) -> np.ndarray:
-    """(21,) int: for each of KEYPOINT_NAMES, its position in darthand's `names` (labels.keypoint_names)."""
-    ours = {("wrist" if n == "wrist" else FINGERS[n[:-1]] + n[-1]): i for i, n in enumerate(names)}
+def keypoint_permutation(names, where: str = "labels") -> np.ndarray:
+    """(21,) int: for each of KEYPOINT_NAMES, its position in darthand's `names` (labels.keypoint_names of the
+    labels file `where`)."""
+    ours = {FINGERS.get(n[:-1], n[:-1]) + n[-1] if n[-1:].isdigit() else n: i for i, n in enumerate(names)}
     missing = [n for n in KEYPOINT_NAMES if n not in ours]
     if missing:
-        raise InputError(f"keypoint_names: {', '.join(missing)} missing")
+        raise InputError(f"{where}: keypoint_names lack {len(missing)} of freihand2d's keypoints ({missing[0]}, ...)")
     return np.array([ours[n] for n in KEYPOINT_NAMES])
 
 
-def coco_keypoints(labels: dict) -> np.ndarray:
-    """(21, 3) float64 COCO keypoints of a frame's labels: x, y (pixel centres at integers), v in {0, 1, 2}."""
-    order = keypoint_permutation(labels["keypoint_names"])
+def coco_keypoints(labels: dict, where: str = "labels") -> np.ndarray:
+    """(21, 3) float64 COCO keypoints of a frame's labels (the file `where`): x, y (pixel centres at integers), v
+    in {0, 1, 2}."""
+    order = keypoint_permutation(labels["keypoint_names"], where)
     uv = np.asarray(labels["keypoints_2d"], np.float64)[order] - 0.5
     inside = np.asarray(labels["in_image"], bool)[order]
     seen = np.asarray(labels["visibility"], bool)[order]
@@ -140,10 +142,10 @@ def rle_text(counts) -> str:
     return chars[emitted].astype(np.uint8).tobytes().decode("ascii")
 
 
-def annotation(index: int, labels: dict, coverage: np.ndarray) -> dict | None:
-    """The COCO annotation of frame `index` (module docstring) from its labels and mask coverage (H, W) uint8; None
-    when it has neither a mask pixel nor a labelled keypoint."""
-    kp = coco_keypoints(labels)
+def annotation(index: int, labels: dict, coverage: np.ndarray, where: str = "labels") -> dict | None:
+    """The COCO annotation of frame `index` (module docstring) from its labels (the file `where`) and mask coverage
+    (H, W) uint8; None when it has neither a mask pixel nor a labelled keypoint."""
+    kp = coco_keypoints(labels, where)
     box = coco_box(coverage, kp)
     if box is None:
         return None
@@ -207,7 +209,7 @@ def _write_split(root: Path, frames: list[dict], tmp: Path, split: str) -> list[
             images.append({"id": index, "file_name": names["image"], "width": width, "height": height})
             opaque = bool(labels.get("render", {}).get("background"))
             _place_image(root / names["image"], tmp / names["image"], opaque)
-            ann = annotation(index, labels, _read_mask(root / names["mask"]))
+            ann = annotation(index, labels, _read_mask(root / names["mask"]), str(root / names["labels"]))
             if ann is not None:
                 f.write(json.dumps(ann) + "\n")
                 n_ann, n_left = n_ann + 1, n_left + (labels["side"] == "left")
