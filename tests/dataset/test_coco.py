@@ -206,8 +206,9 @@ def test_export_replaces_its_own_layout_and_refuses_other_folders(coco_export, t
     (again / "stale.txt").write_text("from before")
     assert main(["dataset", "export", str(dataset), "--format", "coco", "--out", str(again)]) == 0
     assert not (again / "stale.txt").exists()
-    assert sorted(p.name for p in (again / "annotations").iterdir()) == \
-        sorted(p.name for p in (where / "annotations").iterdir())
+    files = sorted(p.relative_to(where) for p in where.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(again) for p in again.rglob("*") if p.is_file())
+    assert all((where / f).read_bytes() == (again / f).read_bytes() for f in files)     # the same bytes again
     assert [p.name for p in tmp_path.iterdir()] == ["again"]           # no staging folder left
     other = tmp_path / "other"
     other.mkdir()
