@@ -616,7 +616,7 @@ def _add_dataset_arguments(p) -> None:
                    help=f"frames per shard, the unit of planning and resume records (default {run.shard_size})")
     p.add_argument("--max-frames", type=COUNT, default=run.max_frames, metavar="N",
                    help=f"frame budget of one run (default {run.max_frames})")
-    p.add_argument("--formats", default=None, metavar="freihand,webdataset,hamer",
+    p.add_argument("--formats", default=None, metavar="freihand,webdataset,hamer,coco",
                    help=f"also write these layouts after rendering (as `darthand dataset export`): "
                         f"{', '.join(FORMATS)}")
     _add_layout_options(p)
@@ -656,8 +656,8 @@ def _add_dataset_commands(sub) -> None:
     p.add_argument("--sheet", type=number(int, 1, 1000), default=24, metavar="N",
                    help="frames on the contact sheet (default 24)")
     p.set_defaults(run=commands.report)
-    p = g.add_parser("export", help="write a dataset in another layout: FreiHAND's, WebDataset tar shards or "
-                                    "HaMeR's training tars and evaluation .npz")
+    p = g.add_parser("export", help="write a dataset in another layout: FreiHAND's, WebDataset tar shards, "
+                                    "HaMeR's training tars and evaluation .npz or mmpose's COCO-style keypoints")
     p.add_argument("dataset", metavar="DIR", help="a render-dataset output folder")
     p.add_argument("--format", required=True, choices=tuple(FORMATS))
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default DIR/<format>)")

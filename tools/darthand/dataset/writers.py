@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Protocol
 
+from darthand.dataset.coco import write_coco
 from darthand.dataset.freihand import write_freihand
 from darthand.dataset.hamer import write_hamer
 from darthand.dataset.webdataset import write_webdataset
@@ -36,4 +37,8 @@ def _hamer(dataset, out, *, left: str = "mirror", allow_non_mano: bool = False) 
     return write_hamer(dataset, out, left=left, allow_non_mano=allow_non_mano)
 
 
-FORMATS: dict[str, Writer] = {"freihand": _freihand, "webdataset": _webdataset, "hamer": _hamer}
+def _coco(dataset, out, *, left: str = "mirror", allow_non_mano: bool = False) -> Path:
+    return write_coco(dataset, out)
+
+
+FORMATS: dict[str, Writer] = {"freihand": _freihand, "webdataset": _webdataset, "hamer": _hamer, "coco": _coco}
