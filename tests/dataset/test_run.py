@@ -175,7 +175,7 @@ def test_shading_options_reach_the_frames_and_their_resume_digest(package, tmp_p
     (["--split", "0.8,0.2,0.1"], "sums to 1.1, more than 1"),
     (["--start", "1000000000000000000000000000000"], "argument --start: 1000000000000000000000000000000 is outside"),
     (["--formats", "freihand"], "is not a MANO model"),                  # refused before rendering, not after
-    (["--formats", "coco"], "--formats: 'coco' is not one of freihand, webdataset"),
+    (["--formats", "yolo"], "--formats: 'yolo' is not one of freihand, webdataset, hamer, coco"),
     (["--texture-ids", "light_moles_00,light_nope_00"], "textures: 'light_nope_00' is not one of"),
     (["--accessory-ids", "watch_99"], "accessories: 'watch_99'"),
     (["--gestures", "wave", "--pose-mode", "jitter"], "'wave' is not a gesture"),
