@@ -141,7 +141,6 @@ def decode_image(path: str) -> np.ndarray:
     so its longer side is at most MAX_DECODE_SIDE; InputError when it cannot be read completely."""
     import OpenImageIO as oiio
 
-
     try:
         buf = oiio.ImageBuf(path)
         spec = buf.spec()

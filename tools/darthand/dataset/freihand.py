@@ -37,6 +37,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import OpenImageIO as oiio
 
 from darthand.dataset.frames import frame_names
 from darthand.dataset.run import read_shard_records
@@ -229,11 +230,8 @@ def _readme(models: dict, is_mano: bool, counts: dict, left: str) -> str:
 
 
 def _write_jpegs(image_png: Path, mask_png: Path, folder: Path, row: int, flip: bool = False) -> None:
-    import OpenImageIO as oiio
-
-
-    rgba = read_png(image_png).astype(np.float32) / 255
-    rgb = rgba[..., :3] * (rgba[..., 3:4] if rgba.shape[2] == 4 else 1)    # over black (sRGB, like FreiHAND's gs)
+    # read_png associates alpha, as OpenImageIO reads PNGs: the colour is already over black (sRGB, like FreiHAND's)
+    rgb = read_png(image_png)[..., :3].astype(np.float32) / 255
     mask = read_png(mask_png)[..., :1]
     for pixels, sub in ((np.rint(rgb * 255).astype(np.uint8), "rgb"), (mask, "mask")):
         if flip:

@@ -47,7 +47,6 @@ def write_report(dataset, out=None, sheet: int = 24) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-
     root = Path(dataset)
     doc = read_json(root / "dataset.json", "dataset.json")
     frames = read_shard_records(root)

@@ -85,7 +85,6 @@ def accessory_glb(side, accessory_id: str, package: dict) -> bytes:
     the package's influences and corrective encoding (its asset.extras.darthand)."""
     import pygltflib as gl
 
-
     extras = package.get("asset", {}).get("extras", {}).get("darthand", {})
     model = side.model
     prefix = model.side.capitalize()

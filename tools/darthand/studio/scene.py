@@ -128,7 +128,6 @@ def _png64(pixels: np.ndarray, srgb: bool = True) -> str:
     """Base64 PNG bytes of (H, W[, C]) uint8 pixels (render/image.write_png's encoding)."""
     import tempfile
 
-
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "frame.png"
         write_png(path, pixels, srgb=srgb)
