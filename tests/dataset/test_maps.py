@@ -45,9 +45,10 @@ def read_map(path, dtype) -> np.ndarray:
     return np.asarray(buf.get_pixels(oiio.UINT16 if dtype == np.uint16 else oiio.UINT8))
 
 
-def trace(vertices: np.ndarray, faces: np.ndarray, K: np.ndarray, size: tuple) -> tuple[np.ndarray, np.ndarray]:
-    """(depth (H, W) camera z of the nearest hit, 0 none; face (H, W) its index, -1 none) of rays from the camera
-    centre through every pixel centre, float64 Moller-Trumbore over every face."""
+def trace(vertices: np.ndarray, faces: np.ndarray, K: np.ndarray, size: tuple) -> tuple:
+    """(depth (H, W) camera z of the nearest hit, 0 none; face (H, W) its index, -1 none; barycentrics bu, bv
+    (H, W) of its corners 1 and 2) of rays from the camera centre through every pixel centre, float64
+    Moller-Trumbore over every face."""
     W, H = size
     v, u = np.mgrid[0:H, 0:W]
     pix = np.stack([u.ravel() + 0.5, v.ravel() + 0.5, np.ones(H * W)], axis=1)
@@ -56,6 +57,7 @@ def trace(vertices: np.ndarray, faces: np.ndarray, K: np.ndarray, size: tuple) -
     e1, e2 = b - a, c - a
     q = np.cross(-a, e1)                                # T x E1 with T = origin - a, the origin at 0
     t_num, depth, face = np.einsum("fc,fc->f", e2, q), np.full(H * W, np.inf), np.full(H * W, -1)
+    bary = np.zeros((2, H * W))
     for s in range(0, len(dirs), 128):
         d = dirs[s:s + 128]
         p = np.cross(d[:, None, :], e2[None])           # (R, F, 3)
@@ -66,10 +68,12 @@ def trace(vertices: np.ndarray, faces: np.ndarray, K: np.ndarray, size: tuple) -
         t = t_num[None] * inv
         t = np.where((bu >= 0) & (bv >= 0) & (bu + bv <= 1) & (t > 0), t, np.inf)
         best = t.argmin(axis=1)
-        depth[s:s + 128] = t[np.arange(len(best)), best]
+        rows = np.arange(len(best))
+        depth[s:s + 128] = t[rows, best]
+        bary[:, s:s + 128] = bu[rows, best], bv[rows, best]
         face[s:s + 128] = np.where(np.isfinite(depth[s:s + 128]), best, -1)
     depth[~np.isfinite(depth)] = 0
-    return depth.reshape(H, W), face.reshape(H, W)
+    return depth.reshape(H, W), face.reshape(H, W), bary[0].reshape(H, W), bary[1].reshape(H, W)
 
 
 def expected_parts(model) -> np.ndarray:
@@ -82,6 +86,15 @@ def expected_parts(model) -> np.ndarray:
     parts[np.asarray(model.face_labels) == 0] = TABLE.index("nail")           # FACE_LABELS[0] is 'nail'
     parts[model.meta["wrist"]["base_faces"]:] = TABLE.index("forearm")
     return parts
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V, 3) area-weighted unit vertex normals (the sum of the corners' face cross products)."""
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    out = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(out, faces[:, k], np.cross(b - a, c - a))
+    return out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-30)
 
 
 def frames_of(out):
@@ -120,7 +133,7 @@ def test_depth_normals_and_parts_against_the_traced_mesh(with_maps, sources):
         model = opened[labels["side"]].pose_model()
         K = np.asarray(labels["K"])
         vertices = np.load(out / f"meshes/{n}.npy")
-        z, face = trace(vertices, model.faces, K, labels["image_size"])
+        z, face, bu, bv = trace(vertices, model.faces, K, labels["image_size"])
         depth = read_map(out / f"maps/depth/{n}.png", np.uint16)[..., 0] / 1000.0
         normals = read_map(out / f"maps/normals/{n}.png", np.uint8) / 255.0 * 2 - 1
         parts = read_map(out / f"maps/parts/{n}.png", np.uint8)[..., 0]
@@ -128,15 +141,16 @@ def test_depth_normals_and_parts_against_the_traced_mesh(with_maps, sources):
         # where the renderer hit the hand, the mesh traced here is hit at the same depth (0.5 mm rounding)
         both = hand & (face >= 0)
         assert both.sum() >= hand.sum() - 2                         # a grazing ray may fall either side
-        assert np.abs(depth[both] - z[both]).max() < 6e-4
+        assert np.abs(depth[both] - z[both]).max() < 5.1e-4
         # where the renderer saw background, the hand mesh is not there either
         assert ((depth == 0) & (face >= 0)).sum() <= 2
         # parts: the model's face labels and skinning at the faces hit
         want = expected_parts(model)[face[both]]
-        assert (parts[both] == want).mean() >= 0.97
+        assert (parts[both] == want).mean() >= 0.99
         # normals: unit, facing the camera, near the traced face's normal turned to the camera
         n_map = normals[both]
         assert np.abs(np.linalg.norm(n_map, axis=1) - 1).max() < 0.01
+        n_map /= np.linalg.norm(n_map, axis=1, keepdims=True)      # angles from directions, not 8-bit lengths
         v, u = np.nonzero(both)
         rays = np.stack([u + 0.5, v + 0.5, np.ones(len(u))], 1) @ np.linalg.inv(K).T
         rays /= np.linalg.norm(rays, axis=1, keepdims=True)
@@ -146,7 +160,17 @@ def test_depth_normals_and_parts_against_the_traced_mesh(with_maps, sources):
         g /= np.linalg.norm(g, axis=1, keepdims=True)
         g *= -np.sign(np.einsum("nc,nc->n", g, rays))[:, None]
         angle = np.degrees(np.arccos(np.clip(np.einsum("nc,nc->n", g, n_map), -1, 1)))
-        assert np.median(angle) < 10 and np.percentile(angle, 95) < 35, (np.median(angle), angle.max())
+        assert np.median(angle) < 12 and np.percentile(angle, 95) < 30 and angle.max() < 60
+        # and within the 8-bit encoding's 0.4 degrees (and float32's) of the interpolated vertex normal, where it
+        # needed no bending into the visible hemisphere (silhouettes)
+        smooth = vertex_normals(vertices.astype(np.float64), model.faces)[f]
+        w = np.stack([1 - bu[both] - bv[both], bu[both], bv[both]], 1)
+        s = np.einsum("nk,nkc->nc", w, smooth)
+        s /= np.linalg.norm(s, axis=1, keepdims=True)
+        s *= np.sign(np.einsum("nc,nc->n", g, s))[:, None]          # to the camera's side of the face
+        front = np.einsum("nc,nc->n", s, -rays) > 0.01
+        angle = np.degrees(np.arccos(np.clip(np.einsum("nc,nc->n", s, n_map)[front], -1, 1)))
+        assert front.mean() > 0.9 and angle.max() < 0.5, angle.max()
         checked += int(both.sum())
     assert checked > 500
 
