@@ -14,6 +14,7 @@ import pytest
 from helpers_dataset import files_of, render
 
 from darthand.dataset.frames import job_digest
+from darthand.schemas import check_schema
 
 MAPS = ("depth", "normals", "parts")
 COUNT = 6
@@ -109,6 +110,7 @@ def test_maps_files_labels_and_encodings(with_maps):
     assert doc["maps"]["parts"]["table"] == TABLE
     assert doc["files"]["depth"] == "maps/depth/<index>.png"
     for n, labels in frames_of(out):
+        check_schema(labels, "labels.schema.json", n)
         assert set(labels["maps"]) == set(MAPS)
         assert labels["maps"]["depth"]["units"] == "mm" and labels["maps"]["depth"]["dtype"] == "uint16"
         assert labels["maps"]["parts"]["table"] == TABLE
