@@ -11,8 +11,9 @@ import tarfile
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-from helpers_dataset import files_of, render
+from helpers_dataset import SIZE, files_of, render
 
+from darthand.cli import main
 from darthand.dataset.frames import job_digest
 from darthand.schemas import check_schema
 
@@ -215,3 +216,16 @@ def test_resume_and_webdataset_members(with_maps, planner, sources):
     data = tar.extractfile(member).read()
     assert data == (out / "maps/depth" / (member.split(".")[0] + ".png")).read_bytes()
     assert io.BytesIO(data).read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_command_line_option(package, tmp_path, capsys):
+    model, tex, acc = package
+    common = [model, "--textures", tex, "--accessories", acc, "--size", str(SIZE), "--processes", "1", "--count",
+              "2"]
+    assert main(["render-dataset", *common, "--maps", "parts,depth", "--out", str(tmp_path / "a")]) == 0
+    assert sorted(p.name for p in (tmp_path / "a" / "maps").iterdir()) == ["depth", "parts"]
+    labels = json.loads((tmp_path / "a" / "labels" / "000001.json").read_text())
+    assert list(labels["maps"]) == ["depth", "parts"]
+    assert main(["render-dataset", *common, "--maps", "depth,albedo", "--out", str(tmp_path / "b")]) == 2
+    assert "maps: 'albedo' is not one of depth, normals, parts" in capsys.readouterr().err
+    assert not (tmp_path / "b").exists()
