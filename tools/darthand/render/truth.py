@@ -111,10 +111,9 @@ def truth_maps(kinds: tuple, subject: Subject, cam: Camera, primary, region: tup
     out: dict = {}
     if "depth" in kinds:
         out["depth"] = depth
-    if "normals" in kinds:
+    if "normals" in kinds:                 # trace.Samples' normals are 0 where nothing was hit, and stay 0
         normals = np.zeros(depth.shape + (3,), np.float32)
-        world = primary.normal.reshape(3, h, w)
-        normals[r0:r1, c0:c1] = np.einsum("ij,jhw->hwi", cam.R.astype(np.float32), world) * (geom >= 0)[..., None]
+        normals[r0:r1, c0:c1] = (cam.R.astype(np.float32) @ primary.normal.reshape(3, h * w)).T.reshape(h, w, 3)
         out["normals"] = normals
     if "parts" in kinds:
         parts = np.zeros(depth.shape, np.uint8)
@@ -129,8 +128,10 @@ def encode(kind: str, values: np.ndarray) -> np.ndarray:
         mm = np.clip(np.rint(values.astype(np.float64) * DEPTH_SCALE), 1, 65535)
         return np.where(values > 0, mm, 0).astype(np.uint16)
     if kind == "normals":
-        hit = np.any(values != 0, axis=-1, keepdims=True)
-        return np.where(hit, np.clip(np.rint((values * 0.5 + 0.5) * 255), 0, 255), 0).astype(np.uint8)
+        out = np.zeros(values.shape, np.uint8)
+        hit = values.any(axis=-1)
+        out[hit] = np.clip(np.rint(values[hit] * np.float32(127.5) + np.float32(127.5)), 0, 255)
+        return out
     if kind == "parts":
         return np.asarray(values, np.uint8)
     raise InputError(f"maps: {kind!r} is not one of {', '.join(KINDS)}")
