@@ -2,9 +2,10 @@
 
 Frames: the first DARTHAND_BENCH_MAPS_FRAMES (default 16) frames of the default plan at 512^2 (both hands, random
 views, lights, backgrounds), rendered single-threaded in one process: each without maps, with all three and with
-each alone, in an order rotated frame by frame so that machine load falls on all alike. Per map kind: the CPU ms
-of computing it from the frame's primary samples (render/truth.truth_maps, the render's timings['maps']), of
-encoding and writing its PNG, and the file's size; beside them the whole render's CPU ms and the image's size.
+each alone, in an order rotated frame by frame so that machine load falls on all alike. Per map kind: the ms of
+computing it from the frame's primary samples (render/truth.truth_maps, the render's timings['maps']: wall time of
+one thread), the CPU ms of encoding and writing its PNG, and the file's size; beside them the whole render's CPU
+ms (with and without each map) and the image's size.
 """
 
 from __future__ import annotations
@@ -79,16 +80,16 @@ def run(frames: int | None = None) -> dict:
                     file_b["image"].append((folder / "image.png").stat().st_size)
     return {"frames": frames, "size": size, "inputs": where,
             "render_cpu_ms": {"+".join(v) or "none": _mean(t) for v, t in render_ms.items()},
-            "compute_cpu_ms": {"+".join(v): _mean(t) for v, t in compute_ms.items()},
+            "compute_ms": {"+".join(v): _mean(t) for v, t in compute_ms.items()},
             "write_cpu_ms": {k: _mean(v) for k, v in write_ms.items()},
             "file_kb": {k: round(float(np.mean(v)) / 1024, 1) for k, v in file_b.items()}}
 
 
 def summary(res: dict) -> str:
-    r, c, w, f = res["render_cpu_ms"], res["compute_cpu_ms"], res["write_cpu_ms"], res["file_kb"]
+    r, c, w, f = res["render_cpu_ms"], res["compute_ms"], res["write_cpu_ms"], res["file_kb"]
     lines = [f"{res['frames']} frames of the default plan at {res['size']}^2, one thread ({res['inputs']}). "
              f"Render CPU per frame without maps: {r['none']:.1f} ms; with all three: {r['+'.join(KINDS)]:.1f} ms.",
-             "", "| map | compute CPU ms | encode + write CPU ms | file kB |", "|---|---|---|---|"]
+             "", "| map | compute ms | encode + write CPU ms | file kB |", "|---|---|---|---|"]
     lines += [f"| {k} | {c[k]:.2f} | {w[k]:.2f} | {f[k]:.1f} |" for k in KINDS]
     lines.append(f"| all three | {c['+'.join(KINDS)]:.2f} | {sum(w.values()):.2f} | {sum(f[k] for k in KINDS):.1f} |")
     lines.append(f"| (image.png, for scale) | | | {f['image']:.1f} |")
