@@ -131,7 +131,7 @@ def test_maps_files_labels_and_encodings(with_maps):
 def test_depth_normals_and_parts_against_the_traced_mesh(with_maps, sources):
     out, _ = with_maps
     opened, _ = sources
-    checked = 0
+    checked = accessories = 0
     for n, labels in frames_of(out):
         model = opened[labels["side"]].pose_model()
         K = np.asarray(labels["K"])
@@ -147,6 +147,10 @@ def test_depth_normals_and_parts_against_the_traced_mesh(with_maps, sources):
         assert np.abs(depth[both] - z[both]).max() < 5.1e-4
         # where the renderer saw background, the hand mesh is not there either
         assert ((depth == 0) & (face >= 0)).sum() <= 2
+        # an accessory or the forearm (cap or wrist rings) is never behind the hand mesh
+        other = parts >= TABLE.index("forearm")
+        assert ((face[other] < 0) | (z[other] >= depth[other] - 5.1e-4)).all()
+        accessories += int((parts == TABLE.index("accessory")).sum())
         # parts: the model's face labels and skinning at the faces hit
         want = expected_parts(model)[face[both]]
         assert (parts[both] == want).mean() >= 0.99
@@ -175,7 +179,7 @@ def test_depth_normals_and_parts_against_the_traced_mesh(with_maps, sources):
         angle = np.degrees(np.arccos(np.clip(np.einsum("nc,nc->n", s, n_map)[front], -1, 1)))
         assert front.mean() > 0.9 and angle.max() < 0.5, angle.max()
         checked += int(both.sum())
-    assert checked > 500
+    assert checked > 500 and accessories > 0
 
 
 def test_maps_change_nothing_else(with_maps, without_maps):
