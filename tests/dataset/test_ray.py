@@ -236,6 +236,19 @@ def test_a_node_lost_mid_run_the_run_finishes_with_nothing_lost_or_written_twice
     assert any(n.get("lost") for n in doc["runner"]["nodes"].values())
 
 
+def test_truth_maps_come_back_from_a_node_as_a_local_run_writes_them(package, head, tmp_path):
+    """--maps through Ray with --ray-files ship (the node renders into staging and returns its files): the maps
+    arrive with the frames, every byte a local run's."""
+    args = _args(package, "--count", "4", "--seed", "6", "--maps", "depth,normals,parts")
+    done = _cli(head, [*args, "--ray", head.address, "--ray-files", "ship", "--out", str(tmp_path / "ray")])
+    assert done.returncode == 0, done.stderr
+    nodes = json.loads((tmp_path / "ray" / "dataset.json").read_text())["runner"]["nodes"].values()
+    assert [n["outputs"] for n in nodes] == ["returned"]
+    got = files_of(tmp_path / "ray")
+    assert sum(name.startswith("maps/") for name in got) == 12
+    assert got == _local(args, tmp_path / "local")
+
+
 @pytest.mark.slow
 def test_an_interrupted_cluster_run_resumes_by_shards_to_a_local_runs_bytes(package, head, tmp_path):
     """The driver killed mid-run: a rerun renders only the shards and frames missing, and the whole equals a local

@@ -616,6 +616,10 @@ def _add_dataset_arguments(p) -> None:
                    help=f"frames per shard, the unit of planning and resume records (default {run.shard_size})")
     p.add_argument("--max-frames", type=COUNT, default=run.max_frames, metavar="N",
                    help=f"frame budget of one run (default {run.max_frames})")
+    p.add_argument("--maps", default=None, metavar="depth,normals,parts",
+                   help="also write per-pixel truth as maps/<kind>/NNNNNN.png: depth (16-bit, camera z in mm), "
+                        "normals (8-bit RGB, camera frame, n*0.5+0.5), parts (8-bit part labels; the table is in "
+                        "the labels' 'maps'); default none")
     p.add_argument("--formats", default=None, metavar="freihand,webdataset,hamer,coco",
                    help=f"also write these layouts after rendering (as `darthand dataset export`): "
                         f"{', '.join(FORMATS)}")

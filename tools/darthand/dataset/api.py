@@ -19,10 +19,12 @@ from darthand.dataset.plan import Planner
 from darthand.dataset.run import render_frames
 from darthand.dataset.sources import SourceSpec, parse_sides, source_specs
 from darthand.errors import InputError
+from darthand.render import truth
 
 
 def render_dataset(options: DatasetOptions) -> dict:
     """Render the dataset `options` describe into options.out; returns its dataset.json document."""
+    truth.check_kinds(options.maps)                       # an unknown map kind: refused before anything opens
     run = _open(options)
     _check_formats(options, run.sources)
     doc = render_frames(options, run.sources, run.specs, run.planner, run.jobs, run.origin)

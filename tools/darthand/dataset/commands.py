@@ -65,7 +65,8 @@ def dataset_options(args) -> DatasetOptions:
         processes=args.processes, threads=args.threads,
         cluster=None if args.ray is None else ClusterOptions(args.ray or None, args.ray_files),
         resume=args.resume, shard_size=args.shard_size, max_frames=args.max_frames,
-        formats=tuple(_names(args.formats) or ()), left=args.left, allow_non_mano=args.allow_non_mano)
+        maps=tuple(_names(args.maps) or ()), formats=tuple(_names(args.formats) or ()), left=args.left,
+        allow_non_mano=args.allow_non_mano)
 
 
 def export(args) -> int:

@@ -6,6 +6,8 @@ parameters in the camera frame, the posed mesh, the sampling record, the split) 
     labels/<n>.json  schemas/labels.schema.json; 'files' relative to the labels file
     meshes/<n>.npy   (V, 3) float32 posed hand vertices in the camera frame, metres (the model's vertex order;
                      the first labels.mesh.base_vertices are the hand without the wrist rings, MANO's 778 for MANO)
+    maps/<kind>/<n>.png  per-pixel truth when the run asks for it (settings 'maps': depth, normals, parts;
+                     render/truth.py's encodings, recorded in labels.maps)
 
 <n> is the frame index zero-padded to MIN_DIGITS digits (more when larger), so names depend on nothing else.
 """
@@ -23,29 +25,39 @@ from darthand.dataset.backgrounds import background_pixels
 from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.model.shape import shaped_vertices
+from darthand.render import truth
 from darthand.render.api import shading_options, write_frame
 from darthand.render.labels import mano_camera_parameters
 from darthand.render.scenes import Scene
 from darthand.template.anthropometry import hand_sizes
 
 MIN_DIGITS = 6
-KINDS = ("image", "mask", "labels", "vertices")
+KINDS = ("image", "mask", "labels", "vertices")      # the files of every frame; truth maps add their kinds
 RING_WEAR = 1             # version of how a ring frame wears its ring (accessories/wear.py), in its digest
 
 
-def frame_names(index: int) -> dict:
-    """Names (relative to the dataset folder) of frame `index`'s files, by kind."""
+def frame_names(index: int, maps: tuple = ()) -> dict:
+    """Names (relative to the dataset folder) of frame `index`'s files, by kind; maps: the truth maps' kinds the
+    run writes (render/truth.KINDS), each maps/<kind>/<n>.png."""
     n = f"{int(index):0{MIN_DIGITS}d}"
     return {"image": f"images/{n}.png", "mask": f"masks/{n}.png", "labels": f"labels/{n}.json",
-            "vertices": f"meshes/{n}.npy"}
+            "vertices": f"meshes/{n}.npy", **{kind: f"maps/{kind}/{n}.png" for kind in maps}}
+
+
+def write_order(maps: tuple = ()) -> tuple:
+    """The kinds of a frame's files in the order they are written: the labels last (a frame is whole once its
+    labels exist)."""
+    return ("vertices", *maps, "image", "mask", "labels")
 
 
 def job_digest(job: dict, settings: dict) -> str:
     """sha256 (hex, 16 digits) of what a frame's files depend on: the job and the render settings (with the
     shading options in full, the renderer's defaults filled in: frames rendered before a default changed are
-    rendered again)."""
+    rendered again). The truth maps are part of it only when asked (a run without them keeps its digests)."""
     key = {"job": job, **{k: settings[k] for k in ("size", "samples", "aa_shading")},
            "shading": shading_options(settings.get("shading")).to_json()}
+    if settings.get("maps"):
+        key["maps"] = list(settings["maps"])
     if wears_ring(job):
         key["ring_wear"] = RING_WEAR       # ring frames rendered before rings were worn per pose are made again
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
@@ -60,7 +72,8 @@ def wears_ring(job: dict) -> bool:
 
 def render_job(renderer, job: dict, settings: dict):
     """(api.Frame, background info or None) of one job, rendered as its scene (render/scenes.py). settings: size,
-    samples, aa_shading, and optionally shading (api.shading_options' dict; None: the renderer's defaults)."""
+    samples, aa_shading, and optionally shading (api.shading_options' dict; None: the renderer's defaults) and maps
+    (render/truth.KINDS to compute)."""
     scene = Scene.from_job(job)
     size = settings["size"]
     background, info = None, None
@@ -70,7 +83,7 @@ def render_job(renderer, job: dict, settings: dict):
     t = time.perf_counter() - t
     frame = renderer.render_scene(scene, background=background, width=size, height=size,
                                   samples=settings["samples"], aa_shading=settings["aa_shading"],
-                                  shading=settings.get("shading"))
+                                  shading=settings.get("shading"), maps=tuple(settings.get("maps") or ()))
     frame.timings["background"] = t
     return frame, info
 
@@ -78,7 +91,8 @@ def render_job(renderer, job: dict, settings: dict):
 def dataset_labels(frame, job: dict, digest: str, source, background: dict | None) -> dict:
     """The frame's labels with the dataset's fields added (see the module docstring)."""
     labels = frame.labels
-    names = frame_names(job["index"])
+    maps = tuple(frame.maps)
+    names = frame_names(job["index"], maps)
     render = dict(labels.get("render", {}))
     render["dataset"] = {"frame": job["index"], "job_sha256": digest}
     if background is not None:
@@ -91,7 +105,10 @@ def dataset_labels(frame, job: dict, digest: str, source, background: dict | Non
     labels["mesh"] = {"vertices": int(len(hand.vertices)), "base_vertices": int(wrist.get("base_vertices",
                                                                                               len(hand.vertices))),
                       "faces": "the model's faces (build/model/<side>.npz)", "frame": "camera", "units": "m"}
-    labels["files"] = {**labels.get("files", {}), "vertices": "../" + names["vertices"]}
+    labels["files"] = {**labels.get("files", {}), "vertices": "../" + names["vertices"],
+                       **{kind: "../" + names[kind] for kind in maps}}
+    if maps:
+        labels["maps"] = truth.describe(maps, {kind: "../" + names[kind] for kind in maps})
     if model is not None:
         labels["mano"] = mano_camera_parameters(model, frame.subject.pose, frame.camera.R, frame.camera.t,
                                                 job.get("betas"))
@@ -123,15 +140,16 @@ def shape_record(model, betas) -> dict:
 
 
 def write_dataset_frame(frame, job: dict, digest: str, out_dir, source, background: dict | None) -> dict:
-    """Write the frame's four files (atomically, the labels last: a frame is whole once its labels exist);
-    returns its summary for the shard record."""
-    names = frame_names(job["index"])
+    """Write the frame's four files and its truth maps (atomically, in write_order: the labels last, a frame is
+    whole once its labels exist); returns its summary for the shard record."""
+    names = frame_names(job["index"], tuple(frame.maps))
     labels = dataset_labels(frame, job, digest, source, background)
     vertices = frame.camera.to_camera(frame.subject.hand.vertices).astype(np.float32)
     path = Path(out_dir) / names["vertices"]
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         np.save(f, vertices)
+    truth.write_truth_maps(frame.maps, {kind: Path(out_dir) / names[kind] for kind in frame.maps})
     write_frame(frame, out_dir, names={k: names[k] for k in ("image", "mask", "labels")})
     return summary(job, labels)
 
@@ -149,10 +167,10 @@ def summary(job: dict, labels: dict) -> dict:
             "background": bg.get("used"), "skipped_backgrounds": bg.get("skipped", [])}
 
 
-def existing_frame(out: Path, job: dict, digest: str) -> dict | None:
-    """The summary of a frame already rendered from this job (all its files present, its labels carrying the job's
-    digest), or None."""
-    names = frame_names(job["index"])
+def existing_frame(out: Path, job: dict, digest: str, maps: tuple = ()) -> dict | None:
+    """The summary of a frame already rendered from this job (all its files present, the truth maps' of `maps`
+    too, its labels carrying the job's digest), or None."""
+    names = frame_names(job["index"], maps)
     if not all((out / n).is_file() for n in names.values()):
         return None
     try:

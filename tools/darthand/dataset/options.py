@@ -71,6 +71,8 @@ class DatasetOptions:
         threads: render threads per process; cluster: render on a cluster instead (None: this machine).
     resume: skip frames already rendered from the same jobs; shard_size: frames per shard (the unit of planning and
         resume records); chunk_size: frames per task (None: chosen per shard); max_frames: the run's frame budget.
+    maps: per-pixel truth maps written beside the images (render/truth.KINDS: 'depth', 'normals', 'parts'; maps/
+        <kind>/<n>.png); part of a frame's job digest only when not empty.
     formats: layouts also written after rendering (dataset/writers.py); left, allow_non_mano: their options.
     progress: False, True (a line at most every 5 s) or a callable(done, total, seconds).
     """
@@ -95,6 +97,7 @@ class DatasetOptions:
     shard_size: int = DEFAULT_SHARD_SIZE
     chunk_size: int | None = None
     max_frames: int = DEFAULT_MAX_FRAMES
+    maps: tuple = ()
     formats: tuple = ()
     left: str = "mirror"
     allow_non_mano: bool = False

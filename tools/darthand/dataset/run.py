@@ -2,6 +2,7 @@
 (dataset/runner.py), recorded, summarised in dataset.json.
 
     OUT/images/, masks/, labels/, meshes/   the frames (dataset/frames.py)
+    OUT/maps/<kind>/                        per-pixel truth maps, when asked (options.maps: depth, normals, parts)
     OUT/shards/<first>-<last>.json          one record per finished shard: its digest and its frames' summaries
     OUT/dataset.json                        the run: sources, plan, settings, counts, visibility rates, timings
 
@@ -36,7 +37,7 @@ from darthand.dataset.options import MAX_SIZE, DatasetOptions, bounded_int
 from darthand.dataset.runner import Runner, make_runner
 from darthand.errors import InputError
 from darthand.fileio import read_json, write_json
-from darthand.render import aa
+from darthand.render import aa, truth
 from darthand.render.api import shading_options
 
 DATASET_FORMAT = "darthand-dataset"
@@ -88,10 +89,11 @@ def render_frames(options: DatasetOptions, sources: dict, specs: dict, planner=N
         shards = (planner.jobs(a, min(a + shard_size, start + count)) for a in range(start, start + count, shard_size))
     if total > max_frames:
         raise InputError(f"jobs: {total} frames are over the frame budget of {max_frames} (--max-frames raises it)")
+    maps = truth.check_kinds(o.maps)
     out = Path(o.out)
-    _prepare_folders(out)
+    _prepare_folders(out, maps)
     settings = {"out_dir": str(out), "size": size, "samples": int(samples), "aa_shading": aa_shading,
-                "shading": shading}
+                "shading": shading, "maps": maps}
     stats = RunStats(t_start)
     report = _progress_printer(stats) if o.progress is True else (o.progress or None)
     runner = make_runner(cluster, specs, settings, sources, workers, threads, total)
@@ -174,11 +176,11 @@ def _open_shard(out: Path, jobs: list[dict], settings: dict, resume: bool) -> di
     if not jobs:
         return state
     state["path"] = shard_record_path(out, jobs)
-    if resume and _shard_done(state, jobs):
+    if resume and _shard_done(state, jobs, settings["maps"]):
         state["summaries"] = read_json(state["path"], "shard record")["frames"]
         return state
     for job, digest in zip(jobs, digests):
-        summary = existing_frame(out, job, digest) if resume else None
+        summary = existing_frame(out, job, digest, settings["maps"]) if resume else None
         if summary is None:
             state["todo"].append((job, digest))
         else:
@@ -186,7 +188,7 @@ def _open_shard(out: Path, jobs: list[dict], settings: dict, resume: bool) -> di
     return state
 
 
-def _shard_done(state: dict, jobs: list[dict]) -> bool:
+def _shard_done(state: dict, jobs: list[dict], maps: tuple = ()) -> bool:
     try:
         record = json.loads(state["path"].read_text())
     except (OSError, ValueError):
@@ -194,7 +196,7 @@ def _shard_done(state: dict, jobs: list[dict]) -> bool:
     if record.get("digest") != state["digest"] or len(record.get("frames", [])) != len(jobs):
         return False
     out = state["path"].parent.parent
-    return all((out / name).is_file() for job in jobs for name in frame_names(job["index"]).values())
+    return all((out / name).is_file() for job in jobs for name in frame_names(job["index"], maps).values())
 
 
 def _write_shard_record(out: Path, state: dict) -> None:
@@ -214,10 +216,11 @@ def read_shard_records(out) -> list[dict]:
     return frames
 
 
-def _prepare_folders(out: Path) -> None:
-    """Make the output folders; remove temporary files an interrupted run left (fileio.atomic_path's '.name.*')."""
+def _prepare_folders(out: Path, maps: tuple = ()) -> None:
+    """Make the output folders (maps/<kind> of the truth maps asked for too); remove temporary files an interrupted
+    run left (fileio.atomic_path's '.name.*')."""
     try:
-        for name in FOLDERS:
+        for name in FOLDERS + tuple(f"maps/{kind}" for kind in maps):
             folder = out / name
             folder.mkdir(parents=True, exist_ok=True)
             for entry in os.scandir(folder):
@@ -389,8 +392,11 @@ def _write_dataset(out: Path, package, jobs_source, planner, total, settings, st
            "plan": planner.describe() if planner is not None else None,
            "count": total, "size": settings["size"], "samples": settings["samples"],
            "aa_shading": settings["aa_shading"], "shading": settings["shading"],
-           "files": {kind: name.replace("000000", "<index>") for kind, name in frame_names(0).items()},
+           "files": {kind: name.replace("000000", "<index>")
+                     for kind, name in frame_names(0, settings["maps"]).items()},
            "models": models, "rendered": stats.rendered, "skipped": stats.skipped,
            "summary": stats.summary(), "timings": stats.timings(processes), "runner": runner}
+    if settings["maps"]:                   # only when asked: a dataset without maps keeps its dataset.json
+        doc["maps"] = truth.describe(settings["maps"], {kind: doc["files"][kind] for kind in settings["maps"]})
     write_json(out / "dataset.json", doc)
     return doc

@@ -6,6 +6,8 @@ first dot into key and extension); its members:
     <key>.mask.png   the 8-bit coverage mask
     <key>.json       the labels (schemas/labels.schema.json)
     <key>.verts.npy  (V, 3) float32 posed vertices, camera frame, metres
+    <key>.depth.png, <key>.normals.png, <key>.parts.png   the per-pixel truth maps, when the dataset has them
+                     (dataset.json 'maps'; encodings in render/truth.py and each sample's labels 'maps')
 
 Tar headers carry no time, owner or host (mtime 0, uid/gid 0, empty names, mode 0644), so the same dataset gives
 the same bytes.
@@ -29,7 +31,7 @@ SPLITS = ("train", "val", "test")
 def write_webdataset(dataset, out=None, samples_per_shard: int = SAMPLES_PER_SHARD) -> Path:
     """Write the shards of a rendered dataset folder into `out` (default DATASET/webdataset)."""
     root = Path(dataset)
-    read_json(root / "dataset.json", "dataset.json")
+    maps = tuple(read_json(root / "dataset.json", "dataset.json").get("maps") or ())      # the truth maps' kinds
     out = Path(out) if out is not None else root / "webdataset"
     out.mkdir(parents=True, exist_ok=True)
     frames = read_shard_records(root)
@@ -41,10 +43,11 @@ def write_webdataset(dataset, out=None, samples_per_shard: int = SAMPLES_PER_SHA
             with atomic_path(out / f"{split}-{shard:06d}.tar") as tmp, tarfile.open(tmp, "w",
                                                                                  format=tarfile.USTAR_FORMAT) as tar:
                 for index in indices[k:k + samples_per_shard]:
-                    names = frame_names(index)
+                    names = frame_names(index, maps)
                     key = Path(names["labels"]).stem
                     for member, kind in ((f"{key}.png", "image"), (f"{key}.mask.png", "mask"),
-                                         (f"{key}.json", "labels"), (f"{key}.verts.npy", "vertices")):
+                                         (f"{key}.json", "labels"), (f"{key}.verts.npy", "vertices"),
+                                         *((f"{key}.{kind}.png", kind) for kind in maps)):
                         _add(tar, member, (root / names[kind]).read_bytes())
     return out
 

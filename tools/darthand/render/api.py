@@ -21,7 +21,7 @@ from darthand.budget import check_memory
 from darthand.errors import InputError
 from darthand.fileio import write_json
 from darthand.jit import kernel
-from darthand.render import aa
+from darthand.render import aa, truth
 from darthand.render.assets import HandAssets, default_catalogues
 from darthand.render.camera import Camera, load_camera
 from darthand.render.image import compose, encode_mask8, load_background, write_exr, write_png
@@ -50,7 +50,8 @@ class Frame:
     linear, premultiplied by alpha (composited when a background was given). alpha (H, W) float32 coverage of hand
     and accessory. geom (H, W) int8 what the pixel centre's ray hit (-1 background, else the subject's surface
     index: 0 hand, 1 accessory). depth (H, W) float32 camera z at pixel centres, 0 for background. labels: the
-    labels.json document. timings: seconds per step. stats: ray counts.
+    labels.json document. timings: seconds per step. stats: ray counts. maps: the per-pixel truth maps asked for
+    ({kind: full-frame array}, render/truth.py; empty unless asked).
     """
 
     rgba: np.ndarray
@@ -63,6 +64,7 @@ class Frame:
     camera: Camera
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
+    maps: dict = field(default_factory=dict)
 
 
 class Renderer:
@@ -88,26 +90,28 @@ class Renderer:
     def render(self, pose=None, *, texture: str | None = None, skin_tone_offset: float = 0.0,
                accessory: str | None = None, camera="three_quarter", lights=None, background=None,
                width: int = 512, height: int = 512, samples: int = DEFAULT_SAMPLES, aa_shading: str = "triangle",
-               shading=None, labels: bool = True, keypoint_order: str = "openpose", betas=None) -> Frame:
+               shading=None, labels: bool = True, keypoint_order: str = "openpose", betas=None,
+               maps: tuple = ()) -> Frame:
         """One frame. pose: None (flat), a gesture name, a pose file or (48,) MANO axis-angle (flat-hand relative).
         camera: a Camera, a view name, a camera JSON path or dict (camera.load_camera), framed on the posed hand.
         lights: a Lighting, a lights JSON path or dict, or None (lights.default_lighting). background: image path or
         (H, W, 3) linear array, or None (transparent). samples: sub-samples per edge pixel (1, 4, 8, 16);
         aa_shading: shade them once per pixel per triangle ('triangle') or each ('sample') (see aa.py). shading: a
         shade.ShadingOptions or a dict of its fields (ambient occlusion, skin model), None for the defaults. betas:
-        the hand's shape (S,) for a model source (None: the model's own)."""
+        the hand's shape (S,) for a model source (None: the model's own). maps: per-pixel truth maps to compute
+        too (render/truth.KINDS: 'depth', 'normals', 'parts'), in Frame.maps."""
         with single_threaded_blas():
             prepared = self._prepare(pose, texture=texture, skin_tone_offset=skin_tone_offset, accessory=accessory,
                                      camera=camera, lights=lights, width=width, height=height,
                                      keypoint_order=keypoint_order, betas=betas)
             return self._finish(prepared, background=background, samples=samples, aa_shading=aa_shading,
-                                shading=shading, labels=labels)
+                                shading=shading, labels=labels, maps=maps)
 
     def render_scene(self, scene: Scene, *, background=None, **options) -> Frame:
         """One frame of a scene (render/scenes.py): its hand posed, dressed and shaped as the scene says, seen by its
         camera under its lights. background: pixels or an image path to composite under it (None: the scene's own
         background when it is an image path, else transparent; a dataset resolves its background documents itself).
-        options: `render`'s width, height, samples, aa_shading, shading, labels, keypoint_order."""
+        options: `render`'s width, height, samples, aa_shading, shading, labels, keypoint_order, maps."""
         hand = scene.single_hand()
         pose = hand.pose_value()
         model = self.source.pose_model()
@@ -127,7 +131,7 @@ class Renderer:
         Do not call `render` on the same Renderer while iterating: the helper thread owns its caches meanwhile."""
         from concurrent.futures import ThreadPoolExecutor
 
-        finish = {k: options.pop(k) for k in ("background", "samples", "aa_shading", "shading", "labels")
+        finish = {k: options.pop(k) for k in ("background", "samples", "aa_shading", "shading", "labels", "maps")
                   if k in options}
         poses = iter(poses)
         # The helper is the only thread that calls _prepare (the source's caches and self._scene are not locked).
@@ -161,11 +165,11 @@ class Renderer:
         return subject, scene, cam, lighting, timings
 
     def _finish(self, prepared: tuple, *, background=None, samples: int = DEFAULT_SAMPLES,
-                aa_shading: str = "triangle", shading=None, labels: bool = True) -> Frame:
+                aa_shading: str = "triangle", shading=None, labels: bool = True, maps: tuple = ()) -> Frame:
         subject, scene, cam, lighting, timings = prepared
         return render_subject(subject, scene, cam, lighting, background=background, samples=samples,
                               aa_shading=aa_shading, shading=shading, threads=self.threads, labels=labels,
-                              timings=timings)
+                              timings=timings, maps=maps)
 
 
 _END = object()
@@ -189,12 +193,14 @@ def shading_options(shading) -> ShadingOptions:
 
 def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: Lighting, *, background=None,
                    samples: int = DEFAULT_SAMPLES, aa_shading: str = "triangle", shading=None, threads: int = 1,
-                   labels: bool = True, timings: dict | None = None) -> Frame:
+                   labels: bool = True, timings: dict | None = None, maps: tuple = ()) -> Frame:
     """Render a posed subject whose scene is built: primary samples in the projected bounds with indirect light at
     the vertices they need (indirect.py), adaptive supersampling of edges (aa.supersample: `samples` sub-samples,
-    `aa_shading` 'triangle' or 'sample'), compositing, labels. shading: see `shading_options`."""
+    `aa_shading` 'triangle' or 'sample'), compositing, labels. shading: see `shading_options`. maps: per-pixel
+    truth maps to compute from the primary samples (truth.KINDS; none by default, at no cost)."""
     timings = {} if timings is None else timings
     aa.check_options(samples, aa_shading)
+    maps = truth.check_kinds(maps)
     options = shading_options(shading)
     H, W = cam.height, cam.width
     check_memory(f"rendering a {W}x{H} image", BYTES_PER_PIXEL * W * H)
@@ -251,6 +257,11 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
             raise InputError(f"background: shape {bg.shape} does not match the image ({H}, {W}, 3)")
     colour, rgba = compose(premult, alpha, (r0, c0), bg, (H, W))
     timings["compose"] = _lap(t)
+    truth_maps = {}
+    if maps:
+        t = time.perf_counter()
+        truth_maps = truth.truth_maps(maps, subject, cam, primary, (r0, r1, c0, c1), full_depth)
+        timings["maps"] = _lap(t)
 
     t = time.perf_counter()
     doc = {}
@@ -263,7 +274,7 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
     timings["labels"] = _lap(t)
     stats["total_rays"] = (stats.get("rays", 0) + stats.get("shadow_rays", 0) + stats.get("indirect_rays", 0)
                            + (21 if labels else 0))
-    return Frame(rgba, colour, full_alpha, full_geom, full_depth, doc, subject, cam, timings, stats)
+    return Frame(rgba, colour, full_alpha, full_geom, full_depth, doc, subject, cam, timings, stats, truth_maps)
 
 
 def scatter(samples: Samples, index: np.ndarray, n: int) -> Samples:

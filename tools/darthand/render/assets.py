@@ -159,7 +159,8 @@ class HandAssets:
         surfaces.append(self.posed_cap(posed, betas, hand.material))      # last: surface indices 0 hand, 1 accessory
         info = {"source": self.source, "texture": texture, "skin_tone_offset": float(skin_tone_offset),
                 "accessory": accessory, "gesture": gesture, **({} if worn is None else {"ring_worn": worn.record}),
-                "accessory_parent_joint": None if accessory == NONE else self.accessories[accessory].parent_joint}
+                "accessory_parent_joint": None if accessory == NONE else self.accessories[accessory].parent_joint,
+                "base_faces": (m.meta.get("wrist") or {}).get("base_faces")}     # before the wrist rings (truth.py)
         return Subject(tuple(surfaces), posed.joints[0].astype(np.float64), posed.keypoints[0].astype(np.float64),
                        m.side, pose_vec, keypoint_order, info)
 

@@ -143,26 +143,28 @@ def load_background(path: str | os.PathLike, width: int, height: int) -> np.ndar
 
 def write_png(path: str | os.PathLike, pixels: np.ndarray, srgb: bool = True) -> None:
     """Write (H, W, C) or (H, W) uint8 pixels (C = 1 gray, 2 gray + alpha, 3 RGB, 4 RGBA, straight alpha) as an
-    8-bit PNG, atomically; deterministic bytes for the same pixels. srgb: tag the file with an sRGB chunk.
+    8-bit PNG, atomically; deterministic bytes for the same pixels. srgb: tag the file with an sRGB chunk. uint16
+    pixels are written as a 16-bit PNG (samples big-endian, as PNG stores them; data maps: pass srgb=False).
 
     Encoded here (deflate by ISA-L, see PNG_COMPRESSION) rather than through OpenImageIO because OpenImageIO's
     Python write holds the GIL for most of its run, which stalls the renderer while a FrameWriter thread writes;
     the compressor releases it. Every
     row uses PNG's 'Up' filter (the difference to the row above: one vectorised subtraction).
     """
-    img = np.ascontiguousarray(pixels, np.uint8)
+    bits = 16 if np.asarray(pixels).dtype == np.uint16 else 8
+    img = np.ascontiguousarray(pixels, ">u2" if bits == 16 else np.uint8)
     if img.ndim == 2:
         img = img[..., None]
     h, w, c = img.shape
     if c not in _PNG_COLOUR_TYPES:
         raise ValueError(f"{path}: cannot write {c} channels as PNG")
-    rows = img.reshape(h, w * c)
-    filtered = np.empty((h, w * c + 1), np.uint8)
+    rows = img.view(np.uint8).reshape(h, w * c * bits // 8)     # 'Up' works on bytes whatever the bit depth
+    filtered = np.empty((h, rows.shape[1] + 1), np.uint8)
     filtered[:, 0] = 2                                   # filter type 'Up'
     filtered[0, 0] = 0                                   # the first row has no row above: 'None'
     filtered[0, 1:] = rows[0]
     np.subtract(rows[1:], rows[:-1], out=filtered[1:, 1:])  # uint8 arithmetic wraps modulo 256, as PNG specifies
-    header = struct.pack(">IIBBBBB", w, h, 8, _PNG_COLOUR_TYPES[c], 0, 0, 0)
+    header = struct.pack(">IIBBBBB", w, h, bits, _PNG_COLOUR_TYPES[c], 0, 0, 0)
     chunks = [_png_chunk(b"IHDR", header)]
     if srgb:
         chunks.append(_png_chunk(b"sRGB", b"\x00"))      # perceptual rendering intent

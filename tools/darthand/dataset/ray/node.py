@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 from darthand.dataset import local
-from darthand.dataset.frames import frame_names
+from darthand.dataset.frames import frame_names, write_order
 from darthand.dataset.ray.connect import code_digest
 from darthand.dataset.ray.shipping import NodeFiles
 from darthand.errors import InputError
@@ -121,9 +121,10 @@ class NodeWorker:
         """[(name, bytes)] of the staged frames' files in the order a local worker writes them (labels last),
         removed from the staging folder."""
         out = []
+        maps = tuple(self.state["settings"].get("maps") or ())
         for frame in frames:
-            names = frame_names(frame["index"])
-            for kind in ("vertices", "image", "mask", "labels"):
+            names = frame_names(frame["index"], maps)
+            for kind in write_order(maps):
                 path = self.staging / names[kind]
                 out.append((names[kind], path.read_bytes()))
                 path.unlink()
