@@ -319,6 +319,19 @@ def staging_folder(out: str | os.PathLike) -> Path:
         raise _write_error(out, e) from None
 
 
+def replace_folder(tmp: Path, out: Path) -> None:
+    """Move the finished folder `tmp` (a `staging_folder`) to `out`, replacing a previous `out` (renamed aside
+    first, then removed): readers see the old folder or the new one, never a mix."""
+    old = None
+    if out.exists():
+        old = staging_folder(out)
+        os.replace(out, old / out.name)
+    os.chmod(tmp, 0o755)  # mkdtemp made it private
+    os.replace(tmp, out)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
 _TEMPORARY = re.compile(r"^\..+\.tmp-(\d+)\.")
 
 

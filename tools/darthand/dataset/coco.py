@@ -52,7 +52,7 @@ import OpenImageIO as oiio
 from darthand.dataset.frames import frame_names
 from darthand.dataset.run import read_shard_records
 from darthand.errors import InputError
-from darthand.fileio import read_json, staging_folder
+from darthand.fileio import read_json, replace_folder, staging_folder
 from darthand.render.image import read_png, write_png
 from darthand.render.png import open_png8
 from darthand.textures.color import linear_to_srgb, srgb_to_linear
@@ -177,7 +177,7 @@ def write_coco(dataset, out=None) -> Path:
     try:
         counts = _write_splits(root, frames, tmp)
         (tmp / "README.md").write_text(_readme(counts))
-        _replace_folder(tmp, out)
+        replace_folder(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -282,18 +282,6 @@ def _check_replaceable(out: Path) -> None:
     if not ours and any(out.iterdir()):
         raise InputError(f"{out}: exists and is not a COCO export (README.md says so); remove it or export "
                          f"elsewhere (--out)")
-
-
-def _replace_folder(tmp: Path, out: Path) -> None:
-    """Move the finished folder `tmp` to `out`, a previous `out` renamed aside first, then removed."""
-    old = None
-    if out.exists():
-        old = staging_folder(out)
-        os.replace(out, old / out.name)
-    os.chmod(tmp, 0o755)                                   # mkdtemp made it private
-    os.replace(tmp, out)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
 
 
 def _readme(counts: dict) -> str:

@@ -47,6 +47,7 @@ import numpy as np
 from darthand.dataset.frames import frame_names
 from darthand.dataset.freihand import LEFT_MODES, model_kinds
 from darthand.dataset.run import read_shard_records
+from darthand.dataset.webdataset import add_member
 from darthand.errors import InputError
 from darthand.fileio import atomic_path, read_json, write_bytes
 from darthand.render.image import read_png
@@ -110,8 +111,8 @@ def _write_split(root: Path, out: Path, split: str, frames: list, kinds: dict, a
                 tarfile.open(tmp, "w", format=tarfile.USTAR_FORMAT) as tar:
             for frame in frames[k:k + SAMPLES_PER_SHARD]:
                 key, jpeg, hand = _sample(root, out, frame, kinds, allow_non_mano)
-                _add(tar, f"{key}.jpg", jpeg)
-                _add(tar, f"{key}.data.pyd", pickle.dumps([hand], protocol=PICKLE_PROTOCOL))
+                add_member(tar, f"{key}.jpg", jpeg)
+                add_member(tar, f"{key}.data.pyd", pickle.dumps([hand], protocol=PICKLE_PROTOCOL))
                 if split in EVAL_SPLITS:
                     write_bytes(out / "images" / split / f"{key}.jpg", jpeg)
                     rows.append(hand)
@@ -227,15 +228,6 @@ def _write_npz(path: Path, rows: list[dict], names: list[str]) -> None:
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     write_bytes(path, buf.getvalue())
-
-
-def _add(tar: tarfile.TarFile, name: str, data: bytes) -> None:
-    """A tar member without time, owner or host (the same dataset gives the same bytes)."""
-    info = tarfile.TarInfo(name)
-    info.size, info.mtime, info.mode = len(data), 0, 0o644
-    info.uid = info.gid = 0
-    info.uname = info.gname = ""
-    tar.addfile(info, io.BytesIO(data))
 
 
 def _readme(out: Path, models: dict, counts: dict, left: str, allow_non_mano: bool) -> str:

@@ -48,11 +48,12 @@ def write_webdataset(dataset, out=None, samples_per_shard: int = SAMPLES_PER_SHA
                     for member, kind in ((f"{key}.png", "image"), (f"{key}.mask.png", "mask"),
                                          (f"{key}.json", "labels"), (f"{key}.verts.npy", "vertices"),
                                          *((f"{key}.{kind}.png", kind) for kind in maps)):
-                        _add(tar, member, (root / names[kind]).read_bytes())
+                        add_member(tar, member, (root / names[kind]).read_bytes())
     return out
 
 
-def _add(tar: tarfile.TarFile, name: str, data: bytes) -> None:
+def add_member(tar: tarfile.TarFile, name: str, data: bytes) -> None:
+    """A tar member without time, owner or host (the same dataset gives the same bytes)."""
     info = tarfile.TarInfo(name)
     info.size, info.mtime, info.mode = len(data), 0, 0o644
     info.uid = info.gid = 0

@@ -44,7 +44,7 @@ from darthand.export.usd_skel import ALL_GESTURES, SPARSE_TOL, RigNames, define_
 from darthand.export.usd_variants import (add_accessory_variants, add_gesture_variants, add_texture_variants,
                                           check_variant_id, new_layer_stage, skin_material, write_accessory_variant,
                                           write_texture_variant)
-from darthand.fileio import staging_folder, write_json
+from darthand.fileio import replace_folder, staging_folder, write_json
 from darthand.model.hand_model import HandModel
 from darthand.textures.loader import TextureSet
 
@@ -178,18 +178,6 @@ def write_interface(path: Path, name: str, root: Sdf.Path, rig_names: RigNames, 
     add_accessory_variants(layer, root, rig_names.prefix, accessory_layers, "none")
     add_gesture_variants(layer, root, rig_names, gesture_names)
     layer.Save()
-
-
-def replace_folder(tmp: Path, out: Path) -> None:
-    """Move the finished folder `tmp` to `out`, replacing a previous `out` (renamed aside first, then removed)."""
-    old = None
-    if out.exists():
-        old = staging_folder(out)
-        os.replace(out, old / out.name)
-    os.chmod(tmp, 0o755)  # mkdtemp made it private
-    os.replace(tmp, out)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
 
 
 def reload_open_layers(folder: Path) -> None:
