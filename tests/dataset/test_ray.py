@@ -243,7 +243,8 @@ def test_truth_maps_come_back_from_a_node_as_a_local_run_writes_them(package, he
     done = _cli(head, [*args, "--ray", head.address, "--ray-files", "ship", "--out", str(tmp_path / "ray")])
     assert done.returncode == 0, done.stderr
     nodes = json.loads((tmp_path / "ray" / "dataset.json").read_text())["runner"]["nodes"].values()
-    assert [n["outputs"] for n in nodes] == ["returned"]
+    outputs = [n["outputs"] for n in nodes]         # the head, and any worker node an earlier test left running
+    assert outputs and set(outputs) == {"returned"}, outputs
     got = files_of(tmp_path / "ray")
     assert sum(name.startswith("maps/") for name in got) == 12
     assert got == _local(args, tmp_path / "local")
