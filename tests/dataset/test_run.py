@@ -301,3 +301,27 @@ def test_usd_packages_plan_their_gestures_by_name():
         Planner({"poses": {"mode": "dart"}}, {"right": Package()})
     with pytest.raises(InputError, match="'point' is not a gesture of the package"):
         Planner({"poses": {"gestures": ["point"]}}, {"right": Package()})
+
+
+def test_an_only_background_that_does_not_decode_is_one_line_for_render_and_render_dataset(tmp_path):
+    """A truncated PNG as the only background: both commands refuse it with the same one line on stderr (libpng's
+    own message, printed on file descriptor 2 by the decoder, kept out), exit 2, before anything renders."""
+    from darthand.render.image import write_png
+
+    write_png(tmp_path / "good.png", np.tile(np.arange(64, dtype=np.uint8)[None, :, None] * 4, (48, 1, 3)))
+    data = (tmp_path / "good.png").read_bytes()
+    (tmp_path / "bg").mkdir()
+    (tmp_path / "bg" / "cut.png").write_bytes(data[:len(data) // 2])
+    cut = str(tmp_path / "bg" / "cut.png")
+    runs = {"render": ["render", "open", "--background", cut, "--size", "32", "--out", str(tmp_path / "r")],
+            "file": ["render-dataset", "open", "--backgrounds", cut, "--count", "2", "--size", "32",
+                     "--processes", "1", "--out", str(tmp_path / "d1")],
+            "folder": ["render-dataset", "open", "--backgrounds", str(tmp_path / "bg"), "--count", "2", "--size",
+                       "32", "--processes", "1", "--out", str(tmp_path / "d2")]}
+    for name, argv in runs.items():
+        done = subprocess.run([sys.executable, "-m", "darthand.cli", *argv], capture_output=True, text=True,
+                              timeout=300)
+        assert done.returncode == 2, (name, done.stderr)
+        assert done.stderr.count("\n") == 1 and "libpng" not in done.stderr, (name, done.stderr)
+        assert done.stderr.startswith(f"darthand: error: {cut}: cannot read background image: "), (name, done.stderr)
+    assert not list((tmp_path / "d1").glob("images/*")) if (tmp_path / "d1").exists() else True

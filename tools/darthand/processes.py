@@ -12,6 +12,8 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import sys
+import tempfile
 import threading
 
 PR_SET_PDEATHSIG = 1     # linux/prctl.h
@@ -97,3 +99,19 @@ def deaf_to_ctrl_c():
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+@contextlib.contextmanager
+def native_stderr_captured():
+    """File descriptor 2 sent to a temporary file for the block, then restored: C libraries that print their own
+    diagnostics there (libpng's 'libpng error: ...' while OpenImageIO decodes a damaged PNG) stay quiet, and the
+    caller reports the failure in its one line. Yields a callable returning what was written (text)."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield lambda: (sink.seek(0), sink.read().decode(errors="replace"))[1]
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)

@@ -23,6 +23,7 @@ import numpy as np
 
 from darthand.errors import InputError
 from darthand.jit import kernel
+from darthand.processes import native_stderr_captured
 from darthand.textures.color import srgb_to_linear
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".exr", ".tif", ".tiff", ".bmp", ".webp", ".hdr")
@@ -79,6 +80,8 @@ class BackgroundSampler:
                 self.files = list_images(path, max_files)
             else:
                 raise InputError(f"backgrounds: {backgrounds!r} is neither 'builtin', 'none', a folder nor an image")
+            if len(self.files) == 1:           # its only image: one that does not decode is refused now, as render does
+                decode_image(str(Path(self.folder) / self.files[0]))
 
     def describe(self) -> dict:
         return {"kind": self.kind, "folder": self.folder, "images": len(self.files) or None}
@@ -142,13 +145,15 @@ def decode_image(path: str) -> np.ndarray:
     import OpenImageIO as oiio
 
     try:
-        buf = oiio.ImageBuf(path)
-        spec = buf.spec()
-        pixels = None if buf.has_error else buf.get_pixels(oiio.FLOAT)
+        with native_stderr_captured():         # libpng prints its own line for a damaged file: ours says it
+            buf = oiio.ImageBuf(path)
+            spec = buf.spec()
+            pixels = None if buf.has_error else buf.get_pixels(oiio.FLOAT)
     except Exception as e:                  # OpenImageIO raises plain exceptions for unreadable files
-        raise InputError(f"{path}: cannot read background image ({e})") from None
+        raise InputError(f"{path}: cannot read background image: {_first_line(str(e))}") from None
     if pixels is None or buf.has_error or pixels.ndim != 3 or not pixels.size:
-        raise InputError(f"{path}: cannot read background image ({buf.geterror() or 'no pixels'})")
+        raise InputError(f"{path}: cannot read background image: {_first_line(buf.geterror()) or 'no pixels'} "
+                         "(truncated or corrupt)")
     if not np.isfinite(pixels).all():
         raise InputError(f"{path}: background image has non-finite pixels")
     channels = pixels.shape[2]
@@ -159,6 +164,11 @@ def decode_image(path: str) -> np.ndarray:
     if factor > 1:
         rgb = box_downscale(rgb, factor)
     return np.ascontiguousarray(rgb, np.float32)
+
+
+def _first_line(text: str) -> str:
+    """The first line of an OpenImageIO error (its decoders add libpng's own lines after it)."""
+    return (text.strip().splitlines() or [""])[0]
 
 
 def box_downscale(image: np.ndarray, factor: int) -> np.ndarray:

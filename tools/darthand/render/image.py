@@ -22,6 +22,7 @@ from darthand.budget import check_memory
 from darthand.errors import InputError
 from darthand.fileio import atomic_path, regular_file
 from darthand.jit import kernel
+from darthand.processes import native_stderr_captured
 from darthand.textures.color import srgb8_table, srgb_to_linear
 
 # Deflate by Intel's ISA-L (the `isal` package): the same format as zlib's, 4-6x faster at its level 1 than zlib at
@@ -97,14 +98,17 @@ def read_image_buf(path: str | os.PathLike, what: str = "image") -> oiio.ImageBu
     size fits the memory budget; InputError naming the file when it is truncated or corrupt (OpenImageIO reads
     lazily and would otherwise hand back the pixels decoded before the damage)."""
     regular_file(path, what)
-    inp = oiio.ImageInput.open(str(path))
+    with native_stderr_captured():             # libpng prints its own line for a damaged file: ours says it
+        inp = oiio.ImageInput.open(str(path))
     if inp is None:
         raise InputError(f"{path}: cannot read {what} ({oiio.geterror() or 'unknown format'})")
     spec = inp.spec()
     inp.close()
     check_memory(f"decoding {path} ({spec.width}x{spec.height})", 8 * spec.width * spec.height * spec.nchannels)
     buf = oiio.ImageBuf(str(path))
-    if not buf.read(force=True) or buf.has_error:
+    with native_stderr_captured():
+        read = buf.read(force=True)
+    if not read or buf.has_error:
         reason = (buf.geterror() or "read failed").strip().splitlines()
         raise InputError(f"{path}: cannot read {what}: {reason[0] if reason else 'read failed'} (truncated or "
                          "corrupt)")
