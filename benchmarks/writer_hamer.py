@@ -18,9 +18,9 @@ REPEATS = 5
 def run(frames: int | None = None) -> dict:
     from benchmarks.render_dataset import dataset_inputs
     from darthand.dataset.api import render_dataset
-    from darthand.dataset.hamer import jpeg_bytes, rgb_over_black, write_hamer
+    from darthand.dataset.hamer import jpeg_bytes, write_hamer
     from darthand.dataset.options import DatasetOptions
-    from darthand.render.image import read_png
+    from darthand.render.image import over_black, read_straight_png
 
     frames = int(os.environ.get("DARTHAND_BENCH_WRITER_FRAMES", frames or 48))
     with tempfile.TemporaryDirectory() as tmp:
@@ -31,7 +31,7 @@ def run(frames: int | None = None) -> dict:
                                       accessories=str(accessories), resume=False, progress=False, processes=1))
         images = sorted((data / "images").glob("*.png"))
         export = min(_seconds(lambda: write_hamer(data, tmp / "hamer")) for _ in range(REPEATS))
-        jpeg = min(_seconds(lambda: [jpeg_bytes(rgb_over_black(read_png(p)), tmp) for p in images])
+        jpeg = min(_seconds(lambda: [jpeg_bytes(over_black(read_straight_png(p)), tmp) for p in images])
                    for _ in range(REPEATS))
         disk = sum(p.stat().st_size for p in (tmp / "hamer").rglob("*") if p.is_file())
     ms = 1000 / frames

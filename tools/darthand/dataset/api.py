@@ -9,6 +9,7 @@ usual `if __name__ == "__main__":` guard.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 from darthand.dataset import writers
@@ -55,12 +56,16 @@ def export_format(dataset, fmt: str, out, **options) -> Path:
     return where
 
 
+@dataclass(frozen=True)
 class _Run:
     """A run's opened inputs: sources {side: opened source}, specs {side: SourceSpec} (what workers open), the
     planner or the jobs (a list of job dicts), and `origin`, what dataset.json records the frames came from."""
 
-    def __init__(self, sources: dict, specs: dict, planner: Planner | None, jobs: list | None, origin: dict):
-        self.sources, self.specs, self.planner, self.jobs, self.origin = sources, specs, planner, jobs, origin
+    sources: dict
+    specs: dict
+    planner: Planner | None
+    jobs: list | None
+    origin: dict
 
 
 def _open(options: DatasetOptions) -> _Run:

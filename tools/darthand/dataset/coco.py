@@ -40,22 +40,19 @@ refused.
 
 from __future__ import annotations
 
-import functools
 import json
 import os
 import shutil
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 
 from darthand.dataset.frames import frame_names
 from darthand.dataset.run import read_shard_records
 from darthand.errors import InputError
 from darthand.fileio import read_json, replace_folder, staging_folder
-from darthand.render.image import read_png, write_png
+from darthand.render.image import over_black, read_png, read_straight_png, write_png
 from darthand.render.png import open_png8
-from darthand.textures.color import linear_to_srgb, srgb_to_linear
 
 SPLITS = ("train", "val", "test")
 MASK_THRESHOLD = 128
@@ -228,37 +225,14 @@ def _place_image(src: Path, dst: Path, opaque: bool) -> None:
     """The frame's image at dst: a hard link (a copy where the file system has none) when opaque, else its straight
     colour composited over black in linear light and written as RGB."""
     if not opaque:
-        rgba = _read_straight(src)
+        rgba = read_straight_png(src)
         if rgba.shape[2] == 4:
-            index = rgba[..., :3].astype(np.intp) * 256 + rgba[..., 3:]
-            write_png(dst, np.take(_over_black_table().ravel(), index))
+            write_png(dst, over_black(rgba))
             return
     try:
         os.link(src, dst)
     except OSError:
         shutil.copyfile(src, dst)
-
-
-@functools.cache
-def _over_black_table() -> np.ndarray:
-    """(256, 256) uint8: [sRGB code, alpha code] -> the sRGB code of that straight colour over black in linear
-    light."""
-    codes = np.arange(256) / 255
-    over = srgb_to_linear(codes)[:, None] * codes[None, :]
-    return np.rint(linear_to_srgb(over).astype(np.float64) * 255).astype(np.uint8)
-
-
-def _read_straight(path: Path) -> np.ndarray:
-    """(H, W, C) uint8 pixels of a PNG as stored: alpha not associated (read_png's OpenImageIO multiplies colour by
-    alpha on read)."""
-    config = oiio.ImageSpec()
-    config.attribute("oiio:UnassociatedAlpha", 1)
-    buf = oiio.ImageBuf()
-    buf.reset(str(path), 0, 0, config)
-    pixels = None if buf.has_error else buf.get_pixels(oiio.UINT8)
-    if pixels is None:
-        raise InputError(f"{path}: cannot read image ({buf.geterror()})")
-    return pixels
 
 
 def _read_mask(path: Path) -> np.ndarray:

@@ -50,8 +50,7 @@ from darthand.dataset.run import read_shard_records
 from darthand.dataset.webdataset import add_member
 from darthand.errors import InputError
 from darthand.fileio import atomic_path, read_json, write_bytes
-from darthand.render.image import read_png
-from darthand.textures.color import linear_to_srgb, srgb_to_linear
+from darthand.render.image import over_black, read_straight_png
 
 SAMPLES_PER_SHARD = 1000
 SPLITS = ("train", "val", "test")
@@ -132,7 +131,7 @@ def _sample(root: Path, out: Path, frame: dict, kinds: dict, allow_non_mano: boo
     mano = bool(kinds.get(labels["side"])) and labels.get("mesh", {}).get("base_vertices") == MANO_VERTICES
     vertices = np.load(root / names["vertices"]) if mano else None
     hand = hand_record(labels, vertices, mano=mano, pose=mano or allow_non_mano, index=int(frame["index"]))
-    jpeg = jpeg_bytes(rgb_over_black(read_png(root / names["image"])), out)
+    jpeg = jpeg_bytes(over_black(read_straight_png(root / names["image"])), out)
     return Path(names["labels"]).stem, jpeg, hand
 
 
@@ -183,17 +182,6 @@ def keypoint_box(uv) -> tuple[np.ndarray, np.ndarray]:
     """(centre (2,), [width, height] (2,)) pixels of the tight box of 2-D points (N, 2)."""
     lo, hi = np.min(uv, axis=0), np.max(uv, axis=0)
     return (lo + hi) / 2, hi - lo
-
-
-def rgb_over_black(rgba: np.ndarray) -> np.ndarray:
-    """(H, W, 3) uint8 sRGB: an 8-bit RGB(A) image composited over black in linear light (an opaque one as is)."""
-    if rgba.ndim == 2:
-        return np.repeat(rgba[..., None], 3, axis=2)
-    if rgba.shape[2] < 4 or (rgba[..., 3] == 255).all():
-        return np.ascontiguousarray(rgba[..., :3])
-    alpha = rgba[..., 3:4].astype(np.float32) / 255
-    linear = srgb_to_linear(rgba[..., :3].astype(np.float32) / 255) * alpha
-    return np.rint(linear_to_srgb(linear) * 255).astype(np.uint8)
 
 
 def jpeg_bytes(rgb: np.ndarray, scratch: Path) -> bytes:

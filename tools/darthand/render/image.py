@@ -23,7 +23,7 @@ from darthand.errors import InputError
 from darthand.fileio import atomic_path, regular_file
 from darthand.jit import kernel
 from darthand.processes import native_stderr_captured
-from darthand.textures.color import srgb8_table, srgb_to_linear
+from darthand.textures.color import linear_to_srgb, srgb8_table, srgb_to_linear
 
 # Deflate by Intel's ISA-L (the `isal` package): the same format as zlib's, 4-6x faster at its level 1 than zlib at
 # level 1 with the run-length strategy used before, and files as small or smaller. A 512^2 frame over a built-in
@@ -208,3 +208,38 @@ def read_png(path: str | os.PathLike) -> np.ndarray:
     if pixels is None:                               # the pixels are read here: a truncated file fails now
         raise InputError(f"{path}: cannot read image ({buf.geterror()})")
     return pixels
+
+
+def read_straight_png(path: str | os.PathLike) -> np.ndarray:
+    """(H, W, C) uint8 pixels of an image as stored: alpha not associated (read_png's OpenImageIO multiplies colour
+    by alpha on read)."""
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    buf = oiio.ImageBuf()
+    buf.reset(str(path), 0, 0, config)
+    pixels = None if buf.has_error else buf.get_pixels(oiio.UINT8)
+    if pixels is None:
+        raise InputError(f"{path}: cannot read image ({buf.geterror()})")
+    return pixels
+
+
+def over_black(rgba: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 sRGB of 8-bit straight-alpha pixels (H, W[, C]) composited over black in linear light (grey
+    repeated, an opaque image as it is): what a layout that reads 3 channels shows of a transparent frame."""
+    if rgba.ndim == 2:
+        rgba = rgba[..., None]
+    if rgba.shape[2] in (1, 2):
+        rgba = np.concatenate([np.repeat(rgba[..., :1], 3, axis=2), rgba[..., 1:]], axis=2)
+    if rgba.shape[2] == 3 or (rgba[..., 3] == 255).all():
+        return np.ascontiguousarray(rgba[..., :3])
+    index = rgba[..., :3].astype(np.intp) * 256 + rgba[..., 3:]
+    return np.take(_over_black_table().ravel(), index)
+
+
+@functools.cache
+def _over_black_table() -> np.ndarray:
+    """(256, 256) uint8: [sRGB code, alpha code] -> the sRGB code of that straight colour over black in linear
+    light."""
+    codes = np.arange(256) / 255
+    over = srgb_to_linear(codes)[:, None] * codes[None, :]
+    return np.rint(linear_to_srgb(over).astype(np.float64) * 255).astype(np.uint8)
