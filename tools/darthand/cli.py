@@ -587,12 +587,20 @@ def _add_dataset_arguments(p) -> None:
     p.add_argument("--distance-range", type=numbers(2, float, 0.01, 100, ordered=True), default=plan.distance_range,
                    metavar="LO,HI",
                    help="camera distance in metres instead of --margin-range (the hand kept in frame)")
-    p.add_argument("--lights", default=plan.lights, metavar="random|default|LIGHTS.json",
-                   help="random: ambient, a key light and sometimes a second light, colours from real light "
-                        "sources (default); default: the renderer's rig; or one lights file for every frame")
-    p.add_argument("--backgrounds", default=plan.backgrounds, metavar="builtin|none|DIR|IMAGE",
-                   help="backgrounds composited under the hand with random crop, zoom and flip: the built-in "
-                        "procedural set (default), none (transparent), a folder of images (e.g. COCO's) or one image")
+    p.add_argument("--lights", default=plan.lights, metavar="environment|random|default|LIGHTS.json",
+                   help="environment: an environment map per frame (--environments), turned, scaled and tinted at "
+                        "random; random: ambient, a key light and sometimes a second light, colours from real light "
+                        "sources; default: the renderer's rig; or one lights file for every frame "
+                        f"(default {plan.lights})")
+    p.add_argument("--environments", default=plan.environments, metavar="builtin|DIR|MAP",
+                   help="the environment maps --lights environment draws from: the built-in CC0 set (Poly Haven's, "
+                        "as Blender ships them), a folder of equirectangular .exr/.hdr maps or one map; maps that "
+                        f"do not decode are left out and recorded in dataset.json (default {plan.environments})")
+    p.add_argument("--backgrounds", default=plan.backgrounds, metavar="builtin|environment|none|DIR|IMAGE",
+                   help="backgrounds composited under the hand: the built-in procedural set, the frame's "
+                        "environment seen through its camera (with --lights environment), none (transparent), a "
+                        "folder of images (e.g. COCO's) or one image (random crop, zoom and flip) "
+                        f"(default {plan.backgrounds})")
     p.add_argument("--split", type=numbers(3, float, 0, 1), default=plan.split, metavar="TRAIN,VAL,TEST",
                    help=f"deterministic split fractions (by pose group) (default {_listed(plan.split)})")
     p.add_argument("--size", type=number(int, 8, o.MAX_SIZE), default=run.size, metavar="N",

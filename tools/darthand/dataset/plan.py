@@ -13,13 +13,17 @@ A plan's options are one JSON document (`plan_spec`), recorded in dataset.json a
   of `skin_tone_steps` levels, an accessory on `accessory_share` (25 %, DART's rate) of the frames, uniform over the
   catalogue, the hand's side uniform over `sides`;
 - view: dataset/views.py (equal-area cells, roll, field of view, size or distance);
-- lights: a random rig (dataset/lighting.py), the renderer's default rig, or one lights document for all frames;
-- background: dataset/backgrounds.py (built-in set, a folder, or none);
+- lights: an environment map (dataset/environments.py: a map of the built-in set or a folder, turned, scaled and
+  tinted per frame), a random rig (dataset/lighting.py), the renderer's default rig, or one lights document for all
+  frames;
+- background: dataset/backgrounds.py (built-in set, a folder, or none), or the frame's environment seen through its
+  camera ('environment');
 - split: train/val/test by `split` fractions, drawn per pose group (the frames of one slerp path share a split, so
   near-identical poses never straddle train and test).
 
 Frame i's choices use numpy's Generator seeded with [seed, FRAME_STREAM, i] (a fixed number of uniforms, each with
-a fixed role, so that one option never shifts another's draws); poses and views have their own streams.
+a fixed role, so that one option never shifts another's draws); poses, views, shapes and the environment have
+their own streams.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from dataclasses import dataclass, field, fields, is_dataclass
 
 import numpy as np
 
-from darthand.dataset import backgrounds, lighting, poses, shapes, views
+from darthand.dataset import backgrounds, environments, lighting, poses, shapes, views
 from darthand.dataset.shapes import ShapeOptions
 from darthand.errors import InputError
 from darthand.fileio import read_json
@@ -40,6 +44,7 @@ from darthand.render.lights import load_lighting
 PLAN_VERSION = 2
 FRAME_STREAM = 0
 SPLIT_STREAM = 4
+ENVIRONMENT_STREAM = 6
 SPLITS = ("train", "val", "test")
 # Which of a frame's uniforms decides what.
 TEXTURE, TONE, BARE, ACCESSORY, SIDE = 0, 1, 2, 3, 4
@@ -71,9 +76,10 @@ class PoseOptions:
 class PlanOptions:
     """A plan's options, with their defaults (the module docstring says what each draws): the one place they are
     defined. `spec()` is the plan document recorded in dataset.json and jobs files. Ranges are (lo, hi); textures
-    and accessories: ids to draw from (None: every one of the catalogue; accessories [] for none); lights 'random',
-    'default' or a lights document or file; backgrounds 'builtin', 'none', a folder or an image; split the
-    train/val/test fractions."""
+    and accessories: ids to draw from (None: every one of the catalogue; accessories [] for none); lights 'environment',
+    'random', 'default' or a lights document or file; environments (the maps 'environment' lights draw from)
+    'builtin', a folder or a map; backgrounds 'builtin', 'none', 'environment' (the frame's environment behind the
+    hand), a folder or an image; split the train/val/test fractions."""
 
     seed: int = 0
     poses: PoseOptions = field(default_factory=PoseOptions)
@@ -89,6 +95,7 @@ class PlanOptions:
     margin_range: tuple = (0.03, 0.15)
     distance_range: tuple | None = None
     lights: str | dict = "random"
+    environments: str = "builtin"
     backgrounds: str = "builtin"
     split: tuple = (0.8, 0.1, 0.1)
     shapes: ShapeOptions = field(default_factory=ShapeOptions)
@@ -190,7 +197,11 @@ class Planner:
         self.views = views.ViewSampler(spec["views"], roll_deg=spec["roll_range_deg"], fov_deg=spec["fov_range_deg"],
                                        margin=spec["margin_range"], distance=spec["distance_range"])
         self.lights = _lights_mode(spec["lights"])
-        self.backgrounds = backgrounds.BackgroundSampler(spec["backgrounds"])
+        self.environments = environments.EnvironmentSet(spec["environments"]) if self.lights == "environment" else None
+        self.backdrop = spec["backgrounds"] == "environment"
+        if self.backdrop and self.environments is None:
+            raise InputError("backgrounds 'environment' shows the frame's environment: it needs lights 'environment'")
+        self.backgrounds = backgrounds.BackgroundSampler("none" if self.backdrop else spec["backgrounds"])
         self.split = check_split(spec["split"])
         self.model = _right_model(sources)
         self.hand_centre = _hand_centre(self.model)
@@ -202,7 +213,10 @@ class Planner:
     def describe(self) -> dict:
         """What the plan draws from (for dataset.json and the report)."""
         out = {"textures": len(self.textures), "accessories": len(self.accessories), "sides": self.sides,
-               "backgrounds": self.backgrounds.describe(), "group_size": self.group_size}
+               "backgrounds": {"kind": "environment"} if self.backdrop else self.backgrounds.describe(),
+               "group_size": self.group_size}
+        if self.environments is not None:
+            out["environments"] = self.environments.describe()
         reference = getattr(self.poses, "reference", None)
         if reference is not None:
             out["reference"] = {"source": reference.source, "poses": len(reference)}
@@ -236,6 +250,12 @@ class Planner:
         camera, view_record = self.views.sample(self.seed, i, u[VIEW:VIEW + 6])
         lights, lights_record = self._lights(u[LIGHTS:LIGHTS + lighting.UNIFORMS], side)
         background = self.backgrounds.sample(u[BACKGROUND:BACKGROUND + backgrounds.UNIFORMS])
+        if self.environments is not None:
+            u_env = np.random.default_rng([self.seed, ENVIRONMENT_STREAM, i]).random(environments.UNIFORMS)
+            environment, lights_record = self.environments.sample(u_env)
+            lights = {"environment": environment}
+            if self.backdrop:
+                background = self.environments.backdrop(u_env)
         betas = self.shapes.sample(self.seed, i)
         sample = {"pose": pose_record, "view": view_record, "lights": lights_record,
                   "texture": texture_tags(texture),
@@ -310,7 +330,7 @@ def _hand_centre(model) -> np.ndarray:
 
 
 def _lights_mode(value):
-    if value in ("random", "default", None):
+    if value in ("environment", "random", "default", None):
         return value or "default"
     doc = read_json(value, "lights file") if isinstance(value, str) else value
     load_lighting(doc, str(value) if isinstance(value, str) else "lights")

@@ -1,0 +1,110 @@
+"""Environment maps in dataset plans (dataset/environments.py): per-frame maps, rotations, strengths and white
+balance drawn from their own stream, strength normalised by the map's solid-angle mean (closed form on uniform and
+two-band maps), bad maps left out and recorded (never the end of a run), the environment as the backdrop."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from darthand.dataset import environments, plan
+from darthand.errors import InputError
+from darthand.schemas import check_schema
+
+
+def write_map(path, pixels: np.ndarray) -> str:
+    """An equirectangular float EXR of (H, W, 3) linear pixels."""
+    h, w = pixels.shape[:2]
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(w, h, 3, oiio.FLOAT))
+    out.write_image(np.ascontiguousarray(pixels, np.float32))
+    out.close()
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def map_folder(tmp_path_factory):
+    """A folder of two good maps and three bad ones (not an image, not 2:1, holding NaN)."""
+    root = tmp_path_factory.mktemp("maps")
+    write_map(root / "grey.exr", np.full((16, 32, 3), 0.25, np.float32))
+    sky = np.zeros((16, 32, 3), np.float32)
+    sky[:8] = 2.0                                      # bright upper half, dark lower half
+    (root / "sub").mkdir()
+    write_map(root / "sub" / "sky.exr", sky)
+    (root / "broken.exr").write_bytes(b"not an exr at all")
+    write_map(root / "square.exr", np.ones((16, 16, 3), np.float32))
+    nan = np.ones((16, 32, 3), np.float32)
+    nan[3, 4, 1] = np.nan
+    write_map(root / "nan.hdr", nan)
+    return root
+
+
+def test_mean_luminance_is_the_solid_angle_mean():
+    assert environments.mean_luminance(np.full((64, 128, 3), 0.7, np.float32)) == pytest.approx(0.7, rel=1e-5)
+    band = np.zeros((256, 512, 3), np.float32)
+    band[:128] = 1.0                                   # the upper hemisphere: half the sphere's solid angle
+    assert environments.mean_luminance(band) == pytest.approx(0.5, abs=1e-4)
+    cap = np.zeros((256, 512, 3), np.float32)
+    cap[:43] = 1.0                                     # latitudes above 90 - 43 * 180 / 256 = 59.77 degrees
+    assert environments.mean_luminance(cap) == pytest.approx((1 - np.sin(np.radians(90 - 43 * 180 / 256))) / 2,
+                                                             abs=1e-3)
+
+
+def test_white_balance_is_neutral_at_6500_kelvin_and_warm_below():
+    assert environments.white_balance(6500.0) == pytest.approx([1.0, 1.0, 1.0], abs=1e-4)
+    warm, cool = environments.white_balance(5000.0), environments.white_balance(8000.0)
+    assert warm[0] > 1 > warm[2] and cool[2] > 1 > cool[0]
+    assert np.mean(warm) == pytest.approx(1.0, abs=1e-4)
+
+
+def test_bad_maps_are_left_out_and_recorded(map_folder):
+    env = environments.EnvironmentSet(str(map_folder))
+    assert sorted(n.rsplit("/", 1)[-1] for n, _ in env.maps) == ["grey.exr", "sky.exr"]
+    skipped = {s["file"].rsplit("/", 1)[-1]: s["reason"] for s in env.skipped}
+    assert sorted(skipped) == ["broken.exr", "nan.hdr", "square.exr"]
+    assert all("\n" not in reason and len(reason) < 300 for reason in skipped.values())
+    assert env.describe()["maps"] == 2 and len(env.describe()["skipped"]) == 3
+    with pytest.raises(InputError, match="no usable map"):
+        environments.EnvironmentSet(str(map_folder / "broken.exr"))
+
+
+def test_strength_brings_each_map_to_the_target_level(map_folder):
+    env = environments.EnvironmentSet(str(map_folder))
+    for u in np.random.default_rng(0).random((40, environments.UNIFORMS)):
+        doc, record = env.sample(u)
+        level = {"grey": 0.25, "sky": 1.0}[record["map"]]       # sky: 2.0 over half the sphere
+        assert doc["strength"] * level == pytest.approx(environments.TARGET_RADIANCE * 2 ** record["stops"],
+                                                        rel=1e-3)
+        assert 0 <= doc["rotation"] < 360 and doc["frame"] == "camera"
+
+
+def test_planned_environments_follow_their_own_stream(sources, map_folder):
+    base = {"seed": 5, "lights": "environment", "environments": str(map_folder)}
+    lit = plan.Planner(base, sources[0])
+    jobs = list(lit.jobs(0, 30))
+    check_schema({"frames": jobs}, "dataset_jobs.schema.json", "plan")
+    assert all(set(j["lights"]) == {"environment"} for j in jobs)
+    assert len({j["lights"]["environment"]["rotation"] for j in jobs}) == 30
+    assert {j["sample"]["lights"]["map"] for j in jobs} == {"grey", "sky"}
+    backdrop = list(plan.Planner({**base, "backgrounds": "environment"}, sources[0]).jobs(0, 30))
+    assert [j["lights"] for j in backdrop] == [j["lights"] for j in jobs]       # the backdrop draws nothing else
+    assert all(j["background"]["environment"] is True and 0 < j["background"]["blur"] < 45 for j in backdrop)
+    assert [j["camera"] for j in backdrop] == [j["camera"] for j in jobs]
+    assert lit.describe()["environments"]["maps"] == 2
+    with pytest.raises(InputError, match="needs lights 'environment'"):
+        plan.Planner({"seed": 5, "backgrounds": "environment"}, sources[0])
+
+
+def test_render_dataset_refuses_a_set_of_bad_maps_in_one_line(package, tmp_path, map_folder):
+    model, tex, acc = package
+    run = subprocess.run([sys.executable, "-m", "darthand.cli", "render-dataset", model, "--textures", tex,
+                          "--accessories", acc, "--out", str(tmp_path / "out"), "--count", "2", "--size", "32",
+                          "--lights", "environment", "--environments", str(map_folder / "square.exr")],
+                         capture_output=True, text=True)
+    assert run.returncode == 2, run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1 and "square.exr" in run.stderr
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").rglob("*.png"))
