@@ -53,7 +53,7 @@ class EnvironmentSet:
     def __init__(self, environments="builtin"):
         self.spec = environments
         if environments in (None, "builtin"):
-            self.kind, names = "builtin", list(environment.builtin_names())
+            self.kind, names = "builtin", environment.list_builtin()
         else:
             path = Path(str(environments))
             if path.is_dir():
