@@ -217,13 +217,16 @@ class VertexLight:
     of the numpy it replaced: the same values to the bit."""
 
     def __init__(self, scene, lights: list[dict], ambient: np.ndarray, rays: int, interreflection: bool = True,
-                 counters: dict | None = None):
+                 counters: dict | None = None, environment=None):
         """lights: lights.world_lights' dicts (radiance (3,) float32); ambient (3,) float32; rays per hand vertex;
-        counters: adds 'indirect_rays' (indirect and shadow rays cast)."""
+        counters: adds 'indirect_rays' (indirect and shadow rays cast); environment: the frame's
+        environment.FrameEnvironment or None: a ray that escapes brings back its radiance in the ray's direction
+        (`sky`) besides the ambient light."""
         if int(rays) < 1:
             raise ValueError(f"VertexLight needs at least 1 ray per vertex, not {rays} (without indirect light, "
                              "make none)")
         self.scene, self.lights, self.rays = scene, lights, int(rays)
+        self.environment = environment
         self.interreflection = bool(interreflection)
         self.ambient = np.ascontiguousarray(ambient, np.float32)
         self.lift = LIFT * max(scene.extent, 1e-3)
@@ -291,7 +294,11 @@ class VertexLight:
                                     mirrored=self.scene.subject.side == "left", count=len(vertices))
         self._count(len(origins))
         if not self.interreflection:
-            _open_kernel(self.scene.occluded(origins, dirs, np.inf), k, self.ambient, ids, self.values[g])
+            blocked = self.scene.occluded(origins, dirs, np.inf)
+            _open_kernel(blocked, k, self.ambient, ids, self.values[g])
+            if self.environment is not None:
+                sky = self.environment.sky(dirs) * ~blocked[:, None]
+                self.values[g][:3, ids] += sky.reshape(len(ids), k, 3).mean(axis=1).T
             return
         self._albedo(g, ids)
         hit = self.scene.intersect(origins, dirs)
@@ -305,6 +312,9 @@ class VertexLight:
             if len(rays):
                 self._reflect(h, hit_vertices)
                 interpolate_columns(self.reflected[h], faces, prim, u, v, rays=rays, out=bounce)
+        if self.environment is not None:                                   # escaping rays see the environment
+            escaped = np.flatnonzero(geom < 0)
+            bounce[:, escaped] = self.environment.sky(dirs[escaped]).T
         _gather_vertices_kernel(geom, bounce, k, self.ambient, self.albedo[g], np.float32(MAX_BOUNCE_ALBEDO), ids,
                                 self.values[g])
 
