@@ -303,8 +303,8 @@ def split_bright(level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     area = np.broadcast_to(weight, luma.shape).ravel()
     mean = float((luma * weight).sum() / (4 * np.pi))
     order = np.argsort(luma.ravel())[::-1]
-    top = np.searchsorted(np.cumsum(area[order]), BRIGHT_SHARE * 4 * np.pi)
-    threshold = max(CLAMP_MEAN * mean, float(luma.ravel()[order[min(top, len(order) - 1)]]), 1e-12)
+    top = min(int(np.searchsorted(np.cumsum(area[order]), BRIGHT_SHARE * 4 * np.pi)), len(order) - 1)
+    threshold = max(CLAMP_MEAN * mean, float(luma.ravel()[order[top]]), 1e-12)
     keep = np.minimum(1.0, threshold / np.maximum(luma, 1e-30))[..., None]
     return level * keep, level * (1 - keep)
 
@@ -314,8 +314,9 @@ def median_cut(excess: np.ndarray, count: int, floor: float = 0.0) -> tuple[np.n
     they took), K <= count, of a map level's excess radiance (H, W, 3). Median cut: the cluster of the largest power
     x angular spread is split in two at the median of its power along the axis (x, y or z) of its directions' largest
     weighted spread, until `count` clusters or none spreads over more than MIN_SPREAD; clusters with less than
-    MIN_LIGHT_SHARE of the strongest one's power, or a luminance power below `floor`, are left to the remainder. A cluster's power is the integral of
-    its radiance over its solid angle / pi, its direction the power-weighted mean."""
+    MIN_LIGHT_SHARE of the strongest one's power, or a luminance power below `floor`, are left to the remainder. A
+    cluster's power is the integral of its radiance over its solid angle / pi, its direction the power-weighted
+    mean."""
     h = excess.shape[0]
     flat_power = (excess * texel_solid_angles(h)[:, :, None] / np.pi).reshape(-1, 3)
     weight = flat_power @ LUMA
