@@ -41,6 +41,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from darthand.errors import InputError
+from darthand.jit import kernel
 from darthand.render.image import read_image_buf
 
 BUILTIN_DIR = Path(__file__).resolve().parents[3] / "assets_src" / "environments"
@@ -225,37 +226,63 @@ def level_of_width(levels: list[np.ndarray], width: int) -> np.ndarray:
     return next((lv for lv in levels if lv.shape[1] <= width), levels[-1])
 
 
-def bilinear(level: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(N, 3) float64 bilinear lookup of a map level (H, W, 3) at (u, v) (N,) in [0, 1], wrapping in u and clamping
-    at the poles."""
-    h, w = level.shape[:2]
-    x = u * w - 0.5
-    y = (1 - v) * h - 0.5
-    x0, y0 = np.floor(x), np.floor(y)
-    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
-    x0 = x0.astype(np.int64) % w
-    x1 = (x0 + 1) % w
-    y0i = np.clip(y0.astype(np.int64), 0, h - 1)
-    y1i = np.clip(y0.astype(np.int64) + 1, 0, h - 1)
-    top = level[y0i, x0] * (1 - fx) + level[y0i, x1] * fx
-    bottom = level[y1i, x0] * (1 - fx) + level[y1i, x1] * fx
-    return top * (1 - fy) + bottom * fy
+def bilinear(level: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 bilinear lookup of a map level (H, W, 3) along lookup directions d (N, 3) (direction_uv's
+    convention), wrapping in u and clamping at the poles."""
+    out = np.zeros((len(d), 3), np.float64)
+    _lookup_kernel(np.ascontiguousarray(level, np.float32), np.ascontiguousarray(d, np.float64), np.eye(3), 0, 1.0,
+                   out)
+    return out
+
+
+@kernel(error_model="numpy")
+def _lookup_kernel(level, d, to_map, width, weight, out):
+    """out[i] += weight x the bilinear lookup of level (H, W, 3) float32 along the i-th direction: d[i] (N, 3)
+    float64, or with width > 0 the direction of pixel centre (i % width + 0.5, i // width + 0.5, 1) times to_map
+    (3, 3) (a row vector times the matrix; d unused). u, v as direction_uv; texel coordinates x = u W - 0.5,
+    y = (1 - v) H - 0.5 (texel centres at integers), x wrapping, y clamped."""
+    h, w = level.shape[0], level.shape[1]
+    for i in range(out.shape[0]):
+        if width > 0:
+            px, py = i % width + 0.5, i // width + 0.5
+            d0 = px * to_map[0, 0] + py * to_map[1, 0] + to_map[2, 0]
+            d1 = px * to_map[0, 1] + py * to_map[1, 1] + to_map[2, 1]
+            d2 = px * to_map[0, 2] + py * to_map[1, 2] + to_map[2, 2]
+        else:
+            d0, d1, d2 = d[i, 0], d[i, 1], d[i, 2]
+        x = (np.arctan2(d1, -d0) / (2 * np.pi) + 0.5) * w - 0.5
+        y = (0.5 - np.arctan2(d2, np.hypot(d0, d1)) / np.pi) * h - 0.5
+        fx0, fy0 = np.floor(x), np.floor(y)
+        fx, fy = x - fx0, y - fy0
+        x0 = int(fx0) % w
+        x1 = (x0 + 1) % w
+        y0 = min(max(int(fy0), 0), h - 1)
+        y1 = min(max(int(fy0) + 1, 0), h - 1)
+        for c in range(3):
+            top = level[y0, x0, c] * (1 - fx) + level[y0, x1, c] * fx
+            bottom = level[y1, x0, c] * (1 - fx) + level[y1, x1, c] * fx
+            out[i, c] += weight * (top * (1 - fy) + bottom * fy)
+
+
+def level_of_detail(levels: list[np.ndarray], angle_deg: np.ndarray) -> np.ndarray:
+    """(N,) the fractional mip level whose texels (360 / width degrees) span `angle_deg` (N,), clipped to the
+    levels."""
+    finest = 360.0 / levels[0].shape[1]
+    return np.clip(np.log2(np.maximum(angle_deg, finest) / finest), 0, len(levels) - 1)
 
 
 def lookup_blurred(levels: list[np.ndarray], d: np.ndarray, angle_deg: np.ndarray | float) -> np.ndarray:
     """(N, 3) float64 radiance of the map along lookup directions d (N, 3), blurred over about `angle_deg` (N,) or
-    a scalar: trilinear between the mip levels whose texels span the angle (360 / width degrees)."""
-    u, v = direction_uv(d)
-    finest = 360.0 / levels[0].shape[1]
-    lod = np.clip(np.log2(np.maximum(np.broadcast_to(angle_deg, u.shape), finest) / finest), 0, len(levels) - 1)
+    a scalar: trilinear between the mip levels whose texels span the angle."""
+    lod = level_of_detail(levels, np.broadcast_to(np.asarray(angle_deg, np.float64), (len(d),)))
     lo = np.floor(lod).astype(np.int64)
-    out = np.zeros((len(u), 3))
+    out = np.zeros((len(d), 3))
     for k in np.unique(lo):
         at = np.flatnonzero(lo == k)
         frac = (lod[at] - k)[:, None]
-        value = bilinear(levels[k], u[at], v[at])
-        if k + 1 < len(levels):
-            value = value * (1 - frac) + bilinear(levels[k + 1], u[at], v[at]) * frac
+        value = bilinear(levels[k], d[at])
+        if k + 1 < len(levels) and frac.any():
+            value = value * (1 - frac) + bilinear(levels[k + 1], d[at]) * frac
         out[at] = value
     return out
 
@@ -405,8 +432,7 @@ class FrameEnvironment:
         """(N, 3) float32 the remainder's radiance seen along world directions (N, 3), blurred at SKY_WIDTH (what an
         indirect ray that escapes brings back)."""
         level = level_of_width(self.lighting.remainder, SKY_WIDTH)
-        u, v = direction_uv(np.asarray(directions, np.float64) @ self.M.T)
-        return (bilinear(level, u, v) * self.scale).astype(np.float32)
+        return (bilinear(level, np.asarray(directions, np.float64) @ self.M.T) * self.scale).astype(np.float32)
 
     def irradiance(self, normals: np.ndarray) -> np.ndarray:
         """(3, N) float32 the remainder's unoccluded pi-folded irradiance at world unit normals (3, N)."""
@@ -438,9 +464,15 @@ def background_view(environment: Environment, camera, blur_deg: float = 0.0) -> 
     resolution)."""
     if not (np.isfinite(blur_deg) and 0 <= blur_deg <= 180):
         raise InputError(f"background_blur: {blur_deg!r} is not a number of degrees in 0..180")
-    lighting = map_lighting(environment.map)
-    rows, cols = np.mgrid[0:camera.height, 0:camera.width]
-    uv = np.stack([cols.ravel() + 0.5, rows.ravel() + 0.5], axis=1)
-    d = camera.directions(uv) @ frame_matrix(environment.frame, camera.R, environment.rotation).T
-    colour = lookup_blurred(lighting.full, d, float(blur_deg)) * environment.scale
+    levels = map_lighting(environment.map).full
+    # pixel (x, y, 1) -> world direction R^T K^-1 p -> the lookup frame: one (3, 3) matrix (for row vectors)
+    to_map = np.linalg.inv(camera.K).T @ camera.R @ frame_matrix(environment.frame, camera.R, environment.rotation).T
+    lod = float(level_of_detail(levels, np.array([float(blur_deg)]))[0])
+    k, frac = int(lod), lod - int(lod)
+    colour = np.zeros((camera.height * camera.width, 3), np.float64)
+    none = np.zeros((0, 3))
+    for level, weight in ((k, 1 - frac), (k + 1, frac)):
+        if weight > 0 and level < len(levels):
+            _lookup_kernel(np.ascontiguousarray(levels[level], np.float32), none, to_map, camera.width, weight, colour)
+    colour *= environment.scale
     return colour.reshape(camera.height, camera.width, 3).astype(np.float32)
