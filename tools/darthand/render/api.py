@@ -96,7 +96,8 @@ class Renderer:
         """One frame. pose: None (flat), a gesture name, a pose file or (48,) MANO axis-angle (flat-hand relative).
         camera: a Camera, a view name, a camera JSON path or dict (camera.load_camera), framed on the posed hand.
         lights: a Lighting, a lights JSON path or dict, or None (lights.default_lighting). background: image path or
-        (H, W, 3) linear array, or None (transparent). samples: sub-samples per edge pixel (1, 4, 8, 16);
+        (H, W, 3) linear array, 'environment' (the lights' environment map seen through the camera:
+        environment.background_view), or None (transparent). samples: sub-samples per edge pixel (1, 4, 8, 16);
         aa_shading: shade them once per pixel per triangle ('triangle') or each ('sample') (see aa.py). shading: a
         shade.ShadingOptions or a dict of its fields (ambient occlusion, skin model), None for the defaults. betas:
         the hand's shape (S,) for a model source (None: the model's own). maps: per-pixel truth maps to compute
