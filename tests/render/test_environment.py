@@ -24,6 +24,8 @@ from darthand.render.api import Renderer
 from darthand.render.camera import Camera, intrinsics
 from darthand.render.lights import Light, Lighting, load_lighting
 from darthand.render.shade import ShadingOptions
+from darthand.render.subject import Material
+from darthand.render.texture import constant_texture
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -126,6 +128,22 @@ def test_one_bright_texel_is_the_directional_light_of_the_same_irradiance(tmp_pa
     diff = np.abs(got.colour - expected.colour).max(axis=-1)
     assert expected.colour.max() > 0.3 and (expected.colour.max(axis=-1) < 0.05).sum() > 50   # lit, with a shadow
     assert np.percentile(diff, 99) < 2e-3 and diff.mean() < 1e-3
+
+
+def test_a_polished_metal_ball_reflects_what_is_behind_the_camera(tmp_path):
+    """At the centre of a mirror-like ball the reflection runs back along the view ray: it shows the map behind the
+    camera (blue), not in front (red), scaled by the split-sum's F0 A + B at normal incidence (about F0 for a
+    polished metal: F0 = the albedo for metallic 1)."""
+    pixels = np.zeros((32, 64, 3), np.float32)
+    pixels[:, :16], pixels[:, 48:], pixels[:, 16:48] = (0, 0, 1), (0, 0, 1), (1, 0, 0)
+    path = write_exr(tmp_path / "behind.exr", pixels)
+    metal = Material("pbr", constant_texture((0.9, 0.9, 0.9)), None, 0.1, None, 1.0, (0.0, 0.0, 0.0), 0.04,
+                     "metal")
+    camera = top_camera(height=4.0, size=48)
+    frame = render(subject(sphere(material=metal)), camera, load_lighting({"environment": {"map": str(path)}}),
+                   samples=1)
+    centre = frame.colour[22:26, 22:26].reshape(-1, 3)
+    assert np.all(centre[:, 2] > 0.75) and np.all(centre[:, 2] < 0.95) and np.all(centre[:, 0] < 0.02)
 
 
 # ------------------------------------------------------------------------------------------------ backdrop
