@@ -60,6 +60,8 @@ SKY_WIDTH = 32              # the remainder's level the per-vertex rays look up 
 SH_WIDTH = 64               # the remainder's level projected onto spherical harmonics
 MIN_WIDTH = 8               # the coarsest mip level
 NEGATIVE_NOISE = 0.05       # of the map's mean: texels above minus this are zero with codec noise; below, an error
+MAPS_KEPT = 8               # maps kept read and prepared per process (all the built-in ones: a dataset drawing a map
+                            # per frame prepares each once; about 9 MB each at 1024 x 512)
 LUMA = np.array([0.2126, 0.7152, 0.0722])      # Rec. 709 luminance of linear RGB
 
 
@@ -93,7 +95,7 @@ def read_map(name_or_path: str | Path) -> np.ndarray:
     return _read_map(str(path), path.stat().st_mtime_ns)
 
 
-@functools.lru_cache(maxsize=4)
+@functools.lru_cache(maxsize=MAPS_KEPT)
 def _read_map(path: str, mtime: int) -> np.ndarray:
     buf = read_image_buf(path, "environment map")        # its decoders' stderr captured, faults one line
     spec = buf.spec()
@@ -311,7 +313,7 @@ def map_lighting(name_or_path: str | Path) -> MapLighting:
     return _map_lighting(str(path), path.stat().st_mtime_ns)
 
 
-@functools.lru_cache(maxsize=4)
+@functools.lru_cache(maxsize=MAPS_KEPT)
 def _map_lighting(path: str, mtime: int) -> MapLighting:
     full = pyramid(_read_map(path, mtime))
     work = level_of_width(full, LIGHT_WIDTH).astype(np.float64)
