@@ -88,8 +88,8 @@ def test_texel_directions_and_solid_angles_invert_the_convention():
 # ------------------------------------------------------------------------------------------------ closed forms
 
 
-@pytest.mark.parametrize("ao_rays", [16, 0])
-def test_uniform_white_map_renders_the_albedo_of_a_convex_lambert_surface(tmp_path, ao_rays):
+@pytest.mark.parametrize("ao_rays, interreflection", [(16, True), (16, False), (0, True)])
+def test_uniform_white_map_renders_the_albedo_of_a_convex_lambert_surface(tmp_path, ao_rays, interreflection):
     """A white Lambertian surface under a uniform map of value L renders L (the contract's units): a convex sphere
     sees the whole hemisphere of every point, so with indirect rays (all escape) or without (the SH irradiance of a
     constant is exact) its albedo a renders a x L."""
@@ -97,7 +97,7 @@ def test_uniform_white_map_renders_the_albedo_of_a_convex_lambert_surface(tmp_pa
     lighting = load_lighting({"environment": {"map": str(path), "strength": 0.5}})
     ball = sphere(material=flat_material((0.6, 0.4, 0.2)))
     frame = render(subject(ball), top_camera(height=4.0, size=48), lighting, samples=1,
-                   shading=ShadingOptions(ao_rays=ao_rays))
+                   shading=ShadingOptions(ao_rays=ao_rays, interreflection=interreflection))
     inside = frame.alpha == 1
     assert inside.sum() > 300
     assert np.abs(frame.colour[inside] - [0.6, 0.4, 0.2]).max() < 2e-3
