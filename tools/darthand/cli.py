@@ -482,8 +482,16 @@ def _add_render_arguments(p) -> None:
                    help="ambient, directional and point lights (schemas/lights.schema.json) (default: a key light "
                         "with shadows, a fill light and ambient, moving with the camera)")
     p.add_argument("--background", default=None, metavar="IMAGE",
-                   help="background image, scaled to cover the frame and composited in linear light "
-                        "(default: transparent)")
+                   help="background image, scaled to cover the frame and composited in linear light, or "
+                        "'environment': the --environment map seen through the camera (default: transparent)")
+    p.add_argument("--environment", default=None, metavar="NAME|PATH",
+                   help="light from an equirectangular environment map: a built-in one (city, courtyard, forest, "
+                        "interior, night, studio, sunrise, sunset) or an .exr/.hdr path; replaces the default rig "
+                        "(added to --lights' lights when both are given)")
+    p.add_argument("--environment-rotation", type=number(float, -36000, 36000), default=0.0, metavar="DEG",
+                   help="turn the environment about its up axis by DEG degrees (default 0)")
+    p.add_argument("--environment-strength", type=number(float, 0, 1e6), default=1.0, metavar="X",
+                   help="multiply the environment's radiance by X (default 1)")
     p.add_argument("--size", type=PIXELS, default=512, metavar="N", help="square image size in pixels (default 512)")
     p.add_argument("--width", type=PIXELS, default=None, metavar="W", help="image width (overrides --size)")
     p.add_argument("--height", type=PIXELS, default=None, metavar="H", help="image height (overrides --size)")

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.fileio import read_json
 from darthand.render.scenes import HandBody, Scene
 
 
@@ -30,6 +31,18 @@ def parse_pose(text: str | None):
     return text
 
 
+def environment_lights(args):
+    """The lights of `render`: --lights (a path or None) as given without --environment; with it, a lights document
+    whose "environment" field is --environment, --environment-rotation and --environment-strength (and whose
+    ambient and lights are --lights', or none)."""
+    if args.environment is None:
+        return args.lights
+    doc = dict(read_json(Path(args.lights), "lights file")) if args.lights else {}
+    doc["environment"] = {"map": args.environment, "rotation": args.environment_rotation,
+                          "strength": args.environment_strength}
+    return doc
+
+
 def render(args) -> int:
     """Render one labelled image of PACKAGE into --out."""
     from darthand.render.api import Renderer, open_source, write_frame
@@ -42,7 +55,7 @@ def render(args) -> int:
     hand = HandBody(pose=tuple(pose) if isinstance(pose, np.ndarray) else pose,
                     pose_index=args.pose_index if is_file and args.pose_index else None, texture=args.texture,
                     skin_tone_offset=args.skin_tone_offset, accessory=args.accessory)
-    scene = Scene((hand,), args.camera, args.lights, args.background)
+    scene = Scene((hand,), args.camera, environment_lights(args), args.background)
     width, height = args.width or args.size, args.height or args.size
     frame = Renderer(source, args.threads).render_scene(
         scene, width=width, height=height, samples=args.samples, aa_shading=args.aa_shading,

@@ -217,13 +217,18 @@ class VertexLight:
     of the numpy it replaced: the same values to the bit."""
 
     def __init__(self, scene, lights: list[dict], ambient: np.ndarray, rays: int, interreflection: bool = True,
-                 counters: dict | None = None):
+                 counters: dict | None = None, environment=None):
         """lights: lights.world_lights' dicts (radiance (3,) float32); ambient (3,) float32; rays per hand vertex;
-        counters: adds 'indirect_rays' (indirect and shadow rays cast)."""
+        counters: adds 'indirect_rays' (indirect and shadow rays cast); environment: the frame's
+        environment.FrameEnvironment or None: the vertex sees its remainder's unoccluded irradiance
+        (`irradiance`, the cosine-weighted mean of the sky over the normal's hemisphere) less what its blocked rays
+        would have seen (`sky` along them), besides the ambient light: the mean of the sky over the escaping rays,
+        with the unoccluded part exact (a control variate: an open vertex gets no noise)."""
         if int(rays) < 1:
             raise ValueError(f"VertexLight needs at least 1 ray per vertex, not {rays} (without indirect light, "
                              "make none)")
         self.scene, self.lights, self.rays = scene, lights, int(rays)
+        self.environment = environment
         self.interreflection = bool(interreflection)
         self.ambient = np.ascontiguousarray(ambient, np.float32)
         self.lift = LIFT * max(scene.extent, 1e-3)
@@ -291,7 +296,10 @@ class VertexLight:
                                     mirrored=self.scene.subject.side == "left", count=len(vertices))
         self._count(len(origins))
         if not self.interreflection:
-            _open_kernel(self.scene.occluded(origins, dirs, np.inf), k, self.ambient, ids, self.values[g])
+            blocked = self.scene.occluded(origins, dirs, np.inf)
+            _open_kernel(blocked, k, self.ambient, ids, self.values[g])
+            if self.environment is not None:
+                self.values[g][:3, ids] += self._environment_seen(normals[ids], dirs, blocked, k).T
             return
         self._albedo(g, ids)
         hit = self.scene.intersect(origins, dirs)
@@ -305,8 +313,21 @@ class VertexLight:
             if len(rays):
                 self._reflect(h, hit_vertices)
                 interpolate_columns(self.reflected[h], faces, prim, u, v, rays=rays, out=bounce)
+        if self.environment is not None:              # added to each of a vertex's k rays: to their mean
+            bounce += np.repeat(self._environment_seen(normals[ids], dirs, geom >= 0, k), k, axis=0).T
         _gather_vertices_kernel(geom, bounce, k, self.ambient, self.albedo[g], np.float32(MAX_BOUNCE_ALBEDO), ids,
                                 self.values[g])
+
+    def _environment_seen(self, normals: np.ndarray, dirs: np.ndarray, blocked: np.ndarray, k: int) -> np.ndarray:
+        """(N, 3) float32 the environment's pi-folded irradiance at N vertices with unit normals (N, 3) whose k rays
+        each (dirs (N * k, 3), vertex-major) are `blocked` (N * k,) bool: unoccluded irradiance less the mean sky of
+        the blocked rays, at least 0."""
+        assert self.environment is not None
+        open_sky = self.environment.irradiance(normals.T).T
+        hidden = np.zeros((len(blocked), 3), np.float32)
+        at = np.flatnonzero(blocked)
+        hidden[at] = self.environment.sky(dirs[at])
+        return np.maximum(open_sky - hidden.reshape(len(normals), k, 3).mean(axis=1), 0).astype(np.float32)
 
     def at(self, g: int, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(E (3, M) float32 indirect irradiance, V (M,) open fraction) at hits on faces prim (M,) of surface g

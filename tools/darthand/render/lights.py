@@ -9,6 +9,8 @@ Units and conventions (schemas/lights.schema.json):
 - A directional light's `direction` is the direction the light travels (from the light into the scene).
 - `frame`: 'camera' (OpenCV camera axes: x right, y down, z forward; the light moves with the camera) or 'world'
   (the model's frame).
+- `environment` (optional): an environment map lighting the scene from the whole sphere (environment.py), added to
+  the ambient term and the lights.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import numpy as np
 
 from darthand.errors import InputError
 from darthand.fileio import read_json
+from darthand.render.environment import Environment
 from darthand.schemas import check_schema
 
 
@@ -51,11 +54,12 @@ class Light:
 
 @dataclass(frozen=True)
 class Lighting:
-    """Ambient colour and intensity, and the lights."""
+    """Ambient colour and intensity, the lights, and an environment map (or None)."""
 
     ambient_color: tuple = (1.0, 1.0, 1.0)
     ambient_intensity: float = 0.0
     lights: tuple = field(default_factory=tuple)
+    environment: Environment | None = None
 
     @property
     def ambient(self) -> np.ndarray:
@@ -63,8 +67,11 @@ class Lighting:
         return (np.asarray(self.ambient_color, np.float32) * np.float32(self.ambient_intensity)).astype(np.float32)
 
     def to_json(self) -> dict:
-        return {"ambient": {"color": list(self.ambient_color), "intensity": self.ambient_intensity},
-                "lights": [light.to_json() for light in self.lights]}
+        doc = {"ambient": {"color": list(self.ambient_color), "intensity": self.ambient_intensity},
+               "lights": [light.to_json() for light in self.lights]}
+        if self.environment is not None:
+            doc["environment"] = self.environment.to_json()
+        return doc
 
 
 def default_lighting() -> Lighting:
@@ -104,7 +111,9 @@ def load_lighting(spec, source: str = "lights") -> Lighting:
                             direction=tuple(vec) if d["type"] == "directional" else None,
                             position=tuple(vec) if d["type"] == "point" else None,
                             shadows=bool(d.get("shadows", True)), frame=d.get("frame", "world")))
-    return Lighting(tuple(amb.get("color", (1.0, 1.0, 1.0))), float(amb.get("intensity", 0.0)), tuple(lights))
+    environment = None if "environment" not in spec else Environment.from_json(spec["environment"], source)
+    return Lighting(tuple(amb.get("color", (1.0, 1.0, 1.0))), float(amb.get("intensity", 0.0)), tuple(lights),
+                    environment)
 
 
 def world_lights(lighting: Lighting, R: np.ndarray, t: np.ndarray) -> list[dict]:

@@ -284,13 +284,14 @@ def diffuse_model(material: Material, hits: Hits, skin_model: str) -> DiffuseMod
 
 
 def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarray, occluded, extent: float,
-          counters: dict | None = None, skin_model: str = DEFAULT_SKIN) -> np.ndarray:
+          counters: dict | None = None, skin_model: str = DEFAULT_SKIN, environment=None) -> np.ndarray:
     """(3, M) float32 outgoing radiance at the hits.
 
     lights: world-frame lights (lights.world_lights; radiance float32). occluded(origins (K, 3), directions (K, 3),
     tfar (K,)) -> (K,) bool: the scene's occlusion query. extent: the scene's size (m), for the shadow-ray offset.
     counters: adds 'shadow_rays'. Indirect light comes with the hits (Hits.indirect, Hits.visible). skin_model: how
-    a skin material's diffuse part responds to a light (SKIN_MODELS).
+    a skin material's diffuse part responds to a light (SKIN_MODELS). environment: the frame's
+    environment.FrameEnvironment or None; its specular ambient (`environment_specular`) is added.
 
     Two compiled passes around the shadow rays: _lights_kernel (per light and hit: n.l, the diffuse response, which
     hits the light can reach and their shadow rays), then Embree's occlusion query per light, then _radiance_kernel
@@ -330,7 +331,19 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
     out = np.empty((3, m), np.float32)
     _radiance_kernel(f32(p.albedo), f32(p.roughness), f0, spec, ambient, irradiance, visible, nv, e2, n, v,
                      position, table, diffuse, reached, out)
+    if environment is not None and spec:
+        out += spec * environment_specular(environment, p, n, v, nv) * visible
     return out
+
+
+def environment_specular(environment, p: SurfaceParams, normal: np.ndarray, view: np.ndarray,
+                         nv: np.ndarray) -> np.ndarray:
+    """(3, M) float32 the specular ambient term of an environment (environment.FrameEnvironment): its radiance
+    prefiltered for the hits' roughness along the reflection directions 2 (n.v) n - v of unit normals and views
+    (3, M), times Karis' F0 A + B at n.v (M,) (clipped as the kernels clip it)."""
+    reflect = 2 * (normal * view).sum(axis=0) * normal - view
+    f0 = np.broadcast_to(p.f0, reflect.shape)
+    return (environment.specular(reflect, p.roughness) * ambient_specular(f0, p.roughness, nv)).astype(np.float32)
 
 
 @kernel(error_model="numpy")

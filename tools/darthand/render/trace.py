@@ -21,6 +21,7 @@ from threadpoolctl import ThreadpoolController
 from darthand.jit import kernel
 from darthand.model.layout import FACE_LABEL_IDS
 from darthand.render.camera import Camera, point_bounds
+from darthand.render.environment import FrameEnvironment
 from darthand.render.indirect import VertexLight
 from darthand.render.scene import Scene, interpolate_columns
 from darthand.render.shade import DEFAULT_SKIN, shade, surface_hits
@@ -65,7 +66,8 @@ def pool(threads: int) -> ThreadPoolExecutor:
 @dataclass
 class Context:
     """What every sample batch of one frame shares; indirect: the frame's indirect light at the vertices
-    (indirect.VertexLight), or None; skin: the skin model (shade.SKIN_MODELS)."""
+    (indirect.VertexLight), or None; skin: the skin model (shade.SKIN_MODELS); environment: the frame's environment
+    map lighting (environment.FrameEnvironment; its lights are among `lights`), or None."""
 
     scene: Scene
     camera: Camera
@@ -74,6 +76,7 @@ class Context:
     threads: int = 1
     indirect: VertexLight | None = None
     skin: str = DEFAULT_SKIN
+    environment: FrameEnvironment | None = None
     dDdx: np.ndarray = field(init=False)
     dDdy: np.ndarray = field(init=False)
 
@@ -203,11 +206,13 @@ def shade_hits(ctx: Context, hits: RayHits, footprint: float = 1.0,
         at = surface_hits(ctx.scene.faces[g], on.prim, on.u, on.v, on.directions, on.depth, pixel_angle)
         if ctx.indirect is not None:
             at.indirect, at.visible = ctx.indirect.at(g, on.prim, on.u, on.v)
+        elif ctx.environment is not None:               # no indirect rays: the environment unoccluded
+            at.indirect = ctx.environment.irradiance(at.normal) + ctx.ambient[:, None]
         if ctx.skin == "subsurface" and surface.material.kind == "skin":
             skin_at(at, surface, on.prim, on.u, on.v)
         _put_columns_kernel(idx, np.ascontiguousarray(at.normal, np.float32), normal)
         colour = shade(surface.material, at, ctx.lights, ctx.ambient, ctx.scene.occluded, ctx.scene.extent,
-                       counters, ctx.skin)
+                       counters, ctx.skin, ctx.environment)
         _put_columns_kernel(idx, np.ascontiguousarray(colour, np.float32), radiance)
     if stats is not None:
         stats["shade"] = stats.get("shade", 0.0) + time.perf_counter() - t0

@@ -1,0 +1,481 @@
+"""Image-based lighting: an equirectangular environment map as a frame's light and backdrop.
+
+The contract (schemas/lights.schema.json, field "environment"):
+
+- A map is named by its stem (a built-in map of `assets_src/environments/`, `list_builtin()`) or given by path (an
+  equirectangular .exr or .hdr, width = 2 x height, linear RGB, no NaN, Inf or negative texel).
+- The environment's radiance in direction d is map(d) x strength x white_balance, in the map's own units: a white
+  Lambertian surface under a uniform map of value L renders radiance L (lights.py's pi-folded intensities).
+- Direction -> texel, Blender's convention in the environment frame E (right-handed, z up):
+  u = atan2(d_y, -d_x) / (2 pi) + 0.5, v = atan2(d_z, hypot(d_x, d_y)) / pi + 0.5, v = 1 the image's top row.
+  `rotation` turns the environment about E's z by that many degrees (d_E is looked up as Rz(-rotation) d_E).
+- Frame 'camera': d_E = (-d_cam.z, d_cam.x, -d_cam.y) (OpenCV camera axes), so with rotation 0 the camera looks at
+  the map's centre column, the map's up the image's up. Frame 'world': d_E = (d.x, -d.z, d.y) (the model's world,
+  Y up, as glTF imported into Blender).
+
+How the renderer lights with it (`frame_environment`), per map once (`map_lighting`, cached), then per frame a
+rotation and a colour scale:
+
+- the compact bright part (a sun, windows, lamps) as up to MAX_LIGHTS directional lights with hard shadows: every
+  texel's luminance above a threshold (CLAMP_MEAN x the map's mean, or its BRIGHT_SHARE brightest solid angle,
+  whichever is higher) is its excess, split by median cut (along the axis of the largest spread of the excess's
+  directions, at its power's median) into clusters; a cluster is a light at its power-weighted mean direction
+  carrying its power (intensity = integral of the excess radiance over the cluster's solid angle / pi);
+- the rest, the map with its luminance clamped to the threshold, as the ambient light generalised: indirect.py's
+  per-vertex rays that escape bring its radiance back (a blurred low-resolution level, `FrameEnvironment.sky`), or
+  without those rays its irradiance per normal from its order-2 spherical harmonics (`FrameEnvironment.irradiance`);
+- specular ambient: that remainder prefiltered by box mip levels, the level picked by the GGX lobe's width,
+  looked up along the reflection direction (`FrameEnvironment.specular`).
+
+Errors in the uniform-map and one-bright-texel cases are what tests/render/test_environment.py checks; the error
+against many environment rays per pixel is measured by benchmarks/environment_light.py.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+from darthand.errors import InputError
+from darthand.jit import kernel
+from darthand.render.image import read_image_buf
+
+BUILTIN_DIR = Path(__file__).resolve().parents[3] / "assets_src" / "environments"
+SUFFIXES = (".exr", ".hdr")
+FRAMES = ("camera", "world")
+ENVIRONMENT_BACKGROUND = "environment"      # the background that is the environment itself (render_subject)
+MAX_LIGHTS = 6              # directional lights taken from a map's bright part (shadow rays per hit and light;
+                            # benchmarks/environment_light.py: 4 leave twice the error on the studio map)
+LIGHT_WIDTH = 256           # the map's width at which lights are extracted (1.4 degree texels)
+CLAMP_MEAN = 4.0            # texels brighter than this x the map's mean luminance give their excess to lights ...
+BRIGHT_SHARE = 0.005        # ... or than the brightest 0.5 % of the sphere, whichever threshold is higher
+MIN_SPREAD = 2.0            # degrees: a cluster of excess narrower than this (a sun) is not split further
+MIN_LIGHT_SHARE = 0.02      # lights weaker than this share of the strongest, or of the map's whole power, are left
+                            # to the remainder (not worth their shadow rays)
+SKY_WIDTH = 32              # the remainder's level the per-vertex rays look up (11 degree texels, then bilinear)
+SH_WIDTH = 64               # the remainder's level projected onto spherical harmonics
+MIN_WIDTH = 8               # the coarsest mip level
+NEGATIVE_NOISE = 0.05       # of the map's mean: texels above minus this are zero with codec noise; below, an error
+MAPS_KEPT = 8               # maps kept read and prepared per process (all the built-in ones: a dataset drawing a map
+                            # per frame prepares each once; about 9 MB each at 1024 x 512)
+LUMA = np.array([0.2126, 0.7152, 0.0722])      # Rec. 709 luminance of linear RGB
+
+
+# ------------------------------------------------------------------------------------------------ maps
+
+
+def list_builtin() -> list[str]:
+    """The built-in maps' names (stems of assets_src/environments/*.exr), sorted."""
+    return sorted(p.stem for p in BUILTIN_DIR.glob("*.exr"))
+
+
+def map_path(name_or_path: str | Path) -> Path:
+    """The file of a map given by built-in name or path; InputError naming it when it is neither."""
+    text = str(name_or_path)
+    if text in list_builtin() and not Path(text).is_file():
+        return BUILTIN_DIR / f"{text}.exr"
+    path = Path(text)
+    if not path.exists():
+        raise InputError(f"environment {text!r}: neither a built-in map ({', '.join(list_builtin())}) nor a file")
+    if path.suffix.lower() not in SUFFIXES:
+        raise InputError(f"{path}: an environment map is an equirectangular .exr or .hdr file")
+    return path
+
+
+def read_map(name_or_path: str | Path) -> np.ndarray:
+    """(H, 2H, 3) float32 linear RGB of a map (built-in name or path), read once per (path, mtime) and checked:
+    InputError, one line naming the file, when it does not decode, is not 2:1, or holds NaN, Inf or negative values.
+    Negative texels within NEGATIVE_NOISE x the map's mean of zero (a lossy codec's undershoot: the built-in maps'
+    DWAB compression leaves some down to -0.002) are read as zero. The array is shared: do not write to it."""
+    path = map_path(name_or_path)
+    return _read_map(str(path), path.stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=MAPS_KEPT)
+def _read_map(path: str, mtime: int) -> np.ndarray:
+    buf = read_image_buf(path, "environment map")        # its decoders' stderr captured, faults one line
+    spec = buf.spec()
+    if spec.width != 2 * spec.height:
+        raise InputError(f"{path}: environment map is {spec.width}x{spec.height}, not 2:1 (equirectangular)")
+    pixels = buf.get_pixels(oiio.FLOAT)
+    if pixels is None:
+        raise InputError(f"{path}: cannot read environment map ({buf.geterror() or 'no pixels'})")
+    pixels = np.asarray(pixels, np.float32).reshape(spec.height, spec.width, spec.nchannels)
+    rgb = np.repeat(pixels[..., :1], 3, axis=2) if spec.nchannels < 3 else pixels[..., :3]
+    if not np.isfinite(rgb).all():
+        raise InputError(f"{path}: environment map holds NaN or Inf values")
+    if (rgb < -NEGATIVE_NOISE * max(float(rgb.mean()), 1e-6)).any():
+        raise InputError(f"{path}: environment map holds negative values")
+    rgb = np.ascontiguousarray(np.maximum(rgb, 0))      # lossy codecs' undershoot (the built-in maps' DWAB)
+    rgb.setflags(write=False)
+    return rgb
+
+
+# ------------------------------------------------------------------------------------------------ the document
+
+
+@dataclass(frozen=True)
+class Environment:
+    """A lights document's "environment": map (built-in name or path), rotation (degrees about E's z), strength
+    (linear multiplier), white_balance (3,) linear multipliers, frame ('camera' or 'world')."""
+
+    map: str
+    rotation: float = 0.0
+    strength: float = 1.0
+    white_balance: tuple = (1.0, 1.0, 1.0)
+    frame: str = "camera"
+
+    @staticmethod
+    def from_json(doc: dict, source: str = "lights") -> "Environment":
+        """From the document field (already schema-checked); InputError naming the source when the map is missing
+        or bad."""
+        env = Environment(str(doc["map"]), float(doc.get("rotation", 0.0)), float(doc.get("strength", 1.0)),
+                          tuple(float(x) for x in doc.get("white_balance", (1.0, 1.0, 1.0))),
+                          str(doc.get("frame", "camera")))
+        if env.frame not in FRAMES:
+            raise InputError(f"{source}: field 'environment.frame' is {env.frame!r}, not one of {', '.join(FRAMES)}")
+        read_map(env.map)
+        return env
+
+    def to_json(self) -> dict:
+        return {"map": self.map, "rotation": self.rotation, "strength": self.strength,
+                "white_balance": list(self.white_balance), "frame": self.frame}
+
+    @property
+    def scale(self) -> np.ndarray:
+        """(3,) float64 strength x white_balance."""
+        return self.strength * np.asarray(self.white_balance, np.float64)
+
+
+# ------------------------------------------------------------------------------------------------ directions
+
+_CAMERA_TO_E = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+_WORLD_TO_E = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+def frame_matrix(frame: str, R: np.ndarray, rotation: float = 0.0) -> np.ndarray:
+    """(3, 3) M taking world directions to the map's lookup directions, d_map = Rz(-rotation) d_E: d_E from the
+    world direction through the camera (R (3, 3) world -> camera) for frame 'camera', directly for 'world'."""
+    to_e = _CAMERA_TO_E @ np.asarray(R, np.float64) if frame == "camera" else _WORLD_TO_E
+    a = np.radians(-rotation)
+    rz = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    return rz @ to_e
+
+
+def env_directions(directions: np.ndarray, frame: str, R: np.ndarray, rotation: float = 0.0) -> np.ndarray:
+    """(N, 3) the map's lookup directions of world directions (N, 3) (see frame_matrix)."""
+    return np.asarray(directions, np.float64) @ frame_matrix(frame, R, rotation).T
+
+
+def direction_uv(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(u, v) in [0, 1] of lookup directions d (N, 3) (need not be unit): Blender's equirectangular convention,
+    u = atan2(d_y, -d_x) / (2 pi) + 0.5, v = atan2(d_z, hypot(d_x, d_y)) / pi + 0.5 (v = 1 the top row)."""
+    d = np.asarray(d, np.float64)
+    u = np.arctan2(d[:, 1], -d[:, 0]) / (2 * np.pi) + 0.5
+    v = np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])) / np.pi + 0.5
+    return u, v
+
+
+def texel_directions(height: int) -> np.ndarray:
+    """(H, 2H, 3) unit lookup directions of the texel centres of an H x 2H map (the inverse of direction_uv)."""
+    width = 2 * height
+    u = (np.arange(width) + 0.5) / width
+    v = 1 - (np.arange(height) + 0.5) / height
+    phi, theta = 2 * np.pi * (u[None, :] - 0.5), np.pi * (v[:, None] - 0.5)
+    c = np.cos(theta)
+    return np.stack(np.broadcast_arrays(-c * np.cos(phi), c * np.sin(phi), np.sin(theta)), axis=-1)
+
+
+def texel_solid_angles(height: int) -> np.ndarray:
+    """(H, 1) the solid angle of each row's texels of an H x 2H map (steradians; they sum to 4 pi over the map)."""
+    edges = np.pi * (0.5 - np.arange(height + 1) / height)          # elevation of the row boundaries, top down
+    return ((np.sin(edges[:-1]) - np.sin(edges[1:])) * (2 * np.pi / (2 * height)))[:, None]
+
+
+# ------------------------------------------------------------------------------------------------ mip levels
+
+
+def halve(level: np.ndarray) -> np.ndarray:
+    """(H/2, W/2, 3) float32: each 2 x 2 block's mean radiance weighted by its texels' solid angles (so power is
+    kept)."""
+    h = level.shape[0]
+    w = texel_solid_angles(h)[:, :, None]
+    weighted = (level * w).reshape(h // 2, 2, level.shape[1] // 2, 2, 3).sum(axis=(1, 3))
+    return (weighted / w.reshape(h // 2, 2, 1, 1).sum(axis=1) / 2).astype(np.float32)
+
+
+def pyramid(pixels: np.ndarray) -> list[np.ndarray]:
+    """Mip levels of a map, finest first: the map at a power-of-two width (resampled by OpenImageIO when it is not
+    one), then halved down to MIN_WIDTH."""
+    h, w = pixels.shape[:2]
+    top = max(MIN_WIDTH, 1 << int(np.floor(np.log2(w))))
+    if top != w:
+        buf = oiio.ImageBufAlgo.resize(oiio.ImageBuf(np.ascontiguousarray(pixels, np.float32)),
+                                       roi=oiio.ROI(0, top, 0, top // 2, 0, 1, 0, 3))
+        pixels = np.asarray(buf.get_pixels(oiio.FLOAT), np.float32).reshape(top // 2, top, 3)
+        pixels = np.maximum(pixels, 0)               # the resampling filter's lobes may undershoot
+    levels = [np.asarray(pixels, np.float32)]
+    while levels[-1].shape[1] > MIN_WIDTH:
+        levels.append(halve(levels[-1]))
+    return levels
+
+
+def level_of_width(levels: list[np.ndarray], width: int) -> np.ndarray:
+    """The finest level no wider than `width` (the coarsest if all are)."""
+    return next((lv for lv in levels if lv.shape[1] <= width), levels[-1])
+
+
+def bilinear(level: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 bilinear lookup of a map level (H, W, 3) along lookup directions d (N, 3) (direction_uv's
+    convention), wrapping in u and clamping at the poles."""
+    out = np.zeros((len(d), 3), np.float64)
+    _lookup_kernel(np.ascontiguousarray(level, np.float32), np.ascontiguousarray(d, np.float64), np.eye(3), 0, 1.0,
+                   out)
+    return out
+
+
+@kernel(error_model="numpy")
+def _lookup_kernel(level, d, to_map, width, weight, out):
+    """out[i] += weight x the bilinear lookup of level (H, W, 3) float32 along the i-th direction: d[i] (N, 3)
+    float64, or with width > 0 the direction of pixel centre (i % width + 0.5, i // width + 0.5, 1) times to_map
+    (3, 3) (a row vector times the matrix; d unused). u, v as direction_uv; texel coordinates x = u W - 0.5,
+    y = (1 - v) H - 0.5 (texel centres at integers), x wrapping, y clamped."""
+    h, w = level.shape[0], level.shape[1]
+    for i in range(out.shape[0]):
+        if width > 0:
+            px, py = i % width + 0.5, i // width + 0.5
+            d0 = px * to_map[0, 0] + py * to_map[1, 0] + to_map[2, 0]
+            d1 = px * to_map[0, 1] + py * to_map[1, 1] + to_map[2, 1]
+            d2 = px * to_map[0, 2] + py * to_map[1, 2] + to_map[2, 2]
+        else:
+            d0, d1, d2 = d[i, 0], d[i, 1], d[i, 2]
+        x = (np.arctan2(d1, -d0) / (2 * np.pi) + 0.5) * w - 0.5
+        y = (0.5 - np.arctan2(d2, np.hypot(d0, d1)) / np.pi) * h - 0.5
+        fx0, fy0 = np.floor(x), np.floor(y)
+        fx, fy = x - fx0, y - fy0
+        x0 = int(fx0) % w
+        x1 = (x0 + 1) % w
+        y0 = min(max(int(fy0), 0), h - 1)
+        y1 = min(max(int(fy0) + 1, 0), h - 1)
+        for c in range(3):
+            top = level[y0, x0, c] * (1 - fx) + level[y0, x1, c] * fx
+            bottom = level[y1, x0, c] * (1 - fx) + level[y1, x1, c] * fx
+            out[i, c] += weight * (top * (1 - fy) + bottom * fy)
+
+
+def level_of_detail(levels: list[np.ndarray], angle_deg: np.ndarray) -> np.ndarray:
+    """(N,) the fractional mip level whose texels (360 / width degrees) span `angle_deg` (N,), clipped to the
+    levels."""
+    finest = 360.0 / levels[0].shape[1]
+    return np.clip(np.log2(np.maximum(angle_deg, finest) / finest), 0, len(levels) - 1)
+
+
+def lookup_blurred(levels: list[np.ndarray], d: np.ndarray, angle_deg: np.ndarray | float) -> np.ndarray:
+    """(N, 3) float64 radiance of the map along lookup directions d (N, 3), blurred over about `angle_deg` (N,) or
+    a scalar: trilinear between the mip levels whose texels span the angle."""
+    lod = level_of_detail(levels, np.broadcast_to(np.asarray(angle_deg, np.float64), (len(d),)))
+    lo = np.floor(lod).astype(np.int64)
+    out = np.zeros((len(d), 3))
+    for k in np.unique(lo):
+        at = np.flatnonzero(lo == k)
+        frac = (lod[at] - k)[:, None]
+        value = bilinear(levels[k], d[at])
+        if k + 1 < len(levels) and frac.any():
+            value = value * (1 - frac) + bilinear(levels[k + 1], d[at]) * frac
+        out[at] = value
+    return out
+
+
+# ------------------------------------------------------------------------------------------------ per map
+
+
+@dataclass(frozen=True)
+class MapLighting:
+    """What a map lights with, in its own lookup frame, before rotation and colour scale: light_dirs (K, 3) unit
+    directions toward the lights, light_power (K, 3) their pi-folded intensities; remainder: mip levels of the map
+    less the lights' part (finest first); sh (9, 3) the remainder's order-2 spherical-harmonic coefficients; full:
+    mip levels of the whole map (the backdrop)."""
+
+    light_dirs: np.ndarray
+    light_power: np.ndarray
+    remainder: list
+    sh: np.ndarray
+    full: list
+
+
+def map_lighting(name_or_path: str | Path) -> MapLighting:
+    """A map's MapLighting, made once per (path, mtime)."""
+    path = map_path(name_or_path)
+    return _map_lighting(str(path), path.stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=MAPS_KEPT)
+def _map_lighting(path: str, mtime: int) -> MapLighting:
+    full = pyramid(_read_map(path, mtime))
+    work = level_of_width(full, LIGHT_WIDTH).astype(np.float64)
+    remainder, excess = split_bright(work)
+    total = float((work @ LUMA * texel_solid_angles(work.shape[0])).sum() / np.pi)
+    dirs, power, kept = median_cut(excess, MAX_LIGHTS, MIN_LIGHT_SHARE * total)
+    remainder = remainder + excess * ~kept[..., None]           # what no light took stays in the remainder
+    levels = pyramid(remainder.astype(np.float32))
+    return MapLighting(dirs, power, levels, sh_project(level_of_width(levels, SH_WIDTH)), full)
+
+
+def split_bright(level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(remainder, excess) (H, W, 3) of a map level: a texel brighter (in luminance) than the threshold keeps the
+    threshold's luminance in its own colour, the rest is its excess; remainder + excess = the level."""
+    weight = texel_solid_angles(level.shape[0])
+    luma = level @ LUMA
+    area = np.broadcast_to(weight, luma.shape).ravel()
+    mean = float((luma * weight).sum() / (4 * np.pi))
+    order = np.argsort(luma.ravel())[::-1]
+    top = min(int(np.searchsorted(np.cumsum(area[order]), BRIGHT_SHARE * 4 * np.pi)), len(order) - 1)
+    threshold = max(CLAMP_MEAN * mean, float(luma.ravel()[order[top]]), 1e-12)
+    keep = np.minimum(1.0, threshold / np.maximum(luma, 1e-30))[..., None]
+    return level * keep, level * (1 - keep)
+
+
+def median_cut(excess: np.ndarray, count: int, floor: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(directions (K, 3) unit toward the lights, power (K, 3) pi-folded intensities, kept (H, W) bool the texels
+    they took), K <= count, of a map level's excess radiance (H, W, 3). Median cut: the cluster of the largest power
+    x angular spread is split in two at the median of its power along the axis (x, y or z) of its directions' largest
+    weighted spread, until `count` clusters or none spreads over more than MIN_SPREAD; clusters with less than
+    MIN_LIGHT_SHARE of the strongest one's power, or a luminance power below `floor`, are left to the remainder. A
+    cluster's power is the integral of its radiance over its solid angle / pi, its direction the power-weighted
+    mean."""
+    h = excess.shape[0]
+    flat_power = (excess * texel_solid_angles(h)[:, :, None] / np.pi).reshape(-1, 3)
+    weight = flat_power @ LUMA
+    kept = np.zeros(excess.shape[:2], bool)
+    where = np.flatnonzero(weight > 0)
+    if not len(where):
+        return np.zeros((0, 3)), np.zeros((0, 3)), kept
+    dirs = texel_directions(h).reshape(-1, 3)
+    clusters = [where]
+    while len(clusters) < count:
+        spreads = [spread(dirs[m], weight[m]) for m in clusters]
+        k = int(np.argmax([weight[m].sum() * s for m, s in zip(clusters, spreads)]))
+        if spreads[k] < np.radians(MIN_SPREAD) ** 2 or len(clusters[k]) < 2:
+            break
+        clusters[k:k + 1] = split_cluster(clusters[k], dirs[clusters[k]], weight[clusters[k]])
+    clusters.sort(key=lambda m: -weight[m].sum())
+    strongest = weight[clusters[0]].sum()
+    clusters = [m for m in clusters if weight[m].sum() >= max(MIN_LIGHT_SHARE * strongest, floor)]
+    out_dirs, out_power = [], []
+    for members in clusters:
+        mean = (dirs[members] * weight[members, None]).sum(axis=0)
+        out_dirs.append(mean / np.linalg.norm(mean))
+        out_power.append(flat_power[members].sum(axis=0))
+        kept.reshape(-1)[members] = True
+    return np.array(out_dirs).reshape(-1, 3), np.array(out_power).reshape(-1, 3), kept
+
+
+def spread(dirs: np.ndarray, weight: np.ndarray) -> float:
+    """The power-weighted variance of unit directions (M, 3) (squared radians, for a small cluster)."""
+    mean = (dirs * weight[:, None]).sum(axis=0) / weight.sum()
+    return float(((dirs - mean) ** 2 * weight[:, None]).sum() / weight.sum())
+
+
+def split_cluster(members: np.ndarray, dirs: np.ndarray, weight: np.ndarray) -> list[np.ndarray]:
+    """Two halves of a cluster of texels `members` (M,) with directions (M, 3) and powers (M,): split at the power
+    median along the axis of largest weighted variance (ties broken by texel index: deterministic)."""
+    mean = (dirs * weight[:, None]).sum(axis=0) / weight.sum()
+    spread = ((dirs - mean) ** 2 * weight[:, None]).sum(axis=0)
+    axis = int(np.argmax(spread))
+    order = np.lexsort((members, dirs[:, axis]))
+    cut = int(np.searchsorted(np.cumsum(weight[order]), weight.sum() / 2))
+    cut = min(max(cut, 1), len(order) - 1)
+    return [members[np.sort(order[:cut])], members[np.sort(order[cut:])]]
+
+
+# ------------------------------------------------------------------------------------------------ harmonics
+
+SH_BAND = np.array([np.pi] + [2 * np.pi / 3] * 3 + [np.pi / 4] * 5)    # the cosine lobe's convolution per band
+
+
+def sh_basis(d: np.ndarray) -> np.ndarray:
+    """(N, 9) the real spherical harmonics of order <= 2 at unit directions d (N, 3)."""
+    x, y, z = d[:, 0], d[:, 1], d[:, 2]
+    return np.stack([np.full_like(x, 0.282095), 0.488603 * y, 0.488603 * z, 0.488603 * x, 1.092548 * x * y,
+                     1.092548 * y * z, 0.315392 * (3 * z * z - 1), 1.092548 * x * z, 0.546274 * (x * x - y * y)],
+                    axis=1)
+
+
+def sh_project(level: np.ndarray) -> np.ndarray:
+    """(9, 3) coefficients of a map level (H, W, 3): the integral of radiance x basis over the sphere."""
+    h = level.shape[0]
+    weighted = (level * texel_solid_angles(h)[:, :, None]).reshape(-1, 3)
+    return sh_basis(texel_directions(h).reshape(-1, 3)).T @ weighted
+
+
+def sh_irradiance(sh: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(N, 3) irradiance / pi (the pi-folded irradiance: a white Lambertian surface's radiance) of SH radiance
+    coefficients (9, 3) at unit normals (N, 3) (Ramamoorthi and Hanrahan 2001)."""
+    return np.maximum(sh_basis(normals) @ (sh * SH_BAND[:, None]) / np.pi, 0.0)
+
+
+# ------------------------------------------------------------------------------------------------ per frame
+
+
+@dataclass
+class FrameEnvironment:
+    """An environment prepared for one frame's camera: `lights` (lights.world_lights' dicts, world frame) and the
+    remainder's lookups in world directions. M (3, 3) world -> lookup directions; scale (3,) the colour scale."""
+
+    lights: list
+    lighting: MapLighting
+    M: np.ndarray
+    scale: np.ndarray
+
+    def sky(self, directions: np.ndarray) -> np.ndarray:
+        """(N, 3) float32 the remainder's radiance seen along world directions (N, 3), blurred at SKY_WIDTH (what an
+        indirect ray that escapes brings back)."""
+        level = level_of_width(self.lighting.remainder, SKY_WIDTH)
+        return (bilinear(level, np.asarray(directions, np.float64) @ self.M.T) * self.scale).astype(np.float32)
+
+    def irradiance(self, normals: np.ndarray) -> np.ndarray:
+        """(3, N) float32 the remainder's unoccluded pi-folded irradiance at world unit normals (3, N)."""
+        n = np.asarray(normals, np.float64).T @ self.M.T
+        return (sh_irradiance(self.lighting.sh, n) * self.scale).T.astype(np.float32)
+
+    def specular(self, directions: np.ndarray, roughness: np.ndarray) -> np.ndarray:
+        """(3, N) float32 the remainder prefiltered for GGX roughness (N,) along world reflection directions
+        (3, N): blurred over about 90 alpha degrees (alpha = roughness^2, the lobe's width)."""
+        d = np.asarray(directions, np.float64).T @ self.M.T
+        angle = 90.0 * np.asarray(roughness, np.float64) ** 2
+        return (lookup_blurred(self.lighting.remainder, d, angle) * self.scale).T.astype(np.float32)
+
+
+def frame_environment(environment: Environment, R: np.ndarray) -> FrameEnvironment:
+    """The environment for a camera (R (3, 3) world -> camera): its map's lights turned into the world and scaled,
+    its remainder's lookups."""
+    lighting = map_lighting(environment.map)
+    M = frame_matrix(environment.frame, R, environment.rotation)
+    scale = environment.scale
+    lights = [{"type": "directional", "radiance": (p * scale).astype(np.float32), "shadows": True,
+               "direction": -(M.T @ d)} for d, p in zip(lighting.light_dirs, lighting.light_power)]
+    return FrameEnvironment(lights, lighting, M, scale)
+
+
+def background_view(environment: Environment, camera, blur_deg: float = 0.0) -> np.ndarray:
+    """(H, W, 3) float32 linear: the environment seen through `camera` (render/camera.Camera), each pixel centre's
+    ray looked up in the whole map (sun included), blurred over about `blur_deg` degrees (0: bilinear at full
+    resolution)."""
+    if not (np.isfinite(blur_deg) and 0 <= blur_deg <= 180):
+        raise InputError(f"background_blur: {blur_deg!r} is not a number of degrees in 0..180")
+    levels = map_lighting(environment.map).full
+    # pixel (x, y, 1) -> world direction R^T K^-1 p -> the lookup frame: one (3, 3) matrix (for row vectors)
+    to_map = np.linalg.inv(camera.K).T @ camera.R @ frame_matrix(environment.frame, camera.R, environment.rotation).T
+    lod = float(level_of_detail(levels, np.array([float(blur_deg)]))[0])
+    k, frac = int(lod), lod - int(lod)
+    colour = np.zeros((camera.height * camera.width, 3), np.float64)
+    none = np.zeros((0, 3))
+    for level, weight in ((k, 1 - frac), (k + 1, frac)):
+        if weight > 0 and level < len(levels):
+            _lookup_kernel(np.ascontiguousarray(levels[level], np.float32), none, to_map, camera.width, weight, colour)
+    colour *= environment.scale
+    return colour.reshape(camera.height, camera.width, 3).astype(np.float32)
