@@ -30,7 +30,7 @@ def write_map(path, pixels: np.ndarray) -> str:
 def map_folder(tmp_path_factory):
     """A folder of two good maps and three bad ones (not an image, not 2:1, holding NaN)."""
     root = tmp_path_factory.mktemp("maps")
-    write_map(root / "grey.exr", np.full((16, 32, 3), 0.25, np.float32))
+    write_map(root / "grey.hdr", np.full((16, 32, 3), 0.25, np.float32))
     sky = np.zeros((16, 32, 3), np.float32)
     sky[:8] = 2.0                                      # bright upper half, dark lower half
     (root / "sub").mkdir()
@@ -39,7 +39,7 @@ def map_folder(tmp_path_factory):
     write_map(root / "square.exr", np.ones((16, 16, 3), np.float32))
     nan = np.ones((16, 32, 3), np.float32)
     nan[3, 4, 1] = np.nan
-    write_map(root / "nan.hdr", nan)
+    write_map(root / "nan.exr", nan)
     return root
 
 
@@ -63,9 +63,9 @@ def test_white_balance_is_neutral_at_6500_kelvin_and_warm_below():
 
 def test_bad_maps_are_left_out_and_recorded(map_folder):
     env = environments.EnvironmentSet(str(map_folder))
-    assert sorted(n.rsplit("/", 1)[-1] for n, _ in env.maps) == ["grey.exr", "sky.exr"]
+    assert sorted(n.rsplit("/", 1)[-1] for n, _ in env.maps) == ["grey.hdr", "sky.exr"]
     skipped = {s["file"].rsplit("/", 1)[-1]: s["reason"] for s in env.skipped}
-    assert sorted(skipped) == ["broken.exr", "nan.hdr", "square.exr"]
+    assert sorted(skipped) == ["broken.exr", "nan.exr", "square.exr"]
     assert all("\n" not in reason and len(reason) < 300 for reason in skipped.values())
     assert env.describe()["maps"] == 2 and len(env.describe()["skipped"]) == 3
     with pytest.raises(InputError, match="no usable map"):

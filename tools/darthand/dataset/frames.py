@@ -17,16 +17,19 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from darthand.dataset.backgrounds import background_pixels
+from darthand.dataset.environments import match_background
 from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.model.shape import shaped_vertices
 from darthand.render import truth
 from darthand.render.api import shading_options, write_frame
+from darthand.render.environment import backdrop_blur
 from darthand.render.labels import mano_camera_parameters
 from darthand.render.scenes import Scene
 from darthand.template.anthropometry import hand_sizes
@@ -78,8 +81,16 @@ def render_job(renderer, job: dict, settings: dict):
     size = settings["size"]
     background, info = None, None
     t = time.perf_counter()
-    if isinstance(scene.background, dict):
+    blur = backdrop_blur(scene.background)
+    if blur is not None:
+        background = scene.background                 # the environment itself: drawn through the frame's camera
+        environment = (scene.lights or {}).get("environment", {}) if isinstance(scene.lights, dict) else {}
+        info = {"used": f"environment:{Path(str(environment.get('map', '?'))).stem}", "blur": blur, "skipped": []}
+    elif isinstance(scene.background, dict):
         background, info = background_pixels(scene.background, size, size)
+        if isinstance(scene.lights, dict) and "environment" in scene.lights:
+            scene = replace(scene, lights={**scene.lights, "environment": match_background(
+                scene.lights["environment"], background)})
     t = time.perf_counter() - t
     frame = renderer.render_scene(scene, background=background, width=size, height=size,
                                   samples=settings["samples"], aa_shading=settings["aa_shading"],

@@ -24,7 +24,7 @@ from darthand.jit import kernel
 from darthand.render import aa, truth
 from darthand.render.assets import HandAssets, default_catalogues
 from darthand.render.camera import Camera, load_camera
-from darthand.render.environment import ENVIRONMENT_BACKGROUND, background_view, frame_environment
+from darthand.render.environment import ENVIRONMENT_BACKGROUND, backdrop_blur, background_view, frame_environment
 from darthand.render.image import compose, encode_mask8, load_background, write_exr, write_png
 from darthand.render.indirect import VertexLight
 from darthand.render.labels import frame_labels
@@ -96,8 +96,8 @@ class Renderer:
         """One frame. pose: None (flat), a gesture name, a pose file or (48,) MANO axis-angle (flat-hand relative).
         camera: a Camera, a view name, a camera JSON path or dict (camera.load_camera), framed on the posed hand.
         lights: a Lighting, a lights JSON path or dict, or None (lights.default_lighting). background: image path or
-        (H, W, 3) linear array, 'environment' (the lights' environment map seen through the camera:
-        environment.background_view), or None (transparent). samples: sub-samples per edge pixel (1, 4, 8, 16);
+        (H, W, 3) linear array, 'environment' or {'environment': True, 'blur': degrees} (the lights' environment
+        map seen through the camera: environment.background_view), or None (transparent). samples: sub-samples per edge pixel (1, 4, 8, 16);
         aa_shading: shade them once per pixel per triangle ('triangle') or each ('sample') (see aa.py). shading: a
         shade.ShadingOptions or a dict of its fields (ambient occlusion, skin model), None for the defaults. betas:
         the hand's shape (S,) for a model source (None: the model's own). maps: per-pixel truth maps to compute
@@ -256,10 +256,11 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
     full_depth = np.zeros((H, W), np.float32)
     full_depth[region] = np.where(geom >= 0, primary.depth.reshape(h, w), 0)
     bg, bg_name = None, None
-    if isinstance(background, str) and background == ENVIRONMENT_BACKGROUND:
+    blur = backdrop_blur(background)
+    if blur is not None:
         if lighting.environment is None:
             raise InputError("background: 'environment' needs lights with an environment (--environment)")
-        bg, bg_name = background_view(lighting.environment, cam), ENVIRONMENT_BACKGROUND
+        bg, bg_name = background_view(lighting.environment, cam, blur), ENVIRONMENT_BACKGROUND
     elif background is not None:
         bg_name = Path(background).name if isinstance(background, (str, Path)) else "array"
         bg = (load_background(background, W, H) if isinstance(background, (str, Path))

@@ -461,6 +461,16 @@ def frame_environment(environment: Environment, R: np.ndarray) -> FrameEnvironme
     return FrameEnvironment(lights, lighting, M, scale)
 
 
+def backdrop_blur(background) -> float | None:
+    """The blur in degrees of a background that is the environment itself ('environment', or a dataset's
+    {'environment': true, 'blur': degrees}), None for any other background."""
+    if isinstance(background, str) and background == ENVIRONMENT_BACKGROUND:
+        return 0.0
+    if isinstance(background, dict) and background.get("environment") is True:
+        return float(background.get("blur", 0.0))
+    return None
+
+
 def background_view(environment: Environment, camera, blur_deg: float = 0.0) -> np.ndarray:
     """(H, W, 3) float32 linear: the environment seen through `camera` (render/camera.Camera), each pixel centre's
     ray looked up in the whole map (sun included), blurred over about `blur_deg` degrees (0: bilinear at full
