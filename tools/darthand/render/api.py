@@ -211,7 +211,8 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
     if options.ao_rays:
         indirect = VertexLight(scene, lights, lighting.ambient, options.ao_rays, options.interreflection, stats)
     timings["indirect_setup"] = _lap(t)
-    ctx = Context(scene, cam, lights, lighting.ambient, threads, indirect, options.skin)
+    ctx = Context(scene, cam, lights, lighting.ambient, threads, indirect, options.skin, options.skin_specular,
+                  float(options.skin_detail))
 
     t = time.perf_counter()
     r0, r1, c0, c1 = scene_bounds(cam, subject.all_vertices())

@@ -1,0 +1,157 @@
+"""Specular reflection of skin: two GGX lobes and a sheen, in place of the single lobe (shade.ggx_specular) when
+`ShadingOptions.skin_specular` is 'dual'.
+
+- Two lobes (the dual-lobe skin model of d'Eon and Luebke, GPU Gems 3 ch. 14, and of Jimenez et al.'s separable
+  SSS): a sharper one (roughness LOBE_ROUGHNESS[0]) for the skin's oily film and a rougher one (LOBE_ROUGHNESS[1])
+  for its dry, scaly surface, mixed LOBE_WEIGHTS, each GGX with height-correlated Smith visibility and Schlick's
+  Fresnel at skin's F0 (subject.SKIN_F0 = 0.028). The lobes' roughness follows the texture's roughness map (the
+  palm is rougher than the back of the hand: textures/canvas.base_roughness): each is its nominal value times the
+  texel's roughness over REFERENCE_ROUGHNESS.
+- A sheen (Estevez and Kulla's "Charlie" distribution, Production Friendly Microfacet Sheen BRDF, 2017, with
+  Neubelt and Pettineo's visibility 1 / (4 (n.l + n.v - n.l n.v))), weight SHEEN_WEIGHT: the retro-reflective glow
+  of vellus hair and the skin's surface at grazing angles.
+- Per region (the mesh's face labels): nails are glossier and more specular than skin, the palm side less
+  specular (REGION_SCALE: roughness and specular factors).
+- Ambient: each lobe's split-sum environment BRDF from Karis' analytic fit (shade.ambient_specular) and the sheen's
+  directional albedo (tabulated once by quadrature, `sheen_albedo`), times the ambient light and its open fraction.
+
+Intensities have pi folded in (lights.py): a light adds pi f (n.l) E, as in shade.py.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from darthand.model.layout import FACE_LABEL_IDS, FACE_LABELS
+
+SKIN_SPECULAR = ("single", "dual")
+LOBE_ROUGHNESS = (0.35, 0.6)         # at the reference roughness
+LOBE_WEIGHTS = (0.85, 0.15)
+REFERENCE_ROUGHNESS = 0.5            # the texture's roughness of the back of the hand (textures/canvas.SKIN_ROUGHNESS)
+SHEEN_WEIGHT = 0.12
+SHEEN_ROUGHNESS = 0.6                # perceptual (alpha = roughness^2)
+# label -> (roughness factor, specular factor); labels not listed: (1, 1)
+REGION_SCALE = {"nail": (0.45, 1.6), "palm": (1.0, 0.8), "finger_palmar": (1.0, 0.8)}
+MIN_ROUGHNESS = 0.045               # as shade.MIN_ROUGHNESS: GGX is singular at alpha = 0
+SHEEN_STEPS = 64                     # the sheen albedo table's columns over n.v in [0, 1]
+
+
+def region_factors(labels: np.ndarray | None, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """(roughness factor (M,), specular factor (M,)) float32 of hits with face labels (M,) int (-1 unlabelled) or
+    None (all 1)."""
+    rough, spec = np.ones(len(FACE_LABELS) + 1, np.float32), np.ones(len(FACE_LABELS) + 1, np.float32)
+    for name, (r, s) in REGION_SCALE.items():
+        rough[FACE_LABEL_IDS[name]], spec[FACE_LABEL_IDS[name]] = r, s
+    if labels is None:
+        return np.ones(m, np.float32), np.ones(m, np.float32)
+    index = np.where(labels < 0, len(FACE_LABELS), labels)
+    return rough[index], spec[index]
+
+
+def lobe_roughness(roughness: np.ndarray, factor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The two lobes' perceptual roughness (M,) each from the texel's roughness (M,) and the region's factor."""
+    scale = roughness * factor / np.float32(REFERENCE_ROUGHNESS)
+    return tuple(np.clip(np.float32(r) * scale, MIN_ROUGHNESS, 1).astype(np.float32) for r in LOBE_ROUGHNESS)
+
+
+def charlie_sheen(nl: np.ndarray, nv: np.ndarray, nh: np.ndarray, roughness) -> np.ndarray:
+    """(M,) pi f_sheen (n.l) per unit (pi-folded) light intensity, unweighted: f_sheen = D V with Charlie's
+    D = (2 + 1/a) sin(theta_h)^(1/a) / (2 pi), a = roughness^2, and V = 1 / (4 (n.l + n.v - n.l n.v))."""
+    a = np.float32(roughness) ** 2
+    sin2 = np.maximum(1 - nh * nh, 0)
+    d = (2 + 1 / a) * sin2 ** (0.5 / a) / 2            # pi D: the 1/pi cancels the folded pi
+    vis = 1 / np.maximum(4 * (nl + nv - nl * nv), 1e-7)
+    return d * vis * nl
+
+
+@functools.lru_cache(maxsize=4)
+def sheen_albedo(roughness: float = SHEEN_ROUGHNESS) -> np.ndarray:
+    """(SHEEN_STEPS,) float32 directional albedo of `charlie_sheen` (integral over the hemisphere of f_sheen n.l)
+    at n.v = 0 .. 1, by a midpoint rule over (theta_l, phi_l) (256 x 128)."""
+    theta = (np.arange(256) + 0.5) * (np.pi / 2) / 256
+    phi = (np.arange(128) + 0.5) * np.pi / 128            # symmetric about the view's plane: half the circle, x 2
+    tl, pl = np.meshgrid(theta, phi, indexing="ij")
+    light = np.stack([np.sin(tl) * np.cos(pl), np.sin(tl) * np.sin(pl), np.cos(tl)])
+    out = np.empty(SHEEN_STEPS, np.float64)
+    for k, nv in enumerate(np.linspace(1e-3, 1, SHEEN_STEPS)):
+        v = np.array([np.sqrt(1 - nv * nv), 0, nv])[:, None, None]
+        h = light + v
+        h /= np.linalg.norm(h, axis=0)
+        value = charlie_sheen(light[2], np.full_like(light[2], nv), h[2], roughness) / np.pi     # f n.l
+        out[k] = 2 * (value * np.sin(tl)).sum() * (np.pi / 2 / 256) * (np.pi / 128)
+    return out.astype(np.float32)
+
+
+def ggx_lobe(nl, nv, nh, vh, roughness, f0) -> np.ndarray:
+    """(3, M) (or (M,) for a scalar f0) pi D Vis F (n.l) of one GGX lobe: D = a^2 / (pi ((n.h)^2 (a^2 - 1) + 1)^2),
+    height-correlated Smith Vis = 0.5 / (n.l sqrt(n.v^2 (1 - a^2) + a^2) + n.v sqrt(n.l^2 (1 - a^2) + a^2)),
+    Schlick's F = f0 + (1 - f0) (1 - v.h)^5, a = roughness^2 (shade.ggx_specular's model; not imported from there:
+    shade.py imports this module)."""
+    a2 = (roughness * roughness) ** 2
+    d = nh * nh * (a2 - 1) + 1
+    vis = 0.5 / np.maximum(nl * np.sqrt(nv * nv * (1 - a2) + a2) + nv * np.sqrt(nl * nl * (1 - a2) + a2), 1e-7)
+    fresnel = f0 + (1 - f0) * (1 - vh) ** 5
+    return a2 / (d * d) * vis * nl * fresnel
+
+
+def environment_lobe(f0, roughness: np.ndarray, nv: np.ndarray) -> np.ndarray:
+    """(3, M) (or (M,)) one GGX lobe's response to a uniform environment of unit radiance: Karis' analytic fit of
+    the split-sum environment BRDF, F0 A + B (as shade.ambient_specular)."""
+    r0 = 1 - roughness
+    a004 = np.minimum(r0 * r0, np.exp2(-9.28 * nv)) * r0 + (0.0425 - 0.0275 * roughness)
+    A = -1.04 * a004 + (1.04 - 0.572 * roughness)
+    B = 1.04 * a004 + (0.022 * roughness - 0.04)
+    return (f0 * A + B).astype(np.float32)
+
+
+def dual_specular(nl, nv, nh, vh, rough_a, rough_b, f0) -> np.ndarray:
+    """(3, M) or (M,): the two GGX lobes' pi f (n.l), mixed LOBE_WEIGHTS."""
+    return (np.float32(LOBE_WEIGHTS[0]) * ggx_lobe(nl, nv, nh, vh, rough_a, f0)
+            + np.float32(LOBE_WEIGHTS[1]) * ggx_lobe(nl, nv, nh, vh, rough_b, f0))
+
+
+def skin_specular_radiance(hits, roughness: np.ndarray, f0, strength: float, lights: np.ndarray,
+                           reached: np.ndarray, ambient: np.ndarray) -> np.ndarray:
+    """(3, M) float32 specular radiance of skin at hits (shade.Hits: normal, view, position, visible, region):
+    per reached light (lights.light_table rows, reached (K, M) after shadows) the dual lobes and the sheen, plus
+    their ambient part; roughness (M,) the texel's, f0 (3, M) or scalar, strength the material's specular scale."""
+    n, v = hits.normal, hits.view
+    m = n.shape[1]
+    rough_factor, spec_factor = region_factors(hits.region, m)
+    rough_a, rough_b = lobe_roughness(roughness, rough_factor)
+    nv = np.clip((n * v).sum(0), 1e-4, 1).astype(np.float32)
+    scale = np.float32(strength) * spec_factor
+    env = (np.float32(LOBE_WEIGHTS[0]) * environment_lobe(f0, rough_a, nv)
+           + np.float32(LOBE_WEIGHTS[1]) * environment_lobe(f0, rough_b, nv)
+           + np.float32(SHEEN_WEIGHT) * np.interp(nv, np.linspace(1e-3, 1, SHEEN_STEPS), sheen_albedo()))
+    out = env * ambient[:, None] * (scale if hits.visible is None else scale * hits.visible)
+    out = np.broadcast_to(out, (3, m)).astype(np.float32)
+    for k in range(len(lights)):
+        on = np.flatnonzero(reached[k])
+        if not len(on):
+            continue
+        direction, radiance = light_at(lights[k], hits.position[:, on])
+        nk, vk = n[:, on], v[:, on]
+        h = direction + vk
+        h /= np.maximum(np.linalg.norm(h, axis=0), 1e-30)
+        nl = np.clip((nk * direction).sum(0), 0, 1)
+        nh = np.clip((nk * h).sum(0), 0, 1)
+        vh = np.clip((vk * h).sum(0), 0, 1)
+        fk = f0 if np.ndim(f0) == 0 else f0[:, on]
+        lobes = dual_specular(nl, nv[on], nh, vh, rough_a[on], rough_b[on], fk)
+        lobes = lobes + np.float32(SHEEN_WEIGHT) * charlie_sheen(nl, nv[on], nh, SHEEN_ROUGHNESS)
+        out[:, on] += (lobes * scale[on] * radiance).astype(np.float32)
+    return out
+
+
+def light_at(row: np.ndarray, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(unit direction toward the light (3, M), radiance arriving (3, M) or (3, 1)) of one lights.light_table row
+    at points (3, M): a directional light's own, a point light's over the squared distance."""
+    colour = row[4:7].astype(np.float32)[:, None]
+    if row[0] == 0:
+        return np.broadcast_to(row[1:4].astype(np.float32)[:, None], position.shape), colour
+    to = row[1:4].astype(np.float32)[:, None] - position
+    dist = np.maximum(np.linalg.norm(to, axis=0), 1e-9)
+    return to / dist, colour / np.maximum(dist * dist, 1e-12)
