@@ -9,7 +9,9 @@
   texel's roughness over REFERENCE_ROUGHNESS.
 - A sheen (Estevez and Kulla's "Charlie" distribution, Production Friendly Microfacet Sheen BRDF, 2017, with
   Neubelt and Pettineo's visibility 1 / (4 (n.l + n.v - n.l n.v))), weight SHEEN_WEIGHT: the retro-reflective glow
-  of vellus hair and the skin's surface at grazing angles.
+  of vellus hair and the skin's surface at grazing angles. It is a layer over the lobes: they are scaled by
+  1 - SHEEN_WEIGHT E_sheen(n.v) (E_sheen the sheen's directional albedo), the light the sheen took (Kulla and
+  Conty's albedo scaling), so lobes and sheen together never reflect more than arrives.
 - Per region (the mesh's face labels): nails are glossier and more specular than skin, the palm side less
   specular (REGION_SCALE: roughness and specular factors).
 - Ambient: each lobe's split-sum environment BRDF from Karis' analytic fit (shade.ambient_specular) and the sheen's
@@ -106,6 +108,11 @@ def environment_lobe(f0, roughness: np.ndarray, nv: np.ndarray) -> np.ndarray:
     return (f0 * A + B).astype(np.float32)
 
 
+def sheen_directional(nv: np.ndarray) -> np.ndarray:
+    """(M,) float32 the sheen's directional albedo at n.v (M,): sheen_albedo's table, linearly interpolated."""
+    return np.interp(nv, np.linspace(1e-3, 1, SHEEN_STEPS), sheen_albedo()).astype(np.float32)
+
+
 def dual_specular(nl, nv, nh, vh, rough_a, rough_b, f0) -> np.ndarray:
     """(3, M) or (M,): the two GGX lobes' pi f (n.l), mixed LOBE_WEIGHTS."""
     return (np.float32(LOBE_WEIGHTS[0]) * ggx_lobe(nl, nv, nh, vh, rough_a, f0)
@@ -123,9 +130,10 @@ def skin_specular_radiance(hits, roughness: np.ndarray, f0, strength: float, lig
     rough_a, rough_b = lobe_roughness(roughness, rough_factor)
     nv = np.clip((n * v).sum(0), 1e-4, 1).astype(np.float32)
     scale = np.float32(strength) * spec_factor
+    sheen = np.float32(SHEEN_WEIGHT) * sheen_directional(nv)
+    layer = 1 - sheen
     env = (np.float32(LOBE_WEIGHTS[0]) * environment_lobe(f0, rough_a, nv)
-           + np.float32(LOBE_WEIGHTS[1]) * environment_lobe(f0, rough_b, nv)
-           + np.float32(SHEEN_WEIGHT) * np.interp(nv, np.linspace(1e-3, 1, SHEEN_STEPS), sheen_albedo()))
+           + np.float32(LOBE_WEIGHTS[1]) * environment_lobe(f0, rough_b, nv)) * layer + sheen
     out = env * ambient[:, None] * (scale if hits.visible is None else scale * hits.visible)
     out = np.broadcast_to(out, (3, m)).astype(np.float32)
     for k in range(len(lights)):
@@ -140,7 +148,7 @@ def skin_specular_radiance(hits, roughness: np.ndarray, f0, strength: float, lig
         nh = np.clip((nk * h).sum(0), 0, 1)
         vh = np.clip((vk * h).sum(0), 0, 1)
         fk = f0 if np.ndim(f0) == 0 else f0[:, on]
-        lobes = dual_specular(nl, nv[on], nh, vh, rough_a[on], rough_b[on], fk)
+        lobes = dual_specular(nl, nv[on], nh, vh, rough_a[on], rough_b[on], fk) * layer[on]
         lobes = lobes + np.float32(SHEEN_WEIGHT) * charlie_sheen(nl, nv[on], nh, SHEEN_ROUGHNESS)
         out[:, on] += (lobes * scale[on] * radiance).astype(np.float32)
     return out
