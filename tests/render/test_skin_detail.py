@@ -14,7 +14,7 @@ from darthand.errors import InputError
 from darthand.render import skin_detail, skin_specular
 from darthand.render.api import Renderer
 from darthand.render.scene import FaceData
-from darthand.render.shade import ShadingOptions
+from darthand.render.shade import Hits, ShadingOptions
 from darthand.render.texture import float_pyramid
 from darthand.render.subject import PLAIN_SKIN, SKIN_F0, Surface, skin_material
 from darthand.textures.bake import bake
@@ -105,6 +105,32 @@ def test_nails_are_glossier_than_skin_and_palms_less_specular():
     assert rough[3] == 1 and spec[3] == 1
 
 
+def test_the_compiled_lights_pass_is_the_numpy_definition():
+    """skin_specular_radiance's per-light kernel against lights_radiance (numpy, float64), on random hits under a
+    directional and a point light, some hits not reached."""
+    rng = np.random.default_rng(3)
+    m = 500
+    n = rng.normal(size=(3, m))
+    n /= np.linalg.norm(n, axis=0)
+    v = n + rng.normal(scale=0.6, size=(3, m))
+    v /= np.linalg.norm(v, axis=0)
+    hits = Hits(rng.uniform(-0.05, 0.05, (3, m)).astype(np.float32), n.astype(np.float32), v.astype(np.float32),
+                None, None, region=rng.integers(-1, 6, m))
+    lights = np.array([[0, 0.0, 0.6, 0.8, 2.0, 1.8, 1.5, 1], [1, 0.1, 0.3, 0.2, 0.05, 0.04, 0.03, 0]], np.float32)
+    reached = rng.random((2, m)) < 0.8
+    roughness = rng.uniform(0.3, 0.8, m).astype(np.float32)
+    got = skin_specular.skin_specular_radiance(hits, roughness, np.float32(SKIN_F0), 1.0, lights, reached,
+                                               np.zeros(3, np.float32))
+    rough_f, spec_f = skin_specular.region_factors(hits.region, m)
+    rough_a, rough_b = skin_specular.lobe_roughness(roughness, rough_f)
+    nv = np.clip((hits.normal * hits.view).sum(0), 1e-4, 1)
+    layer = 1 - skin_specular.SHEEN_WEIGHT * skin_specular.sheen_directional(nv)
+    want = skin_specular.lights_radiance(hits, nv, rough_a, rough_b, np.full((3, m), SKIN_F0), spec_f * layer,
+                                         spec_f, lights, reached)
+    assert np.allclose(got, want, rtol=1e-4, atol=1e-6)
+    assert (want > 0).any()
+
+
 # ------------------------------------------------------------------------------------------------ tangent frame
 
 
@@ -148,6 +174,36 @@ def test_a_bump_never_turns_the_normal_away_from_the_viewer():
     got = skin_detail.bumped_normals(np.array([[0.0], [0.0], [1.0]], np.float32), pu, pv,
                                      np.array([[300.0], [0.0]]), view, 1.0)
     assert (got[:, 0] @ view[:, 0]) >= 1e-3 - 1e-6
+
+
+def test_the_compiled_bump_is_the_numpy_definition(hand):
+    """detail_normals (one compiled pass) against face_tangents and bumped_normals (numpy), on random hits of the
+    hand's faces with random slopes, strong enough that some normals are bent back toward the viewer."""
+    rng = np.random.default_rng(5)
+    surface = Surface("hand", np.asarray(hand.v_template, np.float32), np.asarray(hand.faces, np.int32),
+                      np.zeros((len(hand.v_template), 3), np.float32), skin_material(),
+                      np.asarray(hand.uvs, np.float32), np.asarray(hand.faces_uv, np.int32))
+    table = FaceData(surface).table
+    m = 400
+    prim = rng.integers(0, len(hand.faces), m)
+    n = table[18:21, prim] * np.where(rng.random(m) < 0.5, -1, 1)
+    view = n + rng.normal(scale=0.8, size=(3, m))
+    view /= np.linalg.norm(view, axis=0)
+    slopes = rng.normal(scale=0.05, size=(2, m)).astype(np.float32)
+    hits = Hits(np.zeros((3, m), np.float32), n.astype(np.float32), view.astype(np.float32),
+                rng.random((2, m)).astype(np.float32), np.full(m, 1e-3, np.float32))
+    texture = float_pyramid(np.zeros((1, 1, 2), np.float32))
+
+    class Slopes:                                   # a texture whose lookup returns the slopes given
+        def sample(self, uv, lod):
+            return slopes
+
+        def lod_of_footprint(self, footprint):
+            return texture.lod_of_footprint(footprint)
+
+    got = skin_detail.detail_normals(hits, table, prim, Slopes(), 1.5)
+    want = skin_detail.bumped_normals(hits.normal, *skin_detail.face_tangents(table, prim), slopes, hits.view, 1.5)
+    assert np.allclose(got, want, atol=2e-6)
 
 
 # ------------------------------------------------------------------------------------------------ the relief

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from darthand.jit import kernel
 from darthand.model.layout import FINGERS
 from darthand.model.regions import PALM_NORMAL, hand_frame
 from darthand.render.texture import MipTexture, float_pyramid
@@ -225,7 +226,56 @@ def bumped_normals(normal: np.ndarray, pu: np.ndarray, pv: np.ndarray, slopes: n
 
 def detail_normals(hits, table: np.ndarray, prim: np.ndarray, texture: MipTexture, strength: float) -> np.ndarray:
     """(3, M) float32 shading normals of hits (shade.Hits with uv and footprint) on faces `prim` of a FaceData
-    table, bumped by the relief `texture` (relief_texture) looked up at the hits' footprint."""
+    table, bumped by the relief `texture` (relief_texture) looked up at the hits' footprint: face_tangents and
+    bumped_normals in one compiled pass (_bump_kernel; the tests hold it to the numpy definition)."""
     slopes = texture.sample(hits.uv, texture.lod_of_footprint(hits.footprint))
-    pu, pv = face_tangents(table, prim)
-    return bumped_normals(hits.normal, pu, pv, slopes, hits.view, strength)
+    out = np.empty(hits.normal.shape, np.float32)
+    f32 = lambda a: np.ascontiguousarray(a, np.float32)
+    _bump_kernel(f32(table), np.ascontiguousarray(prim, np.int64), f32(hits.normal), f32(hits.view), slopes,
+                 np.float64(strength), out)
+    return out
+
+
+@kernel(error_model="numpy")
+def _bump_kernel(table, prim, normal, view, slopes, strength, out):
+    """out (3, M) = bumped_normals(normal, *face_tangents(table, prim), slopes, view, strength), per hit in float64
+    (rounded to float32 once)."""
+    tiny = 1e-20
+    for i in range(prim.shape[0]):
+        f = prim[i]
+        e1 = (np.float64(table[3, f]) - table[0, f], np.float64(table[4, f]) - table[1, f],
+              np.float64(table[5, f]) - table[2, f])
+        e2 = (np.float64(table[6, f]) - table[0, f], np.float64(table[7, f]) - table[1, f],
+              np.float64(table[8, f]) - table[2, f])
+        du1, dv1 = np.float64(table[23, f]) - table[21, f], np.float64(table[24, f]) - table[22, f]
+        du2, dv2 = np.float64(table[25, f]) - table[21, f], np.float64(table[26, f]) - table[22, f]
+        det = du1 * dv2 - du2 * dv1
+        inv = 1.0 / det if abs(det) > tiny else 0.0
+        n0, n1, n2 = np.float64(normal[0, i]), np.float64(normal[1, i]), np.float64(normal[2, i])
+        pu0, pu1, pu2 = (e1[0] * dv2 - e2[0] * dv1) * inv, (e1[1] * dv2 - e2[1] * dv1) * inv, \
+            (e1[2] * dv2 - e2[2] * dv1) * inv
+        pv0, pv1, pv2 = (e2[0] * du1 - e1[0] * du2) * inv, (e2[1] * du1 - e1[1] * du2) * inv, \
+            (e2[2] * du1 - e1[2] * du2) * inv
+        t = pu0 * n0 + pu1 * n1 + pu2 * n2
+        pu0, pu1, pu2 = pu0 - n0 * t, pu1 - n1 * t, pu2 - n2 * t
+        t = pv0 * n0 + pv1 * n1 + pv2 * n2
+        pv0, pv1, pv2 = pv0 - n0 * t, pv1 - n1 * t, pv2 - n2 * t
+        c0, c1, c2 = pu1 * pv2 - pu2 * pv1, pu2 * pv0 - pu0 * pv2, pu0 * pv1 - pu1 * pv0
+        area = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+        b0, b1, b2 = n0, n1, n2
+        if area > tiny:
+            sign = -1.0 if c0 * n0 + c1 * n1 + c2 * n2 < 0 else 1.0
+            hu, hv = slopes[0, i] * strength * sign, slopes[1, i] * strength * sign
+            # n area + sign (hu (n x pv) + hv (pu x n))
+            b0 = n0 * area + hu * (n1 * pv2 - n2 * pv1) + hv * (pu1 * n2 - pu2 * n1)
+            b1 = n1 * area + hu * (n2 * pv0 - n0 * pv2) + hv * (pu2 * n0 - pu0 * n2)
+            b2 = n2 * area + hu * (n0 * pv1 - n1 * pv0) + hv * (pu0 * n1 - pu1 * n0)
+        length = max(np.sqrt(b0 * b0 + b1 * b1 + b2 * b2), 1e-30)
+        b0, b1, b2 = b0 / length, b1 / length, b2 / length
+        v0, v1, v2 = np.float64(view[0, i]), np.float64(view[1, i]), np.float64(view[2, i])
+        nv = b0 * v0 + b1 * v1 + b2 * v2
+        if nv < 1e-3:
+            b0, b1, b2 = b0 + (1e-3 - nv) * v0, b1 + (1e-3 - nv) * v1, b2 + (1e-3 - nv) * v2
+            length = max(np.sqrt(b0 * b0 + b1 * b1 + b2 * b2), 1e-30)
+            b0, b1, b2 = b0 / length, b1 / length, b2 / length
+        out[0, i], out[1, i], out[2, i] = np.float32(b0), np.float32(b1), np.float32(b2)

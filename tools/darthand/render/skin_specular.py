@@ -26,6 +26,7 @@ import functools
 
 import numpy as np
 
+from darthand.jit import kernel
 from darthand.model.layout import FACE_LABEL_IDS, FACE_LABELS
 
 SKIN_SPECULAR = ("single", "dual")
@@ -135,23 +136,87 @@ def skin_specular_radiance(hits, roughness: np.ndarray, f0, strength: float, lig
     env = (np.float32(LOBE_WEIGHTS[0]) * environment_lobe(f0, rough_a, nv)
            + np.float32(LOBE_WEIGHTS[1]) * environment_lobe(f0, rough_b, nv)) * layer + sheen
     out = env * ambient[:, None] * (scale if hits.visible is None else scale * hits.visible)
-    out = np.broadcast_to(out, (3, m)).astype(np.float32)
+    out = np.array(np.broadcast_to(out, (3, m)), np.float32)          # writable: the kernel adds into it
+    f32 = lambda a: np.ascontiguousarray(a, np.float32)
+    _lights_kernel(f32(n), f32(v), f32(hits.position), f32(np.broadcast_to(f0, (3, m))), rough_a, rough_b,
+                   f32(nv), f32(scale * layer), f32(scale), np.ascontiguousarray(lights, np.float32),
+                   np.ascontiguousarray(reached, np.bool_), out)
+    return out
+
+
+def lights_radiance(hits, nv, rough_a, rough_b, f0, lobe_scale, sheen_scale, lights, reached) -> np.ndarray:
+    """(3, M) float64: per reached light, lobe_scale (M,) x dual_specular + sheen_scale (M,) x SHEEN_WEIGHT x
+    charlie_sheen, times the light's radiance (light_at). The definition in numpy; skin_specular_radiance does the
+    same in _lights_kernel (the tests hold the two equal to float32 rounding)."""
+    n, v = hits.normal.astype(np.float64), hits.view.astype(np.float64)
+    out = np.zeros(n.shape)
     for k in range(len(lights)):
         on = np.flatnonzero(reached[k])
-        if not len(on):
-            continue
-        direction, radiance = light_at(lights[k], hits.position[:, on])
-        nk, vk = n[:, on], v[:, on]
-        h = direction + vk
+        direction, radiance = light_at(lights[k], hits.position[:, on].astype(np.float64))
+        h = direction + v[:, on]
         h /= np.maximum(np.linalg.norm(h, axis=0), 1e-30)
-        nl = np.clip((nk * direction).sum(0), 0, 1)
-        nh = np.clip((nk * h).sum(0), 0, 1)
-        vh = np.clip((vk * h).sum(0), 0, 1)
-        fk = f0 if np.ndim(f0) == 0 else f0[:, on]
-        lobes = dual_specular(nl, nv[on], nh, vh, rough_a[on], rough_b[on], fk) * layer[on]
-        lobes = lobes + np.float32(SHEEN_WEIGHT) * charlie_sheen(nl, nv[on], nh, SHEEN_ROUGHNESS)
-        out[:, on] += (lobes * scale[on] * radiance).astype(np.float32)
+        nl = np.clip((n[:, on] * direction).sum(0), 0, 1)
+        nh = np.clip((n[:, on] * h).sum(0), 0, 1)
+        vh = np.clip((v[:, on] * h).sum(0), 0, 1)
+        lobes = dual_specular(nl, nv[on], nh, vh, rough_a[on], rough_b[on], np.asarray(f0)[:, on]) * lobe_scale[on]
+        sheen = np.float32(SHEEN_WEIGHT) * charlie_sheen(nl, nv[on], nh, SHEEN_ROUGHNESS) * sheen_scale[on]
+        out[:, on] += (lobes + sheen) * radiance
     return out
+
+
+@kernel(error_model="numpy")
+def _lights_kernel(normal, view, position, f0, rough_a, rough_b, nv, lobe_scale, sheen_scale, lights, reached, out):
+    """out (3, M) += per light k (lights.light_table rows) and hit i where reached[k, i]: (lobe_scale x the two GGX
+    lobes (ggx_lobe, weights LOBE_WEIGHTS, roughness rough_a, rough_b, Fresnel from f0 (3, M)) + sheen_scale x
+    SHEEN_WEIGHT x charlie_sheen (SHEEN_ROUGHNESS)) x the light's radiance (over the squared distance for a point
+    light). Every divisor is guarded (max(x, eps))."""
+    zero, one, half = np.float32(0.0), np.float32(1.0), np.float32(0.5)
+    w_a, w_b, w_s = np.float32(0.85), np.float32(0.15), np.float32(0.12)      # LOBE_WEIGHTS, SHEEN_WEIGHT (literals:
+    sheen_a = np.float32(0.6) * np.float32(0.6)                              # a cached kernel would not see a
+    inv_a = one / sheen_a                                                    # changed global); SHEEN_ROUGHNESS
+    for k in range(lights.shape[0]):
+        point = lights[k, 0] != zero
+        for i in range(normal.shape[1]):
+            if not reached[k, i]:
+                continue
+            lx, ly, lz = lights[k, 1], lights[k, 2], lights[k, 3]
+            q0, q1, q2 = lights[k, 4], lights[k, 5], lights[k, 6]
+            if point:
+                lx, ly, lz = lx - position[0, i], ly - position[1, i], lz - position[2, i]
+                dist = max(np.sqrt(lx * lx + ly * ly + lz * lz), np.float32(1e-9))
+                lx, ly, lz = lx / dist, ly / dist, lz / dist
+                falloff = max(dist * dist, np.float32(1e-12))
+                q0, q1, q2 = q0 / falloff, q1 / falloff, q2 / falloff
+            nx, ny, nz = normal[0, i], normal[1, i], normal[2, i]
+            hx, hy, hz = view[0, i] + lx, view[1, i] + ly, view[2, i] + lz
+            length = max(np.sqrt(hx * hx + hy * hy + hz * hz), np.float32(1e-30))
+            hx, hy, hz = hx / length, hy / length, hz / length
+            nl = min(max(nx * lx + ny * ly + nz * lz, zero), one)
+            nh = min(max(nx * hx + ny * hy + nz * hz, zero), one)
+            vh = min(max(view[0, i] * hx + view[1, i] * hy + view[2, i] * hz, zero), one)
+            c = nv[i]
+            a2 = rough_a[i] * rough_a[i]
+            a2 = a2 * a2
+            d = nh * nh * (a2 - one) + one
+            vis = half / max(nl * np.sqrt(c * c * (one - a2) + a2) + c * np.sqrt(nl * nl * (one - a2) + a2),
+                             np.float32(1e-7))
+            lobe = w_a * (a2 / max(d * d, np.float32(1e-30)) * vis * nl)
+            a2 = rough_b[i] * rough_b[i]
+            a2 = a2 * a2
+            d = nh * nh * (a2 - one) + one
+            vis = half / max(nl * np.sqrt(c * c * (one - a2) + a2) + c * np.sqrt(nl * nl * (one - a2) + a2),
+                             np.float32(1e-7))
+            lobe += w_b * (a2 / max(d * d, np.float32(1e-30)) * vis * nl)
+            x = one - vh
+            x5 = x * x * x * x * x
+            sin2 = max(one - nh * nh, zero)
+            sheen = (np.float32(2.0) + inv_a) * sin2 ** (half * inv_a) * half
+            sheen = sheen / max(np.float32(4.0) * (nl + c - nl * c), np.float32(1e-7)) * nl
+            sheen = w_s * sheen * sheen_scale[i]
+            s = lobe * lobe_scale[i]
+            out[0, i] += (s * (f0[0, i] + (one - f0[0, i]) * x5) + sheen) * q0
+            out[1, i] += (s * (f0[1, i] + (one - f0[1, i]) * x5) + sheen) * q1
+            out[2, i] += (s * (f0[2, i] + (one - f0[2, i]) * x5) + sheen) * q2
 
 
 def light_at(row: np.ndarray, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
