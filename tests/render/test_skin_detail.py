@@ -6,6 +6,7 @@ on the hand: options off by default, labels, mask, edges and normals unchanged w
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -327,3 +328,34 @@ def test_a_material_without_relief_is_shaded_as_before(assets):
     assert np.array_equal(r.render(None, **common).rgba,
                           r.render(None, shading={"skin_detail": 2.0}, **common).rgba)
     assert dataclasses.replace(skin_material(), name="x").detail is None
+
+
+@pytest.mark.slow
+def test_render_and_render_dataset_take_the_options_and_frames_repeat_to_the_byte(hand, tmp_path, capsys):
+    """`darthand render-dataset --skin-specular dual --skin-detail 1`: recorded in dataset.json and each frame's
+    labels; two runs write the same bytes (frame i depends on (seed, i) only). `darthand render` takes them too,
+    and refuses an out-of-range strength in one line."""
+    from darthand.cli import main
+    from darthand.model.npz_io import save_npz
+
+    model = tmp_path / "model" / "right.npz"
+    save_npz(hand, model)
+    common = [str(model), "--count", "2", "--size", "64", "--samples", "4", "--processes", "1", "--seed", "3",
+              "--skin-specular", "dual", "--skin-detail", "1"]
+    for name in ("a", "b"):
+        assert main(["render-dataset", *common, "--out", str(tmp_path / name)]) == 0
+    want = {"ao_rays": 16, "interreflection": True, "skin": "subsurface", "skin_specular": "dual", "skin_detail": 1.0}
+    doc = json.loads((tmp_path / "a" / "dataset.json").read_text())
+    assert doc["shading"] == want
+    for path in sorted((tmp_path / "a" / "labels").iterdir()):
+        assert json.loads(path.read_text())["render"]["shading"] == want
+    images = sorted((tmp_path / "a" / "images").iterdir())
+    assert len(images) == 2
+    assert all(p.read_bytes() == (tmp_path / "b" / "images" / p.name).read_bytes() for p in images)
+    assert main(["render", str(model), "--out", str(tmp_path / "one"), "--size", "48", "--skin-specular", "dual",
+                 "--skin-detail", "0.5"]) == 0
+    assert json.loads((tmp_path / "one" / "labels.json").read_text())["render"]["shading"]["skin_detail"] == 0.5
+    capsys.readouterr()
+    assert main(["render", str(model), "--out", str(tmp_path / "two"), "--skin-detail", "9"]) == 2
+    err = capsys.readouterr().err
+    assert "--skin-detail: 9 is outside [0, 4]" in err and len(err.strip().splitlines()) == 1

@@ -29,7 +29,7 @@ from darthand.jit import kernel
 from darthand.model.layout import FINGERS
 from darthand.model.regions import PALM_NORMAL, hand_frame
 from darthand.render.texture import MipTexture, float_pyramid
-from darthand.textures.bake import Bake, bake
+from darthand.textures.bake import Bake, bake, bake_key, prepare_model
 from darthand.textures.curves import bezier, curve_distance
 from darthand.textures.noise import smoothstep
 from darthand.textures.surface import Surface as BakeSurface
@@ -158,17 +158,28 @@ def _difference(h: np.ndarray, stored: np.ndarray, axis: int) -> np.ndarray:
     return np.where(stored, step, 0.0).astype(np.float32)
 
 
+_RELIEFS: dict = {}
+_RELIEFS_LOCK = threading.Lock()
+
+
 def relief_texture(model, res: int = DETAIL_RES) -> MipTexture:
     """The slope pyramid (2 channels, float32) of a model's relief (a HandModel with UVs; a left hand's is its
-    mirrored right hand's, on the same atlas)."""
-    b = bake(model, res)
-    return float_pyramid(slope_image(b, relief_heights(b)))
+    mirrored right hand's, on the same atlas), built once per process for the bake's key (geometry, UVs, labels,
+    resolution and baking code: both hands of a model share one)."""
+    key = bake_key(prepare_model(model), res)
+    with _RELIEFS_LOCK:
+        if key not in _RELIEFS:
+            if len(_RELIEFS) >= 4:
+                _RELIEFS.clear()
+            b = bake(model, res)
+            _RELIEFS[key] = float_pyramid(slope_image(b, relief_heights(b)))
+        return _RELIEFS[key]
 
 
 @dataclass(eq=False)
 class DetailMap:
-    """A model's relief, built at the first `texture()` call (a few seconds) and kept: the handle a skin Material
-    carries (subject.Material.detail), made once per source."""
+    """A model's relief, built at the first `texture()` call (a few seconds; relief_texture's process-wide cache
+    after that) and kept: the handle a skin Material carries (subject.Material.detail), made once per source."""
 
     model: object
     res: int = DETAIL_RES
