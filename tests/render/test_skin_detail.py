@@ -132,6 +132,23 @@ def test_the_compiled_lights_pass_is_the_numpy_definition():
     assert (want > 0).any()
 
 
+def test_a_roughness_map_decides_the_nails_gloss_and_the_region_only_their_strength():
+    """With a textured roughness (textured=True) a nail hit differs from an unlabelled one by the nail's specular
+    factor alone; without, its lobes are also sharper (a higher peak toward the mirror direction)."""
+    m = 2
+    n = np.tile([[0.0], [0.0], [1.0]], m).astype(np.float32)
+    v = np.tile([[0.3], [0.0], [np.sqrt(1 - 0.09)]], m).astype(np.float32)
+    hits = Hits(np.zeros((3, m), np.float32), n, v, None, None, region=np.array([0, -1]))
+    light = np.array([[0, -0.3, 0.0, np.sqrt(1 - 0.09), 1, 1, 1, 0]], np.float32)        # the mirror direction
+    args = (np.full(m, 0.5, np.float32), np.float32(SKIN_F0), 1.0, light, np.ones((1, m), bool),
+            np.zeros(3, np.float32))
+    textured = skin_specular.skin_specular_radiance(hits, *args, textured=True)
+    nail_spec = skin_specular.REGION_SCALE["nail"][1]
+    assert np.allclose(textured[:, 0], nail_spec * textured[:, 1], rtol=1e-5)
+    plain = skin_specular.skin_specular_radiance(hits, *args, textured=False)
+    assert plain[0, 0] > 1.5 * nail_spec * plain[0, 1]
+
+
 # ------------------------------------------------------------------------------------------------ tangent frame
 
 

@@ -351,7 +351,8 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
     _radiance_kernel(f32(p.albedo), f32(p.roughness), f0, spec, ambient, irradiance, visible, nv, e2, n, v,
                      position, table, diffuse, reached, out)
     if dual and material.specular:
-        out += skin_specular_radiance(hits, p.roughness, p.f0, float(material.specular), table, reached, ambient)
+        out += skin_specular_radiance(hits, p.roughness, p.f0, float(material.specular), table, reached, ambient,
+                                      material.roughness_channel is not None)
     return out
 
 

@@ -12,8 +12,10 @@
   of vellus hair and the skin's surface at grazing angles. It is a layer over the lobes: they are scaled by
   1 - SHEEN_WEIGHT E_sheen(n.v) (E_sheen the sheen's directional albedo), the light the sheen took (Kulla and
   Conty's albedo scaling), so lobes and sheen together never reflect more than arrives.
-- Per region (the mesh's face labels): nails are glossier and more specular than skin, the palm side less
-  specular (REGION_SCALE: roughness and specular factors).
+- Per region (the mesh's face labels): nails are more specular than skin, the palm side less (REGION_SCALE's
+  specular factors); nails are also glossier (its roughness factors) where the texture has no roughness map (the
+  plain hand): a catalogue texture's map already holds them per texel (nail plates 0.3, nail polish by its
+  finish, palms 0.62: textures/skin.py, overlays.py, canvas.py), and it decides.
 - Ambient: each lobe's split-sum environment BRDF from Karis' analytic fit (shade.ambient_specular) and the sheen's
   directional albedo (tabulated once by quadrature, `sheen_albedo`), times the ambient light and its open fraction.
 
@@ -121,13 +123,16 @@ def dual_specular(nl, nv, nh, vh, rough_a, rough_b, f0) -> np.ndarray:
 
 
 def skin_specular_radiance(hits, roughness: np.ndarray, f0, strength: float, lights: np.ndarray,
-                           reached: np.ndarray, ambient: np.ndarray) -> np.ndarray:
+                           reached: np.ndarray, ambient: np.ndarray, textured: bool = False) -> np.ndarray:
     """(3, M) float32 specular radiance of skin at hits (shade.Hits: normal, view, position, visible, region):
     per reached light (lights.light_table rows, reached (K, M) after shadows) the dual lobes and the sheen, plus
-    their ambient part; roughness (M,) the texel's, f0 (3, M) or scalar, strength the material's specular scale."""
+    their ambient part; roughness (M,) the texel's, f0 (3, M) or scalar, strength the material's specular scale;
+    textured: the roughness comes from a map (the regions' roughness factors are then left out)."""
     n, v = hits.normal, hits.view
     m = n.shape[1]
     rough_factor, spec_factor = region_factors(hits.region, m)
+    if textured:
+        rough_factor = np.ones(m, np.float32)
     rough_a, rough_b = lobe_roughness(roughness, rough_factor)
     nv = np.clip((n * v).sum(0), 1e-4, 1).astype(np.float32)
     scale = np.float32(strength) * spec_factor
