@@ -210,18 +210,20 @@ def test_the_compiled_bump_is_the_numpy_definition(hand):
     slopes = rng.normal(scale=0.05, size=(2, m)).astype(np.float32)
     hits = Hits(np.zeros((3, m), np.float32), n.astype(np.float32), view.astype(np.float32),
                 rng.random((2, m)).astype(np.float32), np.full(m, 1e-3, np.float32))
-    texture = float_pyramid(np.zeros((1, 1, 2), np.float32))
+    texture = float_pyramid(np.zeros((1, 1, 3), np.float32))
+    cavity = rng.uniform(0.7, 1.0, m).astype(np.float32)
 
-    class Slopes:                                   # a texture whose lookup returns the slopes given
+    class Slopes:                                   # a texture whose lookup returns the slopes and cavity given
         def sample(self, uv, lod):
-            return slopes
+            return np.concatenate([slopes, cavity[None]])
 
         def lod_of_footprint(self, footprint):
             return texture.lod_of_footprint(footprint)
 
-    got = skin_detail.detail_normals(hits, table, prim, Slopes(), 1.5)
+    got, occlusion = skin_detail.detail_at(hits, table, prim, Slopes(), 1.5)
     want = skin_detail.bumped_normals(hits.normal, *skin_detail.face_tangents(table, prim), slopes, hits.view, 1.5)
     assert np.allclose(got, want, atol=2e-6)
+    assert np.allclose(occlusion, np.maximum(1 - 1.5 * (1 - cavity), 0))
 
 
 # ------------------------------------------------------------------------------------------------ the relief
@@ -240,8 +242,11 @@ def test_the_relief_is_deterministic_and_in_its_depth_range(small_bake, hand):
     palmar = small_bake.fields["palmar"]
     deep = h < -3 * skin_detail.PORE_DEPTH
     assert deep[palmar > 0.8].any() and deep[(palmar < 0.2) & (small_bake.fields["wrinkle"] > 0.5)].any()
-    a = skin_detail.slope_image(small_bake, h)
-    assert np.array_equal(a, skin_detail.slope_image(small_bake, h)) and np.isfinite(a).all()
+    a = skin_detail.relief_image(small_bake, h)
+    assert np.array_equal(a, skin_detail.relief_image(small_bake, h)) and np.isfinite(a).all()
+    cavity = a[..., 2].reshape(-1)[small_bake.texel]
+    assert (cavity[h >= 0] == 1).all() and (cavity[h < -skin_detail.PORE_DEPTH] < 1).all()
+    assert cavity.min() >= 1 - skin_detail.CAVITY
 
 
 def test_bumped_normals_are_continuous_across_uv_seams(small_bake, hand):

@@ -14,6 +14,10 @@ unit, from the UV derivatives of the face, made tangent to the shading normal n)
 P + h n has the normal N' = A n + s (h_u (n x P_v) + h_v (P_u x n)), A = |P_u x P_v|, s = +1 when P_u x P_v
 points along n (-1 on a mirrored atlas: a left hand). `strength` scales h.
 
+Deep grooves also hold less light than the open skin (their walls shadow their floor, which a bump map alone does
+not show): a cavity factor, 1 - CAVITY x clip(-h / PALM_CREASE_DEPTH, 0, 1), stored beside the slopes, scales the
+hit's shaded radiance (1 - strength (1 - cavity), as real-time cavity maps do).
+
 The creases are placed as the palm-prints overlay places its lines (textures/overlays.py), at that overlay's
 middle parameters, so they sit where the catalogue's palm-print variants draw theirs; the albedo is not changed.
 """
@@ -42,6 +46,7 @@ FINGER_CREASE_DEPTH = 0.09 * MM  # flexion creases across the palmar side of the
 CREASE_WIDTH = 0.45 * MM         # Gaussian half-width of a crease's groove
 PORE_DEPTH = 0.012 * MM          # pits where the pore-scale noise is high
 RELIEF_DEPTH = 0.006 * MM        # micro-relief: the fine noise band
+CAVITY = 0.2                     # light lost at the floor of a full-depth palm crease
 # the palm-prints overlay's curves in its hand frame (f: wrist 0 .. knuckle line 1; s: little finger -1 .. index 1)
 # at its middle parameters (heart_curve 0, head_slope 0, life_reach 0.125), and their relative depths
 PALM_CURVES = (
@@ -139,6 +144,13 @@ def slope_image(b: Bake, heights: np.ndarray) -> np.ndarray:
     return out
 
 
+def relief_image(b: Bake, heights: np.ndarray) -> np.ndarray:
+    """(res, res, 3) float32: slope_image's (dh/du, dh/dv) and the cavity factor (1 where nothing is stored)."""
+    cavity = np.ones(b.res * b.res, np.float32)
+    cavity[b.texel] = 1 - CAVITY * np.clip(-heights / PALM_CREASE_DEPTH, 0, 1)
+    return np.concatenate([slope_image(b, heights), cavity.reshape(b.res, b.res, 1)], axis=2)
+
+
 def _difference(h: np.ndarray, stored: np.ndarray, axis: int) -> np.ndarray:
     """Per texel, the step of h per texel along `axis` (central, else one-sided where only one neighbour is
     stored, else 0); 0 at texels not stored."""
@@ -163,8 +175,8 @@ _RELIEFS_LOCK = threading.Lock()
 
 
 def relief_texture(model, res: int = DETAIL_RES) -> MipTexture:
-    """The slope pyramid (2 channels, float32) of a model's relief (a HandModel with UVs; a left hand's is its
-    mirrored right hand's, on the same atlas), built once per process for the bake's key (geometry, UVs, labels,
+    """The pyramid (relief_image's 3 channels, float32) of a model's relief (a HandModel with UVs; a left hand's is
+    its mirrored right hand's, on the same atlas), built once per process for the bake's key (geometry, UVs, labels,
     resolution and baking code: both hands of a model share one)."""
     key = bake_key(prepare_model(model), res)
     with _RELIEFS_LOCK:
@@ -172,7 +184,7 @@ def relief_texture(model, res: int = DETAIL_RES) -> MipTexture:
             if len(_RELIEFS) >= 4:
                 _RELIEFS.clear()
             b = bake(model, res)
-            _RELIEFS[key] = float_pyramid(slope_image(b, relief_heights(b)))
+            _RELIEFS[key] = float_pyramid(relief_image(b, relief_heights(b)))
         return _RELIEFS[key]
 
 
@@ -235,16 +247,19 @@ def bumped_normals(normal: np.ndarray, pu: np.ndarray, pv: np.ndarray, slopes: n
     return bent.astype(np.float32)
 
 
-def detail_normals(hits, table: np.ndarray, prim: np.ndarray, texture: MipTexture, strength: float) -> np.ndarray:
-    """(3, M) float32 shading normals of hits (shade.Hits with uv and footprint) on faces `prim` of a FaceData
-    table, bumped by the relief `texture` (relief_texture) looked up at the hits' footprint: face_tangents and
-    bumped_normals in one compiled pass (_bump_kernel; the tests hold it to the numpy definition)."""
-    slopes = texture.sample(hits.uv, texture.lod_of_footprint(hits.footprint))
+def detail_at(hits, table: np.ndarray, prim: np.ndarray, texture: MipTexture,
+              strength: float) -> tuple[np.ndarray, np.ndarray]:
+    """(normals (3, M) float32, occlusion (M,) float32) of hits (shade.Hits with uv and footprint) on faces `prim` of
+    a FaceData table, from the relief `texture` (relief_texture) looked up at the hits' footprint: the shading
+    normals bumped (face_tangents and bumped_normals in one compiled pass, _bump_kernel; the tests hold it to the
+    numpy definition), and the cavity's factor on the radiance, 1 - strength (1 - cavity), at least 0."""
+    texels = texture.sample(hits.uv, texture.lod_of_footprint(hits.footprint))
     out = np.empty(hits.normal.shape, np.float32)
     f32 = lambda a: np.ascontiguousarray(a, np.float32)
-    _bump_kernel(f32(table), np.ascontiguousarray(prim, np.int64), f32(hits.normal), f32(hits.view), slopes,
-                 np.float64(strength), out)
-    return out
+    _bump_kernel(f32(table), np.ascontiguousarray(prim, np.int64), f32(hits.normal), f32(hits.view),
+                 f32(texels[:2]), np.float64(strength), out)
+    occlusion = np.maximum(1 - np.float32(strength) * (1 - texels[2]), 0).astype(np.float32)
+    return out, occlusion
 
 
 @kernel(error_model="numpy")

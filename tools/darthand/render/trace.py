@@ -25,7 +25,7 @@ from darthand.render.indirect import VertexLight
 from darthand.render.scene import Scene, interpolate_columns
 from darthand.render.shade import DEFAULT_SKIN, shade, surface_hits
 from darthand.render.skin import surface_radius
-from darthand.render.skin_detail import detail_normals
+from darthand.render.skin_detail import detail_at
 
 NAIL = FACE_LABEL_IDS["nail"]
 MIN_CHUNK = 4096          # samples per parallel task, at least
@@ -210,9 +210,11 @@ def shade_hits(ctx: Context, hits: RayHits, footprint: float = 1.0,
         if ctx.skin == "subsurface" and surface.material.kind == "skin":
             skin_at(at, surface, on.prim, on.u, on.v)
         _put_columns_kernel(idx, np.ascontiguousarray(at.normal, np.float32), normal)
-        skin_surface_at(ctx, at, surface, ctx.scene.faces[g].table, on.prim)
+        occlusion = skin_surface_at(ctx, at, surface, ctx.scene.faces[g].table, on.prim)
         colour = shade(surface.material, at, ctx.lights, ctx.ambient, ctx.scene.occluded, ctx.scene.extent,
                        counters, ctx.skin, ctx.skin_specular)
+        if occlusion is not None:
+            colour *= occlusion
         _put_columns_kernel(idx, np.ascontiguousarray(colour, np.float32), radiance)
     if stats is not None:
         stats["shade"] = stats.get("shade", 0.0) + time.perf_counter() - t0
@@ -285,17 +287,20 @@ def skin_at(at, surface, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> No
         at.skin = surface.face_labels[prim] != NAIL
 
 
-def skin_surface_at(ctx: Context, at, surface, table: np.ndarray, prim: np.ndarray) -> None:
+def skin_surface_at(ctx: Context, at, surface, table: np.ndarray, prim: np.ndarray) -> np.ndarray | None:
     """The skin options' inputs of hits `at` on faces `prim` of a surface (after the truth normal was taken, so
     the frame's normals and edges stay the mesh's): its face labels for the dual-lobe specular, and its shading
-    normal bumped by the skin's relief (the hand's own atlas only: not the forearm cap)."""
+    normal bumped by the skin's relief (the hand's own atlas only: not the forearm cap). Returns the relief's
+    cavity factor on the hits' radiance (M,), or None."""
     if surface.material.kind != "skin":
-        return
+        return None
     if ctx.skin_specular == "dual" and surface.face_labels is not None:
         at.region = surface.face_labels[prim]
     detail = surface.material.detail
-    if ctx.skin_detail and detail is not None and surface.role == "hand" and at.uv is not None:
-        at.normal = detail_normals(at, table, prim, detail.texture(), ctx.skin_detail)
+    if not (ctx.skin_detail and detail is not None and surface.role == "hand" and at.uv is not None):
+        return None
+    at.normal, occlusion = detail_at(at, table, prim, detail.texture(), ctx.skin_detail)
+    return occlusion
 
 
 def trace_samples(ctx: Context, uv: np.ndarray, footprint: float = 1.0, stats: dict | None = None) -> Samples:
