@@ -706,8 +706,9 @@ def _add_antialiasing_options(p, samples: int, aa_shading: str = "triangle") -> 
 
 
 def _add_shading_options(p) -> None:
-    """--ao-rays, --no-interreflection, --skin, defaulting to the renderer's (shade.ShadingOptions)."""
-    from darthand.render.shade import SKIN_MODELS, ShadingOptions
+    """--ao-rays, --no-interreflection, --skin, --skin-specular, --skin-detail, defaulting to the renderer's
+    (shade.ShadingOptions)."""
+    from darthand.render.shade import SKIN_MODELS, SKIN_SPECULAR, ShadingOptions
 
     d = ShadingOptions()
     p.add_argument("--ao-rays", type=number(int, 0, 4096), default=d.ao_rays, metavar="N",
@@ -718,6 +719,13 @@ def _add_shading_options(p) -> None:
     p.add_argument("--skin", default=d.skin, choices=SKIN_MODELS,
                    help="the skin's diffuse model: subsurface scattering pre-integrated over curvature, wrap "
                         f"lighting (the earlier look) or lambert (default {d.skin})")
+    p.add_argument("--skin-specular", default=d.skin_specular, choices=SKIN_SPECULAR,
+                   help="the skin's specular: one GGX lobe, or dual: a sharp and a rough lobe and a sheen at grazing "
+                        f"angles, nails glossier (default {d.skin_specular})")
+    p.add_argument("--skin-detail", type=number(float, 0, 4), default=d.skin_detail, metavar="X",
+                   help="strength of the skin's fine relief (knuckle folds, palm and finger creases, pores) on its "
+                        f"shading: 0 none, 1 nominal depths; built once per model, a few seconds (default "
+                        f"{d.skin_detail:g})")
 
 
 def _add_source_options(p) -> None:

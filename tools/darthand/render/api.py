@@ -97,7 +97,8 @@ class Renderer:
         camera: a Camera, a view name, a camera JSON path or dict (camera.load_camera), framed on the posed hand.
         lights: a Lighting, a lights JSON path or dict, or None (lights.default_lighting). background: image path or
         (H, W, 3) linear array, 'environment' or {'environment': True, 'blur': degrees} (the lights' environment
-        map seen through the camera: environment.background_view), or None (transparent). samples: sub-samples per edge pixel (1, 4, 8, 16);
+        map seen through the camera: environment.background_view), or None (transparent). samples: sub-samples
+        per edge pixel (1, 4, 8, 16);
         aa_shading: shade them once per pixel per triangle ('triangle') or each ('sample') (see aa.py). shading: a
         shade.ShadingOptions or a dict of its fields (ambient occlusion, skin model), None for the defaults. betas:
         the hand's shape (S,) for a model source (None: the model's own). maps: per-pixel truth maps to compute
@@ -217,7 +218,8 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
         indirect = VertexLight(scene, lights, lighting.ambient, options.ao_rays, options.interreflection, stats,
                                environment)
     timings["indirect_setup"] = _lap(t)
-    ctx = Context(scene, cam, lights, lighting.ambient, threads, indirect, options.skin, environment)
+    ctx = Context(scene, cam, lights, lighting.ambient, threads, indirect, options.skin, environment,
+                  options.skin_specular, float(options.skin_detail))
 
     t = time.perf_counter()
     r0, r1, c0, c1 = scene_bounds(cam, subject.all_vertices())

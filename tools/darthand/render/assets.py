@@ -30,6 +30,7 @@ from darthand.model.layout import NUM_POSE_FEATURES
 from darthand.model.load import load_model
 from darthand.model.topology import face_joints, vertex_normals
 from darthand.render.poses import resolve_pose
+from darthand.render.skin_detail import DetailMap
 from darthand.render.subject import PLAIN_SKIN, Material, Subject, Surface, checker_material, skin_material
 from darthand.render.texture import constant_texture, load_maps
 from darthand.textures.color import linear_to_srgb, srgb_to_linear
@@ -60,6 +61,7 @@ class HandAssets:
     _refitter: Any = field(default=None, repr=False)          # accessories.reshape.ShapeRefitter, made once
     _refits: tuple | None = field(default=None, repr=False)       # (shape key, {id: refitted Accessory})
     worn_rings: bool = False     # rings worn per pose (accessories/wear), as dataset frames show them
+    _detail: Any = field(default=None, repr=False)            # skin_detail.DetailMap of the model, made once
 
     @classmethod
     def load(cls, model, textures=None, accessories=None) -> "HandAssets":
@@ -168,14 +170,20 @@ class HandAssets:
         """The hand's material for a texture id and skin-tone offset (added to the sRGB albedo)."""
         if texture == PLAIN:
             plain = srgb_to_linear(np.clip(linear_to_srgb(np.array(PLAIN_SKIN)) + offset, 0, 1))
-            return skin_material(constant_texture(plain), name=PLAIN)
+            return skin_material(constant_texture(plain), name=PLAIN, detail=self.detail_map())
         if texture == CHECKER:
             return checker_material()
         t: TextureSet = self.textures[texture]
         if not self.model.has_uvs:
             raise InputError(f"{self.source}: the model has no UVs, so texture {texture!r} cannot be mapped")
         maps = load_maps(t.albedo, offset=offset, data=t.roughness, channels=(0,))
-        return skin_material(maps, 3 if t.roughness else None, name=texture)
+        return skin_material(maps, 3 if t.roughness else None, name=texture, detail=self.detail_map())
+
+    def detail_map(self) -> DetailMap | None:
+        """The model's skin relief (built when a frame first asks for it), None for a model without UVs."""
+        if self._detail is None and self.model.has_uvs:
+            self._detail = DetailMap(self.model)
+        return self._detail
 
     def _static_arrays(self, key, mesh) -> tuple:
         """(faces int32, uvs float32 or None, faces_uv int32 or None) of a model or accessory, converted once: the

@@ -60,7 +60,8 @@ def render(args) -> int:
     frame = Renderer(source, args.threads).render_scene(
         scene, width=width, height=height, samples=args.samples, aa_shading=args.aa_shading,
         keypoint_order=args.keypoint_order,
-        shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin})
+        shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin,
+                 "skin_specular": args.skin_specular, "skin_detail": args.skin_detail})
     paths = write_frame(frame, args.out, depth=args.depth)
     lab = frame.labels
     total = sum(frame.timings.values())

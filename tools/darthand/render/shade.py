@@ -37,6 +37,7 @@ from darthand.errors import InputError
 from darthand.jit import kernel
 from darthand.render.lights import light_table
 from darthand.render.skin import skin_width, sphere_blend_table, table_rows
+from darthand.render.skin_specular import SKIN_SPECULAR, skin_specular_radiance
 from darthand.render.subject import Material
 
 SHADOW_LIFT = 2e-3          # shadow-ray origin offset, relative to the scene's bounding-box diagonal
@@ -53,11 +54,16 @@ class ShadingOptions:
     """How a frame is shaded beyond the direct lights (indirect.py): ao_rays, rays per vertex for the ambient light's
     occlusion and the interreflected light (0: ambient light is never blocked, nothing is interreflected);
     interreflection, add light reflected between surfaces (False: ambient occlusion only); skin, the skin's diffuse
-    model (SKIN_MODELS: 'subsurface', 'wrap' the earlier look, 'lambert')."""
+    model (SKIN_MODELS: 'subsurface', 'wrap' the earlier look, 'lambert'); skin_specular, the skin's specular
+    response ('single': one GGX lobe; 'dual': two lobes and a sheen, skin_specular.py); skin_detail, the strength of
+    the skin's fine relief on its shading normal (skin_detail.py; 0: none, 1: nominal depths). to_json lists
+    skin_specular and skin_detail only when they differ from their defaults (records made before them stay)."""
 
     ao_rays: int = DEFAULT_AO_RAYS
     interreflection: bool = True
     skin: str = DEFAULT_SKIN
+    skin_specular: str = "single"
+    skin_detail: float = 0.0
 
     def __post_init__(self):
         if isinstance(self.ao_rays, bool) or not (isinstance(self.ao_rays, (int, np.integer))
@@ -67,9 +73,19 @@ class ShadingOptions:
             raise InputError(f"interreflection: {self.interreflection!r} is not true or false")
         if self.skin not in SKIN_MODELS:
             raise InputError(f"skin: {self.skin!r} is not one of {', '.join(SKIN_MODELS)}")
+        if self.skin_specular not in SKIN_SPECULAR:
+            raise InputError(f"skin_specular: {self.skin_specular!r} is not one of {', '.join(SKIN_SPECULAR)}")
+        if isinstance(self.skin_detail, bool) or not (isinstance(self.skin_detail, (int, float, np.number))
+                                                      and 0 <= self.skin_detail <= 4):
+            raise InputError(f"skin_detail: {self.skin_detail!r} is not a number in 0..4")
 
     def to_json(self) -> dict:
-        return {"ao_rays": int(self.ao_rays), "interreflection": bool(self.interreflection), "skin": self.skin}
+        out = {"ao_rays": int(self.ao_rays), "interreflection": bool(self.interreflection), "skin": self.skin}
+        if self.skin_specular != "single":
+            out["skin_specular"] = self.skin_specular
+        if self.skin_detail:
+            out["skin_detail"] = float(self.skin_detail)
+        return out
 
 
 @dataclass
@@ -79,7 +95,8 @@ class Hits:
     sample's footprint in uv units, or None; indirect (3, M) the indirect irradiance and visible (M,) the ambient
     light's open fraction (indirect.VertexLight.at), or None (the ambient light reaches everything unblocked);
     radius (M,) the surface's curvature radius (skin.surface_radius) and skin (M,) bool, not a nail, for the
-    subsurface skin model, or None."""
+    subsurface skin model, or None; region (M,) the face labels (model.layout.FACE_LABELS, -1 unlabelled) for
+    skin's dual-lobe specular, or None."""
 
     position: np.ndarray
     normal: np.ndarray
@@ -90,6 +107,7 @@ class Hits:
     visible: np.ndarray | None = None
     radius: np.ndarray | None = None
     skin: np.ndarray | None = None
+    region: np.ndarray | None = None
 
 
 def surface_hits(faces, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray, directions: np.ndarray,
@@ -284,14 +302,17 @@ def diffuse_model(material: Material, hits: Hits, skin_model: str) -> DiffuseMod
 
 
 def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarray, occluded, extent: float,
-          counters: dict | None = None, skin_model: str = DEFAULT_SKIN, environment=None) -> np.ndarray:
+          counters: dict | None = None, skin_model: str = DEFAULT_SKIN, environment=None,
+          skin_specular: str = "single") -> np.ndarray:
     """(3, M) float32 outgoing radiance at the hits.
 
     lights: world-frame lights (lights.world_lights; radiance float32). occluded(origins (K, 3), directions (K, 3),
     tfar (K,)) -> (K,) bool: the scene's occlusion query. extent: the scene's size (m), for the shadow-ray offset.
     counters: adds 'shadow_rays'. Indirect light comes with the hits (Hits.indirect, Hits.visible). skin_model: how
     a skin material's diffuse part responds to a light (SKIN_MODELS). environment: the frame's
-    environment.FrameEnvironment or None; its specular ambient (`environment_specular`) is added.
+    environment.FrameEnvironment or None; its specular ambient (`environment_specular`) is added. skin_specular:
+    'dual' gives a skin material skin_specular.py's lobes and sheen in place of the single lobe (which the kernels
+    then leave out).
 
     Two compiled passes around the shadow rays: _lights_kernel (per light and hit: n.l, the diffuse response, which
     hits the light can reach and their shadow rays), then Embree's occlusion query per light, then _radiance_kernel
@@ -305,7 +326,8 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
     n, v, position = f32(hits.normal), f32(hits.view), f32(hits.position)
     table = light_table(lights)
     model = diffuse_model(material, hits, skin_model)
-    spec = np.float32(material.specular)
+    dual = skin_specular == "dual" and material.kind == "skin"
+    spec = np.float32(0.0 if dual else material.specular)
     lift = np.float32(SHADOW_LIFT * max(extent, 1e-3))
     rays = int(table[:, 7].sum()) * m
     nv, e2 = np.empty(m, np.float32), np.empty(m, np.float32)
@@ -333,6 +355,9 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
                      position, table, diffuse, reached, out)
     if environment is not None and spec:
         out += spec * environment_specular(environment, p, n, v, nv) * visible
+    if dual and material.specular:
+        out += skin_specular_radiance(hits, p.roughness, p.f0, float(material.specular), table, reached, ambient,
+                                      material.roughness_channel is not None, environment)
     return out
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -33,6 +34,7 @@ class Material:
         Roughness is perceptual (GGX alpha = roughness^2).
     specular: scale of the specular lobe (1 physically based, 0 a purely diffuse surface).
     mfp_mm: skin's mean free path per channel (mm), for the subsurface skin model (skin.py).
+    detail: the skin's relief (skin_detail.DetailMap: a bump map built on first use), or None.
     """
 
     kind: str = "pbr"
@@ -46,6 +48,7 @@ class Material:
     name: str = ""
     specular: float = 1.0
     mfp_mm: tuple = SKIN_MFP_MM
+    detail: Any = None
 
 
 def checker_material() -> Material:
@@ -54,10 +57,10 @@ def checker_material() -> Material:
 
 
 def skin_material(maps: MipTexture | None = None, roughness_channel: int | None = None,
-                  roughness_value: float = 0.5, name: str = "skin") -> Material:
-    """The hand's skin: wrap diffuse, skin's specular reflectance."""
+                  roughness_value: float = 0.5, name: str = "skin", detail=None) -> Material:
+    """The hand's skin: wrap diffuse, skin's specular reflectance, its relief `detail` (or None)."""
     return Material("skin", maps if maps is not None else constant_texture(PLAIN_SKIN), roughness_channel,
-                    roughness_value, None, 0.0, SKIN_WRAP, SKIN_F0, name)
+                    roughness_value, None, 0.0, SKIN_WRAP, SKIN_F0, name, detail=detail)
 
 
 @dataclass(frozen=True, eq=False)

@@ -26,6 +26,7 @@ from darthand.render.indirect import VertexLight
 from darthand.render.scene import Scene, interpolate_columns
 from darthand.render.shade import DEFAULT_SKIN, shade, surface_hits
 from darthand.render.skin import surface_radius
+from darthand.render.skin_detail import detail_at
 
 NAIL = FACE_LABEL_IDS["nail"]
 MIN_CHUNK = 4096          # samples per parallel task, at least
@@ -67,7 +68,8 @@ def pool(threads: int) -> ThreadPoolExecutor:
 class Context:
     """What every sample batch of one frame shares; indirect: the frame's indirect light at the vertices
     (indirect.VertexLight), or None; skin: the skin model (shade.SKIN_MODELS); environment: the frame's environment
-    map lighting (environment.FrameEnvironment; its lights are among `lights`), or None."""
+    map lighting (environment.FrameEnvironment; its lights are among `lights`), or None; skin_specular and
+    skin_detail: shade.ShadingOptions' (the skin's specular model, the strength of its relief)."""
 
     scene: Scene
     camera: Camera
@@ -77,6 +79,8 @@ class Context:
     indirect: VertexLight | None = None
     skin: str = DEFAULT_SKIN
     environment: FrameEnvironment | None = None
+    skin_specular: str = "single"
+    skin_detail: float = 0.0
     dDdx: np.ndarray = field(init=False)
     dDdy: np.ndarray = field(init=False)
 
@@ -211,8 +215,11 @@ def shade_hits(ctx: Context, hits: RayHits, footprint: float = 1.0,
         if ctx.skin == "subsurface" and surface.material.kind == "skin":
             skin_at(at, surface, on.prim, on.u, on.v)
         _put_columns_kernel(idx, np.ascontiguousarray(at.normal, np.float32), normal)
+        occlusion = skin_surface_at(ctx, at, surface, ctx.scene.faces[g].table, on.prim)
         colour = shade(surface.material, at, ctx.lights, ctx.ambient, ctx.scene.occluded, ctx.scene.extent,
-                       counters, ctx.skin, ctx.environment)
+                       counters, ctx.skin, ctx.environment, ctx.skin_specular)
+        if occlusion is not None:
+            colour *= occlusion
         _put_columns_kernel(idx, np.ascontiguousarray(colour, np.float32), radiance)
     if stats is not None:
         stats["shade"] = stats.get("shade", 0.0) + time.perf_counter() - t0
@@ -283,6 +290,22 @@ def skin_at(at, surface, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> No
     at.radius = interpolate_columns(radius[None], surface.faces, prim, bu, bv)[0]
     if surface.face_labels is not None:
         at.skin = surface.face_labels[prim] != NAIL
+
+
+def skin_surface_at(ctx: Context, at, surface, table: np.ndarray, prim: np.ndarray) -> np.ndarray | None:
+    """The skin options' inputs of hits `at` on faces `prim` of a surface (after the truth normal was taken, so
+    the frame's normals and edges stay the mesh's): its face labels for the dual-lobe specular, and its shading
+    normal bumped by the skin's relief (the hand's own atlas only: not the forearm cap). Returns the relief's
+    cavity factor on the hits' radiance (M,), or None."""
+    if surface.material.kind != "skin":
+        return None
+    if ctx.skin_specular == "dual" and surface.face_labels is not None:
+        at.region = surface.face_labels[prim]
+    detail = surface.material.detail
+    if not (ctx.skin_detail and detail is not None and surface.role == "hand" and at.uv is not None):
+        return None
+    at.normal, occlusion = detail_at(at, table, prim, detail.texture(), ctx.skin_detail)
+    return occlusion
 
 
 def trace_samples(ctx: Context, uv: np.ndarray, footprint: float = 1.0, stats: dict | None = None) -> Samples:
