@@ -31,6 +31,7 @@ import OpenImageIO as oiio
 from darthand.errors import DarthandError, InputError
 from darthand.export.blender_engine import BlenderUnavailable, blender_python
 from darthand.render.camera import Camera
+from darthand.render.engines import DEFAULT_CYCLES_SAMPLES, MAX_CYCLES_SAMPLES
 from darthand.render.cycles_scene import (Environment, MaterialFiles, camera_spec, frame_arrays, light_specs,
                                           split_environment, world_spec)
 from darthand.render.image import compose, load_background
@@ -39,9 +40,6 @@ from darthand.render.scenes import Scene
 from darthand.render.subject import Subject
 
 WORKER = Path(__file__).resolve().parent / "blender" / "cycles_worker.py"
-ENGINES = ("darthand", "cycles")
-DEFAULT_SAMPLES = 16
-MAX_SAMPLES = 65536
 _CHECKED: dict = {}
 
 
@@ -65,8 +63,9 @@ def check_available() -> Path:
 
 
 def check_samples(samples) -> int:
-    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or not 1 <= samples <= MAX_SAMPLES:
-        raise InputError(f"--cycles-samples: {samples!r} is not a whole number in 1..{MAX_SAMPLES}")
+    ok = isinstance(samples, (int, np.integer)) and not isinstance(samples, bool)
+    if not (ok and 1 <= samples <= MAX_CYCLES_SAMPLES):
+        raise InputError(f"--cycles-samples: {samples!r} is not a whole number in 1..{MAX_CYCLES_SAMPLES}")
     return int(samples)
 
 
@@ -104,7 +103,8 @@ class CyclesWorker:
         return self._proc
 
     def render(self, subject: Subject, cam: Camera, lighting: Lighting, environment: Environment | None, *,
-               samples: int = DEFAULT_SAMPLES, seed: int = 0, threads: int = 1, denoise: bool = True) -> CyclesImage:
+               samples: int = DEFAULT_CYCLES_SAMPLES, seed: int = 0, threads: int = 1,
+               denoise: bool = True) -> CyclesImage:
         """One frame of the posed subject seen by `cam` under `lighting` (and `environment`)."""
         with self._lock:
             n = self._frames = self._frames + 1
@@ -185,7 +185,7 @@ def read_layers(path: Path, height: int, width: int) -> tuple[np.ndarray, np.nda
         index = 0
         while inp.seek_subimage(index, 0):
             names = inp.spec().channelnames
-            pixels = inp.read_image(0, len(names), oiio.FLOAT)
+            pixels = inp.read_image(index, 0, 0, len(names), oiio.FLOAT)
             for c, name in enumerate(names):
                 layers[name.split(".", 1)[-1]] = np.asarray(pixels)[..., c]
             index += 1
@@ -209,7 +209,7 @@ class CyclesRenderer:
     fast renderer's labels, mask and maps, and Cycles' image (module docstring). samples: Cycles' samples per pixel
     (OpenImageDenoise on); worker: the Cycles process (default: this process's shared one)."""
 
-    def __init__(self, renderer, samples: int = DEFAULT_SAMPLES, worker: CyclesWorker | None = None):
+    def __init__(self, renderer, samples: int = DEFAULT_CYCLES_SAMPLES, worker: CyclesWorker | None = None):
         self.renderer = renderer
         self.samples = check_samples(samples)
         self.worker = worker

@@ -41,6 +41,9 @@ from darthand.render.texture import MipTexture, srgb8_to_linear_lut
 TO_BLENDER = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])   # model (Y up) -> Blender (Z up)
 CV_TO_BLENDER_CAMERA = np.diag([1.0, -1.0, -1.0])
 CAMERA_TO_ENVIRONMENT = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])   # d_E = P d_cam
+# Cycles' Environment Texture reads u = atan2(d_y, -d_x) / 2pi (measured: tests/render/test_cycles.py), half a turn
+# from the contract's u = atan2(d_y, -d_x) / 2pi + 0.5: a direction is turned by pi about z before Cycles reads it.
+HALF_TURN = np.diag([-1.0, -1.0, 1.0])
 SENSOR_MM = 36.0
 CLIP_M = (1e-3, 1e4)
 NAIL = 0                             # model.layout.FACE_LABELS' id of 'nail'
@@ -307,12 +310,12 @@ def builtin_maps(blender_python: Path | None = None) -> dict:
 
 
 def environment_matrix(env: Environment, cam: Camera) -> np.ndarray:
-    """(3, 3) Blender world direction -> the direction the map is looked up with (module docstring)."""
+    """(3, 3) Blender world direction -> the direction Cycles' Environment Texture is to look up, so that it reads the
+    texel the contract gives (module docstring; HALF_TURN)."""
     a = math.radians(env.rotation)
     unrotate = np.array([[math.cos(a), math.sin(a), 0.0], [-math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
-    if env.frame == "world":
-        return unrotate
-    return unrotate @ CAMERA_TO_ENVIRONMENT @ cam.R @ TO_BLENDER.T
+    to_environment = np.eye(3) if env.frame == "world" else CAMERA_TO_ENVIRONMENT @ cam.R @ TO_BLENDER.T
+    return HALF_TURN @ unrotate @ to_environment
 
 
 def euler_xyz(R: np.ndarray) -> list[float]:
