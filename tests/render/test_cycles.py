@@ -251,14 +251,13 @@ def _labels(out: Path) -> dict:
 
 
 @needs_bpy
-@pytest.mark.slow
 def test_cycles_dataset_has_the_fast_labels_and_resumes(tmp_path):
     """render-dataset --engine cycles: the fast run's labels (but the engine), and a run stopped after its first
     frame resumes: that frame is kept, the others rendered, the same files as an uninterrupted run's."""
     from darthand.dataset.api import render_dataset
     from darthand.dataset.options import DatasetOptions
 
-    base = dict(count=3, size=32, processes=1, progress=False)
+    base = dict(count=3, size=32, processes=1, progress=False, shard_size=1)     # a progress call per frame
     render_dataset(DatasetOptions("open", str(tmp_path / "fast"), **base))
     stop = tmp_path / "stopped"
 

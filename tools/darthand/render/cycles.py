@@ -72,13 +72,14 @@ def check_samples(samples) -> int:
 @dataclass
 class CyclesImage:
     """A Cycles render: premult (H, W, 3) float32 linear colour premultiplied by alpha (H, W) float32 coverage;
-    environment (H, W, 3) float32 linear, the world seen through each pixel (behind everything); seconds of the
-    worker's render."""
+    environment (H, W, 3) float32 linear, the world seen through each pixel (behind everything); seconds and
+    cpu_seconds (all its threads) of the worker's render."""
 
     premult: np.ndarray
     alpha: np.ndarray
     environment: np.ndarray
     seconds: float
+    cpu_seconds: float
 
 
 class CyclesWorker:
@@ -118,7 +119,7 @@ class CyclesWorker:
                        "world": world_spec(lighting, environment, cam, self.python)}
             answer = self._ask(request)
             premult, alpha, env = read_layers(exr, cam.height, cam.width)
-            return CyclesImage(premult, alpha, env, float(answer["seconds"]))
+            return CyclesImage(premult, alpha, env, float(answer["seconds"]), float(answer["cpu_seconds"]))
 
     def _ask(self, request: dict) -> dict:
         proc = self._proc if self._proc is not None and self._proc.poll() is None else self._start()
@@ -240,6 +241,7 @@ class CyclesRenderer:
                   else np.asarray(background, np.float32))
         frame.colour, frame.rgba = compose(np.moveaxis(image.premult, -1, 0), image.alpha, (0, 0), bg, (H, W))
         frame.timings["cycles"] = image.seconds
+        frame.stats["cycles_cpu_s"] = image.cpu_seconds
         frame.labels.setdefault("render", {}).update(
             engine="cycles", cycles={"samples": self.samples, "denoiser": "OpenImageDenoise"},
             **({"environment": environment.to_json()} if environment is not None else {}))

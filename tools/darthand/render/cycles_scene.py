@@ -11,9 +11,9 @@ viewplane, y up: shift_x = (W/2 - cx) / W, shift_y = (cy - H/2) (fx / fy) / W). 
 
 Units. Light intensities have pi folded in (render/lights.py): a white Lambertian surface facing a directional light
 of intensity I renders radiance I, which in Blender is a sun of irradiance pi I (W/m^2); a point light of intensity I
-gives that at 1 m: Blender's point light of power P has radiant intensity P / (4 pi) per steradian and Cycles divides
-a light's strength by pi once more for its W-as-Lux convention, so P = 4 pi^2 I (tests/render/test_cycles.py checks
-both against closed forms). Ambient light of intensity I is a uniform world of radiance I (its own closed form).
+gives that at 1 m, which in Cycles is a point light of power P = 4 pi^2 I watts (Blender's point lights are defined
+so that P watts give radiant intensity P / (4 pi^2) W/sr). tests/render/test_cycles.py checks both against closed
+forms. Ambient light of intensity I is a uniform world of radiance I (its own closed form).
 
 The environment (the environment contract of issue 28): {"map": NAME or PATH, "rotation": degrees, "strength",
 "white_balance": [r, g, b], "frame": "camera" | "world"}; radiance map(d) * strength * white_balance with Blender's
@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.fileio import read_json
 from darthand.render.camera import Camera
 from darthand.render.image import write_png
 from darthand.render.lights import Lighting, world_lights
@@ -269,8 +270,6 @@ def _triple(doc: dict, source: str) -> list:
 def split_environment(lights) -> tuple:
     """(the lights without their environment, Environment or None) of a lights argument (None, a Lighting, a lights
     file path or its dict): the fast renderer takes the first until its own environment lighting lands."""
-    from darthand.fileio import read_json     # lazy: only a path's document is read here
-
     if isinstance(lights, (str, Path)) and Path(lights).suffix == ".json" and Path(lights).is_file():
         doc = read_json(Path(lights), "lights file")
         if isinstance(doc, dict) and "environment" in doc:

@@ -3,7 +3,8 @@ and sends it one JSON request a line on stdin, and it answers one JSON line per 
 output goes to stderr).
 
     {"cmd": "render", "arrays": NPZ, "out": EXR, "width", "height", "samples", "seed", "threads", "denoise",
-     "camera": {...}, "surfaces": [...], "lights": [...], "world": {...}}    -> {"ok": true, "seconds": s}
+     "camera": {...}, "surfaces": [...], "lights": [...], "world": {...}}
+                                                  -> {"ok": true, "seconds": wall s, "cpu_seconds": CPU s}
     {"cmd": "quit"}                                                          -> exits
     a failure                                                                -> {"ok": false, "error": "one line"}
 
@@ -27,7 +28,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-STATE = {"meshes": {}, "materials": {}, "images": {}, "lights": []}
+STATE: dict = {"meshes": {}, "materials": {}, "images": {}, "lights": []}
 
 
 def main():
@@ -38,10 +39,10 @@ def main():
         request = json.loads(line)
         if request.get("cmd") == "quit":
             break
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), time.process_time()
         try:
             render(request)
-            answer = {"ok": True, "seconds": time.perf_counter() - t}
+            answer = {"ok": True, "seconds": time.perf_counter() - t, "cpu_seconds": time.process_time() - cpu}
         except Exception as e:            # reported to the caller as one line; the worker keeps serving
             answer = {"ok": False, "error": f"{type(e).__name__}: {str(e).strip().splitlines()[0][:300]}"}
         reply.write(json.dumps(answer) + "\n")
