@@ -24,7 +24,7 @@ from darthand.errors import InputError
 from darthand.export.blender_engine import BlenderUnavailable, blender_python
 from darthand.render.api import Renderer
 from darthand.render.cycles import CyclesRenderer, CyclesWorker, check_available
-from darthand.render.cycles_scene import Environment, builtin_maps, environment_map_path, euler_xyz
+from darthand.render.cycles_scene import Environment, MaterialFiles, builtin_maps, environment_map_path, euler_xyz
 from darthand.render.lights import Light, Lighting
 from darthand.render.scenes import HandBody, Scene
 
@@ -94,7 +94,7 @@ def test_euler_xyz_rebuilds_the_rotation():
         assert np.allclose(Rz @ Ry @ Rx, R, atol=1e-9)
 
 
-def test_environment_documents_are_checked():
+def test_environment_documents_are_checked(tmp_path):
     env = Environment.from_json({"map": "studio", "rotation": 30, "white_balance": [1, 0.9, 0.8]})
     assert env.frame == "camera" and env.strength == 1.0 and env.to_json()["rotation"] == 30.0
     for bad, field in (({"rotation": 1}, "map"), ({"map": "x", "frame": "sky"}, "frame"),
@@ -104,6 +104,36 @@ def test_environment_documents_are_checked():
             Environment.from_json(bad)
     with pytest.raises(InputError, match="not a built-in map"):
         environment_map_path("no_such_map")
+    square = tmp_path / "square.exr"
+    buf = oiio.ImageBuf(oiio.ImageSpec(16, 16, 3, oiio.FLOAT))
+    assert buf.write(str(square))
+    with pytest.raises(InputError, match="not equirectangular"):
+        environment_map_path(str(square))
+    (tmp_path / "broken.hdr").write_bytes(b"#?RADIANCE\nnot a picture")
+    with pytest.raises(InputError, match="does not decode"):
+        environment_map_path(str(tmp_path / "broken.hdr"))
+
+
+def test_material_files_write_each_texture_once_and_keep_the_last_few(tmp_path):
+    from darthand.render.image import read_png
+    from darthand.render.texture import code_pyramid, decode_tables, srgb8_to_linear_lut
+
+    rng = np.random.default_rng(0)
+    files = MaterialFiles(tmp_path)
+    codes = [rng.integers(0, 256, (8, 16, 4), dtype=np.uint8) for _ in range(MaterialFiles.KEEP_TEXTURES + 2)]
+    textures = [code_pyramid(c, 3) for c in codes]
+    first = files.texture_files(textures[0])
+    assert files.texture_files(textures[0]) is first
+    assert np.array_equal(read_png(first["base"]["image"])[..., :3], codes[0][..., :3])   # the sRGB codes as stored
+    assert np.array_equal(read_png(first["data"][3]["image"])[..., 0], codes[0][..., 3])
+    offset = textures[1].with_decode(decode_tables(4, 3, offset=0.1))
+    shifted = read_png(files.texture_files(offset)["base"]["image"])[..., :3]
+    expected = srgb8_to_linear_lut(0.1)[codes[1][..., :3]]
+    assert np.abs(srgb8_to_linear_lut(0.0)[shifted] - expected).max() < 0.01                # re-encoded after offset
+    for tex in textures[2:]:
+        files.texture_files(tex)
+    assert not Path(first["base"]["image"]).exists()                                       # the oldest let go
+    assert files.texture_files(textures[0])["base"]["image"] != first["base"]["image"]
 
 
 # ------------------------------------------------------------------------------------------------ closed forms
@@ -216,6 +246,8 @@ def test_a_tiny_frame_registers_with_the_fast_renderer(assets, worker):
     assert error < 0.05, error
     lit = image.premult[image.alpha > 0.99]
     assert lit.mean() > 0.02                                              # the environment lights the hand
+    again = CyclesRenderer(Renderer(assets, 1), samples=4, worker=worker).render_scene(scene, width=64, height=64)
+    assert np.array_equal(again.rgba, frame.rgba)                         # the same scene, the same bytes
 
 
 @needs_bpy

@@ -26,13 +26,16 @@ from __future__ import annotations
 
 import glob
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import OpenImageIO as oiio
 
 from darthand.errors import InputError
 from darthand.fileio import read_json
+from darthand.processes import native_stderr_captured
 from darthand.render.camera import Camera
 from darthand.render.image import write_png
 from darthand.render.lights import Lighting, world_lights
@@ -99,13 +102,16 @@ def has_nails(surface: Surface) -> bool:
 
 class MaterialFiles:
     """Material specs and their texture PNGs in `folder`, each texture written once per pyramid (per texture id and
-    skin-tone offset: the same codes read through another table are another file) and each material numbered once
-    per distinct spec (Blender names are short)."""
+    skin-tone offset: the same codes read through another table are another file) while it is among the last
+    KEEP_TEXTURES used, and each material numbered once per distinct spec (Blender names are short)."""
+
+    KEEP_TEXTURES = 8
 
     def __init__(self, folder: Path):
         self.folder = Path(folder)
-        self._textures: dict = {}         # key -> (the pyramid's storage, kept alive so its id is not reused; files)
-        self._keys: dict = {}             # full spec -> short material name
+        self._textures: OrderedDict = OrderedDict()   # key -> (the pyramid's storage, kept so its id is not
+        self._keys: dict = {}                         # reused; its files); full spec -> short material name
+        self._written = 0
 
     def specs(self, surface: Surface) -> list[dict]:
         """The surface's material slots: its material, then (skin with nails) the same without subsurface."""
@@ -134,8 +140,15 @@ class MaterialFiles:
             return {"constant": np.asarray(tex.levels[0][0, 0], np.float64)}
         decode = b"" if tex.decode is None else tex.decode.tobytes()
         key = (id(tex.flat), decode)
-        if key not in self._textures:
-            self._textures[key] = (tex.flat, self._write(tex, len(self._textures)))
+        if key in self._textures:
+            self._textures.move_to_end(key)
+        else:
+            self._textures[key] = (tex.flat, self._write(tex, self._written))
+            self._written += 1
+            if len(self._textures) > self.KEEP_TEXTURES:
+                _, (_, files) = self._textures.popitem(last=False)
+                for spec in [files["base"], *files["data"].values()]:
+                    Path(spec["image"]).unlink(missing_ok=True)
         return self._textures[key][1]
 
     def _write(self, tex: MipTexture, n: int) -> dict:
@@ -288,7 +301,7 @@ def environment_map_path(name: str, blender_python: Path | None = None) -> Path:
     if path.suffix.lower() in MAP_SUFFIXES or len(path.parts) > 1:
         if not path.is_file():
             raise InputError(f"environment map {name}: no such file")
-        return path.resolve()
+        return check_equirectangular(path.resolve())
     vendored = REPO_ROOT / "assets_src" / "environments" / f"{name}.exr"
     if vendored.is_file():
         return vendored
@@ -297,6 +310,20 @@ def environment_map_path(name: str, blender_python: Path | None = None) -> Path:
         raise InputError(f"environment map {name!r}: not a built-in map ({', '.join(sorted(builtin)) or 'none'}) "
                          "nor an .exr/.hdr file")
     return builtin[name]
+
+
+def check_equirectangular(path: Path) -> Path:
+    """`path`, after checking that it decodes as an image twice as wide as it is high (InputError, one line)."""
+    with native_stderr_captured():
+        image = oiio.ImageInput.open(str(path))
+    if image is None:
+        oiio.geterror()
+        raise InputError(f"environment map {path}: does not decode as an image")
+    width, height = image.spec().width, image.spec().height
+    image.close()
+    if width != 2 * height:
+        raise InputError(f"environment map {path}: {width}x{height} is not equirectangular (width = 2 x height)")
+    return path
 
 
 def builtin_maps(blender_python: Path | None = None) -> dict:

@@ -29,6 +29,7 @@ import numpy as np
 from mathutils import Matrix
 
 STATE: dict = {"meshes": {}, "materials": {}, "images": {}, "lights": []}
+KEEP_MATERIALS = 16        # materials kept for later frames (a catalogue texture is 16-64 MB in Blender's memory)
 
 
 def main():
@@ -83,6 +84,7 @@ def render(request):
         scene.cycles.denoiser = "OPENIMAGEDENOISE"
     scene.render.threads = int(request["threads"])
     set_camera(scene.camera, request["camera"])
+    forget_materials({m["key"] for s in request["surfaces"] for m in s["materials"]})
     with np.load(request["arrays"]) as arrays:
         set_surfaces(scene, request["surfaces"], arrays)
     set_lights(scene, request["lights"])
@@ -170,8 +172,18 @@ def update_mesh(mesh, vertices, normals, uv, material_index):
     mesh.normals_split_custom_set_from_vertices(np.ascontiguousarray(normals, np.float32).reshape(-1, 3))
 
 
+def forget_materials(keep):
+    """Past KEEP_MATERIALS, remove the materials this frame does not use, then the images nothing uses."""
+    if len(STATE["materials"]) <= KEEP_MATERIALS:
+        return
+    for key in [k for k in STATE["materials"] if k not in keep]:
+        bpy.data.materials.remove(STATE["materials"].pop(key))
+    for key in [k for k, img in STATE["images"].items() if img.users == 0]:
+        bpy.data.images.remove(STATE["images"].pop(key))
+
+
 def set_materials(mesh, specs):
-    if [m.name for m in mesh.materials] == [s["key"] for s in specs]:
+    if [m.name if m else None for m in mesh.materials] == [s["key"] for s in specs]:
         return
     mesh.materials.clear()
     for spec in specs:
