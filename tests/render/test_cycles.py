@@ -321,6 +321,22 @@ def test_cycles_dataset_has_the_fast_labels_and_resumes(tmp_path):
                                                                  ).read_bytes()
 
 
+@needs_bpy
+@pytest.mark.slow
+def test_render_command_takes_the_engine_and_an_environment(tmp_path, capsys):
+    from darthand.cli import main
+    from darthand.render.image import read_png
+
+    lights = tmp_path / "lights.json"
+    lights.write_text(json.dumps({"environment": {"map": "courtyard", "rotation": 120, "strength": 1.2}}))
+    assert main(["render", "open", "--out", str(tmp_path / "out"), "--size", "48", "--engine", "cycles",
+                 "--cycles-samples", "2", "--lights", str(lights), "--pose", "fist"]) == 0
+    labels = json.loads((tmp_path / "out" / "labels.json").read_text())
+    assert labels["render"]["engine"] == "cycles" and labels["render"]["environment"]["map"] == "courtyard"
+    rgba = read_png(tmp_path / "out" / "image.png")
+    assert rgba.shape == (48, 48, 4) and rgba[..., 3].max() == 255 and rgba[..., :3].max() > 20
+
+
 def test_blender_python_follows_the_environment_variable(monkeypatch, tmp_path):
     fake = tmp_path / "py"
     fake.write_text("")

@@ -116,7 +116,7 @@ class CyclesWorker:
                        "height": cam.height, "samples": int(samples), "seed": int(seed) & 0x7FFFFFFF,
                        "threads": int(threads), "denoise": bool(denoise), "camera": camera_spec(cam),
                        "surfaces": surfaces, "lights": light_specs(lighting, cam),
-                       "world": world_spec(lighting, environment, cam, self.python)}
+                       "world": world_spec(lighting, environment, cam, self.python or blender_python())}
             answer = self._ask(request)
             premult, alpha, env = read_layers(exr, cam.height, cam.width)
             return CyclesImage(premult, alpha, env, float(answer["seconds"]), float(answer["cpu_seconds"]))
