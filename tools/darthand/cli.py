@@ -497,6 +497,7 @@ def _add_render_arguments(p) -> None:
     p.add_argument("--height", type=PIXELS, default=None, metavar="H", help="image height (overrides --size)")
     _add_antialiasing_options(p, DEFAULT_SAMPLES)
     _add_shading_options(p)
+    _add_engine_options(p)
     p.add_argument("--depth", action="store_true", help="also write depth.exr (camera z in metres, 0 = background)")
     p.add_argument("--keypoint-order", default="openpose", choices=("openpose", "mano"),
                    help="order of the 21 keypoints in labels.json (default openpose)")
@@ -615,6 +616,7 @@ def _add_dataset_arguments(p) -> None:
                    help=f"square image size in pixels (default {run.size})")
     _add_antialiasing_options(p, run.samples, run.aa_shading)
     _add_shading_options(p)
+    _add_engine_options(p, run.engine, run.cycles_samples)
     p.add_argument("--processes", type=number(int, 1, 100_000), default=None, metavar="N",
                    help="worker processes, each rendering whole frames (default: the number of cores; 1 renders "
                         "in this process)")
@@ -726,6 +728,22 @@ def _add_shading_options(p) -> None:
                    help="strength of the skin's fine relief (knuckle folds, palm and finger creases, pores) on its "
                         f"shading: 0 none, 1 nominal depths; built once per model, a few seconds (default "
                         f"{d.skin_detail:g})")
+
+
+def _add_engine_options(p, engine: str | None = None, samples: int | None = None) -> None:
+    """--engine and --cycles-samples (render/engines.py's defaults unless given)."""
+    from darthand.render import engines
+
+    engine = engine or engines.DEFAULT_ENGINE
+    samples = samples or engines.DEFAULT_CYCLES_SAMPLES
+    p.add_argument("--engine", default=engine, choices=engines.ENGINES,
+                   help="where the image comes from: darthand, the fast renderer, or cycles, Blender's path tracer "
+                        "through .venv-blender (or $DARTHAND_BLENDER_PYTHON): same frame, pose, camera, textures "
+                        "and lights, labels and mask from the fast renderer, tens of seconds a frame "
+                        f"(default {engine})")
+    p.add_argument("--cycles-samples", type=number(int, 1, engines.MAX_CYCLES_SAMPLES), default=samples,
+                   metavar="N", help=f"--engine cycles: samples per pixel, denoised by OpenImageDenoise "
+                                     f"(default {samples})")
 
 
 def _add_source_options(p) -> None:

@@ -63,7 +63,7 @@ def dataset_options(args) -> DatasetOptions:
         samples=args.samples, aa_shading=args.aa_shading,
         shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin,
                  "skin_specular": args.skin_specular, "skin_detail": args.skin_detail},
-        processes=args.processes, threads=args.threads,
+        engine=args.engine, cycles_samples=args.cycles_samples, processes=args.processes, threads=args.threads,
         cluster=None if args.ray is None else ClusterOptions(args.ray or None, args.ray_files),
         resume=args.resume, shard_size=args.shard_size, max_frames=args.max_frames,
         maps=tuple(_names(args.maps) or ()), formats=tuple(_names(args.formats) or ()), left=args.left,

@@ -29,6 +29,7 @@ from darthand.fileio import atomic_path
 from darthand.model.shape import shaped_vertices
 from darthand.render import truth
 from darthand.render.api import shading_options, write_frame
+from darthand.render.cycles import CyclesRenderer
 from darthand.render.environment import backdrop_blur
 from darthand.render.labels import mano_camera_parameters
 from darthand.render.scenes import Scene
@@ -61,6 +62,8 @@ def job_digest(job: dict, settings: dict) -> str:
            "shading": shading_options(settings.get("shading")).to_json()}
     if settings.get("maps"):
         key["maps"] = list(settings["maps"])
+    if settings.get("engine"):             # the fast renderer's frames keep their digests
+        key["engine"] = settings["engine"]
     if wears_ring(job):
         key["ring_wear"] = RING_WEAR       # ring frames rendered before rings were worn per pose are made again
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
@@ -75,9 +78,12 @@ def wears_ring(job: dict) -> bool:
 
 def render_job(renderer, job: dict, settings: dict):
     """(api.Frame, background info or None) of one job, rendered as its scene (render/scenes.py). settings: size,
-    samples, aa_shading, and optionally shading (api.shading_options' dict; None: the renderer's defaults) and maps
-    (render/truth.KINDS to compute)."""
+    samples, aa_shading, and optionally shading (api.shading_options' dict; None: the renderer's defaults), maps
+    (render/truth.KINDS to compute) and engine ({'name': 'cycles', 'samples': N}: the image from Cycles,
+    render/cycles.py)."""
     scene = Scene.from_job(job)
+    if settings.get("engine"):
+        renderer = CyclesRenderer(renderer, settings["engine"]["samples"])
     size = settings["size"]
     background, info = None, None
     t = time.perf_counter()

@@ -21,6 +21,7 @@ import numpy as np
 
 from darthand.dataset.plan import PlanOptions
 from darthand.errors import InputError
+from darthand.render.engines import DEFAULT_CYCLES_SAMPLES, DEFAULT_ENGINE
 
 # 16,384 frames: a shard's chunks load each catalogue texture about once (325 textures of 2048^2, ~0.1 s of CPU
 # each), so the larger the shard the fewer loads per frame. Simulated over the benchmark's plan (32,768 frames, two
@@ -71,6 +72,9 @@ class DatasetOptions:
         threads: render threads per process; cluster: render on a cluster instead (None: this machine).
     resume: skip frames already rendered from the same jobs; shard_size: frames per shard (the unit of planning and
         resume records); chunk_size: frames per task (None: chosen per shard); max_frames: the run's frame budget.
+    engine: where the images come from (render/engines.ENGINES: 'darthand' the fast renderer, 'cycles' Blender's
+        Cycles through .venv-blender, labels still the fast renderer's); cycles_samples: Cycles' samples per pixel.
+        Not ClusterOptions.engine, which picks the runner. Part of a frame's job digest only when not 'darthand'.
     maps: per-pixel truth maps written beside the images (render/truth.KINDS: 'depth', 'normals', 'parts'; maps/
         <kind>/<n>.png); part of a frame's job digest only when not empty.
     formats: layouts also written after rendering (dataset/writers.py); left, allow_non_mano: their options.
@@ -97,6 +101,8 @@ class DatasetOptions:
     shard_size: int = DEFAULT_SHARD_SIZE
     chunk_size: int | None = None
     max_frames: int = DEFAULT_MAX_FRAMES
+    engine: str = DEFAULT_ENGINE
+    cycles_samples: int = DEFAULT_CYCLES_SAMPLES
     maps: tuple = ()
     formats: tuple = ()
     left: str = "mirror"

@@ -39,6 +39,8 @@ from darthand.errors import InputError
 from darthand.fileio import read_json, write_json
 from darthand.render import aa, truth
 from darthand.render.api import shading_options
+from darthand.render.cycles import check_available, check_samples
+from darthand.render.engines import ENGINES
 
 DATASET_FORMAT = "darthand-dataset"
 DATASET_VERSION = 2
@@ -90,10 +92,11 @@ def render_frames(options: DatasetOptions, sources: dict, specs: dict, planner=N
     if total > max_frames:
         raise InputError(f"jobs: {total} frames are over the frame budget of {max_frames} (--max-frames raises it)")
     maps = truth.check_kinds(o.maps)
+    engine = engine_settings(o.engine, o.cycles_samples)
     out = Path(o.out)
     _prepare_folders(out, maps)
     settings = {"out_dir": str(out), "size": size, "samples": int(samples), "aa_shading": aa_shading,
-                "shading": shading, "maps": maps}
+                "shading": shading, "maps": maps, **({"engine": engine} if engine else {})}
     stats = RunStats(t_start)
     report = _progress_printer(stats) if o.progress is True else (o.progress or None)
     runner = make_runner(cluster, specs, settings, sources, workers, threads, total)
@@ -106,6 +109,18 @@ def render_frames(options: DatasetOptions, sources: dict, specs: dict, planner=N
     doc = _write_dataset(out, o.package, jobs_source, planner, total, settings, stats, processes, models,
                          runner.describe())
     return doc
+
+
+def engine_settings(engine: str, cycles_samples) -> dict | None:
+    """The run's engine as its settings carry it: None for the fast renderer, {'name': 'cycles', 'samples': N}
+    after checking that Blender's Python imports bpy (one line, before anything renders)."""
+    if engine not in ENGINES:
+        raise InputError(f"--engine: {engine!r} is not one of {', '.join(ENGINES)}")
+    if engine == "darthand":
+        return None
+    samples = check_samples(cycles_samples)
+    check_available()
+    return {"name": engine, "samples": samples}
 
 
 def _render_shards(shards, runner: Runner, settings, resume, processes, chunk_size, stats, total, report) -> None:
@@ -396,6 +411,8 @@ def _write_dataset(out: Path, package, jobs_source, planner, total, settings, st
                      for kind, name in frame_names(0, settings["maps"]).items()},
            "models": models, "rendered": stats.rendered, "skipped": stats.skipped,
            "summary": stats.summary(), "timings": stats.timings(processes), "runner": runner}
+    if settings.get("engine"):             # likewise: the fast renderer's dataset.json is unchanged
+        doc["engine"] = settings["engine"]
     if settings["maps"]:                   # only when asked: a dataset without maps keeps its dataset.json
         doc["maps"] = truth.describe(settings["maps"], {kind: doc["files"][kind] for kind in settings["maps"]})
     write_json(out / "dataset.json", doc)

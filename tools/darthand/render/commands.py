@@ -57,7 +57,13 @@ def render(args) -> int:
                     skin_tone_offset=args.skin_tone_offset, accessory=args.accessory)
     scene = Scene((hand,), args.camera, environment_lights(args), args.background)
     width, height = args.width or args.size, args.height or args.size
-    frame = Renderer(source, args.threads).render_scene(
+    renderer = Renderer(source, args.threads)
+    if args.engine == "cycles":
+        from darthand.render.cycles import CyclesRenderer, check_available  # lazy, as the renderer above
+
+        check_available()
+        renderer = CyclesRenderer(renderer, args.cycles_samples)
+    frame = renderer.render_scene(
         scene, width=width, height=height, samples=args.samples, aa_shading=args.aa_shading,
         keypoint_order=args.keypoint_order,
         shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin,

@@ -1,0 +1,344 @@
+"""The path-traced tier (render/cycles.py): Blender's Cycles against closed forms (a white Lambertian plane under a
+sun, a point light, ambient light and a uniform environment renders the intensity the lights' units promise), against
+the fast renderer (the same frame's mask: IoU and centroid; labels unchanged), the environment seen behind the hand
+against a numpy lookup written from issue 28's environment contract, a missing Blender as one line, and a dataset
+rendered with --engine cycles that resumes after an interruption.
+
+Tests that need bpy skip when .venv-blender is missing."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+from render_scenes import flat_material, quad, subject, top_camera
+
+from darthand.errors import InputError
+from darthand.export.blender_engine import BlenderUnavailable, blender_python
+from darthand.render.api import Renderer
+from darthand.render.cycles import CyclesRenderer, CyclesWorker, check_available
+from darthand.render.cycles_scene import Environment, MaterialFiles, builtin_maps, environment_map_path, euler_xyz
+from darthand.render.lights import Light, Lighting
+from darthand.render.scenes import HandBody, Scene
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _has_bpy() -> bool:
+    try:
+        check_available()
+        return True
+    except (InputError, BlenderUnavailable):
+        return False
+
+
+needs_bpy = pytest.mark.skipif(not _has_bpy(), reason="no Blender Python with bpy (make blender)")
+
+
+@pytest.fixture(scope="module")
+def worker():
+    w = CyclesWorker()
+    yield w
+    w.close()
+
+
+# ------------------------------------------------------------------------------------------------ no Blender
+
+
+def test_missing_blender_is_one_line(monkeypatch, tmp_path):
+    monkeypatch.setenv("DARTHAND_BLENDER_PYTHON", str(tmp_path / "nowhere" / "python"))
+    with pytest.raises(InputError, match=r"^--engine cycles: .*nowhere/python") as e:
+        check_available()
+    assert "\n" not in str(e.value)
+    fake = tmp_path / "python"
+    fake.write_text("#!/bin/sh\nexit 1\n")
+    fake.chmod(0o755)
+    monkeypatch.setenv("DARTHAND_BLENDER_PYTHON", str(fake))
+    with pytest.raises(InputError, match="cannot import bpy"):
+        check_available()
+
+
+def test_render_dataset_without_blender_exits_2_before_rendering(tmp_path):
+    env = {**os.environ, "DARTHAND_BLENDER_PYTHON": str(tmp_path / "missing"),
+           "PYTHONPATH": f"{REPO / 'tools'}:{REPO}"}
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "darthand.cli", "render-dataset", "open", "--out", str(out),
+                           "--count", "2", "--size", "32", "--engine", "cycles"], capture_output=True, text=True,
+                          env=env, cwd=tmp_path, timeout=300)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--engine cycles" in lines[0] and "missing" in lines[0]
+    assert not (out / "images").exists() or not any((out / "images").iterdir())
+
+
+# ------------------------------------------------------------------------------------------------ conventions
+
+
+def test_euler_xyz_rebuilds_the_rotation():
+    rng = np.random.default_rng(3)
+    cases = [np.linalg.qr(rng.normal(size=(3, 3)))[0] for _ in range(20)]
+    cases = [q * np.sign(np.linalg.det(q)) for q in cases]
+    cases += [np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0.0]]), np.array([[0, 0, -1], [0, 1, 0], [1, 0, 0.0]])]
+    for R in cases:
+        a, b, c = euler_xyz(R)
+        Rx = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
+        Ry = np.array([[math.cos(b), 0, math.sin(b)], [0, 1, 0], [-math.sin(b), 0, math.cos(b)]])
+        Rz = np.array([[math.cos(c), -math.sin(c), 0], [math.sin(c), math.cos(c), 0], [0, 0, 1]])
+        assert np.allclose(Rz @ Ry @ Rx, R, atol=1e-9)
+
+
+def test_environment_documents_are_checked(tmp_path):
+    env = Environment.from_json({"map": "studio", "rotation": 30, "white_balance": [1, 0.9, 0.8]})
+    assert env.frame == "camera" and env.strength == 1.0 and env.to_json()["rotation"] == 30.0
+    for bad, field in (({"rotation": 1}, "map"), ({"map": "x", "frame": "sky"}, "frame"),
+                       ({"map": "x", "strength": -1}, "strength"), ({"map": "x", "white_balance": [1]}, "white"),
+                       ({"map": "x", "spin": 1}, "spin")):
+        with pytest.raises(InputError, match=field):
+            Environment.from_json(bad)
+    with pytest.raises(InputError, match="not a built-in map"):
+        environment_map_path("no_such_map")
+    square = tmp_path / "square.exr"
+    buf = oiio.ImageBuf(oiio.ImageSpec(16, 16, 3, oiio.FLOAT))
+    assert buf.write(str(square))
+    with pytest.raises(InputError, match="not equirectangular"):
+        environment_map_path(str(square))
+    (tmp_path / "broken.hdr").write_bytes(b"#?RADIANCE\nnot a picture")
+    with pytest.raises(InputError, match="does not decode"):
+        environment_map_path(str(tmp_path / "broken.hdr"))
+
+
+def test_material_files_write_each_texture_once_and_keep_the_last_few(tmp_path):
+    from darthand.render.image import read_png
+    from darthand.render.texture import code_pyramid, decode_tables, srgb8_to_linear_lut
+
+    rng = np.random.default_rng(0)
+    files = MaterialFiles(tmp_path)
+    codes = [rng.integers(0, 256, (8, 16, 4), dtype=np.uint8) for _ in range(MaterialFiles.KEEP_TEXTURES + 2)]
+    textures = [code_pyramid(c, 3) for c in codes]
+    first = files.texture_files(textures[0])
+    assert files.texture_files(textures[0]) is first
+    assert np.array_equal(read_png(first["base"]["image"])[..., :3], codes[0][..., :3])   # the sRGB codes as stored
+    assert np.array_equal(read_png(first["data"][3]["image"])[..., 0], codes[0][..., 3])
+    offset = textures[1].with_decode(decode_tables(4, 3, offset=0.1))
+    shifted = read_png(files.texture_files(offset)["base"]["image"])[..., :3]
+    expected = srgb8_to_linear_lut(0.1)[codes[1][..., :3]]
+    assert np.abs(srgb8_to_linear_lut(0.0)[shifted] - expected).max() < 0.01                # re-encoded after offset
+    for tex in textures[2:]:
+        files.texture_files(tex)
+    assert not Path(first["base"]["image"]).exists()                                       # the oldest let go
+    assert files.texture_files(textures[0])["base"]["image"] != first["base"]["image"]
+
+
+# ------------------------------------------------------------------------------------------------ closed forms
+
+
+def _plane_radiance(worker, lighting, environment=None, size=24):
+    """Mean radiance (3,) of the central pixels of a white Lambertian square facing a camera 1 m above it."""
+    plane = subject(quad(size=0.6, material=flat_material((1.0, 1.0, 1.0))))
+    cam = top_camera(1.0, size, 20.0)
+    image = worker.render(plane, cam, lighting, environment, samples=16, denoise=False)
+    c = size // 2
+    assert (image.alpha > 0.999).all()
+    return image.premult[c - 4:c + 4, c - 4:c + 4].reshape(-1, 3).mean(0)
+
+
+@needs_bpy
+def test_light_units_match_the_fast_renderers_closed_forms(worker, tmp_path):
+    """A white Lambertian surface facing a directional light of intensity I, a point light of intensity I at 1 m,
+    ambient light I, or inside a uniform environment of value L (times strength and white balance) renders radiance
+    I (L) (render/lights.py, issue 28's environment contract)."""
+    sun = Lighting((1, 1, 1), 0.0, (Light("directional", (1.0, 0.5, 0.25), 0.8, direction=(0, 0, -1)),))
+    assert np.allclose(_plane_radiance(worker, sun), [0.8, 0.4, 0.2], rtol=0.02)
+    tilt = (0.0, math.sin(1), -math.cos(1))
+    slanted = Lighting((1, 1, 1), 0.0, (Light("directional", (1, 1, 1), 1.0, direction=tilt),))
+    assert np.allclose(_plane_radiance(worker, slanted), math.cos(1), rtol=0.02)
+    point = Lighting((1, 1, 1), 0.0, (Light("point", (1, 1, 1), 0.7, position=(0, 0, 1.0), shadows=False),))
+    assert np.allclose(_plane_radiance(worker, point), 0.7, rtol=0.03)
+    ambient = Lighting((1.0, 0.8, 0.6), 0.5, ())
+    assert np.allclose(_plane_radiance(worker, ambient), [0.5, 0.4, 0.3], rtol=0.03)
+    uniform = tmp_path / "uniform.exr"
+    buf = oiio.ImageBuf(oiio.ImageSpec(64, 32, 3, oiio.FLOAT))
+    buf.set_pixels(oiio.ROI(), np.full((32, 64, 3), 0.25, np.float32))
+    assert buf.write(str(uniform))
+    env = Environment(str(uniform), rotation=40.0, strength=2.0, white_balance=(1.0, 0.5, 2.0))
+    assert np.allclose(_plane_radiance(worker, Lighting((1, 1, 1), 0.0, ()), env), [0.5, 0.25, 1.0], rtol=0.03)
+
+
+# ------------------------------------------------------------------------------------------------ against the fast path
+
+
+def read_map(path) -> np.ndarray:
+    buf = oiio.ImageBuf(str(path))
+    return np.asarray(buf.get_pixels(oiio.FLOAT))[..., :3]
+
+
+def contract_lookup(env_map: np.ndarray, environment: Environment, cam, grid: int = 1) -> np.ndarray:
+    """(H, W, 3) the environment seen through each pixel, written from issue 28's contract: a ray direction in the
+    environment frame E (camera: (-z, x, -y) of the camera-frame direction; world: (x, -z, y) of the model's),
+    turned by Rz(-rotation), then u = atan2(d_y, -d_x) / 2pi + 0.5, v = atan2(d_z, hypot(d_x, d_y)) / pi + 0.5
+    (v = 1 the top row), bilinear, wrapping in u; averaged over a grid x grid of points of the pixel (a box filter:
+    1, its centre)."""
+    H, W = cam.height, cam.width
+    offsets = (np.arange(grid) + 0.5) / grid
+    rows, cols, dy, dx = np.meshgrid(np.arange(H), np.arange(W), offsets, offsets, indexing="ij")
+    uv = np.stack([(cols + dx).ravel(), (rows + dy).ravel()], 1)
+    d = cam.directions(uv)
+    if environment.frame == "camera":
+        dc = d @ cam.R.T
+        dE = np.stack([-dc[:, 2], dc[:, 0], -dc[:, 1]], 1)
+    else:
+        dE = np.stack([d[:, 0], -d[:, 2], d[:, 1]], 1)
+    a = -math.radians(environment.rotation)
+    x = math.cos(a) * dE[:, 0] - math.sin(a) * dE[:, 1]
+    y = math.sin(a) * dE[:, 0] + math.cos(a) * dE[:, 1]
+    z = dE[:, 2]
+    u = np.arctan2(y, -x) / (2 * math.pi) + 0.5
+    v = np.arctan2(z, np.hypot(x, y)) / math.pi + 0.5
+    h, w = env_map.shape[:2]
+    fx, fy = u * w - 0.5, (1 - v) * h - 0.5
+    x0, y0 = np.floor(fx).astype(int), np.floor(fy).astype(int)
+    tx, ty = (fx - x0)[:, None], (fy - y0)[:, None]
+    at = lambda yy, xx: env_map[np.clip(yy, 0, h - 1), xx % w]
+    out = ((1 - ty) * ((1 - tx) * at(y0, x0) + tx * at(y0, x0 + 1))
+           + ty * ((1 - tx) * at(y0 + 1, x0) + tx * at(y0 + 1, x0 + 1)))
+    out = out.reshape(H, W, grid * grid, 3).mean(2)
+    return out * environment.strength * np.asarray(environment.white_balance)
+
+
+def mask_agreement(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """(IoU, centroid distance in pixels) of two coverage masks thresholded at 0.5."""
+    A, B = a > 0.5, b > 0.5
+    iou = (A & B).sum() / max(1, (A | B).sum())
+    ya, xa = np.nonzero(A)
+    yb, xb = np.nonzero(B)
+    return float(iou), float(np.hypot(xa.mean() - xb.mean(), ya.mean() - yb.mean()))
+
+
+@needs_bpy
+def test_a_tiny_frame_registers_with_the_fast_renderer(assets, worker):
+    """64 x 64 at 4 samples, end to end: Cycles' coverage against the fast renderer's (IoU > 0.98, centroids within
+    0.5 px), labels unchanged but for the engine, and the environment behind the hand as the contract's lookup."""
+    studio = builtin_maps().get("studio")
+    if studio is None:
+        pytest.skip("Blender's studio-light maps are not installed")
+    environment = {"map": "studio", "rotation": 35.0, "strength": 1.5, "white_balance": [1.0, 0.9, 0.8]}
+    scene = Scene((HandBody(pose="fist", texture="skin_test", accessory="ring_test"),), "three_quarter",
+                  {"environment": environment}, None)
+    fast = Renderer(assets, 1)
+    frame, image = CyclesRenderer(fast, samples=4, worker=worker).render_scene_image(scene, width=64, height=64)
+    reference = Renderer(assets, 1).render_scene(Scene(scene.bodies, scene.camera, {}, None), width=64, height=64)
+    iou, shift = mask_agreement(reference.alpha, image.alpha)
+    assert iou > 0.98 and shift < 0.5, (iou, shift)
+    assert frame.labels["render"]["engine"] == "cycles" and frame.labels["render"]["cycles"]["samples"] == 4
+    same = {k: v for k, v in frame.labels.items() if k != "render"}
+    assert same == {k: v for k, v in reference.labels.items() if k != "render"}
+    assert np.array_equal(frame.alpha, reference.alpha)                    # the mask is the fast renderer's
+    expected = contract_lookup(read_map(studio), Environment.from_json(environment), frame.camera, 4)
+    behind = image.alpha < 0.01
+    error = np.abs(image.environment - expected)[behind].mean() / expected[behind].mean()
+    assert error < 0.05, error
+    lit = image.premult[image.alpha > 0.99]
+    assert lit.mean() > 0.02                                              # the environment lights the hand
+    again = CyclesRenderer(Renderer(assets, 1), samples=4, worker=worker).render_scene(scene, width=64, height=64)
+    assert np.array_equal(again.rgba, frame.rgba)                         # the same scene, the same bytes
+
+
+@needs_bpy
+@pytest.mark.slow
+def test_world_frame_environment_and_larger_frames_register(assets, worker):
+    """At 160 x 120 with an off-centre principal point and the environment in the world frame."""
+    if "forest" not in builtin_maps():
+        pytest.skip("Blender's studio-light maps are not installed")
+    environment = {"map": "forest", "rotation": -70.0, "frame": "world"}
+    K = [[150.0, 0.0, 70.0], [0.0, 150.0, 66.0], [0.0, 0.0, 1.0]]
+    from darthand.render.camera import load_camera
+
+    probe = Renderer(assets, 1).render_scene(Scene((HandBody(pose="fist"),), "dorsal", {}, None), width=160,
+                                             height=120)
+    cam = load_camera({"K": K, "R": probe.camera.R.tolist(), "t": probe.camera.t.tolist(), "width": 160,
+                       "height": 120})
+    scene = Scene((HandBody(pose="fist", texture="skin_test"),), cam.to_json(), {"environment": environment}, None)
+    frame, image = CyclesRenderer(Renderer(assets, 1), samples=8, worker=worker).render_scene_image(
+        scene, width=160, height=120)
+    iou, shift = mask_agreement(frame.alpha, image.alpha)
+    assert iou > 0.98 and shift < 0.5, (iou, shift)
+    expected = contract_lookup(read_map(environment_map_path("forest")), Environment.from_json(environment),
+                               frame.camera, 4)
+    behind = image.alpha < 0.01
+    assert np.abs(image.environment - expected)[behind].mean() / expected[behind].mean() < 0.05
+
+
+# ------------------------------------------------------------------------------------------------ datasets
+
+
+def _labels(out: Path) -> dict:
+    return {p.name: json.loads(p.read_text()) for p in sorted((out / "labels").glob("*.json"))}
+
+
+@needs_bpy
+def test_cycles_dataset_has_the_fast_labels_and_resumes(tmp_path):
+    """render-dataset --engine cycles: the fast run's labels (but the engine), and a run stopped after its first
+    frame resumes: that frame is kept, the others rendered, the same files as an uninterrupted run's."""
+    from darthand.dataset.api import render_dataset
+    from darthand.dataset.options import DatasetOptions
+
+    base = dict(count=3, size=32, processes=1, progress=False, shard_size=1)     # a progress call per frame
+    render_dataset(DatasetOptions("open", str(tmp_path / "fast"), **base))
+    stop = tmp_path / "stopped"
+
+    def interrupt(done, total, seconds):
+        if done >= 1:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        render_dataset(DatasetOptions("open", str(stop), engine="cycles", cycles_samples=2,
+                                      **{**base, "progress": interrupt}))
+    first = sorted((stop / "images").glob("*.png"))
+    assert len(first) == 1
+    kept = first[0].stat().st_mtime_ns
+    doc = render_dataset(DatasetOptions("open", str(stop), engine="cycles", cycles_samples=2, **base))
+    assert doc["rendered"] == 2 and doc["skipped"] == 1 and doc["engine"] == {"name": "cycles", "samples": 2}
+    assert first[0].stat().st_mtime_ns == kept
+    fast, cycles = _labels(tmp_path / "fast"), _labels(stop)
+    assert fast.keys() == cycles.keys() and len(fast) == 3
+    for name, labels in cycles.items():
+        render = labels.pop("render")
+        expected = fast[name]
+        assert render["engine"] == "cycles" and render["cycles"]["samples"] == 2
+        assert render["dataset"]["job_sha256"] != expected["render"]["dataset"]["job_sha256"]
+        expected.pop("render")
+        assert labels == expected
+    for name in fast:
+        stem = name.replace(".json", "")
+        assert (stop / "masks" / f"{stem}.png").read_bytes() == (tmp_path / "fast" / "masks" / f"{stem}.png"
+                                                                 ).read_bytes()
+
+
+@needs_bpy
+@pytest.mark.slow
+def test_render_command_takes_the_engine_and_an_environment(tmp_path, capsys):
+    from darthand.cli import main
+    from darthand.render.image import read_png
+
+    lights = tmp_path / "lights.json"
+    lights.write_text(json.dumps({"environment": {"map": "courtyard", "rotation": 120, "strength": 1.2}}))
+    assert main(["render", "open", "--out", str(tmp_path / "out"), "--size", "48", "--engine", "cycles",
+                 "--cycles-samples", "2", "--lights", str(lights), "--pose", "fist"]) == 0
+    labels = json.loads((tmp_path / "out" / "labels.json").read_text())
+    assert labels["render"]["engine"] == "cycles" and labels["render"]["environment"]["map"] == "courtyard"
+    rgba = read_png(tmp_path / "out" / "image.png")
+    assert rgba.shape == (48, 48, 4) and rgba[..., 3].max() == 255 and rgba[..., :3].max() > 20
+
+
+def test_blender_python_follows_the_environment_variable(monkeypatch, tmp_path):
+    fake = tmp_path / "py"
+    fake.write_text("")
+    monkeypatch.setenv("DARTHAND_BLENDER_PYTHON", str(fake))
+    assert blender_python() == fake
