@@ -16,6 +16,9 @@ from (LIGHT_WIDTH). Figures over the pixels the subject covers: mean |error| and
 relative to the reference's mean, the signed bias, and the reference's own noise (half its two halves' mean
 difference). Side-by-side images (approximation | reference | 4 x |difference|) go to a temporary folder named in
 the results.
+
+Lights per map: the studio map (six soft boxes) with at most 1, 2, 4, 6, 8 lights (environment.MAX_LIGHTS, set here
+for the measurement), CPU per frame and error as above (ao_rays 16).
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ from benchmarks.render import ACCESSORY, _sources
 SIZE, FRAMES_PER_CONFIG = 512, 4
 REF_SIZE, REF_RAYS, REF_MAPS, REF_GESTURE = 160, 1024, ("studio", "sunrise", "forest", "interior"), "grasp"
 AO_RAYS = (0, 4, 16, 64)
+LIGHT_COUNTS, SWEEP_MAP = (1, 2, 4, 6, 8), "studio"     # the most lights a map gives (environment.MAX_LIGHTS)
 BATCH = 128                          # reference pixels per batch of occlusion queries (BATCH x REF_RAYS rays)
 
 
@@ -63,6 +67,46 @@ def _speed(renderer, texture_id: str, gestures: list[str]) -> dict:
                       "shadow_rays": round(float(np.mean([s.get("shadow_rays", 0) for s in stats]))),
                       "indirect_rays": round(float(np.mean([s.get("indirect_rays", 0) for s in stats]))),
                       "lights": _light_count(env["map"]) if env else 2}
+    return out
+
+
+def _with_max_lights(count: int):
+    """A context in which maps give at most `count` lights (environment.MAX_LIGHTS; the prepared maps are
+    forgotten on entry and exit)."""
+    import contextlib
+
+    from darthand.render import environment
+
+    @contextlib.contextmanager
+    def scope():
+        saved = environment.MAX_LIGHTS
+        environment.MAX_LIGHTS = count
+        environment._map_lighting.cache_clear()
+        try:
+            yield
+        finally:
+            environment.MAX_LIGHTS = saved
+            environment._map_lighting.cache_clear()
+
+    return scope()
+
+
+def _sweep_speed(renderer, texture_id: str, gestures: list[str]) -> dict:
+    """CPU ms per 512^2 frame, one thread, under SWEEP_MAP with at most k lights, per k in LIGHT_COUNTS."""
+    lights = {"environment": {"map": SWEEP_MAP}}
+    out = {}
+    for count in LIGHT_COUNTS:
+        with _with_max_lights(count):
+            renderer.render(gestures[0], texture=texture_id, accessory=ACCESSORY, lights=lights, width=SIZE,
+                            height=SIZE)
+            cpu = []
+            for pose in gestures[:FRAMES_PER_CONFIG]:
+                t = time.process_time()
+                frame = renderer.render(pose, texture=texture_id, accessory=ACCESSORY, lights=lights, width=SIZE,
+                                        height=SIZE)
+                cpu.append(time.process_time() - t)
+            out[count] = {"cpu_ms_median": round(1000 * float(np.median(cpu)), 1),
+                          "lights": _light_count(SWEEP_MAP), "shadow_rays": int(frame.stats.get("shadow_rays", 0))}
     return out
 
 
@@ -200,6 +244,15 @@ def _error(renderer, texture_id: str, name: str, images: Path) -> dict:
             exposure = 0.5 / float(np.percentile(reference[covered], 90))
             tiles = [frame.colour * exposure, reference * exposure, 4 * np.abs(frame.colour - reference) * exposure]
     write_png(images / f"{name}.png", np.concatenate([encode_srgb8(t) for t in tiles], axis=1))
+    if name == SWEEP_MAP:
+        out["max_lights"] = {}
+        for count in LIGHT_COUNTS:
+            with _with_max_lights(count):
+                frame = render_subject(subject, scene, cam, lighting, samples=1, labels=False,
+                                       shading={"ao_rays": 16, "interreflection": False, "skin": "lambert"})
+            diff = (frame.colour - reference)[covered]
+            out["max_lights"][count] = {"mean_abs_rel": round(float(np.abs(diff).mean() / scale), 4),
+                                        "p99_abs_rel": round(float(np.percentile(np.abs(diff), 99) / scale), 4)}
     return out
 
 
@@ -217,13 +270,18 @@ def run() -> dict:
         renderer = Renderer(open_source(model, textures=tex, accessories=acc), threads=1)
         gestures = list_gestures()
         speed = _speed(renderer, texture_id, gestures)
+        sweep = _sweep_speed(renderer, texture_id, gestures)
         error = {name: _error(renderer, texture_id, name, images) for name in REF_MAPS}
+    for count, row in sweep.items():
+        row.update(error[SWEEP_MAP]["max_lights"][count])
     return {"inputs": where, "texture": texture_id, "accessory": ACCESSORY, "max_lights": MAX_LIGHTS,
             "speed": {"how": f"{SIZE}^2 frames, one thread, CPU ms per frame (median of {FRAMES_PER_CONFIG} "
                              "gestures), default shading", **speed},
             "error": {"how": f"{REF_SIZE}^2, gesture {REF_GESTURE} with {ACCESSORY}, Lambert, no specular, no "
                              f"interreflection, against {REF_RAYS} rays per pixel (cosine + map power, balance "
                              "heuristic); relative to the reference's mean over covered pixels", **error},
+            "max_lights_sweep": {"map": SWEEP_MAP, "how": "speed as above, error as above at ao_rays 16",
+                                 **{str(k): v for k, v in sweep.items()}},
             "images": str(images)}
 
 
@@ -242,6 +300,11 @@ def summary(result: dict) -> str:
             e = res[f"ao_rays {rays}"]
             lines.append(f"| {name} | {rays} | {e['mean_abs_rel']:.1%} | {e['p99_abs_rel']:.1%} | "
                          f"{e['bias_rel']:+.1%} | {res['reference_noise_rel']:.1%} |")
+    sweep = result["max_lights_sweep"]
+    lines += ["", f"At most K lights from the {sweep['map']} map ({sweep['how']}):", "",
+              "| K | lights | CPU ms | shadow rays | mean abs | p99 abs |", "|---|---|---|---|---|---|"]
+    lines += [f"| {k} | {v['lights']} | {v['cpu_ms_median']} | {v['shadow_rays']} | {v['mean_abs_rel']:.1%} | "
+              f"{v['p99_abs_rel']:.1%} |" for k, v in sweep.items() if k not in ("map", "how")]
     return "\n".join(lines)
 
 

@@ -212,6 +212,15 @@ def test_a_bad_map_on_the_command_line_is_one_line_and_exit_2(tmp_path, hand):
 # ------------------------------------------------------------------------------------------------ frames
 
 
+def test_a_lights_file_names_its_map_relative_to_its_folder(tmp_path):
+    (tmp_path / "maps").mkdir()
+    write_exr(tmp_path / "maps" / "grey.exr", np.full((8, 16, 3), 0.5, np.float32))
+    (tmp_path / "lights.json").write_text(json.dumps({"environment": {"map": "maps/grey.exr"}}))
+    lighting = load_lighting(tmp_path / "lights.json")
+    assert lighting.environment is not None and Path(lighting.environment.map) == tmp_path / "maps" / "grey.exr"
+    assert load_lighting({"environment": {"map": "studio"}}).environment == env.Environment("studio")
+
+
 def test_builtin_maps_are_listed_and_read():
     names = env.list_builtin()
     assert names == ["city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset"]

@@ -130,10 +130,13 @@ class Environment:
     frame: str = "camera"
 
     @staticmethod
-    def from_json(doc: dict, source: str = "lights") -> "Environment":
+    def from_json(doc: dict, source: str = "lights", base: Path | None = None) -> "Environment":
         """From the document field (already schema-checked); InputError naming the source when the map is missing
-        or bad."""
-        env = Environment(str(doc["map"]), float(doc.get("rotation", 0.0)), float(doc.get("strength", 1.0)),
+        or bad. base: the folder a relative map path is relative to (a lights file's; None: the working folder)."""
+        name = str(doc["map"])
+        if base is not None and name not in list_builtin() and not Path(name).is_absolute():
+            name = str(base / name)
+        env = Environment(name, float(doc.get("rotation", 0.0)), float(doc.get("strength", 1.0)),
                           tuple(float(x) for x in doc.get("white_balance", (1.0, 1.0, 1.0))),
                           str(doc.get("frame", "camera")))
         if env.frame not in FRAMES:

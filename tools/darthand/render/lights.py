@@ -97,9 +97,10 @@ def load_lighting(spec, source: str = "lights") -> Lighting:
         return default_lighting()
     if isinstance(spec, Lighting):
         return spec
+    base = None
     if isinstance(spec, (str, Path)):
         path = Path(spec)
-        spec, source = read_json(path, "lights file"), str(path)
+        spec, source, base = read_json(path, "lights file"), str(path), path.parent
     check_schema(spec, "lights.schema.json", source)
     amb = spec.get("ambient", {})
     lights = []
@@ -111,7 +112,8 @@ def load_lighting(spec, source: str = "lights") -> Lighting:
                             direction=tuple(vec) if d["type"] == "directional" else None,
                             position=tuple(vec) if d["type"] == "point" else None,
                             shadows=bool(d.get("shadows", True)), frame=d.get("frame", "world")))
-    environment = None if "environment" not in spec else Environment.from_json(spec["environment"], source)
+    environment = spec.get("environment")
+    environment = None if environment is None else Environment.from_json(environment, source, base)
     return Lighting(tuple(amb.get("color", (1.0, 1.0, 1.0))), float(amb.get("intensity", 0.0)), tuple(lights),
                     environment)
 
