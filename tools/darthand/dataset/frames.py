@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from darthand.dataset.backgrounds import background_pixels
+from darthand.dataset.film import frame_film
 from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.model.shape import shaped_vertices
@@ -58,6 +59,8 @@ def job_digest(job: dict, settings: dict) -> str:
            "shading": shading_options(settings.get("shading")).to_json()}
     if settings.get("maps"):
         key["maps"] = list(settings["maps"])
+    if settings.get("film") is not None:
+        key["film"] = settings["film"]
     if wears_ring(job):
         key["ring_wear"] = RING_WEAR       # ring frames rendered before rings were worn per pose are made again
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
@@ -72,8 +75,8 @@ def wears_ring(job: dict) -> bool:
 
 def render_job(renderer, job: dict, settings: dict):
     """(api.Frame, background info or None) of one job, rendered as its scene (render/scenes.py). settings: size,
-    samples, aa_shading, and optionally shading (api.shading_options' dict; None: the renderer's defaults) and maps
-    (render/truth.KINDS to compute)."""
+    samples, aa_shading, and optionally shading (api.shading_options' dict; None: the renderer's defaults), maps
+    (render/truth.KINDS to compute) and film (dataset/film.film_setting's; None: no film)."""
     scene = Scene.from_job(job)
     size = settings["size"]
     background, info = None, None
@@ -81,9 +84,11 @@ def render_job(renderer, job: dict, settings: dict):
     if isinstance(scene.background, dict):
         background, info = background_pixels(scene.background, size, size)
     t = time.perf_counter() - t
+    film, film_seed = frame_film(settings.get("film"), job)
     frame = renderer.render_scene(scene, background=background, width=size, height=size,
                                   samples=settings["samples"], aa_shading=settings["aa_shading"],
-                                  shading=settings.get("shading"), maps=tuple(settings.get("maps") or ()))
+                                  shading=settings.get("shading"), maps=tuple(settings.get("maps") or ()),
+                                  film=film, film_seed=film_seed)
     frame.timings["background"] = t
     return frame, info
 

@@ -33,6 +33,7 @@ def parse_pose(text: str | None):
 def render(args) -> int:
     """Render one labelled image of PACKAGE into --out."""
     from darthand.render.api import Renderer, open_source, write_frame
+    from darthand.render.film import load_film
 
     source = open_source(args.package, textures=args.textures, accessories=args.accessories, model=args.model)
     pose = parse_pose(args.pose)
@@ -47,7 +48,8 @@ def render(args) -> int:
     frame = Renderer(source, args.threads).render_scene(
         scene, width=width, height=height, samples=args.samples, aa_shading=args.aa_shading,
         keypoint_order=args.keypoint_order,
-        shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin})
+        shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin},
+        film=load_film(args.film, args.film_seed), film_seed=args.film_seed)
     paths = write_frame(frame, args.out, depth=args.depth)
     lab = frame.labels
     total = sum(frame.timings.values())
