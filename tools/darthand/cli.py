@@ -602,7 +602,7 @@ def _add_dataset_arguments(p) -> None:
                    help=f"square image size in pixels (default {run.size})")
     _add_antialiasing_options(p, run.samples, run.aa_shading)
     _add_shading_options(p)
-    _add_film_option(p, run.film)
+    _add_film_option(p, str(run.film))
     p.add_argument("--processes", type=number(int, 1, 100_000), default=None, metavar="N",
                    help="worker processes, each rendering whole frames (default: the number of cores; 1 renders "
                         "in this process)")

@@ -268,7 +268,7 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
     if film is not None:
         t = time.perf_counter()
         rgba, film_record = develop_frame(colour, full_alpha, full_depth, Film.from_json(film), film_seed,
-                                          lighting, cam, subject.all_vertices().mean(axis=0), bg is not None)
+                                          lighting, cam, subject.all_vertices().mean(axis=0), bg)
         timings["film"] = _lap(t)
     truth_maps = {}
     if maps:

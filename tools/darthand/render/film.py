@@ -30,6 +30,7 @@ from __future__ import annotations
 import io
 import math
 from dataclasses import asdict, dataclass, fields
+from typing import Literal
 
 import numpy as np
 from scipy import ndimage, signal
@@ -219,7 +220,7 @@ def line_kernel(length: float, angle_deg: float) -> np.ndarray:
     R = int(math.ceil(length / 2)) + 1
     k = np.zeros((2 * R + 1, 2 * R + 1), np.float64)
     n = max(2, int(math.ceil(4 * length)) + 1)
-    s = np.linspace(-length / 2, length / 2, n)
+    s = ((np.arange(n) + 0.5) / n - 0.5) * length         # midpoints of n equal parts: a uniform segment
     a = math.radians(angle_deg)
     x, y = R + s * math.cos(a), R - s * math.sin(a)
     x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
@@ -229,7 +230,7 @@ def line_kernel(length: float, angle_deg: float) -> np.ndarray:
     return (k / k.sum()).astype(np.float32)
 
 
-def convolve(image: np.ndarray, kernel: np.ndarray, mode: str = "reflect") -> np.ndarray:
+def convolve(image: np.ndarray, kernel: np.ndarray, mode: Literal["reflect", "constant"] = "reflect") -> np.ndarray:
     """(H, W, C) float32 image convolved with an odd square kernel (FFT), the border extended by numpy.pad's
     `mode` ('reflect': the frame's content continues; 'constant': zeros)."""
     R = kernel.shape[0] // 2
@@ -363,7 +364,7 @@ def jpeg_round_trip(rgb: np.ndarray, quality: int) -> np.ndarray:
 
 
 def develop(colour: np.ndarray, alpha: np.ndarray, depth: np.ndarray, film: Film, seed: int, *,
-            composited: bool = True) -> np.ndarray:
+            composited: bool = True, background: np.ndarray | None = None) -> np.ndarray:
     """(H, W, 4) uint8 sRGB image of a frame through `film` (module docstring: the steps and their order).
 
     colour (H, W, 3) float32 linear: composited over a background (composited=True) or premultiplied by alpha (no
@@ -371,38 +372,43 @@ def develop(colour: np.ndarray, alpha: np.ndarray, depth: np.ndarray, film: Film
     0 where nothing was hit (the background, taken at infinity); seed: the sensor noise's Generator seed.
     film.exposure_ev None counts as 0 EV (resolve the automatic exposure first: metered_white, auto_exposure_ev,
     Film.with_exposure). Output alpha: 255 when composited, else the coverage (encode_mask8) with straight colour:
-    the mask, never blurred, is the geometry's coverage."""
+    the mask, never blurred, is the geometry's coverage. background (H, W, 3) linear: the composited frame's
+    background, if known, for defocus to separate the hand from it exactly (else estimated from the uncovered
+    pixels around each edge pixel)."""
     rng = np.random.default_rng(int(seed))
     alpha = np.asarray(alpha, np.float32)
     image = np.asarray(colour, np.float32) * np.float32(exposure_scale(film))
     if film.chromatic_aberration_px > 0:
         image = chromatic_aberration(image, film.chromatic_aberration_px)
-    image, cover = _blur(image, alpha, np.asarray(depth, np.float32), film, composited)
+    behind = None if background is None else np.asarray(background, np.float32) * np.float32(exposure_scale(film))
+    image, cover = _blur(image, alpha, np.asarray(depth, np.float32), film, composited, behind)
     if film.vignetting > 0:
         image = vignette(image, film.vignetting)
     if not composited:
         image = np.where(cover[..., None] > 1e-6, image / np.maximum(cover, 1e-6)[..., None], 0).astype(np.float32)
     image = sensor_noise(image, film, rng)
     image = image * np.asarray(film.white_balance, np.float32)
-    rgb = encode_srgb8(tone_curve(image, np.float32(film.white_point)).astype(np.float32))
+    rgb = encode_srgb8(tone_curve(image, film.white_point).astype(np.float32))
     if film.jpeg_quality:
         rgb = jpeg_round_trip(rgb, film.jpeg_quality)
     a8 = np.full(alpha.shape, 255, np.uint8) if composited else encode_mask8(alpha)
     return np.concatenate([rgb, a8[..., None]], axis=2)
 
 
-def _blur(image, alpha, depth, film: Film, composited: bool) -> tuple[np.ndarray, np.ndarray]:
+def _blur(image, alpha, depth, film: Film, composited: bool, known=None) -> tuple[np.ndarray, np.ndarray]:
     """(image, the image's own coverage) after defocus then motion blur. Composited frames are split into the hand
     layer and the background behind it (the background under the hand filled from its surroundings), blurred
-    apart and composited again; a premultiplied frame is the hand layer alone."""
+    apart and composited again; a premultiplied frame is the hand layer alone. known: the exposed background, when
+    given."""
     cover = alpha
     if film.defocus_px > 0:
         background = None
         if composited:
             behind = (alpha <= 0).astype(np.float32)
-            nearby = _blur_at(image, 1.5, behind)              # the background the hand's edge pixels cover
+            nearby = _blur_at(image, 1.5, behind) if known is None else known    # what the edge pixels cover
             background = np.where(behind[..., None] > 0, image, nearby)
-            image = np.maximum(image - (1 - alpha)[..., None] * nearby, 0)      # the hand layer, premultiplied
+            hand = np.maximum(image - (1 - alpha)[..., None] * nearby, 0)       # the hand layer, premultiplied
+            image = np.where(behind[..., None] > 0, 0, hand).astype(np.float32)
         image, cover, background = defocus(image, alpha, depth, background, film.defocus_px)
         if background is not None:
             image = image + (1 - np.clip(cover, 0, 1))[..., None] * background
@@ -418,15 +424,15 @@ def _blur(image, alpha, depth, film: Film, composited: bool) -> tuple[np.ndarray
 
 
 def develop_frame(colour, alpha, depth, film: Film, seed: int, lighting, cam, point,
-                  composited: bool) -> tuple[np.ndarray, dict]:
+                  background: np.ndarray | None) -> tuple[np.ndarray, dict]:
     """(rgba, record) of a rendered frame through `film`, its automatic exposure metered at world `point` (the
     hand's centre) under `lighting` seen by `cam` (metered_white). record: the film applied (exposure resolved),
     whether its exposure was automatic, the metered white (linear RGB) and the noise seed: what labels carry
-    (Film.from_json reads it back)."""
+    (Film.from_json reads it back). background: the composited background (H, W, 3) linear, or None."""
     white = metered_white(lighting, cam, point)
     auto = film.exposure_ev is None
     applied = film.with_exposure(auto_exposure_ev(white)) if auto else film
-    rgba = develop(colour, alpha, depth, applied, seed, composited=composited)
+    rgba = develop(colour, alpha, depth, applied, seed, composited=background is not None, background=background)
     record = {**applied.to_json(), "auto_exposure": auto, "metered_white": [round(float(v), 6) for v in white],
               "seed": int(seed)}
     return rgba, record
