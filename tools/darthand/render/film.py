@@ -293,11 +293,21 @@ def defocus(premult: np.ndarray, alpha: np.ndarray, depth: np.ndarray, backgroun
         radius = np.where(depth > 0, radius_at_infinity * np.abs(1 - focus / depth), radius_at_infinity)
     radius = np.minimum(radius, 4 * radius_at_infinity).astype(np.float32)
     on_hand = np.where((alpha > 0) & (depth > 0), radius, 0)     # an edge pixel whose centre missed: in focus
-    layer = blur_by_radius(np.concatenate([premult, alpha[..., None]], axis=2), on_hand)
+    layer = np.concatenate([premult, alpha[..., None]], axis=2)
+    box = _around(alpha > 0, int(math.ceil(float(on_hand.max()))) + 2)   # the layer is empty outside it
+    layer[box] = blur_by_radius(layer[box], on_hand[box])
     if background is not None:
         background = blur_by_radius(background, np.where(alpha > 0, radius_at_infinity, radius),
                                     (alpha <= 0).astype(np.float32))
     return layer[..., :3], layer[..., 3], background
+
+
+def _around(mask: np.ndarray, margin: int) -> tuple[slice, slice]:
+    """The rows and columns of mask's true pixels' bounding box grown by `margin`, within the image."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    H, W = mask.shape
+    return (slice(max(0, rows[0] - margin), min(H, rows[-1] + 1 + margin)),
+            slice(max(0, cols[0] - margin), min(W, cols[-1] + 1 + margin)))
 
 
 def chromatic_aberration(image: np.ndarray, shift_px: float) -> np.ndarray:
