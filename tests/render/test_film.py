@@ -149,15 +149,15 @@ def _scaled_lighting(scale: float) -> dict:
 
 def test_exposure_meters_the_light_so_skin_keeps_its_tone_and_order(toned):
     """Light, medium and dark hands under the default light: with the film (automatic exposure, no noise) each
-    keeps its order and its clean render's median sRGB within 14 codes, few hand pixels clip; under a light 4x as
-    strong (or 4x weaker) the film's medians stay those of the default light (the meter reads the light, not the
-    hand) while the clean render's move."""
+    keeps its order and its clean render's median sRGB within 14 codes, few hand pixels clip; under a light twice
+    as strong (or half as strong) the film's medians stay those of the default light (the meter reads the light,
+    not the hand) while the clean render's move."""
     renderer = Renderer(toned(), threads=1)
     film = F.Film()
     medians: dict = {}
     for name in TONES:
         for lights in ("default", "bright", "dim"):
-            lighting = {"default": None, "bright": _scaled_lighting(4.0), "dim": _scaled_lighting(0.25)}[lights]
+            lighting = {"default": None, "bright": _scaled_lighting(2.0), "dim": _scaled_lighting(0.5)}[lights]
             clean = renderer.render("flat", texture=name, camera="dorsal", width=96, height=96, lights=lighting,
                                     labels=False)
             developed = renderer.render("flat", texture=name, camera="dorsal", width=96, height=96,
@@ -176,7 +176,7 @@ def test_exposure_meters_the_light_so_skin_keeps_its_tone_and_order(toned):
         assert abs(developed - clean) <= 14, (name, clean, developed)
         for lights in ("bright", "dim"):
             assert abs(medians[name, lights][1] - developed) <= 4, (name, lights, medians)
-        assert medians[name, "dim"][0] < clean - 30          # the clean render does move with the light
+        assert medians[name, "dim"][0] < clean - 15          # the clean render does move with the light
 
 
 def test_none_is_the_renderer_image_and_films_leave_labels_alone(toned):
@@ -225,17 +225,21 @@ def test_defocus_keeps_the_hand_sharp_and_blurs_the_background(toned):
 
 
 def test_metered_white_is_the_lights_cosine_sum():
-    """One directional light along the camera's axis and ambient: a white surface facing the camera reflects
-    intensity x cos 0 + ambient; a light at 60 degrees gives half."""
+    """One directional light and ambient: the meter's dome facing the camera reads ambient + intensity x (1 +
+    cos theta) / 2 (a hemisphere's projected area seen from theta off its axis); a point light falls off with the
+    square of its distance."""
     from darthand.render.camera import look_at
     from darthand.render.lights import Light, Lighting
 
     cam = look_at((0, 0, -1), (0, 0, 0), (0, -1, 0))
-    for angle, cosine in ((0.0, 1.0), (60.0, 0.5), (120.0, 0.0)):
+    for angle, cosine in ((0.0, 1.0), (60.0, 0.75), (90.0, 0.5), (120.0, 0.25), (180.0, 0.0)):
         d = (np.sin(np.deg2rad(angle)), 0.0, np.cos(np.deg2rad(angle)))
         lighting = Lighting((1, 1, 1), 0.1, (Light("directional", (1, 1, 1), 2.0, direction=d, frame="camera"),))
         assert np.allclose(F.metered_white(lighting, cam, (0, 0, 0)), 0.1 + 2.0 * cosine, atol=1e-6)
     point = Lighting((1, 1, 1), 0.0, (Light("point", (1, 1, 1), 1.0, position=(0, 0, -2)),))
     assert np.allclose(F.metered_white(point, cam, (0, 0, 0)), 0.25, atol=1e-6)       # inverse square at 2 m
     assert F.auto_exposure_ev(np.full(3, F.METERED_WHITE / 2)) == pytest.approx(1.0)
+    assert F.auto_exposure_ev(np.full(3, F.METERED_WHITE / 100)) == F.AUTO_EV_LIMIT
+    assert F.auto_exposure_ev(np.zeros(3)) == F.AUTO_EV_LIMIT
     assert float(luminance(np.ones(3))) == pytest.approx(1.0, abs=1e-6)
+

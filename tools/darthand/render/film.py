@@ -8,9 +8,9 @@ written, in the order light meets a camera:
     ->  tone curve (Hable's filmic curve, white point W)  ->  sRGB 8-bit  ->  JPEG round trip at quality Q
 
 Exposure is metered from the light the scene receives, never from the hand's own brightness: `metered_white` is
-the radiance a white Lambertian surface at the hand, facing the camera, would reflect under the frame's lights
-(lights.py's units: ambient + each light's radiance x cos), and the automatic exposure scales it to METERED_WHITE,
-the level the default light rig gives such a surface. So a dark hand stays dark and a light one light: the tone
+what an incident-light meter at the hand reads under the frame's lights, its dome facing the camera (lights.py's
+units: ambient + each light's radiance x the dome's response), and the automatic exposure scales it to
+METERED_WHITE, its reading under the default light rig. So a dark hand stays dark and a light one light: the tone
 its labels record is the tone its image shows, whatever the light's strength.
 
 The tone curve is John Hable's filmic curve (Uncharted 2, GDC 2010; filmicworlds.com "Filmic Tonemapping
@@ -46,9 +46,13 @@ from darthand.textures.color import encode_srgb8, luminance
 HABLE_A, HABLE_B, HABLE_C, HABLE_D, HABLE_E, HABLE_F = 0.15, 0.50, 0.10, 0.20, 0.02, 0.30
 HABLE_WHITE = 11.2             # Hable's own white point (his exposure bias of 2 is folded into our exposure)
 DEFAULT_WHITE = 4.0            # ours: mid-tones within ~13 sRGB codes of the clean render up to albedo 0.8
-METERED_WHITE = 0.72           # metered_white's luminance under the default light rig, on the camera's axis
+METERED_WHITE = 0.92           # metered_white's luminance under the default light rig, on the camera's axis
+CLEAN_WHITE = 0.72             # a white card facing the camera under the default rig: its clean render's radiance
 ANCHOR_ALBEDO = 0.36           # skin's reflectance (one stop over 18 % grey): reproduced at its clean-render tone
-AUTO_EV_LIMIT = 8.0            # automatic exposure stays within +-8 EV (a scene with no light is not amplified)
+# Automatic exposure stays within +-1.5 EV: a frame's background is an image the lights do not light, so a larger
+# correction for a dim or back-lit hand would blow the background to white (and a scene without light is not
+# amplified); a user who wants more sets exposure_ev.
+AUTO_EV_LIMIT = 1.5
 FULL_WELL_E = 10000.0          # electrons at the white point at ISO 100 (a small sensor's pixel)
 BASE_ISO = 100.0
 RECORD_ONLY = ("auto_exposure", "metered_white", "seed")   # what a record adds to the settings (Film.from_json)
@@ -142,9 +146,12 @@ def _check_range(value, name: str, lo: float, hi: float) -> None:
 
 
 def metered_white(lighting, cam, point) -> np.ndarray:
-    """(3,) float32 linear radiance a white Lambertian surface at world `point` (3,), facing the camera, reflects
-    under `lighting` (lights.Lighting): the ambient light plus each light's radiance x the cosine to it (point
-    lights with their inverse-square falloff), shadows ignored: an incident-light meter at the hand."""
+    """(3,) float32 linear: what an incident-light meter at world `point` (3,) reads under `lighting`
+    (lights.Lighting), its hemispherical dome facing the camera, in the renderer's radiance units (a white
+    Lambertian card facing a light reflects its intensity): the ambient light plus each light's radiance x the
+    dome's response (1 + cos theta) / 2 at the angle theta between the light and the camera (the dome's projected
+    area: a light from the side counts half, as it lights half of a round subject), point lights with their
+    inverse-square falloff; shadows ignored."""
     point = np.asarray(point, np.float64)
     facing = cam.centre - point
     facing /= max(float(np.linalg.norm(facing)), 1e-12)
@@ -156,7 +163,7 @@ def metered_white(lighting, cam, point) -> np.ndarray:
             offset = np.asarray(light["position"]) - point
             distance = max(float(np.linalg.norm(offset)), 1e-6)
             toward, scale = offset / distance, 1.0 / distance ** 2
-        total += np.asarray(light["radiance"], np.float64) * scale * max(0.0, float(toward @ facing))
+        total += np.asarray(light["radiance"], np.float64) * scale * 0.5 * (1.0 + float(toward @ facing))
     return total.astype(np.float32)
 
 
@@ -169,9 +176,9 @@ def auto_exposure_ev(white: np.ndarray) -> float:
 
 def exposure_scale(film: Film) -> float:
     """The factor on linear colour before the tone curve: 2^(exposure_ev + bias) times the factor that puts
-    ANCHOR_ALBEDO x METERED_WHITE (a skin-like surface facing the camera) where the clean render shows it
-    (tone_curve(k x) = x at that value). exposure_ev None counts as 0 (resolve it with `with_exposure`)."""
-    anchor = ANCHOR_ALBEDO * METERED_WHITE
+    ANCHOR_ALBEDO x CLEAN_WHITE (a skin-like surface facing the camera under the default rig) where the clean render
+    shows it (tone_curve(k x) = x at that value). exposure_ev None counts as 0 (resolve it with `with_exposure`)."""
+    anchor = ANCHOR_ALBEDO * CLEAN_WHITE
     ev = (film.exposure_ev or 0.0) + film.exposure_bias_ev
     return float(inverse_tone_curve(anchor, film.white_point) / anchor * 2.0 ** ev)
 
