@@ -50,6 +50,7 @@ def test_render_with_a_singular_camera_is_one_line(tmp_path):
     assert done.stderr.startswith("darthand: error: camera: field 'K'"), done.stderr
 
 
+@pytest.mark.slow
 def test_a_background_too_large_to_decode_is_one_line_for_render_and_render_dataset(tmp_path):
     """A PNG header claiming 100000 x 100000 pixels: OpenImageIO refuses it in three lines; both commands print
     the first, on one line, exit 2."""

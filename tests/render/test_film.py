@@ -243,3 +243,24 @@ def test_metered_white_is_the_lights_cosine_sum():
     assert F.auto_exposure_ev(np.zeros(3)) == F.AUTO_EV_LIMIT
     assert float(luminance(np.ones(3))) == pytest.approx(1.0, abs=1e-6)
 
+
+
+@pytest.mark.slow
+def test_render_takes_a_film_and_refuses_a_bad_one_in_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    def darthand(*argv):
+        return subprocess.run([sys.executable, "-m", "darthand.cli", "render", "open", "--size", "32", *argv],
+                              capture_output=True, text=True, timeout=300)
+
+    (tmp_path / "film.json").write_text(json.dumps({"iso": 400, "jpeg_quality": 70}))
+    done = darthand("--film", str(tmp_path / "film.json"), "--film-seed", "4", "--out", str(tmp_path / "a"))
+    assert done.returncode == 0, done.stderr
+    record = json.loads((tmp_path / "a" / "labels.json").read_text())["render"]["film"]
+    assert record["iso"] == 400 and record["jpeg_quality"] == 70 and record["seed"] == 4
+    (tmp_path / "bad.json").write_text(json.dumps({"iso": 400, "grain": 2}))
+    for film, words in ((str(tmp_path / "bad.json"), "unknown film field 'grain'"),
+                        (str(tmp_path / "missing.json"), "no such film settings file")):
+        done = darthand("--film", film, "--out", str(tmp_path / "b"))
+        assert done.returncode == 2 and done.stderr.count("\n") == 1 and words in done.stderr, done.stderr
