@@ -66,3 +66,17 @@ def test_a_background_too_large_to_decode_is_one_line_for_render_and_render_data
         assert done.stderr.count("\n") == 1, (name, done.stderr)
         assert done.stderr.startswith(f"darthand: error: {huge}: cannot read background image: "), (name,
                                                                                                     done.stderr)
+
+
+def test_a_background_too_large_to_decode_is_one_line_in_both_readers(tmp_path):
+    """The readers behind `render --background` and `render-dataset --backgrounds` (the fast form of the test
+    above): one line each, naming the file, with the same words."""
+    from darthand.dataset.backgrounds import decode_image
+    from darthand.render.image import read_image_buf
+
+    huge = tmp_path / "huge.png"
+    _png_claiming(huge, 100000, 100000)
+    for read in (lambda: read_image_buf(huge, "background image"), lambda: decode_image(str(huge))):
+        with pytest.raises(InputError) as e:
+            read()
+        assert "\n" not in str(e.value) and str(e.value).startswith(f"{huge}: cannot read background image: ")
