@@ -498,6 +498,9 @@ def _add_render_arguments(p) -> None:
     _add_antialiasing_options(p, DEFAULT_SAMPLES)
     _add_shading_options(p)
     _add_engine_options(p)
+    _add_film_option(p, "none")
+    p.add_argument("--film-seed", type=COUNT, default=0, metavar="N", help="the film's noise and 'random' draw seed "
+                   "(default 0)")
     p.add_argument("--depth", action="store_true", help="also write depth.exr (camera z in metres, 0 = background)")
     p.add_argument("--keypoint-order", default="openpose", choices=("openpose", "mano"),
                    help="order of the 21 keypoints in labels.json (default openpose)")
@@ -617,6 +620,7 @@ def _add_dataset_arguments(p) -> None:
     _add_antialiasing_options(p, run.samples, run.aa_shading)
     _add_shading_options(p)
     _add_engine_options(p, run.engine, run.cycles_samples)
+    _add_film_option(p, str(run.film))
     p.add_argument("--processes", type=number(int, 1, 100_000), default=None, metavar="N",
                    help="worker processes, each rendering whole frames (default: the number of cores; 1 renders "
                         "in this process)")
@@ -744,6 +748,13 @@ def _add_engine_options(p, engine: str | None = None, samples: int | None = None
     p.add_argument("--cycles-samples", type=number(int, 1, engines.MAX_CYCLES_SAMPLES), default=samples,
                    metavar="N", help=f"--engine cycles: samples per pixel, denoised by OpenImageDenoise "
                                      f"(default {samples})")
+
+
+def _add_film_option(p, default: str) -> None:
+    p.add_argument("--film", default=default, metavar="none|random|FILM.json",
+                   help="a camera's image (render/film.py): automatic exposure, filmic tone curve, sensor noise, blur, "
+                        "vignetting, JPEG; random: a plausible camera per frame; or a settings file; none: the "
+                        f"renderer's own image (default {default})")
 
 
 def _add_source_options(p) -> None:

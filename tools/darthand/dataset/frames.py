@@ -24,6 +24,7 @@ import numpy as np
 
 from darthand.dataset.backgrounds import background_pixels
 from darthand.dataset.environments import match_background
+from darthand.dataset.film import frame_film
 from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.model.shape import shaped_vertices
@@ -64,6 +65,8 @@ def job_digest(job: dict, settings: dict) -> str:
         key["maps"] = list(settings["maps"])
     if settings.get("engine"):             # the fast renderer's frames keep their digests
         key["engine"] = settings["engine"]
+    if settings.get("film") is not None:
+        key["film"] = settings["film"]
     if wears_ring(job):
         key["ring_wear"] = RING_WEAR       # ring frames rendered before rings were worn per pose are made again
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
@@ -79,8 +82,8 @@ def wears_ring(job: dict) -> bool:
 def render_job(renderer, job: dict, settings: dict):
     """(api.Frame, background info or None) of one job, rendered as its scene (render/scenes.py). settings: size,
     samples, aa_shading, and optionally shading (api.shading_options' dict; None: the renderer's defaults), maps
-    (render/truth.KINDS to compute) and engine ({'name': 'cycles', 'samples': N}: the image from Cycles,
-    render/cycles.py)."""
+    (render/truth.KINDS to compute), engine ({'name': 'cycles', 'samples': N}: the image from Cycles,
+    render/cycles.py) and film (dataset/film.film_setting's; None: no film)."""
     scene = Scene.from_job(job)
     if settings.get("engine"):
         renderer = CyclesRenderer(renderer, settings["engine"]["samples"])
@@ -98,9 +101,11 @@ def render_job(renderer, job: dict, settings: dict):
             scene = replace(scene, lights={**scene.lights, "environment": match_background(
                 scene.lights["environment"], background)})
     t = time.perf_counter() - t
+    film, film_seed = frame_film(settings.get("film"), job)
     frame = renderer.render_scene(scene, background=background, width=size, height=size,
                                   samples=settings["samples"], aa_shading=settings["aa_shading"],
-                                  shading=settings.get("shading"), maps=tuple(settings.get("maps") or ()))
+                                  shading=settings.get("shading"), maps=tuple(settings.get("maps") or ()),
+                                  film=film, film_seed=film_seed)
     frame.timings["background"] = t
     return frame, info
 

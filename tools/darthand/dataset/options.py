@@ -67,7 +67,9 @@ class DatasetOptions:
     The frames: `jobs` (a jobs file or a list of job dicts, schemas/dataset_jobs.schema.json), else frames
         start .. start + count - 1 of `plan`.
     size: square image size (pixels); samples, aa_shading: edge anti-aliasing (render/aa.py); shading: the
-        renderer's shading options (render/shade.ShadingOptions' fields; None: its defaults).
+        renderer's shading options (render/shade.ShadingOptions' fields; None: its defaults); film: a camera's
+        image per frame (dataset/film.py: 'none', 'random', a FILM.json path or a dict of render/film.Film's
+        fields); part of a frame's job digest only when not 'none'.
     processes: worker processes (None: the cores available; 1 renders in this process), or a cluster's workers;
         threads: render threads per process; cluster: render on a cluster instead (None: this machine).
     resume: skip frames already rendered from the same jobs; shard_size: frames per shard (the unit of planning and
@@ -94,6 +96,7 @@ class DatasetOptions:
     samples: int = DEFAULT_SAMPLES
     aa_shading: str = "triangle"
     shading: dict | None = None
+    film: str | dict = "none"
     processes: int | None = None
     threads: int | None = None
     cluster: ClusterOptions | None = None

@@ -38,6 +38,7 @@ from darthand.dataset.runner import Runner, make_runner
 from darthand.errors import InputError
 from darthand.fileio import read_json, write_json
 from darthand.render import aa, truth
+from darthand.dataset.film import film_setting
 from darthand.render.api import shading_options
 from darthand.render.cycles import check_available, check_samples
 from darthand.render.engines import ENGINES
@@ -96,7 +97,8 @@ def render_frames(options: DatasetOptions, sources: dict, specs: dict, planner=N
     out = Path(o.out)
     _prepare_folders(out, maps)
     settings = {"out_dir": str(out), "size": size, "samples": int(samples), "aa_shading": aa_shading,
-                "shading": shading, "maps": maps, **({"engine": engine} if engine else {})}
+                "shading": shading, "maps": maps, "film": film_setting(o.film),
+                **({"engine": engine} if engine else {})}
     stats = RunStats(t_start)
     report = _progress_printer(stats) if o.progress is True else (o.progress or None)
     runner = make_runner(cluster, specs, settings, sources, workers, threads, total)
@@ -413,6 +415,8 @@ def _write_dataset(out: Path, package, jobs_source, planner, total, settings, st
            "summary": stats.summary(), "timings": stats.timings(processes), "runner": runner}
     if settings.get("engine"):             # likewise: the fast renderer's dataset.json is unchanged
         doc["engine"] = settings["engine"]
+    if settings.get("film") is not None:   # only when asked, as the maps
+        doc["film"] = settings["film"]
     if settings["maps"]:                   # only when asked: a dataset without maps keeps its dataset.json
         doc["maps"] = truth.describe(settings["maps"], {kind: doc["files"][kind] for kind in settings["maps"]})
     write_json(out / "dataset.json", doc)

@@ -25,6 +25,7 @@ from darthand.render import aa, truth
 from darthand.render.assets import HandAssets, default_catalogues
 from darthand.render.camera import Camera, load_camera
 from darthand.render.environment import ENVIRONMENT_BACKGROUND, backdrop_blur, background_view, frame_environment
+from darthand.render.film import Film, develop_frame
 from darthand.render.image import compose, encode_mask8, load_background, write_exr, write_png
 from darthand.render.indirect import VertexLight
 from darthand.render.labels import frame_labels
@@ -92,7 +93,7 @@ class Renderer:
                accessory: str | None = None, camera="three_quarter", lights=None, background=None,
                width: int = 512, height: int = 512, samples: int = DEFAULT_SAMPLES, aa_shading: str = "triangle",
                shading=None, labels: bool = True, keypoint_order: str = "openpose", betas=None,
-               maps: tuple = ()) -> Frame:
+               maps: tuple = (), film=None, film_seed: int = 0) -> Frame:
         """One frame. pose: None (flat), a gesture name, a pose file or (48,) MANO axis-angle (flat-hand relative).
         camera: a Camera, a view name, a camera JSON path or dict (camera.load_camera), framed on the posed hand.
         lights: a Lighting, a lights JSON path or dict, or None (lights.default_lighting). background: image path or
@@ -102,19 +103,21 @@ class Renderer:
         aa_shading: shade them once per pixel per triangle ('triangle') or each ('sample') (see aa.py). shading: a
         shade.ShadingOptions or a dict of its fields (ambient occlusion, skin model), None for the defaults. betas:
         the hand's shape (S,) for a model source (None: the model's own). maps: per-pixel truth maps to compute
-        too (render/truth.KINDS: 'depth', 'normals', 'parts'), in Frame.maps."""
+        too (render/truth.KINDS: 'depth', 'normals', 'parts'), in Frame.maps. film: a camera's image (render/film.py:
+        a Film or a dict of its fields; None: the renderer's own image), its sensor noise seeded by film_seed."""
         with single_threaded_blas():
             prepared = self._prepare(pose, texture=texture, skin_tone_offset=skin_tone_offset, accessory=accessory,
                                      camera=camera, lights=lights, width=width, height=height,
                                      keypoint_order=keypoint_order, betas=betas)
             return self._finish(prepared, background=background, samples=samples, aa_shading=aa_shading,
-                                shading=shading, labels=labels, maps=maps)
+                                shading=shading, labels=labels, maps=maps, film=film, film_seed=film_seed)
 
     def render_scene(self, scene: Scene, *, background=None, **options) -> Frame:
         """One frame of a scene (render/scenes.py): its hand posed, dressed and shaped as the scene says, seen by its
         camera under its lights. background: pixels or an image path to composite under it (None: the scene's own
         background when it is an image path, else transparent; a dataset resolves its background documents itself).
-        options: `render`'s width, height, samples, aa_shading, shading, labels, keypoint_order, maps."""
+        options: `render`'s width, height, samples, aa_shading, shading, labels, keypoint_order, maps, film,
+        film_seed."""
         hand = scene.single_hand()
         pose = hand.pose_value()
         model = self.source.pose_model()
@@ -134,8 +137,8 @@ class Renderer:
         Do not call `render` on the same Renderer while iterating: the helper thread owns its caches meanwhile."""
         from concurrent.futures import ThreadPoolExecutor
 
-        finish = {k: options.pop(k) for k in ("background", "samples", "aa_shading", "shading", "labels", "maps")
-                  if k in options}
+        finish = {k: options.pop(k) for k in ("background", "samples", "aa_shading", "shading", "labels", "maps",
+                                              "film", "film_seed") if k in options}
         poses = iter(poses)
         # The helper is the only thread that calls _prepare (the source's caches and self._scene are not locked).
         with single_threaded_blas(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="darthand-prepare") as helper:
@@ -168,11 +171,12 @@ class Renderer:
         return subject, scene, cam, lighting, timings
 
     def _finish(self, prepared: tuple, *, background=None, samples: int = DEFAULT_SAMPLES,
-                aa_shading: str = "triangle", shading=None, labels: bool = True, maps: tuple = ()) -> Frame:
+                aa_shading: str = "triangle", shading=None, labels: bool = True, maps: tuple = (), film=None,
+                film_seed: int = 0) -> Frame:
         subject, scene, cam, lighting, timings = prepared
         return render_subject(subject, scene, cam, lighting, background=background, samples=samples,
                               aa_shading=aa_shading, shading=shading, threads=self.threads, labels=labels,
-                              timings=timings, maps=maps)
+                              timings=timings, maps=maps, film=film, film_seed=film_seed)
 
 
 _END = object()
@@ -196,11 +200,14 @@ def shading_options(shading) -> ShadingOptions:
 
 def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: Lighting, *, background=None,
                    samples: int = DEFAULT_SAMPLES, aa_shading: str = "triangle", shading=None, threads: int = 1,
-                   labels: bool = True, timings: dict | None = None, maps: tuple = ()) -> Frame:
+                   labels: bool = True, timings: dict | None = None, maps: tuple = (), film=None,
+                   film_seed: int = 0) -> Frame:
     """Render a posed subject whose scene is built: primary samples in the projected bounds with indirect light at
     the vertices they need (indirect.py), adaptive supersampling of edges (aa.supersample: `samples` sub-samples,
     `aa_shading` 'triangle' or 'sample'), compositing, labels. shading: see `shading_options`. maps: per-pixel
-    truth maps to compute from the primary samples (truth.KINDS; none by default, at no cost)."""
+    truth maps to compute from the primary samples (truth.KINDS; none by default, at no cost). film: develop the
+    composited colour as a camera would (render/film.py; Frame.colour stays the linear colour, Frame.rgba and
+    labels['render']['film'] are the film's), None: the image as composited."""
     timings = {} if timings is None else timings
     aa.check_options(samples, aa_shading)
     maps = truth.check_kinds(maps)
@@ -271,6 +278,12 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
             raise InputError(f"background: shape {bg.shape} does not match the image ({H}, {W}, 3)")
     colour, rgba = compose(premult, alpha, (r0, c0), bg, (H, W))
     timings["compose"] = _lap(t)
+    film_record = None
+    if film is not None:
+        t = time.perf_counter()
+        rgba, film_record = develop_frame(colour, full_alpha, full_depth, Film.from_json(film), film_seed,
+                                          lighting, cam, subject.all_vertices().mean(axis=0), bg)
+        timings["film"] = _lap(t)
     truth_maps = {}
     if maps:
         t = time.perf_counter()
@@ -280,9 +293,12 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
     t = time.perf_counter()
     doc = {}
     if labels:
+        record = {"samples": samples, "aa_shading": aa_shading, "background": bg_name,
+                  "lights": lighting.to_json(), "shading": options.to_json()}
+        if film_record is not None:
+            record["film"] = film_record
         doc = frame_labels(subject, cam, scene, full_alpha, files={"image": IMAGE, "mask": MASK},
-                           extra={"render": {"samples": samples, "aa_shading": aa_shading, "background": bg_name,
-                                             "lights": lighting.to_json(), "shading": options.to_json()}})
+                           extra={"render": record})
     timings["labels"] = _lap(t)
     stats["total_rays"] = (stats.get("rays", 0) + stats.get("shadow_rays", 0) + stats.get("indirect_rays", 0)
                            + (21 if labels else 0))

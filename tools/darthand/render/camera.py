@@ -27,6 +27,7 @@ DEFAULT_FOV_DEG = 30.0
 DEFAULT_MARGIN = 0.08
 MAX_MAGNITUDE = 1e9      # largest entry of K (pixels) and t (metres): beyond it projections stop being finite
 MAX_SIDE = 1 << 20       # image side in pixels (the memory budget refuses far less)
+MIN_FOCAL_PX = 1e-3      # smallest focal length in pixels: ray directions stay finite in float32
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,8 +49,7 @@ class Camera:
             object.__setattr__(self, name, a)
         if not (np.abs(self.R @ self.R.T - np.eye(3)).max() < 1e-6 and np.linalg.det(self.R) > 0):
             raise InputError("camera: field 'R' is not a rotation matrix")
-        if self.K[0, 0] <= 0 or self.K[1, 1] <= 0 or self.K[2, 2] != 1 or self.K[1, 0] or self.K[2, 0] or self.K[2, 1]:
-            raise InputError("camera: field 'K' must be upper triangular with positive focal lengths and K[2,2] = 1")
+        check_intrinsics(self.K)
         if not (1 <= int(self.width) <= MAX_SIDE and 1 <= int(self.height) <= MAX_SIDE):
             raise InputError(f"camera: image size {self.width}x{self.height} is outside 1..{MAX_SIDE} pixels a side")
         object.__setattr__(self, "width", int(self.width))
@@ -92,6 +92,15 @@ class Camera:
     def to_json(self) -> dict:
         return {"width": self.width, "height": self.height, "K": self.K.tolist(), "R": self.R.tolist(),
                 "t": self.t.tolist()}
+
+
+def check_intrinsics(K: np.ndarray) -> None:
+    """InputError unless K (3, 3) is upper triangular with K[2,2] = 1 and focal lengths of at least MIN_FOCAL_PX
+    pixels (a smaller one makes ray directions overflow float32, and zero divides by zero when framing)."""
+    if (not K[0, 0] >= MIN_FOCAL_PX or not K[1, 1] >= MIN_FOCAL_PX or K[2, 2] != 1 or K[1, 0] or K[2, 0]
+            or K[2, 1]):
+        raise InputError(f"camera: field 'K' must be upper triangular with focal lengths of at least {MIN_FOCAL_PX:g} "
+                         "pixel and K[2,2] = 1")
 
 
 def point_bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -222,6 +231,7 @@ def load_camera(spec, points=None, *, width: int | None = None, height: int | No
     h = int(spec.get("height", height or 512))
     if "K" in spec:
         K = np.asarray(spec["K"], dtype=np.float64)
+        check_intrinsics(K)                   # before framing divides by its focal lengths
     else:
         K = intrinsics(w, h, spec.get("fov_deg"), spec.get("focal_px"))
     if "R" in spec:

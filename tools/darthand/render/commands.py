@@ -46,6 +46,7 @@ def environment_lights(args):
 def render(args) -> int:
     """Render one labelled image of PACKAGE into --out."""
     from darthand.render.api import Renderer, open_source, write_frame
+    from darthand.render.film import load_film
 
     source = open_source(args.package, textures=args.textures, accessories=args.accessories, model=args.model)
     pose = parse_pose(args.pose)
@@ -67,7 +68,8 @@ def render(args) -> int:
         scene, width=width, height=height, samples=args.samples, aa_shading=args.aa_shading,
         keypoint_order=args.keypoint_order,
         shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin,
-                 "skin_specular": args.skin_specular, "skin_detail": args.skin_detail})
+                 "skin_specular": args.skin_specular, "skin_detail": args.skin_detail},
+        film=load_film(args.film, args.film_seed), film_seed=args.film_seed)
     paths = write_frame(frame, args.out, depth=args.depth)
     lab = frame.labels
     total = sum(frame.timings.values())

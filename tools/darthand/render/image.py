@@ -100,8 +100,8 @@ def read_image_buf(path: str | os.PathLike, what: str = "image") -> oiio.ImageBu
     regular_file(path, what)
     with native_stderr_captured():             # libpng prints its own line for a damaged file: ours says it
         inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise InputError(f"{path}: cannot read {what} ({oiio.geterror() or 'unknown format'})")
+    if inp is None:                            # OpenImageIO's reason can run to several lines: its first says it
+        raise InputError(f"{path}: cannot read {what}: {first_line(oiio.geterror()) or 'unknown format'}")
     spec = inp.spec()
     inp.close()
     check_memory(f"decoding {path} ({spec.width}x{spec.height})", 8 * spec.width * spec.height * spec.nchannels)
@@ -109,10 +109,14 @@ def read_image_buf(path: str | os.PathLike, what: str = "image") -> oiio.ImageBu
     with native_stderr_captured():
         read = buf.read(force=True)
     if not read or buf.has_error:
-        reason = (buf.geterror() or "read failed").strip().splitlines()
-        raise InputError(f"{path}: cannot read {what}: {reason[0] if reason else 'read failed'} (truncated or "
+        raise InputError(f"{path}: cannot read {what}: {first_line(buf.geterror()) or 'read failed'} (truncated or "
                          "corrupt)")
     return buf
+
+
+def first_line(text: str | None) -> str:
+    """The first line of an OpenImageIO error (its decoders add lines of their own, e.g. libpng's, after it)."""
+    return (str(text or "").strip().splitlines() or [""])[0]
 
 
 @functools.lru_cache(maxsize=4)
