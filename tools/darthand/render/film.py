@@ -37,8 +37,8 @@ from scipy import ndimage, signal
 
 from darthand.errors import InputError
 from darthand.fileio import read_json
-from darthand.render.image import encode_mask8
 from darthand.render.environment import frame_environment
+from darthand.render.image import encode_mask8
 from darthand.render.lights import world_lights
 from darthand.textures.color import encode_srgb8, luminance
 
