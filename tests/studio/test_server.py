@@ -292,9 +292,10 @@ def test_scene_environment_reaches_the_job(server):
     saved = doc["document"]["studio"]
     assert saved["scene"]["lights"]["environment"] == env and saved["film"] == {"exposure_ev": 0.5}
     if "studio" in listing(server):
-        body = scene(lights={"environment": {"map": "studio"}})
+        body = scene(lights={"environment": {"map": "studio"}}, background={"environment": {}})
         status, doc = request(server, "POST", "/api/export/scene", body)
-        assert doc["document"]["frames"][0]["lights"]["environment"]["map"] == "studio"
+        job = doc["document"]["frames"][0]
+        assert job["lights"]["environment"]["map"] == "studio" and job["background"] == "environment"
 
 
 def test_render_with_an_environment_is_refused_in_one_line_until_the_renderer_draws_it(server):

@@ -25,7 +25,7 @@ from darthand.render.lights import load_lighting
 REPO_ROOT = Path(__file__).resolve().parents[3]
 VENDORED = REPO_ROOT / "assets_src" / "environments"
 MAX_FILM_FIELDS = 32
-NEGATIVE_TOLERANCE = 0.01
+NEGATIVE_NOISE = 0.05
 
 
 def builtin_environment_folder() -> Path | None:
@@ -38,9 +38,10 @@ def builtin_environment_folder() -> Path | None:
 
 
 def read_map(path: Path) -> np.ndarray:
-    """(H, W, 3) float32 linear radiance of an equirectangular map; InputError naming the file and the fault when it
-    does not decode, is not 2:1, or holds NaN, Inf or negative values (beyond -NEGATIVE_TOLERANCE: lossy EXR
-    compression leaves a few texels slightly below 0 in 7 of Blender's 8 maps; those read as 0)."""
+    """(H, W, 3) float32 linear radiance of an equirectangular map (a grey map's one channel repeated); InputError
+    naming the file and the fault when it does not decode, is not 2:1, or holds NaN, Inf or negative values beyond
+    NEGATIVE_NOISE x the map's mean (lossy EXR compression leaves texels slightly below 0 in 7 of Blender's 8 maps;
+    those read as 0)."""
     with native_stderr_captured():
         buf = oiio.ImageBuf(str(path))
         pixels = buf.get_pixels(oiio.FLOAT) if buf.read(force=True) and not buf.has_error else None
@@ -50,12 +51,12 @@ def read_map(path: Path) -> np.ndarray:
     height, width = pixels.shape[:2]
     if width != 2 * height:
         raise InputError(f"{path}: environment map is {width}x{height}, not equirectangular (width = 2 x height)")
-    if pixels.ndim != 3 or pixels.shape[2] < 3:
-        raise InputError(f"{path}: environment map has {1 if pixels.ndim == 2 else pixels.shape[2]} channels, not RGB")
-    rgb = np.ascontiguousarray(pixels[..., :3], np.float32)
+    pixels = pixels.reshape(height, width, -1)
+    rgb = np.ascontiguousarray(np.repeat(pixels[..., :1], 3, axis=2) if pixels.shape[2] < 3 else pixels[..., :3],
+                               np.float32)
     if not np.isfinite(rgb).all():
         raise InputError(f"{path}: environment map holds NaN or Inf values")
-    if rgb.min() < -NEGATIVE_TOLERANCE:
+    if rgb.min() < -NEGATIVE_NOISE * max(float(rgb.mean()), 1e-6):
         raise InputError(f"{path}: environment map holds negative values (down to {rgb.min():.3g})")
     return np.maximum(rgb, 0)
 
@@ -71,9 +72,11 @@ def environment_render_ready() -> bool:
     return importlib.util.find_spec("darthand.render.environment") is not None
 
 
-def environment_background_job(blur_deg: float) -> dict:
-    """The job's background spec for 'the environment seen through the camera', blurred by blur_deg degrees."""
-    return {"environment": True, "blur": float(blur_deg)}
+def environment_background_job(blur_deg: float) -> str | dict:
+    """The job's background for 'the environment seen through the camera': the env branch's render_subject takes
+    the string 'environment' (unblurred); blurred by blur_deg > 0 degrees, a spec {'environment': true, 'blur'} the
+    frame path has yet to pass to background_view."""
+    return "environment" if blur_deg == 0 else {"environment": True, "blur": float(blur_deg)}
 
 
 def check_film(film, what: str) -> dict:

@@ -2,7 +2,7 @@
 folder (`darthand studio --environments DIR`), each with a thumbnail and a copy the live view loads.
 
 A map's id is what a studio scene names: a built-in map's stem ("studio"), a folder map's file name ("sky.hdr"),
-so the two never collide. The listing opens each file's header only (decodes, 2:1, RGB); a fault found when the
+so the two never collide. The listing opens each file's header only (decodes, 2:1); a fault found when the
 pixels are first decoded (truncated data, NaN/Inf, negative values) marks the map unusable from then on. Made
 files are cached under BUILD/studio/cache, keyed by the map's path, size and modification time:
 - the thumbnail: THUMB_WIDTH x THUMB_HEIGHT sRGB PNG, box-filtered and tone-mapped (exposed to the map's own
@@ -125,7 +125,7 @@ def _map_files(folder: Path) -> list[Path]:
 
 
 def header_fault(path: Path) -> str | None:
-    """Why the file's header rules it out as an equirectangular RGB map (one line), or None."""
+    """Why the file's header rules it out as an equirectangular map (one line), or None."""
     with native_stderr_captured():
         inp = oiio.ImageInput.open(str(path))
     if inp is None:
@@ -135,8 +135,6 @@ def header_fault(path: Path) -> str | None:
     inp.close()
     if spec.width != 2 * spec.height:
         return f"is {spec.width}x{spec.height}, not equirectangular (width = 2 x height)"
-    if spec.nchannels < 3:
-        return f"has {spec.nchannels} channels, not RGB"
     return None
 
 
