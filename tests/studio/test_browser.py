@@ -109,6 +109,11 @@ STEPS = [
                            " await window.studio.loadScene(doc);"
                            " return {before, cleared, after: window.studio.sceneDoc()}; })()"},   # 61
     {"do": "screenshot", "path": "{shots}/page_environment.png"},
+    {"do": "click", "selector": "#film-on"},                                                    # 63: the clean image
+    {"do": "screenshot", "selector": "#view", "path": "{shots}/env_live_for_render.png"},
+    {"do": "click", "selector": "#render"},                                                     # 65
+    {"do": "eval", "expr": "({request: window.studio.state.lastRequest, image: window.studio.state.lastRender.image,"
+                           " job: window.studio.state.lastRender.job})"},
 ]
 
 
@@ -455,3 +460,22 @@ def test_saved_scene_loads_back_with_its_environment(session):
     np.testing.assert_allclose(np.asarray(after["camera"]["R"]), np.asarray(before["camera"]["R"]), atol=1e-9)
     np.testing.assert_allclose(after["camera"]["t"], before["camera"]["t"], atol=1e-9)
     assert {k: v for k, v in after.items() if k != "camera"} == {k: v for k, v in before.items() if k != "camera"}
+
+
+def test_reference_render_shows_the_live_views_backdrop(session):
+    """Once the renderer draws environments: the Render of the environment backdrop (clean image, same camera) shows
+    the live view's backdrop, pixel for pixel within a few sRGB codes away from the hand."""
+    from scipy.ndimage import binary_dilation
+
+    from darthand.studio.adapters import environment_render_ready
+
+    if not environment_render_ready():
+        pytest.skip("the renderer does not draw environments yet (render/environment.py)")
+    r = session["results"][66]
+    assert "film" not in r["request"] and r["job"]["lights"] == r["request"]["lights"] | {
+        "environment": {**r["request"]["lights"]["environment"], "map": r["job"]["lights"]["environment"]["map"]}}
+    render = _png(r["image"])[..., :3].astype(np.float64)
+    live = _read_image(session["shots"] / "env_live_for_render.png")
+    keep = ~binary_dilation(_silhouette(session["results"][54]["silhouette"], 512), iterations=4)
+    difference = np.abs(render - live).max(axis=2)[keep]
+    assert difference.mean() < 2 and np.percentile(difference, 99) < 16, np.percentile(difference, [50, 99])
