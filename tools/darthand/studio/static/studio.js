@@ -22,7 +22,7 @@ const state = {
 };
 const history = { undo: [], redo: [], committed: null };
 const anim = { playing: false, phase: 0, from: null, to: null, speed: 0.5, last: 0 };
-const metrics = { usable_ms: null, redraw_ms: [], draw_ms: [], texture_ms: [], render_ms: [] };
+const metrics = { usable_ms: null, redraw_ms: [], draw_ms: [], texture_ms: [], render_ms: [], environment_ms: [] };
 const pending = new Set();
 let catalogue, environments, renderer, scene, camera, controls, ambient, key, pmrem;
 let hand = null;                     // the shown side: {side, root, meshes, bones, rig, table, morph, variants, ...}
@@ -274,11 +274,14 @@ function loadEnvironment(id) {
 
 /** Light the live view with a map ("none": the Lights panel's lights). */
 async function selectEnvironment(id) {
+  const t0 = performance.now();
   const chosen = id === "none" ? null : id;
   if (chosen !== null) await track(loadEnvironment(chosen));      // a map that fails leaves the choice as it was
   state.environment.id = chosen;
   markSelected("environments", id);
   await updateEnvironment();
+  draw();
+  metrics.environment_ms.push(performance.now() - t0);
 }
 
 /** The environment in the live view, placed as issue 28's contract places it in frame "world": direction d is
