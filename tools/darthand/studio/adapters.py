@@ -7,7 +7,7 @@ deletes this module once all are replaced).
 - load_lighting_checked      -> render/lights.load_lighting (once the lights schema has the 'environment' field)
 - environment_render_ready   -> always True (render/api draws a lights document's environment)
 - environment_background_job -> the job background form the dataset planner uses for the environment backdrop
-- check_film                 -> render/film.Film's dict parser (its InputError for unknown or out-of-range fields)
+- check_film                 -> render/film.Film.from_json (its InputError for unknown or out-of-range fields)
 """
 
 from __future__ import annotations

@@ -307,23 +307,25 @@ function environmentDoc() {
 
 // -------------------------------------------------------------------------------------------------- film
 
-/** ADAPTER (issue 28): the Image settings panel as a film dict. The field names are a guess at render/film.Film's;
- * the lead renames them at merge. null: the clean image. */
+/** The Image settings panel as a film dict (render/film.Film's fields; exposure_ev left out: automatic), or null:
+ * the clean image. */
 function filmDoc() {
   if (!$("film-on").checked) return null;
-  const film = { exposure: $("film-auto").checked ? "auto" : +$("film-ev").value, tone_curve: $("film-tone").value };
-  if (+$("film-iso").value) film.iso = +$("film-iso").value;
-  if (+$("film-jpeg").value) film.jpeg_quality = +$("film-jpeg").value;
+  const film = {};
+  if (!$("film-auto").checked) film.exposure_ev = +$("film-ev").value;
+  const fields = { iso: "film-iso", defocus_px: "film-defocus", motion_blur_px: "film-motion", jpeg_quality: "film-jpeg" };
+  for (const [name, id] of Object.entries(fields)) if (+$(id).value) film[name] = +$(id).value;
   return film;
 }
 
 function showFilm(film) {
   $("film-on").checked = !!film;
   if (!film) return;
-  $("film-auto").checked = film.exposure === "auto" || film.exposure === undefined;
-  if (typeof film.exposure === "number") setRange("film-ev", film.exposure);
-  if (film.tone_curve) $("film-tone").value = film.tone_curve;
+  $("film-auto").checked = typeof film.exposure_ev !== "number";
+  setRange("film-ev", film.exposure_ev ?? 0);
   $("film-iso").value = String(film.iso ?? 0);
+  setRange("film-defocus", film.defocus_px ?? 0);
+  setRange("film-motion", film.motion_blur_px ?? 0);
   $("film-jpeg").value = String(film.jpeg_quality ?? 0);
 }
 
@@ -759,8 +761,10 @@ function buildEnvironments() {
   bindRange("env-strength", (v) => { env.strength = v; guarded(updateEnvironment()); });
   bindRange("env-blur", (v) => { env.blur = v; guarded(updateBackground()); });
   $("env-background").addEventListener("change", (e) => { env.background = e.target.checked; guarded(updateBackground()); });
-  for (const id of ["film-on", "film-auto", "film-tone", "film-iso", "film-jpeg"]) $(id).addEventListener("change", () => { state.film = filmDoc(); });
+  for (const id of ["film-on", "film-auto", "film-iso", "film-jpeg"]) $(id).addEventListener("change", () => { state.film = filmDoc(); });
   bindRange("film-ev", () => { $("film-auto").checked = false; state.film = filmDoc(); });
+  bindRange("film-defocus", () => { state.film = filmDoc(); });
+  bindRange("film-motion", () => { state.film = filmDoc(); });
 }
 
 function buildBackground() {
