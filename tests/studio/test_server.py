@@ -305,3 +305,12 @@ def test_render_with_an_environment_is_refused_in_one_line_until_the_renderer_dr
         pytest.skip("the renderer draws environments")
     status, message = refused_any(server, "POST", "/api/render", scene(lights={"environment": {"map": "uniform.hdr"}}))
     assert status == 501 and "environment" in message
+
+
+def test_environments_folder_that_is_not_one_is_one_line(server, tmp_path, capsys):
+    from darthand.cli import main
+
+    _, build = server
+    assert main(["studio", str(build), "--environments", str(tmp_path / "nowhere")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "--environments" in err and "not a folder" in err, err
