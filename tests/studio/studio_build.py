@@ -90,3 +90,46 @@ def glove(model) -> Accessory:
     return Accessory(GLOVE, model.v_template[used] + 0.0015 * normals, remap[faces], weights=model.weights[used],
                      posedirs=model.posedirs[used], kind="glove",
                      material={"base_color": [0.2, 0.35, 0.8], "metallic": 0.0, "roughness": 0.7})
+
+
+# ------------------------------------------------------------------------------------------------ environment maps
+
+UNIFORM_RADIANCE = 0.5                   # the uniform map's value (linear)
+
+
+def direction_map(width: int = 256) -> np.ndarray:
+    """(width / 2, width, 3) float32 equirectangular map whose texel holds 0.5 + 0.5 * d_E, d_E the unit direction
+    that texel stands for in issue 28's convention (environment frame E, z up): the map centre column looks along
+    -x, v = 1 is the top row. A view of it shows, per pixel, the direction it looked up."""
+    height = width // 2
+    u = (np.arange(width) + 0.5) / width
+    v = 1 - (np.arange(height) + 0.5) / height                 # rows top to bottom
+    azimuth = (u - 0.5) * 2 * np.pi                            # = atan2(d_y, -d_x)
+    elevation = (v - 0.5) * np.pi                              # = atan2(d_z, hypot(d_x, d_y))
+    el, az = np.meshgrid(elevation, azimuth, indexing="ij")
+    d = np.stack([-np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=-1)
+    return (0.5 + 0.5 * d).astype(np.float32)
+
+
+def write_float_image(path: Path, pixels: np.ndarray) -> Path:
+    """Write float pixels as .exr or .hdr (by suffix) with OpenImageIO."""
+    import OpenImageIO as oiio
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    buf = oiio.ImageBuf(np.ascontiguousarray(pixels, np.float32))
+    assert buf.write(str(path)), buf.geterror()
+    return path
+
+
+def make_environments(folder: Path) -> Path:
+    """A --environments folder: two good maps (directions.hdr: direction_map(); uniform.hdr: UNIFORM_RADIANCE
+    everywhere), and three bad ones: broken.exr (not an image), wide.exr (3:1), nan.exr (2:1 holding a NaN)."""
+    write_float_image(folder / "directions.hdr", direction_map())
+    write_float_image(folder / "uniform.hdr", np.full((32, 64, 3), UNIFORM_RADIANCE, np.float32))
+    (folder / "broken.exr").write_bytes(b"this is not an OpenEXR file")
+    write_float_image(folder / "wide.exr", np.ones((16, 48, 3), np.float32))
+    nan = np.ones((16, 32, 3), np.float32)
+    nan[3, 5, 1] = np.nan
+    write_float_image(folder / "nan.exr", nan)
+    (folder / "notes.txt").write_text("not a map: not listed")
+    return folder

@@ -9,12 +9,14 @@ import json
 import sys
 import threading
 from pathlib import Path
+from urllib.parse import quote
 
+import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from studio_build import RING, make_build  # noqa: E402
+from studio_build import RING, make_build, make_environments  # noqa: E402
 
 ZERO = [[0.0, 0.0, 0.0]] * 16
 
@@ -26,7 +28,8 @@ def server(tmp_path_factory):
 
     build = make_build(tmp_path_factory.mktemp("studio_build"))
     (build.parent / "secret.txt").write_text("outside the build")
-    srv = make_server(Studio(StudioBuild(build)))
+    environments = make_environments(build.parent / "environments")
+    srv = make_server(Studio(StudioBuild(build, environments=environments)))
     thread = threading.Thread(target=srv.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
     thread.start()
     yield srv, build
@@ -130,6 +133,12 @@ def scene(**kw):
     (scene(camera={"width": 99999, "height": 99999, "K": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
                    "R": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "t": [0, 0, 1]}), 400, "camera"),
     (scene(lights={"ambient": {"intensity": -4}}), 400, "lights"),
+    (scene(lights={"environment": {"map": "../../secret.txt"}}), 404, "environment"),
+    (scene(lights={"environment": {"map": "broken.exr"}}), 422, "does not decode"),
+    (scene(lights={"environment": {"map": "uniform.hdr", "strength": -1}}), 400, "strength"),
+    (scene(lights={"environment": {"map": "uniform.hdr", "frame": "sky"}}), 400, "frame"),
+    (scene(background={"environment": {"blur": 2}}), 400, "environment"),
+    (scene(film=[1]), 400, "film"),
     (scene(name="../../evil"), 400, "name"),
     ([1, 2, 3], 400, "scene"),
 ])
@@ -182,3 +191,126 @@ def test_cli_argument_errors_are_one_line(tmp_path, capsys):
         assert main(args) == 2, args
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and err.startswith("darthand: error:"), err
+
+
+# ------------------------------------------------------------------------------------------------ environments
+
+
+def _image(data: bytes) -> np.ndarray:
+    """Pixels of PNG or Radiance .hdr bytes, decoded by Pillow (PNG) or OpenImageIO (.hdr): not the studio's code."""
+    import io
+    import tempfile
+
+    if data[:4] == b"\x89PNG":
+        from PIL import Image
+
+        return np.asarray(Image.open(io.BytesIO(data)))
+    import OpenImageIO as oiio
+
+    with tempfile.NamedTemporaryFile(suffix=".hdr") as f:
+        f.write(data)
+        f.flush()
+        return oiio.ImageBuf(f.name).get_pixels(oiio.FLOAT)
+
+
+def listing(server) -> dict:
+    status, doc = request(server, "GET", "/api/environments")
+    assert status == 200
+    return {e["id"]: e for e in doc["environments"]}
+
+
+def test_environments_listing_marks_bad_maps_with_their_reason(server):
+    maps = listing(server)
+    assert maps["directions.hdr"] == {"id": "directions.hdr", "source": "folder", "usable": True}
+    assert "notes.txt" not in maps
+    assert not maps["broken.exr"]["usable"] and "does not decode" in maps["broken.exr"]["reason"]
+    assert not maps["wide.exr"]["usable"] and "48x16, not equirectangular" in maps["wide.exr"]["reason"]
+    from darthand.studio.adapters import builtin_environment_folder
+
+    builtin = [k for k, e in maps.items() if e["source"] == "builtin"]
+    if builtin_environment_folder() is not None:         # Blender's (or the vendored) maps
+        assert {"studio", "city", "forest", "sunset"} <= set(builtin)
+    assert list(maps)[:len(builtin)] == builtin            # built-ins first
+
+
+def test_a_map_that_fails_to_decode_becomes_unusable_not_an_error(server):
+    """nan.exr passes the header check; decoding it for its thumbnail finds the NaN: one-line 422, then listed
+    unusable with that reason, and the listing itself still answers."""
+    status, message = refused_any(server, "GET", "/media/environment/nan.exr.png")
+    assert status == 422 and "NaN" in message
+    maps = listing(server)
+    assert not maps["nan.exr"]["usable"] and "NaN" in maps["nan.exr"]["reason"]
+    assert maps["uniform.hdr"]["usable"]
+
+
+def refused_any(server, method, path, body=None):
+    """(status, message) of a one-line JSON refusal of any status (refused() takes 4xx only)."""
+    status, doc = request(server, method, path, body)
+    assert isinstance(doc, dict) and set(doc) == {"error", "status"} and doc["status"] == status, doc
+    assert "\n" not in doc["error"]
+    return status, doc["error"]
+
+
+def test_thumbnails_are_small_tone_mapped_pngs(server):
+    """Every usable map's thumbnail is a 128 x 64 PNG; a uniform map's is the closed form of the tone curve:
+    exposed to 0.3 (its log-average), x / (1 + x) = 0.3 / 1.3 linear, sRGB-encoded."""
+    for name, env in listing(server).items():
+        if env["usable"] and name != "nan.exr":
+            status, data = request(server, "GET", f"/media/environment/{quote(name)}.png")
+            assert status == 200 and _image(data).shape == (64, 128, 3), name
+    grey = _image(request(server, "GET", "/media/environment/uniform.hdr.png")[1]).astype(float)
+    x = 0.3 / 1.3
+    expected = 255 * (1.055 * x ** (1 / 2.4) - 0.055)
+    assert np.abs(grey - expected).max() <= 1.0
+
+
+def test_live_map_is_the_map_as_radiance_hdr(server):
+    """The live view's .hdr decodes (OpenImageIO) to the folder's map, within RGBE's 8-bit mantissa shared by a
+    texel's channels (1/256 of its largest channel, twice: the test wrote the map as RGBE too)."""
+    from studio_build import direction_map
+
+    status, data = request(server, "GET", "/media/environment/directions.hdr.hdr")
+    assert status == 200 and data[:10] == b"#?RADIANCE"
+    np.testing.assert_allclose(_image(data), direction_map(), rtol=0, atol=2 / 256)
+    assert refused(server, "GET", "/media/environment/directions.hdr.exr")[0] == 404
+    assert refused(server, "GET", "/media/environment/..%2f..%2fsecret.txt.hdr")[0] in (400, 404)
+    assert refused(server, "GET", "/media/environment/wide.exr.png")[0] == 422
+
+
+def test_scene_environment_reaches_the_job(server):
+    """The exported job's lights carry the environment (a folder map by its path, a built-in by its name) and its
+    background the environment backdrop; the export keeps the studio scene (environment and film) to load back."""
+    _, build = server
+    env = {"map": "uniform.hdr", "rotation": 30.0, "strength": 1.5, "frame": "world"}
+    body = scene(lights={"environment": env}, background={"environment": {"blur": 4.0}},
+                 film={"exposure_ev": 0.5}, name="env_scene")
+    status, doc = request(server, "POST", "/api/export/scene", body)
+    assert status == 200, doc
+    job = doc["document"]["frames"][0]
+    assert job["lights"]["environment"] == {**env, "map": str(build.parent / "environments" / "uniform.hdr")}
+    assert job["background"]["blur"] == 4.0
+    saved = doc["document"]["studio"]
+    assert saved["scene"]["lights"]["environment"] == env and saved["film"] == {"exposure_ev": 0.5}
+    if "studio" in listing(server):
+        body = scene(lights={"environment": {"map": "studio"}}, background={"environment": {}})
+        status, doc = request(server, "POST", "/api/export/scene", body)
+        job = doc["document"]["frames"][0]
+        assert job["lights"]["environment"]["map"] == "studio" and job["background"] == "environment"
+
+
+def test_render_with_an_environment_is_refused_in_one_line_until_the_renderer_draws_it(server):
+    from darthand.studio.adapters import environment_render_ready
+
+    if environment_render_ready():
+        pytest.skip("the renderer draws environments")
+    status, message = refused_any(server, "POST", "/api/render", scene(lights={"environment": {"map": "uniform.hdr"}}))
+    assert status == 501 and "environment" in message
+
+
+def test_environments_folder_that_is_not_one_is_one_line(server, tmp_path, capsys):
+    from darthand.cli import main
+
+    _, build = server
+    assert main(["studio", str(build), "--environments", str(tmp_path / "nowhere")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "--environments" in err and "not a folder" in err, err

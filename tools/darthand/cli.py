@@ -836,6 +836,9 @@ def _add_studio_command(sub) -> None:
                    help="allow a --host other than this machine's loopback (anyone reaching it sees the build)")
     p.add_argument("--backgrounds", metavar="DIR", default=None,
                    help="a folder of background images the page may use (besides colours and the built-in set)")
+    p.add_argument("--environments", metavar="DIR", default=None,
+                   help="a folder of equirectangular environment maps (.exr, .hdr) the page offers besides the "
+                        "built-in set")
     p.add_argument("--verbose", action="store_true", help="log every request")
     p.set_defaults(run=commands.studio)
 

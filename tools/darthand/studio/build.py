@@ -22,16 +22,10 @@ from darthand.dataset.plan import texture_tags
 from darthand.errors import InputError
 from darthand.model.preview import VIEWS
 from darthand.render.api import open_source
+from darthand.studio.environments import EnvironmentSet
+from darthand.studio.request_error import RequestError
 
 SIDES = ("right", "left")
-
-
-class RequestError(InputError):
-    """A request the studio refuses: `status` the HTTP status (4xx), the message one line naming what is wrong."""
-
-    def __init__(self, status: int, message: str):
-        super().__init__(message)
-        self.status = status
 
 
 @dataclass
@@ -55,9 +49,10 @@ class SideAssets:
 
 
 class StudioBuild:
-    """A build folder opened for the studio: its sides (SideAssets), optional background images."""
+    """A build folder opened for the studio: its sides (SideAssets), optional background images, the environment
+    maps (the built-in set and an optional folder's)."""
 
-    def __init__(self, root, backgrounds=None):
+    def __init__(self, root, backgrounds=None, environments=None):
         self.root = Path(root).resolve()
         if not self.root.is_dir():
             raise InputError(f"{root}: not a build folder (run `make assets`)")
@@ -69,6 +64,7 @@ class StudioBuild:
         if backgrounds is not None:
             self.background_folder = Path(backgrounds).resolve()
             self.background_files = list_images(self.background_folder, max_files=10_000)
+        self.environments = EnvironmentSet(environments)
 
     @property
     def out_dir(self) -> Path:

@@ -27,8 +27,9 @@ from darthand.model.mirror import mirror_pose
 from darthand.render.api import Renderer
 from darthand.render.camera import Camera
 from darthand.render.image import encode_mask8, write_png
-from darthand.render.lights import load_lighting
 from darthand.schemas import check_schema
+from darthand.studio.adapters import (check_film, environment_background_job, environment_render_ready,
+                                      load_lighting_checked)
 from darthand.studio.build import RequestError, StudioBuild
 
 SCENE_SCHEMA = "studio_scene.schema.json"
@@ -56,11 +57,18 @@ def check_scene(build: StudioBuild, scene) -> dict:
                                     "renders square images, as render-dataset does")
         _checked(lambda: Camera(np.asarray(camera["K"]), np.asarray(camera["R"]), np.asarray(camera["t"]),
                                 camera["width"], camera["height"]))
-    if scene.get("lights") is not None:
-        _checked(lambda: load_lighting(scene["lights"], "scene: lights"))
+    lights = scene.get("lights")
+    if lights is not None:
+        _checked(lambda: load_lighting_checked(lights, "scene: lights"))
+        if "environment" in lights:
+            build.environments.get(lights["environment"]["map"])
     background = scene.get("background")
     if isinstance(background, dict) and "image" in background:
         build.background_file(background["image"])
+    if isinstance(background, dict) and "environment" in background and not (lights or {}).get("environment"):
+        raise RequestError(400, "scene: field 'background' is the environment, but the lights have none")
+    if scene.get("film") is not None:
+        _checked(lambda: check_film(scene["film"], "scene"))
     return scene
 
 
@@ -85,8 +93,18 @@ def scene_job(build: StudioBuild, scene: dict, index: int = 0) -> dict:
     job = {"index": index, "side": scene["side"], "pose": [float(x) for x in scene_pose(build, scene)],
            "texture": scene.get("texture"), "skin_tone_offset": float(scene.get("skin_tone_offset", 0.0)),
            "accessory": scene.get("accessory", "none"), "camera": scene.get("camera") or "three_quarter",
-           "lights": scene.get("lights"), "background": _job_background(build, scene.get("background"))}
+           "lights": _job_lights(build, scene.get("lights")),
+           "background": _job_background(build, scene.get("background"))}
     return {k: v for k, v in job.items() if v is not None}
+
+
+def _job_lights(build: StudioBuild, lights):
+    """The lights document with its environment's map id turned into what the renderer reads (a built-in's name,
+    a folder map's path)."""
+    if not lights or "environment" not in lights:
+        return lights
+    environment = {**lights["environment"], "map": build.environments.job_map(lights["environment"]["map"])}
+    return {**lights, "environment": environment}
 
 
 def _job_background(build: StudioBuild, background):
@@ -95,6 +113,8 @@ def _job_background(build: StudioBuild, background):
     if "image" in background:
         path = build.background_file(background["image"])
         return {"folder": str(path.parent), "files": [path.name], "builtin": 0}
+    if "environment" in background:
+        return environment_background_job(background["environment"].get("blur", 0.0))
     return dict(background)
 
 
@@ -105,16 +125,21 @@ def render_scene(build: StudioBuild, scene: dict) -> dict:
     """Render the scene as its dataset job would be: {'image', 'mask' (PNG bytes, base64), 'labels', 'job',
     'seconds'}."""
     check_scene(build, scene)
+    if (scene.get("lights") or {}).get("environment") and not environment_render_ready():
+        raise RequestError(501, "render: this renderer has no environment lighting yet (render/environment.py, "
+                                "issue 28): choose 'none' in the Environment panel")
     job = scene_job(build, scene)
     side = build.side(scene["side"])
     size = int(scene["camera"]["width"]) if scene.get("camera") else 512
+    settings = {"size": size, "samples": SAMPLES, "aa_shading": AA_SHADING}
+    if scene.get("film") is not None:
+        settings["film"] = scene["film"]
     t = time.perf_counter()
     with side.lock:
         if side.renderer is None:
             side.renderer = Renderer(side.source)
         try:
-            frame, background = render_job(side.renderer, job, {"size": size, "samples": SAMPLES,
-                                                           "aa_shading": AA_SHADING})
+            frame, background = render_job(side.renderer, job, settings)
         except InputError as e:
             raise RequestError(400, f"render: {e}") from None
     labels = frame.labels
@@ -194,8 +219,11 @@ def scene_export(build: StudioBuild, scene: dict, path_hint: str) -> dict:
     job = scene_job(build, scene)
     size = int(scene["camera"]["width"]) if scene.get("camera") else 512
     model = build.side(scene["side"]).source.source
-    doc = {"frames": [job], "studio": {
-        "size": size, "samples": SAMPLES, "aa_shading": AA_SHADING,
-        "command": f"darthand render-dataset {model} --jobs {path_hint} --size {size} --out OUT"}}
+    studio: dict = {"size": size, "samples": SAMPLES, "aa_shading": AA_SHADING,
+                    "command": f"darthand render-dataset {model} --jobs {path_hint} --size {size} --out OUT",
+                    "scene": {k: v for k, v in scene.items() if k != "name"}}
+    if scene.get("film") is not None:
+        studio["film"] = scene["film"]
+    doc = {"frames": [job], "studio": studio}
     check_jobs(doc, "scene export")
     return doc

@@ -205,6 +205,8 @@ class StudioHandler(BaseHTTPRequestHandler):
     def get_api(self, rest):
         if rest == ["catalogue"]:
             return self._json(self.studio.build.catalogue())
+        if rest == ["environments"]:
+            return self._json({"environments": self.studio.build.environments.listing()})
         if len(rest) == 2 and rest[0] == "rig":
             return self._json(self.studio.rig(rest[1]))
         raise RequestError(404, f"no such API call: {self.path[:100]!r}")
@@ -255,7 +257,16 @@ class StudioHandler(BaseHTTPRequestHandler):
             body = media.cached_file(cache / f"accessory_{side.side}_{aid}.png",
                                      lambda p: media.accessory_thumbnail(side, aid, p))
             return self._send(200, body, "image/png", cache=True)
+        if len(rest) == 2 and rest[0] == "environment":
+            return self._environment(rest[1], cache)
         raise RequestError(404, f"no such media: {self.path[:100]!r}")
+
+    def _environment(self, name: str, cache: Path) -> None:
+        """An environment's thumbnail (<id>.png) or its map for the live view (<id>.hdr, RGBE)."""
+        environments = self.studio.build.environments
+        if name.endswith(".png"):
+            return self._send(200, environments.thumbnail(name[:-4], cache), "image/png", cache=True)
+        return self._send(200, environments.live_map(_strip(name, ".hdr"), cache), "image/vnd.radiance", cache=True)
 
     # ---------------------------------------------------------------------------------------------- POST
 

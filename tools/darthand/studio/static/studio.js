@@ -4,6 +4,7 @@
 // backgrounds, and renders, frames and exports scenes. `window.studio` is the page's interface for its tests.
 import * as THREE from "three";
 import { GLTFLoader } from "three/addons/loaders/GLTFLoader.js";
+import { HDRLoader } from "three/addons/loaders/HDRLoader.js";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
 import * as R from "./rig.js";
 
@@ -17,12 +18,13 @@ const state = {
   side: null, angles: R.zeroAngles(), texture: null, skinTone: 0, accessory: "none",
   ambient: { color: [1, 1, 1], intensity: 0.25 }, key: { color: [1, 1, 1], intensity: 0.9, azimuth: -30, elevation: 35 },
   background: { kind: "none" }, renderSize: 512, poseList: [],
+  environment: { id: null, rotation: 0, strength: 1, background: false, blur: 0 }, film: null, lastRequest: null,
 };
 const history = { undo: [], redo: [], committed: null };
 const anim = { playing: false, phase: 0, from: null, to: null, speed: 0.5, last: 0 };
-const metrics = { usable_ms: null, redraw_ms: [], draw_ms: [], texture_ms: [], render_ms: [] };
+const metrics = { usable_ms: null, redraw_ms: [], draw_ms: [], texture_ms: [], render_ms: [], environment_ms: [] };
 const pending = new Set();
-let catalogue, renderer, scene, camera, controls, ambient, key;
+let catalogue, environments, renderer, scene, camera, controls, ambient, key, pmrem;
 let hand = null;                     // the shown side: {side, root, meshes, bones, rig, table, morph, variants, ...}
 const hands = {};                    // side -> promise of its loaded hand
 let accessory = null;                // {id, object, skinned}
@@ -33,7 +35,7 @@ const loader = new GLTFLoader();
 // -------------------------------------------------------------------------------------------------- start-up
 
 async function start() {
-  catalogue = await getJSON("/api/catalogue");
+  [catalogue, { environments }] = await Promise.all([getJSON("/api/catalogue"), getJSON("/api/environments")]);
   const side = catalogue.sides[0];
   // the package, the rig and the first camera load while the panels are built
   const loading = loadHand(side);
@@ -60,6 +62,7 @@ function setupThree() {
   renderer.outputColorSpace = THREE.SRGBColorSpace;
   renderer.setClearColor(0x202326, 1);
   scene = new THREE.Scene();
+  pmrem = new THREE.PMREMGenerator(renderer);
   camera = new THREE.PerspectiveCamera(30, 1, 0.005, 20);
   ambient = new THREE.AmbientLight(0xffffff, 1);
   key = new THREE.DirectionalLight(0xffffff, 1);
@@ -219,12 +222,13 @@ async function selectAccessory(id) {
 // -------------------------------------------------------------------------------------------------- lights
 
 function updateLights() {
-  const a = state.ambient, k = state.key;
+  const a = state.ambient, k = state.key, lit = state.environment.id === null;
   // darthand's intensities have pi folded in (schemas/lights.schema.json); three.js's Lambert term divides by pi.
+  // An environment replaces these lights (lightsDoc sends none with it).
   ambient.color.setRGB(...a.color);
-  ambient.intensity = a.intensity * PI;
+  ambient.intensity = lit ? a.intensity * PI : 0;
   key.color.setRGB(...k.color);
-  key.intensity = k.intensity * PI;
+  key.intensity = lit ? k.intensity * PI : 0;
   const d = keyDirectionCamera();
   camera.updateMatrixWorld();
   // camera frame (OpenCV: x right, y down, z forward) -> three.js camera axes (x right, y up, z back) -> world
@@ -243,6 +247,7 @@ function keyDirectionCamera() {
 
 function lightsDoc() {
   const r = (v) => v.map((x) => +x.toFixed(5));
+  if (state.environment.id !== null) return { ambient: { color: [1, 1, 1], intensity: 0 }, lights: [], environment: environmentDoc() };
   return {
     ambient: { color: r(state.ambient.color), intensity: +state.ambient.intensity },
     lights: [{ type: "directional", direction: r(keyDirectionCamera()), color: r(state.key.color),
@@ -250,12 +255,95 @@ function lightsDoc() {
   };
 }
 
+// -------------------------------------------------------------------------------------------------- environment
+
+const hdrLoader = new HDRLoader();
+const environmentMaps = {};          // id -> promise of {equirect, pmrem}: the map and its prefiltered radiance
+
+function loadEnvironment(id) {
+  if (!environmentMaps[id]) {
+    environmentMaps[id] = (async () => {
+      const equirect = await hdrLoader.loadAsync(`/media/environment/${encodeURIComponent(id)}.hdr`);
+      equirect.mapping = THREE.EquirectangularReflectionMapping;
+      return { equirect, pmrem: pmrem.fromEquirectangular(equirect).texture };
+    })();
+    environmentMaps[id].catch(() => { delete environmentMaps[id]; });
+  }
+  return environmentMaps[id];
+}
+
+/** Light the live view with a map ("none": the Lights panel's lights). */
+async function selectEnvironment(id) {
+  const t0 = performance.now();
+  const chosen = id === "none" ? null : id;
+  if (chosen !== null) await track(loadEnvironment(chosen));      // a map that fails leaves the choice as it was
+  state.environment.id = chosen;
+  markSelected("environments", id);
+  await updateEnvironment();
+  draw();
+  metrics.environment_ms.push(performance.now() - t0);
+}
+
+/** The environment in the live view, placed as issue 28's contract places it in frame "world": direction d is
+ * looked up at d_E = (d.x, -d.z, d.y) turned by -rotation about E_z (= world +Y), the map's centre column along
+ * -E_x. three.js looks d up with its centre column along +X and scene.*Rotation's Euler R as R^T d, so the two
+ * agree for a rotation of (rotation - 180) degrees about Y. */
+async function updateEnvironment() {
+  const env = state.environment;
+  const maps = env.id === null ? null : await track(loadEnvironment(env.id));
+  scene.environment = maps ? maps.pmrem : null;
+  scene.environmentIntensity = env.strength;
+  scene.environmentRotation.set(0, (env.rotation - 180) * PI / 180, 0);
+  scene.backgroundRotation.copy(scene.environmentRotation);
+  await updateBackground();
+}
+
+/** The lights document's environment field (schemas/lights.schema.json): the studio's scenes use frame "world"
+ * because its camera orbits the hand while the surroundings stay put. */
+function environmentDoc() {
+  const env = state.environment;
+  return { map: env.id, rotation: +env.rotation, strength: +env.strength, frame: "world" };
+}
+
+// -------------------------------------------------------------------------------------------------- film
+
+/** The Image settings panel as a film dict (render/film.Film's fields; exposure_ev left out: automatic), or null:
+ * the clean image. */
+function filmDoc() {
+  if (!$("film-on").checked) return null;
+  const film = {};
+  if (!$("film-auto").checked) film.exposure_ev = +$("film-ev").value;
+  const fields = { iso: "film-iso", defocus_px: "film-defocus", motion_blur_px: "film-motion", jpeg_quality: "film-jpeg" };
+  for (const [name, id] of Object.entries(fields)) if (+$(id).value) film[name] = +$(id).value;
+  return film;
+}
+
+function showFilm(film) {
+  $("film-on").checked = !!film;
+  if (!film) return;
+  $("film-auto").checked = typeof film.exposure_ev !== "number";
+  setRange("film-ev", film.exposure_ev ?? 0);
+  $("film-iso").value = String(film.iso ?? 0);
+  setRange("film-defocus", film.defocus_px ?? 0);
+  setRange("film-motion", film.motion_blur_px ?? 0);
+  $("film-jpeg").value = String(film.jpeg_quality ?? 0);
+}
+
 // -------------------------------------------------------------------------------------------------- background
 
 const backgroundTextures = {};
 async function updateBackground() {
-  const bg = state.background;
-  if (bg.kind === "color") scene.background = new THREE.Color().setRGB(...bg.color);
+  const bg = state.background, env = state.environment;
+  scene.backgroundIntensity = 1;
+  scene.backgroundBlurriness = 0;
+  if (env.background && env.id !== null) {
+    const maps = await track(loadEnvironment(env.id));
+    // three.js blurs a PMREM background by GGX roughness r, a lobe about r^2 radians wide: r = sqrt(blur in radians)
+    const roughness = Math.sqrt(env.blur * PI / 180);
+    scene.background = roughness > 0 ? maps.pmrem : maps.equirect;
+    scene.backgroundBlurriness = Math.min(1, roughness);
+    scene.backgroundIntensity = env.strength;
+  } else if (bg.kind === "color") scene.background = new THREE.Color().setRGB(...bg.color);
   else if (bg.kind === "builtin" || bg.kind === "image") {
     const url = `/media/background/${bg.kind}/${bg.kind === "builtin" ? bg.builtin : bg.image}.png`;
     if (!backgroundTextures[url]) {
@@ -270,6 +358,7 @@ async function updateBackground() {
 
 function backgroundDoc() {
   const bg = state.background;
+  if (state.environment.background && state.environment.id !== null) return { environment: { blur: +state.environment.blur } };
   if (bg.kind === "color") return { color: bg.color.map((x) => +x.toFixed(5)) };
   if (bg.kind === "builtin") return { builtin: bg.builtin };
   if (bg.kind === "image") return { image: bg.image };
@@ -321,13 +410,16 @@ function sceneDoc(extra = {}) {
     accessory: state.accessory, camera: cameraDoc(state.renderSize), lights: lightsDoc(), background: backgroundDoc(),
     ...extra };
   if (state.texture) doc.texture = state.texture;
+  const film = filmDoc();
+  if (film) doc.film = film;
   return doc;
 }
 
 async function renderReference() {
   setStatus("rendering...");
   const t0 = performance.now();
-  const result = await postJSON("/api/render", sceneDoc());
+  state.lastRequest = sceneDoc();
+  const result = await postJSON("/api/render", state.lastRequest);
   await showRender(result);
   metrics.render_ms.push(performance.now() - t0);
   setStatus(`rendered ${result.size} px in ${result.seconds.toFixed(2)} s (round trip ${((performance.now() - t0) / 1000).toFixed(2)} s)`);
@@ -357,6 +449,65 @@ async function showRender(result) {
   for (const big of ["keypoints_3d_world", "joints_3d_world"]) delete shown[big];
   $("render-labels").textContent = JSON.stringify(shown, null, 1);
   state.lastRender = result;
+}
+
+/** Load a saved scene: a studio scene (schemas/studio_scene.schema.json) or a scene export (its studio.scene). */
+async function loadScene(doc) {
+  const s = doc?.studio?.scene || doc;
+  if (!s || !Array.isArray(s.angles_deg)) throw new Error("load scene: not a studio scene or scene export");
+  if (s.side && s.side !== state.side && catalogue.sides.includes(s.side)) await showSide(s.side);
+  if (s.texture) await selectTexture(s.texture);
+  state.skinTone = skinTone.value = s.skin_tone_offset ?? 0;
+  setRange("skin-tone", state.skinTone);
+  await selectAccessory(s.accessory || "none");
+  setAngles(s.angles_deg);
+  showLights(s.lights);
+  showBackground(s.background);
+  showFilm(s.film);
+  state.film = filmDoc();
+  if (s.camera) {
+    state.renderSize = s.camera.width;
+    $("render-size").value = String(s.camera.width);
+    const centre = [0, 1, 2].map((j) => -(s.camera.R[0][j] * s.camera.t[0] + s.camera.R[1][j] * s.camera.t[1] + s.camera.R[2][j] * s.camera.t[2]));
+    const distance = controls ? camera.position.distanceTo(controls.target) : 0.4;
+    setCamera({ ...s.camera, target: centre.map((c, i) => c + distance * s.camera.R[2][i]) });
+  }
+  await updateEnvironment();
+}
+
+/** The Lights and Environment panels from a lights document (null: the default rig, panels left as they are). */
+function showLights(lights) {
+  if (!lights) return;
+  const env = lights.environment, e = state.environment;
+  Object.assign(e, { id: env ? env.map : null, rotation: env?.rotation ?? 0, strength: env?.strength ?? 1 });
+  setRange("env-rotation", e.rotation);
+  setRange("env-strength", e.strength);
+  markSelected("environments", env ? env.map : "none");
+  if (env) return;                                  // its ambient and lights are off: keep the panel's
+  const setColour = (which, rgb) => { $(`${which}-color`).value = "#" + new THREE.Color().setRGB(...rgb).getHexString(); };
+  state.ambient = { color: lights.ambient?.color ?? [1, 1, 1], intensity: lights.ambient?.intensity ?? 0 };
+  setColour("ambient", state.ambient.color);
+  setRange("ambient-intensity", state.ambient.intensity);
+  const k = (lights.lights || []).find((l) => l.type === "directional" && l.frame === "camera");
+  if (!k) return;
+  const n = Math.hypot(...k.direction), toward = k.direction.map((x) => -x / n);      // keyDirectionCamera, inverted
+  Object.assign(state.key, { color: k.color ?? [1, 1, 1], intensity: k.intensity ?? 1,
+    elevation: Math.asin(-toward[1]) * 180 / PI, azimuth: Math.atan2(toward[0], -toward[2]) * 180 / PI });
+  setColour("key", state.key.color);
+  for (const f of ["intensity", "azimuth", "elevation"]) setRange(`key-${f}`, state.key[f]);
+}
+
+function showBackground(bg) {
+  const e = state.environment;
+  e.background = !!bg?.environment;
+  $("env-background").checked = e.background;
+  if (bg?.environment) { e.blur = bg.environment.blur ?? 0; setRange("env-blur", e.blur); return; }
+  const kind = !bg ? "none" : bg.color ? "color" : bg.builtin !== undefined ? "builtin" : "image";
+  document.querySelector(`input[name=bg][value=${kind}]`).checked = true;
+  if (kind === "color") $("bg-color").value = "#" + new THREE.Color().setRGB(...bg.color).getHexString();
+  if (kind === "builtin") $("bg-builtin").value = String(bg.builtin);
+  if (kind === "image") $("bg-image").value = String(bg.image);
+  state.background = kind === "none" ? { kind } : { kind, ...bg };
 }
 
 // -------------------------------------------------------------------------------------------------- exports
@@ -504,6 +655,7 @@ function buildPanels() {
   buildTextures();
   buildAccessories();
   buildLights();
+  buildEnvironments();
   buildBackground();
   for (const view of catalogue.views) addButton($("views"), view, () => setView(view));
   $("render-size").addEventListener("change", (e) => { state.renderSize = +e.target.value; });
@@ -527,6 +679,7 @@ function buildPanels() {
   $("export-poses").addEventListener("click", () => state.poseList.length && guarded(exportKind("poses", { poses: state.poseList })));
   $("export-scene").addEventListener("click", () => guarded(exportKind("scene", sceneDoc())));
   $("render").addEventListener("click", () => guarded(renderReference()));
+  $("load-scene").addEventListener("change", (e) => e.target.files[0] && guarded(e.target.files[0].text().then((text) => loadScene(JSON.parse(text)))));
   $("show-keypoints").addEventListener("change", () => state.lastRender && showRender(state.lastRender));
 }
 
@@ -590,6 +743,28 @@ function buildLights() {
   }
   bindRange("key-azimuth", (v) => { state.key.azimuth = v; requestDraw(); });
   bindRange("key-elevation", (v) => { state.key.elevation = v; requestDraw(); });
+}
+
+function buildEnvironments() {
+  const grid = $("environments");
+  const none = figure(null, "none", () => guarded(selectEnvironment("none")));
+  none.classList.add("selected");
+  grid.append(none);
+  for (const env of environments) {
+    const fig = figure(env.usable ? `/media/environment/${encodeURIComponent(env.id)}.png` : null, env.id,
+      () => env.usable && guarded(selectEnvironment(env.id)));
+    if (!env.usable) { fig.classList.add("unusable"); fig.title = `${env.id}: ${env.reason}`; }
+    grid.append(fig);
+  }
+  const env = state.environment;
+  bindRange("env-rotation", (v) => { env.rotation = v; guarded(updateEnvironment()); });
+  bindRange("env-strength", (v) => { env.strength = v; guarded(updateEnvironment()); });
+  bindRange("env-blur", (v) => { env.blur = v; guarded(updateBackground()); });
+  $("env-background").addEventListener("change", (e) => { env.background = e.target.checked; guarded(updateBackground()); });
+  for (const id of ["film-on", "film-auto", "film-iso", "film-jpeg"]) $(id).addEventListener("change", () => { state.film = filmDoc(); });
+  bindRange("film-ev", () => { $("film-auto").checked = false; state.film = filmDoc(); });
+  bindRange("film-defocus", () => { state.film = filmDoc(); });
+  bindRange("film-motion", () => { state.film = filmDoc(); });
 }
 
 function buildBackground() {
@@ -672,6 +847,13 @@ function addButton(parent, label, onClick) {
   return b;
 }
 
+/** Set a range input and its output without firing its handlers. */
+function setRange(id, value) {
+  const input = $(id), out = input.nextElementSibling;
+  input.value = value;
+  if (out?.tagName === "OUTPUT") out.value = (+input.value).toFixed(2);
+}
+
 function bindRange(id, onInput, onChange) {
   const input = $(id), out = input.nextElementSibling;
   const show = () => { if (out?.tagName === "OUTPUT") out.value = (+input.value).toFixed(2); };
@@ -741,6 +923,7 @@ function capture() {
 window.studio = {
   state, metrics, measure: false, errors: [], idle, capture, silhouette, livePositions, sceneDoc, cameraDoc,
   manoPose: () => R.axisAngles(R.manoRotations(hand.rig, state.angles)),
-  selectTexture, selectAccessory, setView, renderReference, mirror, undo, redo,
+  selectTexture, selectAccessory, setView, renderReference, mirror, undo, redo, selectEnvironment, loadScene,
+  environments: () => environments,
 };
 window.studio.ready = start().catch((e) => { setStatus(`could not start: ${e.message}`, true); throw e; });
