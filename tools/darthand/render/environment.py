@@ -20,10 +20,13 @@ rotation and a colour scale:
   texel's luminance above a threshold (CLAMP_MEAN x the map's mean, or its BRIGHT_SHARE brightest solid angle,
   whichever is higher) is its excess, split by median cut (along the axis of the largest spread of the excess's
   directions, at its power's median) into clusters; a cluster is a light at its power-weighted mean direction
-  carrying its power (intensity = integral of the excess radiance over the cluster's solid angle / pi);
-- the rest, the map with its luminance clamped to the threshold, as the ambient light generalised: indirect.py's
-  per-vertex rays that escape bring its radiance back (a blurred low-resolution level, `FrameEnvironment.sky`), or
-  without those rays its irradiance per normal from its order-2 spherical harmonics (`FrameEnvironment.irradiance`);
+  carrying its power (intensity = integral of the excess radiance over the cluster's solid angle / pi); clusters
+  too weak or too wide for one hard light go back to the remainder;
+- the rest (the map with its luminance clamped to the threshold, and what no light took) as the ambient light
+  generalised: at indirect.py's vertices its unoccluded irradiance from its order-2 spherical harmonics
+  (`FrameEnvironment.irradiance`) less its radiance along the vertex's blocked rays (`FrameEnvironment.sky`, a
+  blurred low-resolution level): the mean over the escaping rays, exact where nothing blocks; without those rays
+  the unoccluded irradiance per normal;
 - specular ambient: that remainder prefiltered by box mip levels, the level picked by the GGX lobe's width,
   looked up along the reflection direction (`FrameEnvironment.specular`).
 
