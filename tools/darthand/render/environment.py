@@ -20,10 +20,13 @@ rotation and a colour scale:
   texel's luminance above a threshold (CLAMP_MEAN x the map's mean, or its BRIGHT_SHARE brightest solid angle,
   whichever is higher) is its excess, split by median cut (along the axis of the largest spread of the excess's
   directions, at its power's median) into clusters; a cluster is a light at its power-weighted mean direction
-  carrying its power (intensity = integral of the excess radiance over the cluster's solid angle / pi);
-- the rest, the map with its luminance clamped to the threshold, as the ambient light generalised: indirect.py's
-  per-vertex rays that escape bring its radiance back (a blurred low-resolution level, `FrameEnvironment.sky`), or
-  without those rays its irradiance per normal from its order-2 spherical harmonics (`FrameEnvironment.irradiance`);
+  carrying its power (intensity = integral of the excess radiance over the cluster's solid angle / pi); clusters
+  too weak or too wide for one hard light go back to the remainder;
+- the rest (the map with its luminance clamped to the threshold, and what no light took) as the ambient light
+  generalised: at indirect.py's vertices its unoccluded irradiance from its order-2 spherical harmonics
+  (`FrameEnvironment.irradiance`) less its radiance along the vertex's blocked rays (`FrameEnvironment.sky`, a
+  blurred low-resolution level): the mean over the escaping rays, exact where nothing blocks; without those rays
+  the unoccluded irradiance per normal;
 - specular ambient: that remainder prefiltered by box mip levels, the level picked by the GGX lobe's width,
   looked up along the reflection direction (`FrameEnvironment.specular`).
 
@@ -54,6 +57,7 @@ LIGHT_WIDTH = 256           # the map's width at which lights are extracted (1.4
 CLAMP_MEAN = 4.0            # texels brighter than this x the map's mean luminance give their excess to lights ...
 BRIGHT_SHARE = 0.005        # ... or than the brightest 0.5 % of the sphere, whichever threshold is higher
 MIN_SPREAD = 2.0            # degrees: a cluster of excess narrower than this (a sun) is not split further
+MAX_LIGHT_SPREAD = 15.0     # degrees (power-weighted RMS): a wider cluster is left to the remainder (with few lights)
 MIN_LIGHT_SHARE = 0.02      # lights weaker than this share of the strongest, or of the map's whole power, are left
                             # to the remainder (not worth their shadow rays)
 SKY_WIDTH = 32              # the remainder's level the per-vertex rays look up (11 degree texels, then bilinear)
@@ -347,7 +351,8 @@ def median_cut(excess: np.ndarray, count: int, floor: float = 0.0) -> tuple[np.n
     they took), K <= count, of a map level's excess radiance (H, W, 3). Median cut: the cluster of the largest power
     x angular spread is split in two at the median of its power along the axis (x, y or z) of its directions' largest
     weighted spread, until `count` clusters or none spreads over more than MIN_SPREAD; clusters with less than
-    MIN_LIGHT_SHARE of the strongest one's power, or a luminance power below `floor`, are left to the remainder. A
+    MIN_LIGHT_SHARE of the strongest one's power, a luminance power below `floor` or a spread wider than
+    MAX_LIGHT_SPREAD (one hard light would stand badly for it) are left to the remainder. A
     cluster's power is the integral of its radiance over its solid angle / pi, its direction the power-weighted
     mean."""
     h = excess.shape[0]
@@ -367,7 +372,8 @@ def median_cut(excess: np.ndarray, count: int, floor: float = 0.0) -> tuple[np.n
         clusters[k:k + 1] = split_cluster(clusters[k], dirs[clusters[k]], weight[clusters[k]])
     clusters.sort(key=lambda m: -weight[m].sum())
     strongest = weight[clusters[0]].sum()
-    clusters = [m for m in clusters if weight[m].sum() >= max(MIN_LIGHT_SHARE * strongest, floor)]
+    clusters = [m for m in clusters if weight[m].sum() >= max(MIN_LIGHT_SHARE * strongest, floor)
+                and spread(dirs[m], weight[m]) <= np.radians(MAX_LIGHT_SPREAD) ** 2]
     out_dirs, out_power = [], []
     for members in clusters:
         mean = (dirs[members] * weight[members, None]).sum(axis=0)
