@@ -90,9 +90,9 @@ def relative_errors(detected: np.ndarray, keypoints: np.ndarray) -> np.ndarray:
     return np.linalg.norm(detected - keypoints, axis=1) / max(hand_size(keypoints), 1e-9)
 
 
-def pck(errors: np.ndarray, threshold: float) -> float:
-    """Share of keypoints whose relative error is within `threshold` (of the hand's size)."""
-    return float(np.mean(np.asarray(errors) <= threshold)) if len(errors) else float("nan")
+def pck(errors: np.ndarray, threshold: float) -> float | None:
+    """Share of keypoints whose relative error is within `threshold` (of the hand's size); None without any."""
+    return float(np.mean(np.asarray(errors) <= threshold)) if len(errors) else None
 
 
 def labels_openpose(labels: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -118,10 +118,10 @@ def frame_record(labels: dict, detection: dict) -> dict:
     return record
 
 
-def wilson(successes: int, n: int, z: float = 1.96) -> list[float]:
-    """95 % Wilson score interval [lo, hi] of a rate successes / n."""
+def wilson(successes: int, n: int, z: float = 1.96) -> list:
+    """95 % Wilson score interval [lo, hi] of a rate successes / n ([None, None] for n = 0)."""
     if n == 0:
-        return [float("nan"), float("nan")]
+        return [None, None]
     p = successes / n
     centre, half = p + z * z / (2 * n), z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
     return [(centre - half) / (1 + z * z / n), (centre + half) / (1 + z * z / n)]
@@ -129,18 +129,19 @@ def wilson(successes: int, n: int, z: float = 1.96) -> list[float]:
 
 def figures(records: list[dict]) -> dict:
     """Detection rate (and interval), PCK at THRESHOLDS (all 21 and the visible keypoints, pooled over the keypoints
-    of the frames where a hand was found), mean relative error and handedness accuracy of some frames' records."""
+    of the frames where a hand was found), mean relative error and handedness accuracy of some frames' records;
+    None where there is nothing to count (JSON has no NaN)."""
     found = [r for r in records if r["found"]]
     out = {"frames": len(records), "found": len(found),
-           "detection_rate": len(found) / len(records) if records else float("nan"),
+           "detection_rate": len(found) / len(records) if records else None,
            "detection_rate_95": wilson(len(found), len(records))}
     errors = np.concatenate([r["errors"] for r in found]) if found else np.zeros(0)
     visible = np.concatenate([r["visible_errors"] for r in found]) if found else np.zeros(0)
     for t in THRESHOLDS:
         out[f"pck_{t}"] = pck(errors, t)
         out[f"pck_visible_{t}"] = pck(visible, t)
-    out["mean_error"] = float(errors.mean()) if len(errors) else float("nan")
-    out["handedness"] = float(np.mean([r["handedness_right"] for r in found])) if found else float("nan")
+    out["mean_error"] = float(errors.mean()) if len(errors) else None
+    out["handedness"] = float(np.mean([r["handedness_right"] for r in found])) if found else None
     return out
 
 
@@ -317,7 +318,7 @@ def run(out: Path | None = None, frames: int | None = None, settings: str | None
             if "error" in results[name]:
                 continue
             indices = indices or sheet_frames(read_labels(root / name, frames))
-            rows.append((f"{name}\n{results[name]['bare']['detection_rate']:.0%} found", root / name, detections))
+            rows.append((f"{name}\n{_pct(results[name]['bare']['detection_rate'])} found", root / name, detections))
         sheet = Path(out or ROOT / "build" / "bench") / "realism_sheet.png"
         if rows and indices:
             contact_sheet(sheet, rows, indices)
@@ -347,7 +348,7 @@ def summary(res: dict) -> str:
         b = r["bare"]
         lo, hi = b["detection_rate_95"]
         lines.append(f"| {name} | {b['frames']} | {_pct(b['detection_rate'])} ({_pct(lo)}-{_pct(hi)}) | "
-                     f"{b['pck_0.1']:.3f} | {b['pck_0.2']:.3f} | {_pct(b['handedness'])} | "
+                     f"{_num(b['pck_0.1'])} | {_num(b['pck_0.2'])} | {_pct(b['handedness'])} | "
                      f"{_pct(r['accessory']['detection_rate'])} of {r['accessory']['frames']} | "
                      f"{r['cpu_s_per_frame']:.3f} |")
     if res.get("sheet"):
@@ -356,7 +357,11 @@ def summary(res: dict) -> str:
 
 
 def _pct(x) -> str:
-    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:.0f} %"
+    return "n/a" if x is None else f"{100 * x:.0f} %"
+
+
+def _num(x) -> str:
+    return "n/a" if x is None else f"{x:.3f}"
 
 
 def main(argv=None) -> int:

@@ -61,6 +61,12 @@ def test_pck_pools_keypoints_over_found_frames_only():
     assert f["pck_0.2"] == pytest.approx(1 - 7 / 42)    # off by 0.15 x sqrt(2) = 0.21 > 0.2
 
 
+def test_nothing_to_count_is_none_not_nan():
+    f = realism.figures([realism.frame_record(labels(hand()), detection(None))])
+    assert f["detection_rate"] == 0 and f["pck_0.2"] is None and f["handedness"] is None
+    assert realism.figures([])["detection_rate"] is None and realism.wilson(0, 0) == [None, None]
+
+
 def test_mediapipe_left_is_a_right_hand_in_an_unmirrored_frame():
     assert realism.side_of("Left") == "right" and realism.side_of("Right") == "left"
     assert realism.side_of(None) is None
