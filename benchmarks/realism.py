@@ -326,7 +326,7 @@ def run(out: Path | None = None, frames: int | None = None, settings: str | None
     return {"detection_rate_default": head.get("bare", {}).get("detection_rate"),
             "frames": frames, "seed": SEED, "min_visible": MIN_VISIBLE, "settings": results,
             "sheet": sheet.name if rows else None, "sheet_frames": indices,
-            "options": {name: table[name] for name in table},
+            "options": {name: table[name] for name in table}, "order": list(table),
             "what": f"MediaPipe Hands 0.10.14 on `render-dataset --seed {SEED} --count {frames}` per setting; frames "
                     f"with >= {MIN_VISIBLE} of 21 keypoints visible; PCK relative to the 2D keypoints' bounding-box "
                     "diagonal"}
@@ -340,17 +340,18 @@ def summary(res: dict) -> str:
              f"(no accessory, >= {res['min_visible']} of 21 keypoints visible; seed {res['seed']}, {res['frames']} "
              "frames planned).", "",
              "| setting | frames | detection (95 %) | PCK 0.1 | PCK 0.2 | handedness | with accessory: detection | "
-             "CPU s/frame |", "|---|---|---|---|---|---|---|---|"]
-    for name, r in res["settings"].items():
+             "CPU ms/frame: steady, whole command |", "|---|---|---|---|---|---|---|---|"]
+    for name in res.get("order", res["settings"]):       # the table's order (JSON files sort their keys)
+        r = res["settings"][name]
         if "error" in r:
-            lines.append(f"| {name} | failed: {r['error']} | | | | | | |")
+            lines.append(f"| {name} | failed: {r['error']} (`{r['command']}`) | | | | | | |")
             continue
         b = r["bare"]
         lo, hi = b["detection_rate_95"]
         lines.append(f"| {name} | {b['frames']} | {_pct(b['detection_rate'])} ({_pct(lo)}-{_pct(hi)}) | "
                      f"{_num(b['pck_0.1'])} | {_num(b['pck_0.2'])} | {_pct(b['handedness'])} | "
                      f"{_pct(r['accessory']['detection_rate'])} of {r['accessory']['frames']} | "
-                     f"{r['cpu_s_per_frame']:.3f} |")
+                     f"{_ms(r['cpu_ms_per_image'])}, {_ms(1000 * r['cpu_s_per_frame'])} |")
     if res.get("sheet"):
         lines += ["", f"Contact sheet: `{res['sheet']}` (frames {', '.join(map(str, res['sheet_frames']))})."]
     return "\n".join(lines)
@@ -358,6 +359,10 @@ def summary(res: dict) -> str:
 
 def _pct(x) -> str:
     return "n/a" if x is None else f"{100 * x:.0f} %"
+
+
+def _ms(x) -> str:
+    return "n/a" if x is None else f"{x:.0f}"
 
 
 def _num(x) -> str:
