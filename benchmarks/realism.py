@@ -129,7 +129,8 @@ def wilson(successes: int, n: int, z: float = 1.96) -> list:
 
 def figures(records: list[dict]) -> dict:
     """Detection rate (and interval), PCK at THRESHOLDS (all 21 and the visible keypoints, pooled over the keypoints
-    of the frames where a hand was found), mean relative error and handedness accuracy of some frames' records;
+    of the frames where a hand was found), mean relative error, each keypoint's median relative error (the
+    'openpose' order) and handedness accuracy of some frames' records;
     None where there is nothing to count (JSON has no NaN)."""
     found = [r for r in records if r["found"]]
     out = {"frames": len(records), "found": len(found),
@@ -141,6 +142,8 @@ def figures(records: list[dict]) -> dict:
         out[f"pck_{t}"] = pck(errors, t)
         out[f"pck_visible_{t}"] = pck(visible, t)
     out["mean_error"] = float(errors.mean()) if len(errors) else None
+    out["median_error_per_keypoint"] = np.median([r["errors"] for r in found], axis=0).round(4).tolist() \
+        if found else None
     out["handedness"] = float(np.mean([r["handedness_right"] for r in found])) if found else None
     return out
 
@@ -154,18 +157,20 @@ def subsets(records: list[dict]) -> dict:
 
 
 def order_check(records: list[dict], labels_by_index: dict, detections_by_index: dict) -> dict:
-    """For each of MediaPipe's 21 landmarks, the labels' keypoint nearest to it on average over the frames where a
-    hand was found: the identity when the two orders agree. {'agrees': landmarks whose nearest keypoint is their
-    own, 'nearest': the 21 nearest keypoints' indices}."""
-    total, n = np.zeros((21, 21)), 0
+    """For each of MediaPipe's 21 landmarks, the labels' keypoint nearest to it over the frames where a hand was
+    found (the median relative distance: a frame whose detection is off does not decide): the identity when the two
+    orders agree. {'frames', 'agrees': landmarks whose nearest keypoint is their own, 'nearest': the 21 nearest
+    keypoints' indices}."""
+    distances = []
     for r in records:
         if r["found"]:
             kp, _ = labels_openpose(labels_by_index[r["index"]])
             det = np.asarray(detections_by_index[r["index"]]["landmarks"], np.float64)
-            total += np.linalg.norm(det[:, None] - kp[None], axis=2) / max(hand_size(kp), 1e-9)
-            n += 1
-    nearest = total.argmin(axis=1)
-    return {"frames": n, "agrees": int((nearest == np.arange(21)).sum()), "nearest": nearest.tolist()}
+            distances.append(np.linalg.norm(det[:, None] - kp[None], axis=2) / max(hand_size(kp), 1e-9))
+    if not distances:
+        return {"frames": 0, "agrees": None, "nearest": None}
+    nearest = np.median(distances, axis=0).argmin(axis=1)
+    return {"frames": len(distances), "agrees": int((nearest == np.arange(21)).sum()), "nearest": nearest.tolist()}
 
 
 # ------------------------------------------------------------------ rendering and detecting

@@ -38,6 +38,7 @@ def test_a_detection_equal_to_the_labels_has_pck_one():
     kp = hand()
     f = realism.figures([realism.frame_record(labels(kp), detection(kp))])
     assert f["detection_rate"] == 1 and f["pck_0.1"] == 1 and f["pck_0.2"] == 1 and f["mean_error"] == 0
+    assert f["median_error_per_keypoint"] == [0.0] * 21
 
 
 @pytest.mark.parametrize("direction", [(1, 0), (0, -1), (0.6, 0.8)])
@@ -113,6 +114,7 @@ def test_order_check_finds_the_identity_and_a_swap():
         check = realism.order_check(records, frames, dets)
         assert check["agrees"] == agrees and check["frames"] == 5
     assert check["nearest"][1] == 4 and check["nearest"][4] == 1
+    assert realism.order_check([], frames, same) == {"frames": 0, "agrees": None, "nearest": None}
 
 
 def test_wilson_interval_matches_the_closed_form():
