@@ -250,6 +250,17 @@ def sheet_frames(labels: dict, count: int = SHEET_FRAMES) -> list[int]:
     return [bare[k] for k in sorted(set(np.linspace(0, len(bare) - 1, min(count, len(bare))).round().astype(int)))]
 
 
+def shrink(image: np.ndarray, size: int) -> np.ndarray:
+    """(size, size, 3) uint8 of a square (N, N, 3) uint8 image: the mean of each k x k block where N = k size (sRGB
+    codes averaged: a thumbnail), else the nearest pixel."""
+    n = image.shape[0]
+    if n % size == 0:
+        k = n // size
+        return image.reshape(size, k, size, k, 3).mean(axis=(1, 3)).round().astype(np.uint8)
+    pick = (np.arange(size) * n / size).astype(int)
+    return image[pick][:, pick].copy()
+
+
 def sheet_row(folder: Path, indices: list[int], detections: dict) -> tuple[np.ndarray, list]:
     """((T, T * len(indices), 3) uint8 tiles of the frames over black, each bordered green where a hand was found and
     red where not; [(x, y) landmark arrays in the row's pixels]) at SHEET_TILE pixels a tile."""
@@ -257,38 +268,42 @@ def sheet_row(folder: Path, indices: list[int], detections: dict) -> tuple[np.nd
     for k, i in enumerate(indices):
         rgb = over_black(read_straight_png(folder / frame_names(i)["image"]))
         step = rgb.shape[0] / SHEET_TILE
-        tile = rgb[(np.arange(SHEET_TILE) * step).astype(int)][:, (np.arange(SHEET_TILE) * step).astype(int)].copy()
+        tile = shrink(rgb, SHEET_TILE)
         found = detections.get(i, {}).get("found", False)
         tile[:3], tile[-3:], tile[:, :3], tile[:, -3:] = [(40, 200, 60) if found else (220, 40, 40)] * 4
         tiles.append(tile)
         if found:
-            marks.append(np.asarray(detections[i]["landmarks"]) / step + [k * SHEET_TILE, 0])
+            marks.append(np.asarray(detections[i]["landmarks"]) / step - 0.5 + [k * SHEET_TILE, 0])   # centres: +0.5
     return np.concatenate(tiles, axis=1), marks
 
 
 def contact_sheet(path: Path, rows: list[tuple[str, Path, dict]], indices: list[int]) -> None:
-    """Write the sheet (rows: (label, dataset folder, {index: detection})) as a PNG."""
+    """Write the sheet (rows: (label, dataset folder, {index: detection})) as a PNG, a frame's tile SHEET_TILE pixels
+    of the image to the tile (axes placed in pixels: nothing resampled)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt       # imported here: only the sheet needs matplotlib
 
-    width = SHEET_TILE * len(indices)
-    fig, axes = plt.subplots(len(rows), 1, figsize=(width / 100 + 1.6, 1.5 * len(rows)), dpi=100, squeeze=False)
-    for ax, (label, folder, detections) in zip(axes[:, 0], rows):
+    left, top, row_h, dpi = 150, 30, SHEET_TILE + 22, 100
+    width, height = SHEET_TILE * len(indices), top + row_h * len(rows)
+    fig = plt.figure(figsize=((left + width + 10) / dpi, height / dpi), dpi=dpi)
+    for r, (label, folder, detections) in enumerate(rows):
+        bottom = height - top - r * row_h - SHEET_TILE
+        ax = fig.add_axes((left / fig.bbox.width, bottom / height, width / fig.bbox.width, SHEET_TILE / height))
         image, marks = sheet_row(folder, indices, detections)
         ax.imshow(image, interpolation="nearest")
         for m in marks:
-            ax.plot(m[:, 0], m[:, 1], ".", color="yellow", markersize=2)
+            ax.plot(m[:, 0], m[:, 1], ".", color="yellow", markersize=2.5)
         ax.set_xticks([SHEET_TILE * (k + 0.5) for k in range(len(indices))], [str(i) for i in indices], fontsize=6)
+        ax.tick_params(length=0, pad=2)
         ax.set_yticks([])
         ax.set_ylabel(label, rotation=0, ha="right", va="center", fontsize=9)
         ax.set_xlim(0, width)
         ax.set_ylim(SHEET_TILE, 0)
-    fig.suptitle(f"seed {SEED}: the same frames per setting (green: MediaPipe finds the hand, its landmarks in "
-                 "yellow; red: not found)", fontsize=9)
-    fig.tight_layout()
+    fig.text(0.5, 1 - 10 / height, f"seed {SEED}: the same frames per setting (green: MediaPipe finds the hand, its "
+             "landmarks in yellow; red: not found)", ha="center", va="top", fontsize=9)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
+    fig.savefig(path, dpi=dpi)
     plt.close(fig)
 
 

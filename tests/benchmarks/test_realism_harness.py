@@ -131,3 +131,23 @@ def test_the_settings_table_starts_with_todays_default():
     assert list(realism.chosen_settings("default-lights,default")) == ["default", "default-lights"]
     with pytest.raises(SystemExit, match="unknown settings nope"):
         realism.chosen_settings("nope")
+
+
+def test_make_bench_runs_the_harness_and_not_the_detector_script():
+    from benchmarks.__main__ import available
+
+    assert "realism" in available() and not any("detect" in name for name in available())
+
+
+def test_summary_says_why_it_skipped_and_which_setting_failed():
+    assert realism.summary({"skipped": "no hand detector"}) == "Skipped: no hand detector"
+    kp = hand()
+    ok = {**realism.subsets([realism.frame_record(labels(kp), detection(kp))]), "cpu_s_per_frame": 0.2,
+          "cpu_ms_per_image": 150.0}
+    res = {"detection_rate_default": 1.0, "min_visible": 15, "seed": 11, "frames": 1, "order": ["default", "env"],
+           "settings": {"env": {"error": "unrecognized arguments: --environments", "command": "render-dataset ..."},
+                        "default": ok}}
+    lines = realism.summary(res).splitlines()
+    assert lines[0].startswith("Headline: MediaPipe finds the hand in 100 % of the default frames")
+    assert lines[4].startswith("| default | 1 | 100 %") and "| 150, 200 |" in lines[4]
+    assert lines[5].startswith("| env | failed: unrecognized arguments")
