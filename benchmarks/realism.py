@@ -178,7 +178,7 @@ def order_check(records: list[dict], labels_by_index: dict, detections_by_index:
 def detector_problem() -> str | None:
     """Why the detector cannot run (None when it can)."""
     if not DETECTOR_PYTHON.is_file():
-        return f"no hand detector environment ({DETECTOR_PYTHON.relative_to(ROOT)}): run `make detector`"
+        return f"no hand detector environment ({DETECTOR_PYTHON}): run `make detector`"
     probe = subprocess.run([str(DETECTOR_PYTHON), "-c", "import mediapipe.python.solutions.hands"],
                            capture_output=True, text=True)
     if probe.returncode:

@@ -151,3 +151,10 @@ def test_summary_says_why_it_skipped_and_which_setting_failed():
     assert lines[0].startswith("Headline: MediaPipe finds the hand in 100 % of the default frames")
     assert lines[4].startswith("| default | 1 | 100 %") and "| 150, 200 |" in lines[4]
     assert lines[5].startswith("| env | failed: unrecognized arguments")
+
+
+def test_without_the_detector_the_benchmark_reports_itself_skipped(monkeypatch, tmp_path):
+    monkeypatch.setattr(realism, "DETECTOR_PYTHON", tmp_path / "no-venv" / "bin" / "python")
+    res = realism.run(out=tmp_path, frames=2)
+    assert res == {"skipped": res["skipped"]} and "make detector" in res["skipped"]
+    assert not list(tmp_path.iterdir())                 # nothing rendered, no sheet
