@@ -3,12 +3,12 @@
 Runs in the detector's own environment (`make detector`: .venv-detector/bin/python), never in the project's: it
 imports neither darthand nor anything of the benchmarks package, only MediaPipe, OpenCV and numpy 1.x.
 
-    .venv-detector/bin/python benchmarks/_realism_detect.py IMAGES_DIR OUT.json
+    .venv-detector/bin/python benchmarks/_realism_detect.py IMAGES_DIR OUT.json [MIN_DETECTION_CONFIDENCE]
 
 The detector: MediaPipe's legacy `solutions.hands` (the 0.10.14 wheel carries its palm detector and hand landmark
 models; it has no Tasks .task bundle), static_image_mode=True (every image detected afresh, no tracking between
 frames), model_complexity=1 (the full landmark model), max_num_hands=1 (a frame shows one hand: the most confident
-detection is the one kept), min_detection_confidence 0.5 (MediaPipe's default).
+detection is the one kept), min_detection_confidence 0.5 (MediaPipe's default; the third argument changes it).
 
 OUT.json: {"detector": {settings, version}, "images": {file name: {"found": bool, "landmarks": 21 [x, y] in
 pixels (x right, y down, pixel centres at +0.5) or [], "handedness": MediaPipe's label ('Left'/'Right') or None,
@@ -62,14 +62,15 @@ def detect(hands, path: Path) -> dict:
 
 
 def main(argv: list[str]) -> int:
-    if len(argv) != 2:
-        print("usage: _realism_detect.py IMAGES_DIR OUT.json", file=sys.stderr)
+    if len(argv) not in (2, 3):
+        print("usage: _realism_detect.py IMAGES_DIR OUT.json [MIN_DETECTION_CONFIDENCE]", file=sys.stderr)
         return 2
     images, out = Path(argv[0]), Path(argv[1])
+    settings = {**SETTINGS, **({"min_detection_confidence": float(argv[2])} if len(argv) == 3 else {})}
     files = sorted(p for p in images.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
-    with mp.solutions.hands.Hands(**SETTINGS) as hands:
+    with mp.solutions.hands.Hands(**settings) as hands:
         found = {p.name: detect(hands, p) for p in files}
-    doc = {"detector": {"name": "mediapipe.solutions.hands", "version": mp.__version__, **SETTINGS},
+    doc = {"detector": {"name": "mediapipe.solutions.hands", "version": mp.__version__, **settings},
            "images": found}
     tmp = out.with_name(out.name + ".tmp")
     tmp.write_text(json.dumps(doc))
