@@ -207,7 +207,9 @@ def render_setting(folder: Path, frames: int, options: list[str]) -> dict:
         cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
         record.write_text(json.dumps({"rendered": doc["rendered"], "cpu_s_per_frame": cpu / doc["rendered"],
                                       "cpu_ms_per_image": doc["timings"].get("cpu_ms_per_image")}))
-    return {**json.loads(record.read_text()), "command": "darthand " + " ".join(command)}
+    measured = json.loads(record.read_text()) if record.is_file() else \
+        {"rendered": 0, "cpu_s_per_frame": None, "cpu_ms_per_image": None}       # frames another run left there
+    return {**measured, "command": "darthand " + " ".join(command)}
 
 
 def detect(images: Path, out: Path, confidence: float) -> dict:
@@ -353,11 +355,12 @@ def run(out: Path | None = None, frames: int | None = None, settings: str | None
         sheet = Path(out or ROOT / "build" / "bench") / "realism_sheet.png"
         if rows and indices:
             contact_sheet(sheet, rows, indices)
-    head = results.get(next(iter(table)), {})
-    return {"detection_rate_default": head.get("bare", {}).get("detection_rate"),
+    head = "default" if "default" in results else next(iter(table))      # the headline's setting
+    return {"detection_rate_default": results.get("default", {}).get("bare", {}).get("detection_rate"),
+            "headline": {"setting": head, "detection_rate": results[head].get("bare", {}).get("detection_rate")},
             "frames": frames, "seed": SEED, "min_visible": MIN_VISIBLE, "min_detection_confidence": confidence,
             "settings": results,
-            "sheet": sheet.name if rows else None, "sheet_frames": indices,
+            "sheet": sheet.name if rows and indices else None, "sheet_frames": indices,
             "options": {name: table[name] for name in table}, "order": list(table),
             "what": f"MediaPipe Hands 0.10.14 on `render-dataset --seed {SEED} --count {frames}` per setting; frames "
                     f"with >= {MIN_VISIBLE} of 21 keypoints visible; PCK relative to the 2D keypoints' bounding-box "
@@ -368,7 +371,8 @@ def summary(res: dict) -> str:
     """The markdown section: the headline, then a line per setting."""
     if "skipped" in res:
         return f"Skipped: {res['skipped']}"
-    lines = [f"Headline: MediaPipe finds the hand in {_pct(res['detection_rate_default'])} of the default frames "
+    head = res.get("headline", {"setting": "default", "detection_rate": res["detection_rate_default"]})
+    lines = [f"Headline: MediaPipe finds the hand in {_pct(head['detection_rate'])} of the {head['setting']} frames "
              f"(no accessory, >= {res['min_visible']} of 21 keypoints visible; seed {res['seed']}, {res['frames']} "
              "frames planned).", "",
              "| setting | frames | detection (95 %) | PCK 0.1 | PCK 0.2 | handedness | with accessory: detection | "
@@ -383,7 +387,7 @@ def summary(res: dict) -> str:
         lines.append(f"| {name} | {b['frames']} | {_pct(b['detection_rate'])} ({_pct(lo)}-{_pct(hi)}) | "
                      f"{_num(b['pck_0.1'])} | {_num(b['pck_0.2'])} | {_pct(b['handedness'])} | "
                      f"{_pct(r['accessory']['detection_rate'])} of {r['accessory']['frames']} | "
-                     f"{_ms(r['cpu_ms_per_image'])}, {_ms(1000 * r['cpu_s_per_frame'])} |")
+                     f"{_ms(r['cpu_ms_per_image'])}, {_ms(r['cpu_s_per_frame'] and 1000 * r['cpu_s_per_frame'])} |")
     if res.get("sheet"):
         lines += ["", f"Contact sheet: `{res['sheet']}` (frames {', '.join(map(str, res['sheet_frames']))})."]
     return "\n".join(lines)
