@@ -64,8 +64,10 @@ SHEET_TILE = 128
 THRESHOLDS = (0.1, 0.2)
 DEFAULT_CONFIDENCE = 0.5          # MediaPipe's min_detection_confidence (its own default)
 
-# The render settings compared: name -> the render-dataset options added to the plan's. A new setting is one line
-# (e.g. "environments": ["--environments", "builtin"]); the first is the headline's.
+# The render settings compared: name -> the render-dataset options added to the plan's (any option of the command,
+# so any DatasetOptions field). A new setting is one line, e.g. "environments": ["--environments", "builtin"] or
+# "cycles": ["--engine", "cycles"] (the CPU figures count the command's child processes, Blender's too). The headline
+# is 'default''s (else the first row run).
 SETTINGS: dict[str, list[str]] = {
     "default": [],
     "no-background": ["--backgrounds", "none"],
