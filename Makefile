@@ -21,6 +21,9 @@ VENV   := .venv
 BLENDER_VENV  := .venv-blender
 BPY           ?= bpy==5.0.1
 BLENDER_STAMP := $(BLENDER_VENV)/.installed-stamp
+# The realism benchmark's hand detector (MediaPipe) in its own environment: `make detector`.
+DETECTOR_VENV  := .venv-detector
+DETECTOR_STAMP := $(DETECTOR_VENV)/.installed-stamp
 PY     := $(VENV)/bin/python
 DH     := $(VENV)/bin/darthand
 STEP    = $(PY) -m darthand.step
@@ -43,7 +46,7 @@ POSES        := $(wildcard assets_src/poses/*.json)
 # A stage's outputs depend on its own code too, so editing a generator rebuilds what it made.
 src = $(wildcard tools/darthand/$(1)/*.py tools/darthand/$(1)/*/*.py)
 
-.PHONY: assets verify-build shapes test test-all lint bench usdz clean venv node blender chromium FORCE
+.PHONY: assets verify-build shapes test test-all lint bench usdz clean venv node blender chromium detector FORCE
 .DEFAULT_GOAL := assets
 # A step that fails leaves no output make would take as up to date next time (grouped targets: all of them), so a
 # failed step fails again on every run until its cause is fixed.
@@ -199,7 +202,17 @@ $(BENCH_STAMP): pyproject.toml | $(STAMP)
 	@$(PY) -m pip install -q --disable-pip-version-check -e '.[test,bench]' && touch $@ \
 	 || echo "bench extra not installed: the render_reference benchmark will be skipped"
 
-bench: $(STAMP) $(BENCH_STAMP) $(NODE_STAMP) build/model/right.npz
+# The realism benchmark's hand landmarker (MediaPipe, trained on real photographs) in its own environment, out of the
+# project's dependencies (benchmarks/detector-requirements.txt says why each pin); without it the realism benchmark
+# reports itself skipped.
+detector: $(DETECTOR_STAMP)
+$(DETECTOR_STAMP): benchmarks/detector-requirements.txt
+	@{ test -x $(DETECTOR_VENV)/bin/python || $(PYTHON) -m venv $(DETECTOR_VENV); } && \
+	 $(DETECTOR_VENV)/bin/python -m pip install -q --disable-pip-version-check --no-deps \
+	   -r benchmarks/detector-requirements.txt && touch $@ \
+	 || echo "hand detector not installed: the realism benchmark will be skipped"
+
+bench: $(STAMP) $(BENCH_STAMP) $(NODE_STAMP) build/model/right.npz detector
 	@$(PY) -m benchmarks --out build/bench
 
 clean:

@@ -1,7 +1,8 @@
 """`make bench`: run every benchmark module, write build/bench/<name>.json and a markdown table.
 
 Run from the repository root: `python -m benchmarks --out build/bench [--only NAME ...]`. A benchmark module is
-benchmarks.<name> with `run() -> dict` of JSON-serialisable figures, and optionally `summary(result) -> str`, its
+benchmarks.<name> with `run() -> dict` of JSON-serialisable figures (`run(out)` if it writes files of its own
+into the output folder), and optionally `summary(result) -> str`, its
 markdown section (instead of the table of every figure). Timings live here and never in tests.
 """
 
@@ -9,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import inspect
 import json
 import pkgutil
 import platform
@@ -85,7 +87,8 @@ def main(argv=None) -> int:
     for name in args.only or available():
         print(f"[bench] {name} ...", file=sys.stderr, flush=True)
         t0 = time.perf_counter()
-        res = importlib.import_module(f"benchmarks.{name}").run()
+        run = importlib.import_module(f"benchmarks.{name}").run
+        res = run(out=out) if "out" in inspect.signature(run).parameters else run()   # a module writing files
         res["bench_seconds"] = round(time.perf_counter() - t0, 2)
         write_json(out / f"{name}.json", res)
         results[name] = res
