@@ -489,6 +489,7 @@ def _add_render_arguments(p) -> None:
     p.add_argument("--height", type=PIXELS, default=None, metavar="H", help="image height (overrides --size)")
     _add_antialiasing_options(p, DEFAULT_SAMPLES)
     _add_shading_options(p)
+    _add_geometry_options(p)
     p.add_argument("--depth", action="store_true", help="also write depth.exr (camera z in metres, 0 = background)")
     p.add_argument("--keypoint-order", default="openpose", choices=("openpose", "mano"),
                    help="order of the 21 keypoints in labels.json (default openpose)")
@@ -599,6 +600,7 @@ def _add_dataset_arguments(p) -> None:
                    help=f"square image size in pixels (default {run.size})")
     _add_antialiasing_options(p, run.samples, run.aa_shading)
     _add_shading_options(p)
+    _add_geometry_options(p)
     p.add_argument("--processes", type=number(int, 1, 100_000), default=None, metavar="N",
                    help="worker processes, each rendering whole frames (default: the number of cores; 1 renders "
                         "in this process)")
@@ -702,6 +704,31 @@ def _add_shading_options(p) -> None:
     p.add_argument("--skin", default=d.skin, choices=SKIN_MODELS,
                    help="the skin's diffuse model: subsurface scattering pre-integrated over curvature, wrap "
                         f"lighting (the earlier look) or lambert (default {d.skin})")
+
+
+def _add_geometry_options(p) -> None:
+    """--subdivision, --arm, defaulting to the renderer's (render/dress.GeometryOptions: both off)."""
+    # Imported when the parser is built: `darthand --help` does not load the renderer (as _add_shading_options).
+    from darthand.render.dress import GeometryOptions
+    from darthand.render.subdivision import MAX_LEVEL
+
+    d = GeometryOptions()
+    p.add_argument("--subdivision", type=number(int, 0, MAX_LEVEL), default=d.subdivision, metavar="N",
+                   help="Loop subdivision levels of the skin at render time, for round outlines and shading; the "
+                        f"labels keep the model's own vertices (0 off, 1 or 2; default {d.subdivision})")
+    p.add_argument("--arm", type=_arm_length, default=d.arm, metavar="METRES|on|off",
+                   help="draw the forearm this far past the model's cut instead of its flat cap, so it goes on out "
+                        "of the frame ('on': 0.3 m; default off); the camera and labels are unchanged")
+
+
+def _arm_length(text: str) -> float:
+    """--arm's value: metres, 'on' (ARM_ON_M) or 'off' (0)."""
+    from darthand.render.arm import ARM_ON_M
+
+    words = {"on": ARM_ON_M, "off": 0.0}
+    if text.strip().lower() in words:
+        return words[text.strip().lower()]
+    return number(float, 0, 2)(text)
 
 
 def _add_source_options(p) -> None:

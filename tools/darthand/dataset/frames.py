@@ -27,6 +27,7 @@ from darthand.fileio import atomic_path
 from darthand.model.shape import shaped_vertices
 from darthand.render import truth
 from darthand.render.api import shading_options, write_frame
+from darthand.render.dress import geometry_options
 from darthand.render.labels import mano_camera_parameters
 from darthand.render.scenes import Scene
 from darthand.template.anthropometry import hand_sizes
@@ -58,6 +59,8 @@ def job_digest(job: dict, settings: dict) -> str:
            "shading": shading_options(settings.get("shading")).to_json()}
     if settings.get("maps"):
         key["maps"] = list(settings["maps"])
+    if settings.get("geometry"):
+        key["geometry"] = settings["geometry"]          # only when on: digests of runs without it stay
     if wears_ring(job):
         key["ring_wear"] = RING_WEAR       # ring frames rendered before rings were worn per pose are made again
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
@@ -72,8 +75,8 @@ def wears_ring(job: dict) -> bool:
 
 def render_job(renderer, job: dict, settings: dict):
     """(api.Frame, background info or None) of one job, rendered as its scene (render/scenes.py). settings: size,
-    samples, aa_shading, and optionally shading (api.shading_options' dict; None: the renderer's defaults) and maps
-    (render/truth.KINDS to compute)."""
+    samples, aa_shading, and optionally shading (api.shading_options' dict; None: the renderer's defaults), maps
+    (render/truth.KINDS to compute) and geometry (render/dress.GeometryOptions' fields; None: off)."""
     scene = Scene.from_job(job)
     size = settings["size"]
     background, info = None, None
@@ -81,9 +84,11 @@ def render_job(renderer, job: dict, settings: dict):
     if isinstance(scene.background, dict):
         background, info = background_pixels(scene.background, size, size)
     t = time.perf_counter() - t
+    geometry = geometry_options(settings.get("geometry"))
     frame = renderer.render_scene(scene, background=background, width=size, height=size,
                                   samples=settings["samples"], aa_shading=settings["aa_shading"],
-                                  shading=settings.get("shading"), maps=tuple(settings.get("maps") or ()))
+                                  shading=settings.get("shading"), maps=tuple(settings.get("maps") or ()),
+                                  subdivision=geometry.subdivision, arm=geometry.arm)
     frame.timings["background"] = t
     return frame, info
 
@@ -100,10 +105,9 @@ def dataset_labels(frame, job: dict, digest: str, source, background: dict | Non
     labels["render"] = render
     labels["gesture"] = labels.get("gesture") or job.get("gesture")
     model = source.pose_model()
-    hand = frame.subject.hand
+    hand = frame.subject.hand_vertices
     wrist = (getattr(model, "meta", None) or {}).get("wrist") or {}
-    labels["mesh"] = {"vertices": int(len(hand.vertices)), "base_vertices": int(wrist.get("base_vertices",
-                                                                                              len(hand.vertices))),
+    labels["mesh"] = {"vertices": int(len(hand)), "base_vertices": int(wrist.get("base_vertices", len(hand))),
                       "faces": "the model's faces (build/model/<side>.npz)", "frame": "camera", "units": "m"}
     labels["files"] = {**labels.get("files", {}), "vertices": "../" + names["vertices"],
                        **{kind: "../" + names[kind] for kind in maps}}
@@ -144,7 +148,7 @@ def write_dataset_frame(frame, job: dict, digest: str, out_dir, source, backgrou
     whole once its labels exist); returns its summary for the shard record."""
     names = frame_names(job["index"], tuple(frame.maps))
     labels = dataset_labels(frame, job, digest, source, background)
-    vertices = frame.camera.to_camera(frame.subject.hand.vertices).astype(np.float32)
+    vertices = frame.camera.to_camera(frame.subject.hand_vertices).astype(np.float32)
     path = Path(out_dir) / names["vertices"]
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp, open(tmp, "wb") as f:

@@ -66,7 +66,9 @@ class DatasetOptions:
     The frames: `jobs` (a jobs file or a list of job dicts, schemas/dataset_jobs.schema.json), else frames
         start .. start + count - 1 of `plan`.
     size: square image size (pixels); samples, aa_shading: edge anti-aliasing (render/aa.py); shading: the
-        renderer's shading options (render/shade.ShadingOptions' fields; None: its defaults).
+        renderer's shading options (render/shade.ShadingOptions' fields; None: its defaults); geometry: the drawn
+        surfaces' options (render/dress.GeometryOptions' fields: subdivision, arm; None: off), part of a frame's job
+        digest only when not the defaults.
     processes: worker processes (None: the cores available; 1 renders in this process), or a cluster's workers;
         threads: render threads per process; cluster: render on a cluster instead (None: this machine).
     resume: skip frames already rendered from the same jobs; shard_size: frames per shard (the unit of planning and
@@ -90,6 +92,7 @@ class DatasetOptions:
     samples: int = DEFAULT_SAMPLES
     aa_shading: str = "triangle"
     shading: dict | None = None
+    geometry: dict | None = None
     processes: int | None = None
     threads: int | None = None
     cluster: ClusterOptions | None = None

@@ -39,6 +39,7 @@ from darthand.errors import InputError
 from darthand.fileio import read_json, write_json
 from darthand.render import aa, truth
 from darthand.render.api import shading_options
+from darthand.render.dress import geometry_options
 
 DATASET_FORMAT = "darthand-dataset"
 DATASET_VERSION = 2
@@ -65,6 +66,7 @@ def render_frames(options: DatasetOptions, sources: dict, specs: dict, planner=N
     t_start = time.monotonic()
     aa.check_options(samples, aa_shading)
     shading = shading_options(o.shading).to_json()
+    geometry = geometry_options(o.geometry).to_json()
     size = bounded_int(o.size, "size", 8, MAX_SIZE, "pixels")
     if cluster is None:
         processes = bounded_int(len(os.sched_getaffinity(0)) if processes is None else processes, "processes", 1,
@@ -93,7 +95,7 @@ def render_frames(options: DatasetOptions, sources: dict, specs: dict, planner=N
     out = Path(o.out)
     _prepare_folders(out, maps)
     settings = {"out_dir": str(out), "size": size, "samples": int(samples), "aa_shading": aa_shading,
-                "shading": shading, "maps": maps}
+                "shading": shading, "maps": maps, **({"geometry": geometry} if geometry else {})}
     stats = RunStats(t_start)
     report = _progress_printer(stats) if o.progress is True else (o.progress or None)
     runner = make_runner(cluster, specs, settings, sources, workers, threads, total)
@@ -396,6 +398,8 @@ def _write_dataset(out: Path, package, jobs_source, planner, total, settings, st
                      for kind, name in frame_names(0, settings["maps"]).items()},
            "models": models, "rendered": stats.rendered, "skipped": stats.skipped,
            "summary": stats.summary(), "timings": stats.timings(processes), "runner": runner}
+    if settings.get("geometry"):           # likewise: a run with the geometry options off keeps its dataset.json
+        doc["geometry"] = settings["geometry"]
     if settings["maps"]:                   # only when asked: a dataset without maps keeps its dataset.json
         doc["maps"] = truth.describe(settings["maps"], {kind: doc["files"][kind] for kind in settings["maps"]})
     write_json(out / "dataset.json", doc)

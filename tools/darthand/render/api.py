@@ -24,6 +24,7 @@ from darthand.jit import kernel
 from darthand.render import aa, truth
 from darthand.render.assets import HandAssets, default_catalogues
 from darthand.render.camera import Camera, load_camera
+from darthand.render.dress import Dresser, geometry_options
 from darthand.render.image import compose, encode_mask8, load_background, write_exr, write_png
 from darthand.render.indirect import VertexLight
 from darthand.render.labels import frame_labels
@@ -75,6 +76,7 @@ class Renderer:
         self.threads = default_threads() if threads is None else max(1, int(threads))
         self._scene: TraceScene | None = None
         self._lights: tuple | None = None
+        self._dresser = Dresser()
 
     def _lighting(self, lights) -> Lighting:
         """load_lighting, remembered for the same argument (validating a lights document costs milliseconds)."""
@@ -91,7 +93,7 @@ class Renderer:
                accessory: str | None = None, camera="three_quarter", lights=None, background=None,
                width: int = 512, height: int = 512, samples: int = DEFAULT_SAMPLES, aa_shading: str = "triangle",
                shading=None, labels: bool = True, keypoint_order: str = "openpose", betas=None,
-               maps: tuple = ()) -> Frame:
+               maps: tuple = (), subdivision: int = 0, arm: float = 0.0) -> Frame:
         """One frame. pose: None (flat), a gesture name, a pose file or (48,) MANO axis-angle (flat-hand relative).
         camera: a Camera, a view name, a camera JSON path or dict (camera.load_camera), framed on the posed hand.
         lights: a Lighting, a lights JSON path or dict, or None (lights.default_lighting). background: image path or
@@ -99,11 +101,13 @@ class Renderer:
         aa_shading: shade them once per pixel per triangle ('triangle') or each ('sample') (see aa.py). shading: a
         shade.ShadingOptions or a dict of its fields (ambient occlusion, skin model), None for the defaults. betas:
         the hand's shape (S,) for a model source (None: the model's own). maps: per-pixel truth maps to compute
-        too (render/truth.KINDS: 'depth', 'normals', 'parts'), in Frame.maps."""
+        too (render/truth.KINDS: 'depth', 'normals', 'parts'), in Frame.maps. subdivision: Loop levels of the skin
+        (0, 1, 2; render/subdivision.py); arm: metres of forearm drawn past the cut instead of its cap (0: the cap;
+        a model source only; render/arm.py). Neither moves the camera or the labels' hand (render/dress.py)."""
         with single_threaded_blas():
             prepared = self._prepare(pose, texture=texture, skin_tone_offset=skin_tone_offset, accessory=accessory,
                                      camera=camera, lights=lights, width=width, height=height,
-                                     keypoint_order=keypoint_order, betas=betas)
+                                     keypoint_order=keypoint_order, betas=betas, subdivision=subdivision, arm=arm)
             return self._finish(prepared, background=background, samples=samples, aa_shading=aa_shading,
                                 shading=shading, labels=labels, maps=maps)
 
@@ -111,7 +115,8 @@ class Renderer:
         """One frame of a scene (render/scenes.py): its hand posed, dressed and shaped as the scene says, seen by its
         camera under its lights. background: pixels or an image path to composite under it (None: the scene's own
         background when it is an image path, else transparent; a dataset resolves its background documents itself).
-        options: `render`'s width, height, samples, aa_shading, shading, labels, keypoint_order, maps."""
+        options: `render`'s width, height, samples, aa_shading, shading, labels, keypoint_order, maps, subdivision,
+        arm."""
         hand = scene.single_hand()
         pose = hand.pose_value()
         model = self.source.pose_model()
@@ -145,20 +150,29 @@ class Renderer:
                 yield self._finish(prepared, **finish)
 
     def _prepare(self, pose, *, texture=None, skin_tone_offset=0.0, accessory=None, camera="three_quarter",
-                 lights=None, width=512, height=512, keypoint_order="openpose", betas=None) -> tuple:
+                 lights=None, width=512, height=512, keypoint_order="openpose", betas=None, subdivision=0,
+                 arm=0.0) -> tuple:
         """(subject, scene, camera, lighting, timings): the frame's work before tracing."""
         check_skin_tone_offset(skin_tone_offset)
+        geometry = geometry_options(subdivision=subdivision, arm=arm)
+        if geometry.arm and self.source.kind != "model":
+            raise InputError(f"arm: a {self.source.kind} source has no forearm rig to extend (use a model .npz)")
         timings: dict = {}
         t = time.perf_counter()
         shape = {} if betas is None else {"betas": betas}      # a USD package has no shape to change
+        shape.update({"arm": geometry.arm} if geometry.arm else {})
         subject = self.source.subject(pose, texture=texture, skin_tone_offset=skin_tone_offset, accessory=accessory,
                                       keypoint_order=keypoint_order, **shape)
         timings["pose"] = _lap(t)
         t = time.perf_counter()
-        points = subject.all_vertices()
+        points = subject.framing_points()
         cam = load_camera(camera, points, width=width, height=height, side=subject.side)
         lighting = self._lighting(lights)
         timings["setup"] = _lap(t)
+        if not geometry.is_default:
+            t = time.perf_counter()
+            subject = self._dresser.dress(subject, cam, geometry)
+            timings["dress"] = _lap(t)
         t = time.perf_counter()
         self._scene = scene = scene_for(subject, self._scene)
         timings["scene"] = _lap(t)
@@ -270,7 +284,9 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
             None if background is None else "array")
         doc = frame_labels(subject, cam, scene, full_alpha, files={"image": IMAGE, "mask": MASK},
                            extra={"render": {"samples": samples, "aa_shading": aa_shading, "background": bg_name,
-                                             "lights": lighting.to_json(), "shading": options.to_json()}})
+                                             "lights": lighting.to_json(), "shading": options.to_json(),
+                                             **({"geometry": subject.info["geometry"]}
+                                                if subject.info.get("geometry") else {})}})
     timings["labels"] = _lap(t)
     stats["total_rays"] = (stats.get("rays", 0) + stats.get("shadow_rays", 0) + stats.get("indirect_rays", 0)
                            + (21 if labels else 0))

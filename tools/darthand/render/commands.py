@@ -47,7 +47,8 @@ def render(args) -> int:
     frame = Renderer(source, args.threads).render_scene(
         scene, width=width, height=height, samples=args.samples, aa_shading=args.aa_shading,
         keypoint_order=args.keypoint_order,
-        shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin})
+        shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin},
+        subdivision=args.subdivision, arm=args.arm)
     paths = write_frame(frame, args.out, depth=args.depth)
     lab = frame.labels
     total = sum(frame.timings.values())

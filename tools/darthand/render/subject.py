@@ -102,10 +102,21 @@ class Subject:
     pose: np.ndarray
     keypoint_order: str = "openpose"
     info: dict = field(default_factory=dict)
+    mesh: np.ndarray | None = None
+    framing: np.ndarray | None = None
 
     @property
     def hand(self) -> Surface:
         return next(s for s in self.surfaces if s.role == "hand")
+
+    @property
+    def hand_vertices(self) -> np.ndarray:
+        """(N, 3) the model's own posed hand vertices (labels and meshes are of these, whatever is drawn)."""
+        return self.hand.vertices if self.mesh is None else self.mesh
+
+    def framing_points(self) -> np.ndarray:
+        """The points the camera frames (see `framing`)."""
+        return self.all_vertices() if self.framing is None else self.framing
 
     @property
     def accessory(self) -> Surface | None:
