@@ -1,0 +1,182 @@
+"""Render-time Loop subdivision (render/subdivision.py): closed-form stencils on an octahedron, limit points against
+repeated subdivision, a sphere-like mesh getting rounder, UVs kept inside their own charts across seams, and a
+subdivided frame's labels, meshes and camera left as the model's."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from darthand.errors import InputError
+from darthand.render.api import Renderer
+from darthand.render.dress import GeometryOptions, geometry_options
+from darthand.render.subdivision import SubdivisionPlan, limit_matrix, loop_level
+
+OCTAHEDRON_V = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+OCTAHEDRON_F = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
+
+
+def icosahedron() -> tuple[np.ndarray, np.ndarray]:
+    """The unit icosahedron (12 vertices on the unit sphere, 20 outward-wound faces)."""
+    p = (1 + 5 ** 0.5) / 2
+    v = np.array([[-1, p, 0], [1, p, 0], [-1, -p, 0], [1, -p, 0], [0, -1, p], [0, 1, p], [0, -1, -p], [0, 1, -p],
+                  [p, 0, -1], [p, 0, 1], [-p, 0, -1], [-p, 0, 1]], float)
+    f = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
+                  [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
+                  [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    return v / np.linalg.norm(v, axis=1, keepdims=True), f
+
+
+def test_octahedron_level_matches_loop_stencils():
+    M, faces = loop_level(OCTAHEDRON_F, 6)
+    out = M @ OCTAHEDRON_V
+    # Valence 4: beta = (5/8 - (3/8 + cos(pi/2)/4)^2) / 4 = 31/256; the four neighbours sum to zero.
+    assert np.allclose(out[:6], OCTAHEDRON_V * (1 - 4 * 31 / 256), atol=1e-15)
+    # Edge (0, 2) between faces (0, 2, 4) and (2, 0, 5): 3/8 (v0 + v2) + 1/8 (v4 + v5).
+    edge_vertex = 3 / 8 * (OCTAHEDRON_V[0] + OCTAHEDRON_V[2]) + 1 / 8 * (OCTAHEDRON_V[4] + OCTAHEDRON_V[5])
+    assert np.isclose(np.abs(out[6:] - edge_vertex).sum(axis=1), 0).sum() == 1
+    assert M.shape == (18, 6) and faces.shape == (32, 3) and np.allclose(M.sum(axis=1), 1)
+
+
+def test_limit_points_are_where_repeated_subdivision_goes():
+    v, f = icosahedron()
+    v = v * np.array([1.0, 0.6, 1.3]) + 0.05 * np.sin(7 * v)        # irregular: no symmetry does the work
+    limit = limit_matrix(f, len(v)) @ v
+    M, faces = loop_level(f, len(v))
+    points = M @ v
+    for _ in range(6):
+        step, faces = loop_level(faces, len(points))
+        points = step @ points
+    # Old vertices keep their indices through the levels; six levels bring them within 1e-4 of the limit.
+    assert np.abs(points[:len(v)] - limit).max() < 1e-4
+    assert np.abs(limit - v).max() > 1e-2
+
+
+def sphere_deviation(v: np.ndarray, f: np.ndarray) -> float:
+    """Largest relative deviation from the mean radius over points spread on the triangles."""
+    w = np.array([(a, b, 1 - a - b) for a in np.linspace(0, 1, 7) for b in np.linspace(0, 1, 7) if a + b <= 1])
+    pts = np.einsum("sk,fkc->fsc", w, v[f]).reshape(-1, 3)
+    r = np.linalg.norm(pts, axis=1)
+    return float(np.abs(r / r.mean() - 1).max())
+
+
+def test_a_sphere_like_mesh_gets_rounder():
+    v, f = icosahedron()
+    errors = [sphere_deviation(v, f)]
+    for level in (1, 2):
+        plan = SubdivisionPlan.build(f, len(v), level)
+        errors.append(sphere_deviation(plan.positions(v).astype(np.float64), plan.faces))
+    assert errors[0] > 0.1 and errors[1] < errors[0] / 3 and errors[2] < errors[1] / 2, errors
+
+
+def cube_with_seams() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A unit cube (8 vertices, 12 faces) whose six sides are six UV islands in a 3 x 2 atlas (every cube edge a
+    seam): (vertices, faces, uvs (24, 2), faces_uv)."""
+    v = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    faces, faces_uv, uvs = [], [], []
+    for k, q in enumerate(quads):
+        u0, v0 = (k % 3) / 3, (k // 3) / 2
+        base = len(uvs)
+        uvs += [[u0 + 0.02, v0 + 0.02], [u0 + 0.31, v0 + 0.02], [u0 + 0.31, v0 + 0.48], [u0 + 0.02, v0 + 0.48]]
+        faces += [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]
+        faces_uv += [[base, base + 1, base + 2], [base, base + 2, base + 3]]
+    return v, np.array(faces), np.array(uvs), np.array(faces_uv)
+
+
+def barycentric(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """(..., 3) barycentric coordinates of 2D points p (..., 2) in triangles tri (..., 3, 2)."""
+    a, b, c = tri[..., 0, :], tri[..., 1, :], tri[..., 2, :]
+    d = (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (c[..., 0] - a[..., 0]) * (b[..., 1] - a[..., 1])
+    l1 = ((p[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (c[..., 0] - a[..., 0]) * (p[..., 1] - a[..., 1])) / d
+    l2 = ((b[..., 0] - a[..., 0]) * (p[..., 1] - a[..., 1]) - (p[..., 0] - a[..., 0]) * (b[..., 1] - a[..., 1])) / d
+    return np.stack([1 - l1 - l2, l1, l2], -1)
+
+
+def assert_uvs_stay_in_their_charts(faces_uv, uvs, plan: SubdivisionPlan, level: int) -> None:
+    """Every subdivided face's UV triangle lies inside its control face's, with 4^-level of its area: no texel
+    is stretched across a seam."""
+    sub_uv = plan.uv_matrix @ uvs
+    child = sub_uv[plan.faces_uv]                                  # (F', 3, 2)
+    parent = uvs[faces_uv[plan.parent]]                            # (F', 3, 2)
+    bary = barycentric(child, parent[:, None])
+    assert bary.min() > -1e-9 and bary.max() < 1 + 1e-9
+    def area(t):
+        e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+        return np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    assert np.allclose(area(child), area(parent) / 4 ** level, rtol=1e-6, atol=1e-12)
+
+
+@pytest.mark.parametrize("level", [1, 2])
+def test_uv_seams_kept_on_a_cube(level):
+    v, f, uvs, fuv = cube_with_seams()
+    plan = SubdivisionPlan.build(f, len(v), level, fuv, len(uvs))
+    assert_uvs_stay_in_their_charts(fuv, uvs, plan, level)
+    if level == 1:      # 8 vertices + 18 edges; 24 UVs + 6 islands x 5 UV edges (the seams are not shared)
+        assert plan.matrix.shape == (26, 8) and plan.uv_matrix.shape == (54, 24)
+
+
+def test_uv_seams_kept_on_the_hand(hand):
+    plan = SubdivisionPlan.build(hand.faces, hand.num_vertices, 1, hand.faces_uv, len(hand.uvs))
+    assert_uvs_stay_in_their_charts(hand.faces_uv, hand.uvs, plan, 1)
+
+
+def point_triangle_distance(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """(M,) distances of points p (M, 3) to triangles tri (M, 3, 3): the nearest of the triangle's inside (if the
+    projection falls in it) and its three edges."""
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    n = np.cross(b - a, c - a)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    plane = np.einsum("ij,ij->i", p - a, n)
+    q = p - plane[:, None] * n
+    inside = np.ones(len(p), bool)
+    for u, v in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ij,ij->i", np.cross(v - u, q - u), n) >= 0
+    best = np.where(inside, np.abs(plane), np.inf)
+    for u, v in ((a, b), (b, c), (c, a)):
+        t = np.clip(np.einsum("ij,ij->i", p - u, v - u) / np.einsum("ij,ij->i", v - u, v - u), 0, 1)
+        best = np.minimum(best, np.linalg.norm(p - (u + t[:, None] * (v - u)), axis=1))
+    return best
+
+
+def distance_to_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, candidates: int = 24) -> np.ndarray:
+    """(M,) distance of each point to the mesh: the nearest of its `candidates` faces nearest by centroid."""
+    from scipy.spatial import cKDTree
+
+    _, near = cKDTree(vertices[faces].mean(axis=1)).query(points, candidates)
+    d = np.stack([point_triangle_distance(points, vertices[faces[near[:, k]]]) for k in range(candidates)])
+    return d.min(axis=0)
+
+
+def test_the_limit_surface_stays_near_the_hand(hand):
+    """The subdivided hand is within a few millimetres of its control mesh (Loop's limit lies inside convex parts)
+    and it moved: the outline is not the control mesh's."""
+    for level in (1, 2):
+        plan = SubdivisionPlan.build(hand.faces, hand.num_vertices, level)
+        distance = distance_to_mesh(plan.positions(hand.v_template).astype(np.float64), hand.v_template, hand.faces)
+        assert 1e-4 < distance.max() < 4e-3, (level, distance.max())
+
+
+def test_options_refuse_bad_levels():
+    assert GeometryOptions().is_default and GeometryOptions().to_json() == {}
+    assert geometry_options({"subdivision": 1}).to_json() == {"subdivision": 1}
+    for bad in ({"subdivision": 3}, {"subdivision": -1}, {"arm": 0.001}, {"smooth": 1}):
+        with pytest.raises(InputError):
+            geometry_options(bad)
+
+
+def test_subdivided_frame_keeps_labels_camera_and_mesh(assets):
+    renderer = Renderer(assets, threads=1)
+    plain = renderer.render("fist", width=128, height=128)
+    smooth = renderer.render("fist", width=128, height=128, subdivision=1)
+    a, b = dict(plain.labels), dict(smooth.labels)
+    assert b["render"].pop("geometry") == {"subdivision": 1}
+    for key in ("K", "camera", "keypoints_2d", "keypoints_3d", "joints_3d", "mano_pose", "in_image", "bbox_keypoints",
+                "render"):
+        assert a[key] == b[key], key
+    assert np.array_equal(smooth.subject.hand_vertices, plain.subject.hand.vertices)
+    assert len(smooth.subject.hand.vertices) > 3 * len(plain.subject.hand.vertices)
+    # The image is the same hand, its outline moved by less than the limit surface's distance (about a pixel here).
+    overlap = (plain.alpha > 0.5) & (smooth.alpha > 0.5)
+    assert overlap.sum() > 0.95 * (plain.alpha > 0.5).sum()
+    assert sum(a["visibility"]) - sum(b["visibility"]) in (-1, 0, 1)
