@@ -153,15 +153,24 @@ def band_walk(model: HandModel, v_rim: float, d: np.ndarray) -> np.ndarray:
 
 
 def shorten_before(vertices: np.ndarray, origin: np.ndarray, axis: np.ndarray, camera_centre: np.ndarray,
-                   radius: float, reach: float, margin: float = 0.05) -> np.ndarray:
-    """Posed arm vertices (V, 3) with their distances along `axis` (unit) from `origin` (the cut's centre) scaled so
-    an arm reaching `reach` metres ends `margin` metres before a camera inside its tube (within `radius` of the
-    axis, ahead of the cut): no view from inside the arm. The same array when the camera is clear of it."""
+                   radius: float, reach: float, rim: np.ndarray) -> np.ndarray:
+    """Posed arm vertices (V, 3), ring by ring over the loop's L vertices (a trailing vertex after the last whole
+    ring, the far centre, keeps its offset from the axis), cut back to a prism of the cut's own section `rim` (L, 3)
+    reaching MIN_LENGTH along `axis` (unit) from `origin` (the cut's centre) when the camera looks along the arm
+    from inside its half-cylinder (within `radius` of the axis, ahead of the cut): from there any arm would hide the
+    hand behind its far end, so the frame shows the cut much as it would without the option. The same array when
+    the camera is clear of it (or the arm is no longer than MIN_LENGTH)."""
     rel = np.asarray(camera_centre, np.float64) - origin
     ahead = float(rel @ axis)
     off_axis = float(np.linalg.norm(rel - ahead * axis))
-    if ahead <= 0 or off_axis > radius or ahead - margin >= reach:
+    if ahead <= 0 or off_axis > radius or reach <= MIN_LENGTH:
         return vertices
-    keep = max(ahead - margin, MIN_LENGTH) / reach
-    along = np.maximum((vertices - origin) @ axis, 0.0)
-    return (vertices - np.outer((1 - keep) * along, axis)).astype(vertices.dtype)
+    v = np.asarray(vertices, np.float64)
+    along = np.maximum((v - origin) @ axis, 0.0)
+    out = v - np.outer(along, axis)                                    # onto the cut's plane ...
+    L = len(rim)
+    whole = len(v) // L * L
+    rim_plane = rim - np.outer((rim - origin) @ axis, axis)
+    out[:whole] = np.tile(rim_plane, (len(v) // L, 1))                 # ... in the cut's own section
+    out += np.outer(along * (MIN_LENGTH / reach), axis)
+    return out.astype(vertices.dtype)

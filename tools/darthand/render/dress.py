@@ -93,9 +93,10 @@ class Dresser:
 
 
 def clear_of_camera(surfaces: tuple, camera: Camera) -> tuple:
-    """The surfaces with an arm (render/arm.py: its tube, role 'arm', and its far end, ARM_END) shortened by
-    arm.shorten_before when the camera sits inside its tube; the same tuple otherwise. The axis runs from the
-    tube's first ring's centre to the far end's centre (the end's last vertex; its ring is its other vertices)."""
+    """The surfaces with an arm (render/arm.py: its tube, role 'arm', and its far end, ARM_END) cut back by
+    arm.shorten_before when the camera looks along it from inside its half-cylinder; the same tuple otherwise. The
+    axis runs from the tube's first ring's centre to the far end's centre (the end's last vertex; its ring is its
+    other vertices)."""
     tube = next((s for s in surfaces if s.role == "arm"), None)
     end = next((s for s in surfaces if s.name == ARM_END), None)
     if tube is None or end is None:
@@ -108,8 +109,8 @@ def clear_of_camera(surfaces: tuple, camera: Camera) -> tuple:
     radius = float(np.linalg.norm(rel - np.outer(rel @ axis, axis), axis=1).max()) + CAMERA_CLEARANCE_M
     moved = {}
     for s in (tube, end):
-        v = shorten_before(s.vertices, origin, axis, camera.centre, radius, reach=float((end.vertices[-1] - origin)
-                                                                                         @ axis))
+        v = shorten_before(s.vertices, origin, axis, camera.centre, radius, float((end.vertices[-1] - origin) @ axis),
+                           tube.vertices[:ring].astype(np.float64))
         if v is not s.vertices:
             moved[s.name] = dataclasses.replace(s, vertices=v, normals=vertex_normals(v, s.faces))
     return surfaces if not moved else tuple(moved.get(s.name, s) for s in surfaces)
