@@ -11,6 +11,7 @@ from darthand.errors import InputError
 from darthand.render.api import Renderer
 from darthand.render.dress import GeometryOptions, geometry_options
 from darthand.render.subdivision import SubdivisionPlan, limit_matrix, loop_level
+from testkit.mesh_distance import distance_to_mesh
 
 OCTAHEDRON_V = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
 OCTAHEDRON_F = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
@@ -119,33 +120,6 @@ def test_uv_seams_kept_on_a_cube(level):
 def test_uv_seams_kept_on_the_hand(hand):
     plan = SubdivisionPlan.build(hand.faces, hand.num_vertices, 1, hand.faces_uv, len(hand.uvs))
     assert_uvs_stay_in_their_charts(hand.faces_uv, hand.uvs, plan, 1)
-
-
-def point_triangle_distance(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    """(M,) distances of points p (M, 3) to triangles tri (M, 3, 3): the nearest of the triangle's inside (if the
-    projection falls in it) and its three edges."""
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    n = np.cross(b - a, c - a)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    plane = np.einsum("ij,ij->i", p - a, n)
-    q = p - plane[:, None] * n
-    inside = np.ones(len(p), bool)
-    for u, v in ((a, b), (b, c), (c, a)):
-        inside &= np.einsum("ij,ij->i", np.cross(v - u, q - u), n) >= 0
-    best = np.where(inside, np.abs(plane), np.inf)
-    for u, v in ((a, b), (b, c), (c, a)):
-        t = np.clip(np.einsum("ij,ij->i", p - u, v - u) / np.einsum("ij,ij->i", v - u, v - u), 0, 1)
-        best = np.minimum(best, np.linalg.norm(p - (u + t[:, None] * (v - u)), axis=1))
-    return best
-
-
-def distance_to_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, candidates: int = 24) -> np.ndarray:
-    """(M,) distance of each point to the mesh: the nearest of its `candidates` faces nearest by centroid."""
-    from scipy.spatial import cKDTree
-
-    _, near = cKDTree(vertices[faces].mean(axis=1)).query(points, candidates)
-    d = np.stack([point_triangle_distance(points, vertices[faces[near[:, k]]]) for k in range(candidates)])
-    return d.min(axis=0)
 
 
 def test_the_limit_surface_stays_near_the_hand(hand):
