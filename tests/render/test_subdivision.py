@@ -154,3 +154,17 @@ def test_subdivided_frame_keeps_labels_camera_and_mesh(assets):
     overlap = (plain.alpha > 0.5) & (smooth.alpha > 0.5)
     assert overlap.sum() > 0.95 * (plain.alpha > 0.5).sum()
     assert sum(a["visibility"]) - sum(b["visibility"]) in (-1, 0, 1)
+
+
+def test_geometry_enters_the_frame_digest_only_when_on():
+    """Resume keys frames by their digest: a run with subdivision or the arm renders its frames again, a run with
+    both off keeps the digests it had before the options existed."""
+    from darthand.dataset.frames import job_digest
+
+    job = {"index": 3, "side": "right", "pose": "fist"}
+    base = {"size": 64, "samples": 4, "aa_shading": "triangle", "shading": None, "maps": ()}
+    plain = job_digest(job, base)
+    assert job_digest(job, {**base, "geometry": {}}) == plain
+    digests = {job_digest(job, {**base, "geometry": geometry_options(g).to_json()})
+               for g in ({"subdivision": 1}, {"subdivision": 2}, {"arm": 0.3}, {"subdivision": 1, "arm": 0.3})}
+    assert len(digests) == 4 and plain not in digests

@@ -728,7 +728,10 @@ def _arm_length(text: str) -> float:
     words = {"on": ARM_ON_M, "off": 0.0}
     if text.strip().lower() in words:
         return words[text.strip().lower()]
-    return number(float, 0, 2)(text)
+    try:
+        return number(float, 0, 2)(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"{text[:40]!r} is not a length in metres (0..2), 'on' or 'off'") from None
 
 
 def _add_source_options(p) -> None:

@@ -62,7 +62,7 @@ def dataset_options(args) -> DatasetOptions:
         textures=args.textures, accessories=args.accessories, model=args.model, size=args.size,
         samples=args.samples, aa_shading=args.aa_shading,
         shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin},
-        geometry={"subdivision": args.subdivision, "arm": args.arm},
+        geometry={"subdivision": args.subdivision, "arm": args.arm} if args.subdivision or args.arm else None,
         processes=args.processes, threads=args.threads,
         cluster=None if args.ray is None else ClusterOptions(args.ray or None, args.ray_files),
         resume=args.resume, shard_size=args.shard_size, max_frames=args.max_frames,
