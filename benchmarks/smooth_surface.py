@@ -13,7 +13,9 @@ they change.
   many corners; a faceted one a lot at few.
 - The cap: the share of DARTHAND_BENCH_SMOOTH_CAP_FRAMES (default 200) frames of that plan at 256^2 in which the
   camera's primary rays hit a cap surface (the forearm's cut, or the arm's far end), arm off and on, and the share
-  in which the arm was cut back because the camera looked along it (render/arm.shorten_before).
+  in which the arm was cut back because the camera looked along it (render/arm.shorten_before); over the same
+  frames, the share whose visibility labels or mask bbox change with one level of subdivision or with the arm
+  (keypoints, camera, pose and mesh never do: tests/render/test_subdivision.py, test_arm.py).
 """
 
 from __future__ import annotations
@@ -89,20 +91,28 @@ def limit_distances(model) -> dict:
 
 
 def cap_shares(renderers: dict, jobs: list) -> dict:
-    """{arm off / on: share of frames with cap pixels}, and the share of frames whose arm was cut back."""
-    hits = {"off": 0, "on": 0}
+    """Over `jobs` at 256^2, plain, subdivided once and with the arm: the share of frames with cap pixels (plain,
+    arm), of frames whose arm was cut back, and of frames whose visibility labels or mask bbox differ from the
+    plain frame's (subdivision, arm)."""
+    cap = {"off": 0, "on": 0}
+    changed = {"subdivision1": {"visibility": 0, "bbox": 0}, "arm": {"visibility": 0, "bbox": 0}}
     cut_back = 0
     for job in jobs:
-        for key, geometry in (("off", {}), ("on", {"arm": ARM_M})):
-            frame, _ = render_cpu(renderers[job["side"]], job, geometry, 256)
-            caps = [i for i, s in enumerate(frame.subject.surfaces) if s.role == "cap"]
-            hits[key] += bool(np.isin(frame.geom, caps).any())
-            if geometry:
-                tube = next(s for s in frame.subject.surfaces if s.role == "arm")
-                cut_back += float(np.ptp(tube.vertices, axis=0).max()) < ARM_M / 2
+        frames = {key: render_cpu(renderers[job["side"]], job, geometry, 256)[0]
+                  for key, geometry in (("off", {}), ("subdivision1", {"subdivision": 1}), ("on", {"arm": ARM_M}))}
+        for key in ("off", "on"):
+            caps = [i for i, s in enumerate(frames[key].subject.surfaces) if s.role == "cap"]
+            cap[key] += bool(np.isin(frames[key].geom, caps).any())
+        tube = next(s for s in frames["on"].subject.surfaces if s.role == "arm")
+        cut_back += float(np.ptp(tube.vertices, axis=0).max()) < ARM_M / 2
+        plain = frames["off"].labels
+        for key, frame in (("subdivision1", frames["subdivision1"]), ("arm", frames["on"])):
+            for field in ("visibility", "bbox"):
+                changed[key][field] += frame.labels[field] != plain[field]
     n = max(len(jobs), 1)
-    return {"frames": len(jobs), "cap_visible_share": {k: round(v / n, 4) for k, v in hits.items()},
-            "arm_cut_back_share": round(cut_back / n, 4)}
+    return {"frames": len(jobs), "cap_visible_share": {k: round(v / n, 4) for k, v in cap.items()},
+            "arm_cut_back_share": round(cut_back / n, 4),
+            "labels_changed_share": {k: {f: round(v / n, 4) for f, v in c.items()} for k, c in changed.items()}}
 
 
 def run(frames: int | None = None) -> dict:
@@ -164,7 +174,11 @@ def summary(res: dict) -> str:
               f"{one['mean_mm']}), level 2 max {two['max_mm']} mm (mean {two['mean_mm']}).",
               f"Cap seen in {100 * cap['cap_visible_share']['off']:.1f} % of {cap['frames']} frames without the arm, "
               f"{100 * cap['cap_visible_share']['on']:.1f} % with a {res['arm_m']} m arm (cut back in "
-              f"{100 * cap['arm_cut_back_share']:.1f} %: the camera looked along it)."]
+              f"{100 * cap['arm_cut_back_share']:.1f} %: the camera looked along it).",
+              "Frames whose labels differ from the plain frame's (keypoints, camera, pose and mesh never do; "
+              "coverage follows the mask): " + "; ".join(f"{k}: visibility {100 * v['visibility']:.1f} %, mask bbox "
+                                            f"{100 * v['bbox']:.1f} %" for k, v in cap["labels_changed_share"].items())
+              + "."]
     return "\n".join(lines)
 
 
