@@ -139,21 +139,21 @@ def test_options_refuse_bad_levels():
             geometry_options(bad)
 
 
-def test_subdivided_frame_keeps_labels_camera_and_mesh(assets):
+@pytest.mark.parametrize("pose, camera", [("fist", "three_quarter"), ("point", "palmar"), ("spread", "radial")])
+def test_subdivided_frame_keeps_labels_camera_and_mesh(assets, pose, camera):
     renderer = Renderer(assets, threads=1)
-    plain = renderer.render("fist", width=128, height=128)
-    smooth = renderer.render("fist", width=128, height=128, subdivision=1)
+    plain = renderer.render(pose, camera=camera, width=128, height=128)
+    smooth = renderer.render(pose, camera=camera, width=128, height=128, subdivision=1)
     a, b = dict(plain.labels), dict(smooth.labels)
     assert b["render"].pop("geometry") == {"subdivision": 1}
-    for key in ("K", "camera", "keypoints_2d", "keypoints_3d", "joints_3d", "mano_pose", "in_image", "bbox_keypoints",
-                "render"):
-        assert a[key] == b[key], key
+    # Everything but what the drawn outline decides (the mask's bbox and coverage); visibility is traced against
+    # the model's own faces.
+    assert {k for k in a if a[k] != b[k]} <= {"bbox", "coverage"}
     assert np.array_equal(smooth.subject.hand_vertices, plain.subject.hand.vertices)
     assert len(smooth.subject.hand.vertices) > 3 * len(plain.subject.hand.vertices)
     # The image is the same hand, its outline moved by less than the limit surface's distance (about a pixel here).
     overlap = (plain.alpha > 0.5) & (smooth.alpha > 0.5)
     assert overlap.sum() > 0.95 * (plain.alpha > 0.5).sum()
-    assert sum(a["visibility"]) - sum(b["visibility"]) in (-1, 0, 1)
 
 
 def test_geometry_enters_the_frame_digest_only_when_on():

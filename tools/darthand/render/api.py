@@ -282,7 +282,9 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
     if labels:
         bg_name = Path(background).name if isinstance(background, (str, Path)) else (
             None if background is None else "array")
-        doc = frame_labels(subject, cam, scene, full_alpha, files={"image": IMAGE, "mask": MASK},
+        # A subdivided skin is labelled on the model's own faces (render/dress.py): the plain frame's visibility.
+        label_scene = scene if subject.labelled is None else TraceScene(subject.labelled)
+        doc = frame_labels(subject, cam, label_scene, full_alpha, files={"image": IMAGE, "mask": MASK},
                            extra={"render": {"samples": samples, "aa_shading": aa_shading, "background": bg_name,
                                              "lights": lighting.to_json(), "shading": options.to_json(),
                                              **({"geometry": subject.info["geometry"]}

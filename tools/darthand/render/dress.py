@@ -76,12 +76,15 @@ class Dresser:
         self.subdivider = Subdivider()
 
     def dress(self, subject: Subject, camera: Camera, options: GeometryOptions) -> Subject:
-        """The subject as drawn: an arm kept out of the camera (`clear_of_camera`), its skin surfaces subdivided;
-        the same subject when both options are off."""
+        """The subject as drawn: an arm kept out of the camera (`clear_of_camera`), its skin surfaces subdivided
+        (the labels then trace visibility against the unsubdivided surfaces: Subject.labelled); the same subject
+        when both options are off."""
         if options.is_default:
             return subject
         surfaces = clear_of_camera(subject.surfaces, camera)
+        labelled = None
         if options.subdivision:
+            labelled = dataclasses.replace(subject, surfaces=surfaces)
             surfaces = tuple(self.subdivider.surface(s, options.subdivision) if s.role in SMOOTHED_ROLES else s
                              for s in surfaces)
         info = {**subject.info, "geometry": options.to_json()}
@@ -89,7 +92,7 @@ class Dresser:
         if base is not None and options.subdivision:
             info["base_faces"] = int(base) * 4 ** options.subdivision       # face f's children: 4^k f ...
         return dataclasses.replace(subject, surfaces=surfaces, info=info, mesh=subject.hand_vertices,
-                                   framing=subject.framing_points())
+                                   framing=subject.framing_points(), labelled=labelled)
 
 
 def clear_of_camera(surfaces: tuple, camera: Camera) -> tuple:
