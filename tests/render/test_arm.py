@@ -54,6 +54,10 @@ def test_the_camera_and_labels_stay(hand, assets):
     a, b = plain.labels, arm.labels
     for key in ("K", "camera", "keypoints_2d", "keypoints_3d", "joints_3d", "mano_pose", "accessory"):
         assert a[key] == b[key], key
+    # The mask (and its bbox, coverage) is the hand's and the accessory's: the arm is drawn in the image's alpha.
+    assert np.abs(np.array(b["bbox"]) - np.array(a["bbox"])).max() <= 2
+    assert abs(b["coverage"] - a["coverage"]) < 0.1 * a["coverage"]
+    assert arm.rgba[..., 3].astype(float).sum() > 1.05 * 255 * arm.alpha.sum()
     # The arm can only hide keypoints (a real occluder), never reveal one.
     assert not (np.array(b["visibility"]) & ~np.array(a["visibility"])).any()
     assert np.array_equal(arm.subject.hand_vertices, plain.subject.hand.vertices)
@@ -104,7 +108,7 @@ def test_a_camera_looking_along_the_arm_sees_the_cut(hand, assets, distance):
     tube = next(s for s in frame.subject.surfaces if s.name == ARM)
     centre, axis, _ = loop_frame(hand, forearm_cap(hand).loop)
     assert ((tube.vertices - centre) @ axis).max() < MIN_LENGTH + 1e-3
-    assert np.abs(frame.alpha - plain.alpha).mean() < 0.05
+    assert np.abs(frame.rgba[..., 3] / 255 - plain.alpha).mean() < 0.05
 
 
 def test_shorten_before_leaves_a_clear_arm_alone():

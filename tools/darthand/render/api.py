@@ -24,7 +24,7 @@ from darthand.jit import kernel
 from darthand.render import aa, truth
 from darthand.render.assets import HandAssets, default_catalogues
 from darthand.render.camera import Camera, load_camera
-from darthand.render.dress import Dresser, geometry_options
+from darthand.render.dress import Dresser, geometry_options, model_coverage
 from darthand.render.image import compose, encode_mask8, load_background, write_exr, write_png
 from darthand.render.indirect import VertexLight
 from darthand.render.labels import frame_labels
@@ -49,8 +49,9 @@ class Frame:
 
     rgba (H, W, 4) uint8: image.png (sRGB, straight alpha; opaque over a background). colour (H, W, 3) float32
     linear, premultiplied by alpha (composited when a background was given). alpha (H, W) float32 coverage of hand
-    and accessory. geom (H, W) int8 what the pixel centre's ray hit (-1 background, else the subject's surface
-    index: 0 hand, 1 accessory). depth (H, W) float32 camera z at pixel centres, 0 for background. labels: the
+    and accessory (an arm, render/arm.py, is in rgba's alpha, not in this one: dress.model_coverage). geom (H, W)
+    int8 what the pixel centre's ray hit (-1 background, else the subject's surface index: 0 hand, 1 accessory).
+    depth (H, W) float32 camera z at pixel centres, 0 for background. labels: the
     labels.json document. timings: seconds per step. stats: ray counts. maps: the per-pixel truth maps asked for
     ({kind: full-frame array}, render/truth.py; empty unless asked).
     """
@@ -270,6 +271,7 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
         if bg.shape != (H, W, 3):
             raise InputError(f"background: shape {bg.shape} does not match the image ({H}, {W}, 3)")
     colour, rgba = compose(premult, alpha, (r0, c0), bg, (H, W))
+    full_alpha = model_coverage(full_alpha, full_geom, subject.surfaces)      # the image's alpha keeps an arm
     timings["compose"] = _lap(t)
     truth_maps = {}
     if maps:

@@ -13,10 +13,11 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from darthand.errors import InputError
 from darthand.model.topology import vertex_normals
-from darthand.render.arm import ARM_END, check_length, shorten_before
+from darthand.render.arm import ARM, ARM_END, check_length, shorten_before
 from darthand.render.camera import Camera
 from darthand.render.subdivision import MAX_LEVEL, SMOOTHED_ROLES, Subdivider
 from darthand.render.subject import Subject
@@ -93,6 +94,19 @@ class Dresser:
             info["base_faces"] = int(base) * 4 ** options.subdivision       # face f's children: 4^k f ...
         return dataclasses.replace(subject, surfaces=surfaces, info=info, mesh=subject.hand_vertices,
                                    framing=subject.framing_points(), labelled=labelled)
+
+
+def model_coverage(alpha: np.ndarray, geom: np.ndarray, surfaces: tuple) -> np.ndarray:
+    """(H, W) float32 the coverage `alpha` (H, W) of the model's surfaces alone (hand, its cut's cap, accessory):
+    the pixels whose centre ray hit an arm surface (render/arm.py, `geom` (H, W) the surface index) left out, and
+    the background-centred edge pixels kept only beside a pixel of the model. The mask, bbox and coverage then mean
+    what they meant before the arm (`alpha` itself, without an arm)."""
+    arm = [i for i, s in enumerate(surfaces) if s.name in (ARM, ARM_END)]
+    if not arm:
+        return alpha
+    model = (geom >= 0) & ~np.isin(geom, arm)
+    keep = model | ((geom < 0) & ndimage.binary_dilation(model, np.ones((3, 3), bool)))
+    return np.where(keep, alpha, 0).astype(np.float32)
 
 
 def clear_of_camera(surfaces: tuple, camera: Camera) -> tuple:
