@@ -181,3 +181,23 @@ def test_subdivided_faces_keep_their_parts(assets):
         both = (plain > 0) & (smooth > 0)
         assert (plain[both] != smooth[both]).mean() < 0.03, level
         assert set(np.unique(smooth)) == set(np.unique(plain))
+
+
+def test_a_glove_is_subdivided_with_the_skin(hand, texture_files):
+    """A skinned accessory lies a fraction of a millimetre off the skin: subdivided with it (the same linear map of
+    nearly the same surface), the skin stays under it; subdividing the skin alone pushes its concave parts through
+    (177 skin pixels here)."""
+    from darthand.accessories.loader import Accessory
+    from darthand.model.topology import vertex_normals
+    from darthand.render.assets import HandAssets
+
+    offset = hand.v_template + 0.0005 * vertex_normals(hand.v_template, hand.faces)
+    glove = Accessory(id="glove_test", vertices=offset, faces=hand.faces, weights=hand.weights,
+                      posedirs=hand.posedirs, material={"base_color": (0.1, 0.2, 0.8, 1.0)}, kind="glove")
+    assets = HandAssets(hand, {texture_files.id: texture_files}, texture_files.id, {glove.id: glove}, "open+wrist")
+    renderer = Renderer(assets, threads=1)
+    frames = {level: renderer.render("fist", camera="palmar", width=256, height=256, accessory="glove_test",
+                                     subdivision=level) for level in (0, 1)}
+    skin = {level: int((frame.geom == 0).sum()) for level, frame in frames.items()}
+    assert skin[1] <= skin[0] + 5, skin
+    assert len(frames[1].subject.accessory.faces) == 4 * len(hand.faces)

@@ -86,14 +86,20 @@ class Dresser:
         labelled = None
         if options.subdivision:
             labelled = dataclasses.replace(subject, surfaces=surfaces)
-            surfaces = tuple(self.subdivider.surface(s, options.subdivision) if s.role in SMOOTHED_ROLES else s
-                             for s in surfaces)
+            surfaces = tuple(self.subdivider.surface(s, options.subdivision) if smoothed(s) else s for s in surfaces)
         info = {**subject.info, "geometry": options.to_json()}
         base = subject.info.get("base_faces")
         if base is not None and options.subdivision:
             info["base_faces"] = int(base) * 4 ** options.subdivision       # face f's children: 4^k f ...
         return dataclasses.replace(subject, surfaces=surfaces, info=info, mesh=subject.hand_vertices,
                                    framing=subject.framing_points(), labelled=labelled)
+
+
+def smoothed(surface) -> bool:
+    """Whether a surface is subdivided: the skin (SMOOTHED_ROLES) and a skinned accessory (a glove: a rigid one has
+    a `transform`), which lies a millimetre off the skin and must move with it (subdividing the skin alone would
+    push its concave parts, between the fingers and in the palm, through the glove)."""
+    return surface.role in SMOOTHED_ROLES or (surface.role == "accessory" and surface.transform is None)
 
 
 def model_coverage(alpha: np.ndarray, geom: np.ndarray, surfaces: tuple) -> np.ndarray:
