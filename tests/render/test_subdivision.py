@@ -201,3 +201,13 @@ def test_a_glove_is_subdivided_with_the_skin(hand, texture_files):
     skin = {level: int((frame.geom == 0).sum()) for level, frame in frames.items()}
     assert skin[1] <= skin[0] + 5, skin
     assert len(frames[1].subject.accessory.faces) == 4 * len(hand.faces)
+
+
+def test_dressed_frames_are_deterministic(assets, hand, texture_files, ring):
+    """The same frame from a fresh renderer and source, with subdivision and the arm: the same bytes."""
+    from darthand.render.assets import HandAssets
+
+    again = HandAssets(hand, {texture_files.id: texture_files}, texture_files.id, {ring.id: ring}, "open+wrist")
+    a, b = (Renderer(src, threads=1).render("ok", accessory="ring_test", width=96, height=96, subdivision=2, arm=0.3)
+            for src in (assets, again))
+    assert np.array_equal(a.rgba, b.rgba) and a.labels == b.labels
