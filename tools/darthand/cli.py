@@ -501,6 +501,7 @@ def _add_render_arguments(p) -> None:
     _add_film_option(p, "none")
     p.add_argument("--film-seed", type=COUNT, default=0, metavar="N", help="the film's noise and 'random' draw seed "
                    "(default 0)")
+    _add_geometry_options(p)
     p.add_argument("--depth", action="store_true", help="also write depth.exr (camera z in metres, 0 = background)")
     p.add_argument("--keypoint-order", default="openpose", choices=("openpose", "mano"),
                    help="order of the 21 keypoints in labels.json (default openpose)")
@@ -621,6 +622,7 @@ def _add_dataset_arguments(p) -> None:
     _add_shading_options(p)
     _add_engine_options(p, run.engine, run.cycles_samples)
     _add_film_option(p, str(run.film))
+    _add_geometry_options(p)
     p.add_argument("--processes", type=number(int, 1, 100_000), default=None, metavar="N",
                    help="worker processes, each rendering whole frames (default: the number of cores; 1 renders "
                         "in this process)")
@@ -755,6 +757,34 @@ def _add_film_option(p, default: str) -> None:
                    help="a camera's image (render/film.py): automatic exposure, filmic tone curve, sensor noise, blur, "
                         "vignetting, JPEG; random: a plausible camera per frame; or a settings file; none: the "
                         f"renderer's own image (default {default})")
+
+
+def _add_geometry_options(p) -> None:
+    """--subdivision, --arm, defaulting to the renderer's (render/dress.GeometryOptions: both off)."""
+    # Imported when the parser is built: `darthand --help` does not load the renderer (as _add_shading_options).
+    from darthand.render.dress import GeometryOptions
+    from darthand.render.subdivision import MAX_LEVEL
+
+    d = GeometryOptions()
+    p.add_argument("--subdivision", type=number(int, 0, MAX_LEVEL), default=d.subdivision, metavar="N",
+                   help="Loop subdivision levels of the skin at render time, for round outlines and shading; the "
+                        f"labels keep the model's own vertices (0 off, 1 or 2; default {d.subdivision})")
+    p.add_argument("--arm", type=_arm_length, default=d.arm, metavar="METRES|on|off",
+                   help="draw the forearm this far past the model's cut instead of its flat cap, so it goes on out "
+                        "of the frame ('on': 0.3 m; default off); the camera and labels are unchanged")
+
+
+def _arm_length(text: str) -> float:
+    """--arm's value: metres, 'on' (ARM_ON_M) or 'off' (0)."""
+    from darthand.render.arm import ARM_ON_M
+
+    words = {"on": ARM_ON_M, "off": 0.0}
+    if text.strip().lower() in words:
+        return words[text.strip().lower()]
+    try:
+        return number(float, 0, 2)(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"{text[:40]!r} is not a length in metres (0..2), 'on' or 'off'") from None
 
 
 def _add_source_options(p) -> None:

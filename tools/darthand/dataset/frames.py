@@ -32,6 +32,7 @@ from darthand.render import truth
 from darthand.render.api import shading_options, write_frame
 from darthand.render.cycles import CyclesRenderer
 from darthand.render.environment import backdrop_blur
+from darthand.render.dress import geometry_options
 from darthand.render.labels import mano_camera_parameters
 from darthand.render.scenes import Scene
 from darthand.template.anthropometry import hand_sizes
@@ -67,6 +68,8 @@ def job_digest(job: dict, settings: dict) -> str:
         key["engine"] = settings["engine"]
     if settings.get("film") is not None:
         key["film"] = settings["film"]
+    if settings.get("geometry"):
+        key["geometry"] = settings["geometry"]          # only when on: digests of runs without it stay
     if wears_ring(job):
         key["ring_wear"] = RING_WEAR       # ring frames rendered before rings were worn per pose are made again
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
@@ -83,7 +86,8 @@ def render_job(renderer, job: dict, settings: dict):
     """(api.Frame, background info or None) of one job, rendered as its scene (render/scenes.py). settings: size,
     samples, aa_shading, and optionally shading (api.shading_options' dict; None: the renderer's defaults), maps
     (render/truth.KINDS to compute), engine ({'name': 'cycles', 'samples': N}: the image from Cycles,
-    render/cycles.py) and film (dataset/film.film_setting's; None: no film)."""
+    render/cycles.py), film (dataset/film.film_setting's; None: no film) and geometry (render/dress.GeometryOptions'
+    fields; None: off)."""
     scene = Scene.from_job(job)
     if settings.get("engine"):
         renderer = CyclesRenderer(renderer, settings["engine"]["samples"])
@@ -102,10 +106,11 @@ def render_job(renderer, job: dict, settings: dict):
                 scene.lights["environment"], background)})
     t = time.perf_counter() - t
     film, film_seed = frame_film(settings.get("film"), job)
+    geometry = geometry_options(settings.get("geometry"))
     frame = renderer.render_scene(scene, background=background, width=size, height=size,
                                   samples=settings["samples"], aa_shading=settings["aa_shading"],
                                   shading=settings.get("shading"), maps=tuple(settings.get("maps") or ()),
-                                  film=film, film_seed=film_seed)
+                                  film=film, film_seed=film_seed, subdivision=geometry.subdivision, arm=geometry.arm)
     frame.timings["background"] = t
     return frame, info
 
@@ -122,10 +127,9 @@ def dataset_labels(frame, job: dict, digest: str, source, background: dict | Non
     labels["render"] = render
     labels["gesture"] = labels.get("gesture") or job.get("gesture")
     model = source.pose_model()
-    hand = frame.subject.hand
+    hand = frame.subject.hand_vertices
     wrist = (getattr(model, "meta", None) or {}).get("wrist") or {}
-    labels["mesh"] = {"vertices": int(len(hand.vertices)), "base_vertices": int(wrist.get("base_vertices",
-                                                                                              len(hand.vertices))),
+    labels["mesh"] = {"vertices": int(len(hand)), "base_vertices": int(wrist.get("base_vertices", len(hand))),
                       "faces": "the model's faces (build/model/<side>.npz)", "frame": "camera", "units": "m"}
     labels["files"] = {**labels.get("files", {}), "vertices": "../" + names["vertices"],
                        **{kind: "../" + names[kind] for kind in maps}}
@@ -166,7 +170,7 @@ def write_dataset_frame(frame, job: dict, digest: str, out_dir, source, backgrou
     whole once its labels exist); returns its summary for the shard record."""
     names = frame_names(job["index"], tuple(frame.maps))
     labels = dataset_labels(frame, job, digest, source, background)
-    vertices = frame.camera.to_camera(frame.subject.hand.vertices).astype(np.float32)
+    vertices = frame.camera.to_camera(frame.subject.hand_vertices).astype(np.float32)
     path = Path(out_dir) / names["vertices"]
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp, open(tmp, "wb") as f:

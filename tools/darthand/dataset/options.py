@@ -69,7 +69,9 @@ class DatasetOptions:
     size: square image size (pixels); samples, aa_shading: edge anti-aliasing (render/aa.py); shading: the
         renderer's shading options (render/shade.ShadingOptions' fields; None: its defaults); film: a camera's
         image per frame (dataset/film.py: 'none', 'random', a FILM.json path or a dict of render/film.Film's
-        fields); part of a frame's job digest only when not 'none'.
+        fields); part of a frame's job digest only when not 'none'; geometry: the drawn surfaces' options
+        (render/dress.GeometryOptions' fields: subdivision, arm; None: off), part of a frame's job digest only when
+        not the defaults.
     processes: worker processes (None: the cores available; 1 renders in this process), or a cluster's workers;
         threads: render threads per process; cluster: render on a cluster instead (None: this machine).
     resume: skip frames already rendered from the same jobs; shard_size: frames per shard (the unit of planning and
@@ -97,6 +99,7 @@ class DatasetOptions:
     aa_shading: str = "triangle"
     shading: dict | None = None
     film: str | dict = "none"
+    geometry: dict | None = None
     processes: int | None = None
     threads: int | None = None
     cluster: ClusterOptions | None = None

@@ -42,6 +42,7 @@ from darthand.dataset.film import film_setting
 from darthand.render.api import shading_options
 from darthand.render.cycles import check_available, check_samples
 from darthand.render.engines import ENGINES
+from darthand.render.dress import geometry_options
 
 DATASET_FORMAT = "darthand-dataset"
 DATASET_VERSION = 2
@@ -68,6 +69,7 @@ def render_frames(options: DatasetOptions, sources: dict, specs: dict, planner=N
     t_start = time.monotonic()
     aa.check_options(samples, aa_shading)
     shading = shading_options(o.shading).to_json()
+    geometry = geometry_options(o.geometry).to_json()
     size = bounded_int(o.size, "size", 8, MAX_SIZE, "pixels")
     if cluster is None:
         processes = bounded_int(len(os.sched_getaffinity(0)) if processes is None else processes, "processes", 1,
@@ -98,7 +100,7 @@ def render_frames(options: DatasetOptions, sources: dict, specs: dict, planner=N
     _prepare_folders(out, maps)
     settings = {"out_dir": str(out), "size": size, "samples": int(samples), "aa_shading": aa_shading,
                 "shading": shading, "maps": maps, "film": film_setting(o.film),
-                **({"engine": engine} if engine else {})}
+                **({"engine": engine} if engine else {}), **({"geometry": geometry} if geometry else {})}
     stats = RunStats(t_start)
     report = _progress_printer(stats) if o.progress is True else (o.progress or None)
     runner = make_runner(cluster, specs, settings, sources, workers, threads, total)
@@ -417,6 +419,8 @@ def _write_dataset(out: Path, package, jobs_source, planner, total, settings, st
         doc["engine"] = settings["engine"]
     if settings.get("film") is not None:   # only when asked, as the maps
         doc["film"] = settings["film"]
+    if settings.get("geometry"):           # likewise: a run with the geometry options off keeps its dataset.json
+        doc["geometry"] = settings["geometry"]
     if settings["maps"]:                   # only when asked: a dataset without maps keeps its dataset.json
         doc["maps"] = truth.describe(settings["maps"], {kind: doc["files"][kind] for kind in settings["maps"]})
     write_json(out / "dataset.json", doc)

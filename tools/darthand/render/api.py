@@ -26,6 +26,7 @@ from darthand.render.assets import HandAssets, default_catalogues
 from darthand.render.camera import Camera, load_camera
 from darthand.render.environment import ENVIRONMENT_BACKGROUND, backdrop_blur, background_view, frame_environment
 from darthand.render.film import Film, develop_frame
+from darthand.render.dress import Dresser, geometry_options, model_coverage
 from darthand.render.image import compose, encode_mask8, load_background, write_exr, write_png
 from darthand.render.indirect import VertexLight
 from darthand.render.labels import frame_labels
@@ -50,8 +51,9 @@ class Frame:
 
     rgba (H, W, 4) uint8: image.png (sRGB, straight alpha; opaque over a background). colour (H, W, 3) float32
     linear, premultiplied by alpha (composited when a background was given). alpha (H, W) float32 coverage of hand
-    and accessory. geom (H, W) int8 what the pixel centre's ray hit (-1 background, else the subject's surface
-    index: 0 hand, 1 accessory). depth (H, W) float32 camera z at pixel centres, 0 for background. labels: the
+    and accessory (an arm, render/arm.py, is in rgba's alpha, not in this one: dress.model_coverage). geom (H, W)
+    int8 what the pixel centre's ray hit (-1 background, else the subject's surface index: 0 hand, 1 accessory).
+    depth (H, W) float32 camera z at pixel centres, 0 for background. labels: the
     labels.json document. timings: seconds per step. stats: ray counts. maps: the per-pixel truth maps asked for
     ({kind: full-frame array}, render/truth.py; empty unless asked).
     """
@@ -77,6 +79,7 @@ class Renderer:
         self.threads = default_threads() if threads is None else max(1, int(threads))
         self._scene: TraceScene | None = None
         self._lights: tuple | None = None
+        self._dresser = Dresser()
 
     def _lighting(self, lights) -> Lighting:
         """load_lighting, remembered for the same argument (validating a lights document costs milliseconds)."""
@@ -93,7 +96,7 @@ class Renderer:
                accessory: str | None = None, camera="three_quarter", lights=None, background=None,
                width: int = 512, height: int = 512, samples: int = DEFAULT_SAMPLES, aa_shading: str = "triangle",
                shading=None, labels: bool = True, keypoint_order: str = "openpose", betas=None,
-               maps: tuple = (), film=None, film_seed: int = 0) -> Frame:
+               maps: tuple = (), film=None, film_seed: int = 0, subdivision: int = 0, arm: float = 0.0) -> Frame:
         """One frame. pose: None (flat), a gesture name, a pose file or (48,) MANO axis-angle (flat-hand relative).
         camera: a Camera, a view name, a camera JSON path or dict (camera.load_camera), framed on the posed hand.
         lights: a Lighting, a lights JSON path or dict, or None (lights.default_lighting). background: image path or
@@ -104,11 +107,14 @@ class Renderer:
         shade.ShadingOptions or a dict of its fields (ambient occlusion, skin model), None for the defaults. betas:
         the hand's shape (S,) for a model source (None: the model's own). maps: per-pixel truth maps to compute
         too (render/truth.KINDS: 'depth', 'normals', 'parts'), in Frame.maps. film: a camera's image (render/film.py:
-        a Film or a dict of its fields; None: the renderer's own image), its sensor noise seeded by film_seed."""
+        a Film or a dict of its fields; None: the renderer's own image), its sensor noise seeded by film_seed.
+        subdivision: Loop levels of the skin (0, 1, 2; render/subdivision.py); arm: metres of forearm drawn past the
+        cut instead of its cap (0: the cap; a model source only; render/arm.py). Neither moves the camera or the
+        labels' hand (render/dress.py)."""
         with single_threaded_blas():
             prepared = self._prepare(pose, texture=texture, skin_tone_offset=skin_tone_offset, accessory=accessory,
                                      camera=camera, lights=lights, width=width, height=height,
-                                     keypoint_order=keypoint_order, betas=betas)
+                                     keypoint_order=keypoint_order, betas=betas, subdivision=subdivision, arm=arm)
             return self._finish(prepared, background=background, samples=samples, aa_shading=aa_shading,
                                 shading=shading, labels=labels, maps=maps, film=film, film_seed=film_seed)
 
@@ -117,7 +123,7 @@ class Renderer:
         camera under its lights. background: pixels or an image path to composite under it (None: the scene's own
         background when it is an image path, else transparent; a dataset resolves its background documents itself).
         options: `render`'s width, height, samples, aa_shading, shading, labels, keypoint_order, maps, film,
-        film_seed."""
+        film_seed, subdivision, arm."""
         hand = scene.single_hand()
         pose = hand.pose_value()
         model = self.source.pose_model()
@@ -151,20 +157,29 @@ class Renderer:
                 yield self._finish(prepared, **finish)
 
     def _prepare(self, pose, *, texture=None, skin_tone_offset=0.0, accessory=None, camera="three_quarter",
-                 lights=None, width=512, height=512, keypoint_order="openpose", betas=None) -> tuple:
+                 lights=None, width=512, height=512, keypoint_order="openpose", betas=None, subdivision=0,
+                 arm=0.0) -> tuple:
         """(subject, scene, camera, lighting, timings): the frame's work before tracing."""
         check_skin_tone_offset(skin_tone_offset)
+        geometry = geometry_options(subdivision=subdivision, arm=arm)
+        if geometry.arm and self.source.kind != "model":
+            raise InputError(f"arm: a {self.source.kind} source has no forearm rig to extend (use a model .npz)")
         timings: dict = {}
         t = time.perf_counter()
         shape = {} if betas is None else {"betas": betas}      # a USD package has no shape to change
+        shape.update({"arm": geometry.arm} if geometry.arm else {})
         subject = self.source.subject(pose, texture=texture, skin_tone_offset=skin_tone_offset, accessory=accessory,
                                       keypoint_order=keypoint_order, **shape)
         timings["pose"] = _lap(t)
         t = time.perf_counter()
-        points = subject.all_vertices()
+        points = subject.framing_points()
         cam = load_camera(camera, points, width=width, height=height, side=subject.side)
         lighting = self._lighting(lights)
         timings["setup"] = _lap(t)
+        if not geometry.is_default:
+            t = time.perf_counter()
+            subject = self._dresser.dress(subject, cam, geometry)
+            timings["dress"] = _lap(t)
         t = time.perf_counter()
         self._scene = scene = scene_for(subject, self._scene)
         timings["scene"] = _lap(t)
@@ -277,6 +292,7 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
         if bg.shape != (H, W, 3):
             raise InputError(f"background: shape {bg.shape} does not match the image ({H}, {W}, 3)")
     colour, rgba = compose(premult, alpha, (r0, c0), bg, (H, W))
+    full_alpha = model_coverage(full_alpha, full_geom, subject.surfaces)      # the image's alpha keeps an arm
     timings["compose"] = _lap(t)
     film_record = None
     if film is not None:
@@ -294,10 +310,13 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
     doc = {}
     if labels:
         record = {"samples": samples, "aa_shading": aa_shading, "background": bg_name,
-                  "lights": lighting.to_json(), "shading": options.to_json()}
+                  "lights": lighting.to_json(), "shading": options.to_json(),
+                  **({"geometry": subject.info["geometry"]} if subject.info.get("geometry") else {})}
         if film_record is not None:
             record["film"] = film_record
-        doc = frame_labels(subject, cam, scene, full_alpha, files={"image": IMAGE, "mask": MASK},
+        # A subdivided skin is labelled on the model's own faces (render/dress.py): the plain frame's visibility.
+        label_scene = scene if subject.labelled is None else TraceScene(subject.labelled)
+        doc = frame_labels(subject, cam, label_scene, full_alpha, files={"image": IMAGE, "mask": MASK},
                            extra={"render": record})
     timings["labels"] = _lap(t)
     stats["total_rays"] = (stats.get("rays", 0) + stats.get("shadow_rays", 0) + stats.get("indirect_rays", 0)

@@ -29,6 +29,7 @@ from darthand.model.hand_model import HandModel
 from darthand.model.layout import NUM_POSE_FEATURES
 from darthand.model.load import load_model
 from darthand.model.topology import face_joints, vertex_normals
+from darthand.render.arm import ARM, ARM_END, check_length, forearm_arm
 from darthand.render.poses import resolve_pose
 from darthand.render.skin_detail import DetailMap
 from darthand.render.subject import PLAIN_SKIN, Material, Subject, Surface, checker_material, skin_material
@@ -127,9 +128,11 @@ class HandAssets:
     # ---------------------------------------------------------------------------------------------- posing
 
     def subject(self, pose=None, *, texture: str | None = None, skin_tone_offset: float = 0.0,
-                accessory: str | None = None, betas=None, keypoint_order: str = "openpose") -> Subject:
+                accessory: str | None = None, betas=None, keypoint_order: str = "openpose",
+                arm: float = 0.0) -> Subject:
         """The posed hand (and accessory) for a pose: None (flat), a gesture name, a pose file, or (48,) axis-angle
-        relative to the flat hand."""
+        relative to the flat hand. arm: metres of forearm drawn past the cut instead of its cap (render/arm.py; 0:
+        the cap), the camera still framed on the hand, accessory and cap (Subject.framing)."""
         pose_vec, gesture = resolve_pose(self.model, pose, cache=self._gestures)
         texture, accessory = self.resolve_texture(texture), self.resolve_accessory(accessory)
         worn = None
@@ -158,13 +161,19 @@ class HandAssets:
                 move = None if worn is None else worn.move
                 self._last_accessory = ((key, accessory), self.posed_accessory(acc, posed, acc_key, move))
             surfaces.append(self._last_accessory[1])
-        surfaces.append(self.posed_cap(posed, betas, hand.material))      # last: surface indices 0 hand, 1 accessory
+        cap = self.posed_cap(posed, betas, hand.material)
+        framing = None
+        if arm:
+            framing = np.concatenate([s.vertices for s in surfaces] + [cap.vertices])
+            surfaces.extend(self.posed_arm(posed, betas, hand.material, arm))
+        else:
+            surfaces.append(cap)                     # last: surface indices 0 hand, 1 accessory
         info = {"source": self.source, "texture": texture, "skin_tone_offset": float(skin_tone_offset),
                 "accessory": accessory, "gesture": gesture, **({} if worn is None else {"ring_worn": worn.record}),
                 "accessory_parent_joint": None if accessory == NONE else self.accessories[accessory].parent_joint,
                 "base_faces": (m.meta.get("wrist") or {}).get("base_faces")}     # before the wrist rings (truth.py)
         return Subject(tuple(surfaces), posed.joints[0].astype(np.float64), posed.keypoints[0].astype(np.float64),
-                       m.side, pose_vec, keypoint_order, info)
+                       m.side, pose_vec, keypoint_order, info, framing=framing)
 
     def skin(self, texture: str, offset: float = 0.0) -> Material:
         """The hand's material for a texture id and skin-tone offset (added to the sRGB albedo)."""
@@ -208,6 +217,30 @@ class HandAssets:
         v = cap.pose(posed, betas)[0].astype(np.float32)
         return Surface("forearm_cap", v, faces, vertex_normals(v, faces), material, uvs, faces_uv, cap.vertices,
                        "cap", joints)
+
+    def posed_arm(self, posed, betas, material: Material, length: float) -> tuple[Surface, Surface]:
+        """(the forearm tube, its far end's cap) of `length` metres (render/arm.py) for a forward-pass result, in the
+        hand's material."""
+        key = ("arm", check_length(length))
+        if key not in self._face_joints:
+            arm = forearm_arm(self.model, length)
+            sk = arm.skin
+            joints = face_joints(sk.faces, sk.weights)
+            T, K, L = arm.tube_faces, arm.tube_vertices, arm.ring_size
+            i32, f32 = (lambda a: np.ascontiguousarray(a, np.int32)), (lambda a: np.ascontiguousarray(a, np.float32))
+            tube = (i32(sk.faces[:T]), None if sk.uvs is None else f32(sk.uvs),
+                    None if sk.faces_uv is None else i32(sk.faces_uv[:T]), joints[:T])
+            end = (i32(sk.faces[T:] - (K - L)), None if sk.uvs is None else f32(sk.uvs),
+                   None if sk.faces_uv is None else i32(sk.faces_uv[T:]), joints[T:])
+            self._face_joints[key] = (arm, tube, end)
+        arm, tube, end = self._face_joints[key]
+        v = arm.skin.pose(posed, betas)[0].astype(np.float32)
+        K, L = arm.tube_vertices, arm.ring_size
+        tube_v, end_v = np.ascontiguousarray(v[:K]), np.ascontiguousarray(v[K - L:])
+        return (Surface(ARM, tube_v, tube[0], vertex_normals(tube_v, tube[0]), material, tube[1], tube[2],
+                        arm.skin.vertices[:K], "arm", tube[3]),
+                Surface(ARM_END, end_v, end[0], vertex_normals(end_v, end[0]), material, end[1], end[2],
+                        arm.skin.vertices[K - L:], "cap", end[3]))
 
     def fitted_accessory(self, accessory: str, betas) -> tuple[Accessory, object]:
         """(the accessory fitted to the hand of `betas`, the key its rest arrays are kept under): the catalogue's

@@ -96,7 +96,7 @@ def frame_labels(subject: Subject, camera: Camera, scene: Scene, alpha: np.ndarr
     kp_world = np.asarray(subject.keypoints, np.float64)
     kp_cam = camera.to_camera(kp_world)
     kp_2d, _ = camera.project(kp_world)
-    thick = keypoint_thickness(kp_world, subject.hand.vertices, subject.keypoint_order)
+    thick = keypoint_thickness(kp_world, subject.hand_vertices, subject.keypoint_order)
     visible = visibility(scene, camera, kp_world, thick, own_parts(subject.keypoint_order))
     inside = (kp_2d[:, 0] >= 0) & (kp_2d[:, 0] < camera.width) & (kp_2d[:, 1] >= 0) & (kp_2d[:, 1] < camera.height)
     kp_bbox = [float(kp_2d[:, 0].min()), float(kp_2d[:, 1].min()), float(kp_2d[:, 0].max()),

@@ -95,7 +95,11 @@ class Subject:
 
     joints (16, 3) and keypoints (21, 3): world, metres, float64; keypoints in `keypoint_order`. pose (48,): MANO
     axis-angle relative to the flat hand. info: ids for the labels (texture, skin_tone_offset, accessory, gesture,
-    source...).
+    source...). The drawn surfaces may differ from the model's (render/dress.py): mesh (N, 3) float32 is then the
+    model's own posed hand vertices (None: the hand surface's); framing (M, 3) the points the camera is framed on
+    (the plain subject's, so an arm reaching out of the frame or a subdivided skin leaves the camera as it was;
+    None: all drawn vertices); labelled the subject whose surfaces the labels' visibility rays are traced against
+    (the unsubdivided one, so the labels are the plain frame's; None: this one).
     """
 
     surfaces: tuple
@@ -105,10 +109,22 @@ class Subject:
     pose: np.ndarray
     keypoint_order: str = "openpose"
     info: dict = field(default_factory=dict)
+    mesh: np.ndarray | None = None
+    framing: np.ndarray | None = None
+    labelled: Subject | None = None
 
     @property
     def hand(self) -> Surface:
         return next(s for s in self.surfaces if s.role == "hand")
+
+    @property
+    def hand_vertices(self) -> np.ndarray:
+        """(N, 3) the model's own posed hand vertices (labels and meshes are of these, whatever is drawn)."""
+        return self.hand.vertices if self.mesh is None else self.mesh
+
+    def framing_points(self) -> np.ndarray:
+        """The points the camera frames (see `framing`)."""
+        return self.all_vertices() if self.framing is None else self.framing
 
     @property
     def accessory(self) -> Surface | None:

@@ -44,7 +44,8 @@ KINDS = ("depth", "normals", "parts")
 PARTS = ("background", "palm", *(f"{finger}_{k}" for finger in FINGERS for k in (1, 2, 3)), "nail", "forearm",
          "accessory", "object")
 PART_IDS = {name: i for i, name in enumerate(PARTS)}
-ROLE_PARTS = {"cap": PART_IDS["forearm"], "accessory": PART_IDS["accessory"], "object": PART_IDS["object"]}
+ROLE_PARTS = {"cap": PART_IDS["forearm"], "arm": PART_IDS["forearm"], "accessory": PART_IDS["accessory"],
+              "object": PART_IDS["object"]}
 DEPTH_SCALE = 1000.0            # PNG units per metre
 ENCODINGS = {
     "depth": {"format": "png", "dtype": "uint16", "channels": 1, "units": "mm", "scale": DEPTH_SCALE,
