@@ -324,6 +324,27 @@ def test_render_shows_a_uniform_environment_behind_the_hand(server):
     assert doc["labels"]["render"]["background"]["used"] == "environment:uniform"
 
 
+def test_the_jobs_string_backdrop_is_the_object_form_at_blur_0(server):
+    """schemas/dataset_jobs.schema.json keeps the string 'environment' (`render --background environment`'s form) as
+    the same backdrop as the studio's {'environment': true, 'blur': 0}: both are valid jobs and render the same
+    bytes through the dataset's frame path."""
+    from darthand.dataset.frames import render_job
+    from darthand.dataset.jobs import check_jobs
+    from darthand.render.api import Renderer, open_source
+
+    _, build = server
+    lights = {"environment": {"map": str(build.parent / "environments" / "directions.hdr"), "frame": "world"}}
+    renderer = Renderer(open_source(build / "model" / "right.npz"))
+    settings = {"size": 48, "samples": 4, "aa_shading": "triangle"}
+    images = []
+    for background in ("environment", {"environment": True, "blur": 0.0}):
+        job = {"index": 0, "pose": None, "lights": lights, "background": background}
+        check_jobs([job], "jobs")
+        images.append(render_job(renderer, job, settings)[0].rgba)
+    assert images[0][..., 3].min() == 255                  # the backdrop fills the frame
+    np.testing.assert_array_equal(images[0], images[1])
+
+
 def test_a_map_whose_pixels_are_bad_is_refused_for_a_scene_and_listed_unusable(server):
     """nan.exr's header is fine; a scene naming it decodes it (render/environment.read_map): one-line 422 naming
     the NaN, for export as for render, and the listing says so from then on."""
