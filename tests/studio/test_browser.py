@@ -189,13 +189,10 @@ def _model(build, side="right"):
 
 
 def test_page_loads_without_errors(session):
-    """No console errors but the browser's own line for the Render refused with an environment (until the renderer
-    draws environments: test_render_request_carries_the_environment)."""
-    from darthand.studio.adapters import environment_render_ready
-
+    """No console errors, page errors or failed requests over the whole session (the Renders under an environment
+    included)."""
     report = session["report"]
-    console = [m for m in report["console"] if environment_render_ready() or "status of 501" not in m]
-    assert console == [] and report["page_errors"] == [] and report["failed_requests"] == []
+    assert report["console"] == [] and report["page_errors"] == [] and report["failed_requests"] == []
     assert session["results"][35]["errors"] == []
     assert session["results"][0]["usable_ms"] > 0
 
@@ -433,10 +430,8 @@ def _angles(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def test_render_request_carries_the_environment(session):
     """Render sends the lights document's environment (frame 'world', the panel's rotation and strength), the
-    environment backdrop and the Image settings' film; the renderer draws it, or (until render/environment.py
-    lands) refuses in one line naming the environment. The unusable map is shown as such."""
-    from darthand.studio.adapters import environment_render_ready
-
+    environment backdrop and the Image settings' film; the job the server rendered carries the map's file and the
+    dataset's backdrop form. The unusable map is shown as such."""
     r = session["results"][59]
     request = r["request"]
     assert request["lights"]["environment"] == {"map": "directions.hdr", "rotation": 90, "strength": 1,
@@ -444,10 +439,9 @@ def test_render_request_carries_the_environment(session):
     assert request["lights"]["lights"] == [] and request["lights"]["ambient"]["intensity"] == 0
     assert request["background"] == {"environment": {"blur": 0}}
     assert isinstance(request["film"], dict) and request["film"]
-    if environment_render_ready():
-        assert r["job"]["lights"]["environment"]["map"].endswith("directions.hdr")
-    else:
-        assert "environment" in r["errors"][-1]
+    assert r["errors"] == []
+    assert r["job"]["lights"]["environment"]["map"].endswith("directions.hdr")
+    assert r["job"]["background"] == {"environment": True, "blur": 0.0}
     assert "unusable" in r["broken"]
 
 
@@ -463,17 +457,12 @@ def test_saved_scene_loads_back_with_its_environment(session):
 
 
 def test_reference_render_shows_the_live_views_backdrop_and_light(session):
-    """Once the renderer draws environments: the Render of the environment backdrop (clean image, same camera) shows
-    the live view's backdrop, pixel for pixel within a few sRGB codes away from the hand, and lights the hand as
-    three.js's prefiltered map does (the direction map tints each side of the hand by the way it faces: a turned
-    or mirrored environment would tint it otherwise). Measured on a trial merge with the env branch: backdrop 0.3,
-    hand 4.7 codes mean difference."""
+    """The Render of the environment backdrop (clean image, same camera) shows the live view's backdrop, pixel for
+    pixel within a few sRGB codes away from the hand, and lights the hand as three.js's prefiltered map does (the
+    direction map tints each side of the hand by the way it faces: a turned or mirrored environment would tint it
+    otherwise). Measured on a trial merge with the env branch: backdrop 0.3, hand 4.7 codes mean difference."""
     from scipy.ndimage import binary_dilation, binary_erosion
 
-    from darthand.studio.adapters import environment_render_ready
-
-    if not environment_render_ready():
-        pytest.skip("the renderer does not draw environments yet (render/environment.py)")
     r = session["results"][66]
     assert "film" not in r["request"] and r["job"]["lights"] == r["request"]["lights"] | {
         "environment": {**r["request"]["lights"]["environment"], "map": r["job"]["lights"]["environment"]["map"]}}

@@ -4,6 +4,7 @@ header, methods it does not serve; and the `darthand studio` command's own argum
 
 from __future__ import annotations
 
+import base64
 import http.client
 import json
 import sys
@@ -37,11 +38,11 @@ def server(tmp_path_factory):
     srv.server_close()
 
 
-def request(server, method, path, body=None, headers=None):
+def request(server, method, path, body=None, headers=None, timeout=30):
     """(status, parsed JSON or raw bytes) of a raw request (the path is sent as written: no client normalisation)."""
     srv, _ = server
     host, port = srv.server_address[:2]
-    conn = http.client.HTTPConnection(host, port, timeout=30)
+    conn = http.client.HTTPConnection(host, port, timeout=timeout)
     hdrs = {"Host": f"{host}:{port}", **(headers or {})}
     data = body if isinstance(body, bytes) or body is None else json.dumps(body).encode()
     if data is not None and "Content-Type" not in hdrs:
@@ -134,11 +135,14 @@ def scene(**kw):
                    "R": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "t": [0, 0, 1]}), 400, "camera"),
     (scene(lights={"ambient": {"intensity": -4}}), 400, "lights"),
     (scene(lights={"environment": {"map": "../../secret.txt"}}), 404, "environment"),
-    (scene(lights={"environment": {"map": "broken.exr"}}), 422, "does not decode"),
+    (scene(lights={"environment": {"map": "broken.exr"}}), 422, "cannot read environment map"),
     (scene(lights={"environment": {"map": "uniform.hdr", "strength": -1}}), 400, "strength"),
     (scene(lights={"environment": {"map": "uniform.hdr", "frame": "sky"}}), 400, "frame"),
     (scene(background={"environment": {"blur": 2}}), 400, "environment"),
+    (scene(lights={"environment": {"map": "uniform.hdr"}}, background={"environment": {"blur": 60}}), 400, "blur"),
     (scene(film=[1]), 400, "film"),
+    (scene(film={"shutter_ms": 8}), 400, "'shutter_ms'"),
+    (scene(film={"iso": 10}), 400, "iso"),
     (scene(name="../../evil"), 400, "name"),
     ([1, 2, 3], 400, "scene"),
 ])
@@ -223,13 +227,11 @@ def test_environments_listing_marks_bad_maps_with_their_reason(server):
     maps = listing(server)
     assert maps["directions.hdr"] == {"id": "directions.hdr", "source": "folder", "usable": True}
     assert "notes.txt" not in maps
-    assert not maps["broken.exr"]["usable"] and "does not decode" in maps["broken.exr"]["reason"]
-    assert not maps["wide.exr"]["usable"] and "48x16, not equirectangular" in maps["wide.exr"]["reason"]
-    from darthand.studio.adapters import builtin_environment_folder
-
+    assert not maps["broken.exr"]["usable"] and "cannot read environment map" in maps["broken.exr"]["reason"]
+    assert not maps["wide.exr"]["usable"] and "48x16, not 2:1" in maps["wide.exr"]["reason"]
     builtin = [k for k, e in maps.items() if e["source"] == "builtin"]
-    if builtin_environment_folder() is not None:         # Blender's (or the vendored) maps
-        assert {"studio", "city", "forest", "sunset"} <= set(builtin)
+    assert {"studio", "city", "forest", "sunset"} <= set(builtin)      # the vendored maps (assets_src/environments)
+    assert all(maps[k]["usable"] for k in builtin)
     assert list(maps)[:len(builtin)] == builtin            # built-ins first
 
 
@@ -279,7 +281,10 @@ def test_live_map_is_the_map_as_radiance_hdr(server):
 
 def test_scene_environment_reaches_the_job(server):
     """The exported job's lights carry the environment (a folder map by its path, a built-in by its name) and its
-    background the environment backdrop; the export keeps the studio scene (environment and film) to load back."""
+    background the dataset's environment backdrop ({'environment': true, 'blur'}, blur 0 too); the export keeps the
+    studio scene (environment and film) to load back, and is a valid jobs file."""
+    from darthand.dataset.jobs import check_jobs
+
     _, build = server
     env = {"map": "uniform.hdr", "rotation": 30.0, "strength": 1.5, "frame": "world"}
     body = scene(lights={"environment": env}, background={"environment": {"blur": 4.0}},
@@ -288,23 +293,66 @@ def test_scene_environment_reaches_the_job(server):
     assert status == 200, doc
     job = doc["document"]["frames"][0]
     assert job["lights"]["environment"] == {**env, "map": str(build.parent / "environments" / "uniform.hdr")}
-    assert job["background"]["blur"] == 4.0
+    assert job["background"] == {"environment": True, "blur": 4.0}
     saved = doc["document"]["studio"]
     assert saved["scene"]["lights"]["environment"] == env and saved["film"] == {"exposure_ev": 0.5}
-    if "studio" in listing(server):
-        body = scene(lights={"environment": {"map": "studio"}}, background={"environment": {}})
-        status, doc = request(server, "POST", "/api/export/scene", body)
-        job = doc["document"]["frames"][0]
-        assert job["lights"]["environment"]["map"] == "studio" and job["background"] == "environment"
+    check_jobs(doc["document"], "export")
+    body = scene(lights={"environment": {"map": "studio"}}, background={"environment": {}})
+    status, doc = request(server, "POST", "/api/export/scene", body)
+    assert status == 200, doc
+    job = doc["document"]["frames"][0]
+    assert job["lights"]["environment"]["map"] == "studio" and job["background"] == {"environment": True, "blur": 0.0}
+    check_jobs(doc["document"], "export")
 
 
-def test_render_with_an_environment_is_refused_in_one_line_until_the_renderer_draws_it(server):
-    from darthand.studio.adapters import environment_render_ready
+def test_render_shows_a_uniform_environment_behind_the_hand(server):
+    """Render under the uniform map (0.5 everywhere) at strength 1.5 with the environment backdrop, clean image:
+    every pixel away from the hand is the closed form sRGB(0.75); the labels name the backdrop."""
+    body = scene(lights={"environment": {"map": "uniform.hdr", "strength": 1.5, "frame": "world"}},
+                 background={"environment": {"blur": 2.0}},
+                 camera={"width": 64, "height": 64, "K": [[90, 0, 32], [0, 90, 32], [0, 0, 1]],
+                         "R": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "t": [0, 0, 0.5]})
+    status, doc = request(server, "POST", "/api/render", body, timeout=600)     # the first render compiles kernels
+    assert status == 200, doc
+    image, mask = (_image(base64.b64decode(doc[k])) for k in ("image", "mask"))
+    mask = mask[..., 0] if mask.ndim == 3 else mask
+    away = mask == 0
+    assert 0 < (~away).sum() and away.sum() > 64 * 64 // 4
+    x = 0.75
+    expected = 255 * (1.055 * x ** (1 / 2.4) - 0.055)
+    assert np.abs(image[..., :3][away].astype(float) - expected).max() <= 1.0
+    assert doc["labels"]["render"]["background"]["used"] == "environment:uniform"
 
-    if environment_render_ready():
-        pytest.skip("the renderer draws environments")
-    status, message = refused_any(server, "POST", "/api/render", scene(lights={"environment": {"map": "uniform.hdr"}}))
-    assert status == 501 and "environment" in message
+
+def test_the_jobs_string_backdrop_is_the_object_form_at_blur_0(server):
+    """schemas/dataset_jobs.schema.json keeps the string 'environment' (`render --background environment`'s form) as
+    the same backdrop as the studio's {'environment': true, 'blur': 0}: both are valid jobs and render the same
+    bytes through the dataset's frame path."""
+    from darthand.dataset.frames import render_job
+    from darthand.dataset.jobs import check_jobs
+    from darthand.render.api import Renderer, open_source
+
+    _, build = server
+    lights = {"environment": {"map": str(build.parent / "environments" / "directions.hdr"), "frame": "world"}}
+    renderer = Renderer(open_source(build / "model" / "right.npz"))
+    settings = {"size": 48, "samples": 4, "aa_shading": "triangle"}
+    images = []
+    for background in ("environment", {"environment": True, "blur": 0.0}):
+        job = {"index": 0, "pose": None, "lights": lights, "background": background}
+        check_jobs([job], "jobs")
+        images.append(render_job(renderer, job, settings)[0].rgba)
+    assert images[0][..., 3].min() == 255                  # the backdrop fills the frame
+    np.testing.assert_array_equal(images[0], images[1])
+
+
+def test_a_map_whose_pixels_are_bad_is_refused_for_a_scene_and_listed_unusable(server):
+    """nan.exr's header is fine; a scene naming it decodes it (render/environment.read_map): one-line 422 naming
+    the NaN, for export as for render, and the listing says so from then on."""
+    body = scene(lights={"environment": {"map": "nan.exr"}})
+    for call in ("/api/export/scene", "/api/render"):
+        status, message = refused(server, "POST", call, body)
+        assert status == 422 and "NaN" in message, (call, message)
+    assert not listing(server)["nan.exr"]["usable"]
 
 
 def test_environments_folder_that_is_not_one_is_one_line(server, tmp_path, capsys):

@@ -2,9 +2,8 @@
 
 build.py what a build folder offers the page (sides, packages, catalogue ids) and the checks of every id a request
 names; rig.py the per-side data the page poses the glTF with; media.py thumbnails, accessory glTFs and backgrounds;
-environments.py the environment maps offered (built-in and --environments DIR), their thumbnails and live copies;
-adapters.py stand-ins for the environment and film functions of issue 28's other branches (replaced at merge);
-request_error.py the refusal every module raises;
+environments.py the environment maps offered (render/environment.py's built-in set and --environments DIR), their
+thumbnails and live copies; request_error.py the refusal every module raises;
 scene.py a scene from the page as a checked one-frame dataset job, pose files, exports and the render; server.py the
 HTTP server (127.0.0.1, validated requests, bounded work); static/ the page (three.js from the repo's node_modules).
 """

@@ -1,10 +1,12 @@
-"""The environment maps the studio offers (issue 28's environment contract): the built-in set and the maps of a
-folder (`darthand studio --environments DIR`), each with a thumbnail and a copy the live view loads.
+"""The environment maps the studio offers (render/environment.py's contract): the built-in set
+(render/environment.list_builtin) and the maps of a folder (`darthand studio --environments DIR`), each with a
+thumbnail and a copy the live view loads.
 
-A map's id is what a studio scene names: a built-in map's stem ("studio"), a folder map's file name ("sky.hdr"),
+A map's id is what a studio scene names: a built-in map's name ("studio"), a folder map's file name ("sky.hdr"),
 so the two never collide. The listing opens each file's header only (decodes, 2:1); a fault found when the
-pixels are first decoded (truncated data, NaN/Inf, negative values) marks the map unusable from then on. Made
-files are cached under BUILD/studio/cache, keyed by the map's path, size and modification time:
+pixels are first decoded by render/environment.read_map (truncated data, NaN/Inf, negative values) marks the map
+unusable from then on, with read_map's one-line reason. Made files are cached under BUILD/studio/cache, keyed by
+the map's path, size and modification time:
 - the thumbnail: THUMB_WIDTH x THUMB_HEIGHT sRGB PNG, box-filtered and tone-mapped (exposed to the map's own
   log-average luminance, then Reinhard's x / (1 + x)), for picking by eye;
 - the live map: the map itself as an RGBE Radiance .hdr (three.js's HDRLoader reads it; EXR's many compressions
@@ -25,12 +27,11 @@ import OpenImageIO as oiio
 from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.processes import native_stderr_captured
-from darthand.render.image import write_png
-from darthand.studio.adapters import builtin_environment_folder, read_map
+from darthand.render.environment import SUFFIXES, list_builtin, map_path, read_map
+from darthand.render.image import first_line, write_png
 from darthand.studio.request_error import RequestError
 from darthand.textures.color import encode_srgb8
 
-SUFFIXES = (".exr", ".hdr")
 THUMB_WIDTH, THUMB_HEIGHT = 128, 64
 LIVE_WIDTH = 1024
 MAX_FOLDER_MAPS = 1000
@@ -61,11 +62,10 @@ class EnvironmentMap:
 class EnvironmentSet:
     """The built-in maps and those of `folder` (top level, .exr and .hdr), listed once when opened."""
 
-    def __init__(self, folder=None, builtin: Path | None = None):
-        builtin = builtin if builtin is not None else builtin_environment_folder()
+    def __init__(self, folder=None):
         self.maps: dict[str, EnvironmentMap] = {}
-        for path in _map_files(builtin) if builtin is not None else []:
-            self.maps[path.stem] = EnvironmentMap(path.stem, "builtin", path)
+        for name in list_builtin():
+            self.maps[name] = EnvironmentMap(name, "builtin", map_path(name))
         self.folder = None if folder is None else Path(folder).resolve()
         if self.folder is not None:
             if not self.folder.is_dir():
@@ -90,8 +90,12 @@ class EnvironmentSet:
         return env
 
     def job_map(self, map_id) -> str:
-        """What a lights document's environment.map holds for this id: a built-in's name, a folder map's path."""
+        """What a lights document's environment.map holds for this id: a built-in's name, a folder map's path. The
+        map is decoded first (read_map keeps the last few per process), so a fault is the studio's 422 and the map
+        is listed unusable from then on."""
         env = self.get(map_id)
+        with self._lock:
+            self._decoded(env)
         return env.id if env.source == "builtin" else str(env.path)
 
     def thumbnail(self, map_id, cache: Path) -> bytes:
@@ -107,12 +111,17 @@ class EnvironmentSet:
     def _cached(self, env: EnvironmentMap, path: Path, make) -> bytes:
         with self._lock:
             if not path.is_file():
-                try:
-                    make(read_map(env.path), path)
-                except InputError as e:
-                    env.reason = str(e).removeprefix(f"{env.path}: ")
-                    raise RequestError(422, f"environment {env.id!r} is unusable: {env.reason}") from None
+                make(self._decoded(env), path)
             return path.read_bytes()
+
+    def _decoded(self, env: EnvironmentMap) -> np.ndarray:
+        """(H, 2H, 3) float32 linear pixels of the map (render/environment.read_map); its InputError marks the map
+        unusable with read_map's reason (the path left out) and is a RequestError 422."""
+        try:
+            return read_map(env.path)
+        except InputError as e:
+            env.reason = str(e).removeprefix(f"{env.path}: ")
+            raise RequestError(422, f"environment {env.id!r} is unusable: {env.reason}") from None
 
 
 def _map_files(folder: Path) -> list[Path]:
@@ -125,16 +134,16 @@ def _map_files(folder: Path) -> list[Path]:
 
 
 def header_fault(path: Path) -> str | None:
-    """Why the file's header rules it out as an equirectangular map (one line), or None."""
+    """Why the file's header rules it out as an equirectangular map (one line, worded as read_map's refusal without
+    the path), or None."""
     with native_stderr_captured():
         inp = oiio.ImageInput.open(str(path))
     if inp is None:
-        reason = (oiio.geterror() or "unknown format").strip().splitlines()
-        return f"does not decode ({reason[0] if reason else 'unknown format'})"
+        return f"cannot read environment map: {first_line(oiio.geterror()) or 'unknown format'}"
     spec = inp.spec()
     inp.close()
     if spec.width != 2 * spec.height:
-        return f"is {spec.width}x{spec.height}, not equirectangular (width = 2 x height)"
+        return f"environment map is {spec.width}x{spec.height}, not 2:1 (equirectangular)"
     return None
 
 

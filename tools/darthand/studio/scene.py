@@ -26,10 +26,10 @@ from darthand.model.layout import NUM_JOINTS
 from darthand.model.mirror import mirror_pose
 from darthand.render.api import Renderer
 from darthand.render.camera import Camera
+from darthand.render.film import Film
 from darthand.render.image import encode_mask8, write_png
+from darthand.render.lights import load_lighting
 from darthand.schemas import check_schema
-from darthand.studio.adapters import (check_film, environment_background_job, environment_render_ready,
-                                      load_lighting_checked)
 from darthand.studio.build import RequestError, StudioBuild
 
 SCENE_SCHEMA = "studio_scene.schema.json"
@@ -59,16 +59,14 @@ def check_scene(build: StudioBuild, scene) -> dict:
                                 camera["width"], camera["height"]))
     lights = scene.get("lights")
     if lights is not None:
-        _checked(lambda: load_lighting_checked(lights, "scene: lights"))
-        if "environment" in lights:
-            build.environments.get(lights["environment"]["map"])
+        _checked(lambda: load_lighting(_job_lights(build, lights), "scene: lights"))   # the map by its file
     background = scene.get("background")
     if isinstance(background, dict) and "image" in background:
         build.background_file(background["image"])
     if isinstance(background, dict) and "environment" in background and not (lights or {}).get("environment"):
         raise RequestError(400, "scene: field 'background' is the environment, but the lights have none")
     if scene.get("film") is not None:
-        _checked(lambda: check_film(scene["film"], "scene"))
+        _checked(lambda: Film.from_json(scene["film"], "scene: film"))
     return scene
 
 
@@ -100,7 +98,7 @@ def scene_job(build: StudioBuild, scene: dict, index: int = 0) -> dict:
 
 def _job_lights(build: StudioBuild, lights):
     """The lights document with its environment's map id turned into what the renderer reads (a built-in's name,
-    a folder map's path)."""
+    a folder map's path); RequestError 404 (an unknown id) or 422 (a map listed unusable)."""
     if not lights or "environment" not in lights:
         return lights
     environment = {**lights["environment"], "map": build.environments.job_map(lights["environment"]["map"])}
@@ -113,8 +111,8 @@ def _job_background(build: StudioBuild, background):
     if "image" in background:
         path = build.background_file(background["image"])
         return {"folder": str(path.parent), "files": [path.name], "builtin": 0}
-    if "environment" in background:
-        return environment_background_job(background["environment"].get("blur", 0.0))
+    if "environment" in background:          # the dataset's form (render/environment.backdrop_blur), blur 0 too
+        return {"environment": True, "blur": float(background["environment"].get("blur", 0.0))}
     return dict(background)
 
 
@@ -125,9 +123,6 @@ def render_scene(build: StudioBuild, scene: dict) -> dict:
     """Render the scene as its dataset job would be: {'image', 'mask' (PNG bytes, base64), 'labels', 'job',
     'seconds'}."""
     check_scene(build, scene)
-    if (scene.get("lights") or {}).get("environment") and not environment_render_ready():
-        raise RequestError(501, "render: this renderer has no environment lighting yet (render/environment.py, "
-                                "issue 28): choose 'none' in the Environment panel")
     job = scene_job(build, scene)
     side = build.side(scene["side"])
     size = int(scene["camera"]["width"]) if scene.get("camera") else 512
