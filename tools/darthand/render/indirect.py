@@ -320,14 +320,19 @@ class VertexLight:
 
     def _environment_seen(self, normals: np.ndarray, dirs: np.ndarray, blocked: np.ndarray, k: int) -> np.ndarray:
         """(N, 3) float32 the environment's pi-folded irradiance at N vertices with unit normals (N, 3) whose k rays
-        each (dirs (N * k, 3), vertex-major) are `blocked` (N * k,) bool: unoccluded irradiance less the mean sky of
-        the blocked rays, at least 0."""
+        each (dirs (N * k, 3), vertex-major) are `blocked` (N * k,) bool: the unoccluded irradiance times, per
+        channel, the share of the rays' sky that the open rays see (1 for an open vertex: exact; the open fraction
+        under a uniform map). A ratio, not the difference of the two estimates: the order-2 irradiance smooths a
+        bright patch that the blocked rays' sky does not, and their difference went below zero in one channel
+        (blue blotches between fingers under a blue sky)."""
         assert self.environment is not None
         open_sky = self.environment.irradiance(normals.T).T
-        hidden = np.zeros((len(blocked), 3), np.float32)
-        at = np.flatnonzero(blocked)
-        hidden[at] = self.environment.sky(dirs[at])
-        return np.maximum(open_sky - hidden.reshape(len(normals), k, 3).mean(axis=1), 0).astype(np.float32)
+        sky = self.environment.sky(dirs).reshape(len(normals), k, 3).astype(np.float64)
+        seen = np.where(blocked.reshape(len(normals), k, 1), 0.0, sky).sum(axis=1)
+        total = sky.sum(axis=1)
+        share = np.where(total > 1e-12, seen / np.maximum(total, 1e-12), 1.0 - blocked.reshape(len(normals), k)
+                         .mean(axis=1, keepdims=True))
+        return (np.maximum(open_sky, 0) * share).astype(np.float32)
 
     def at(self, g: int, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(E (3, M) float32 indirect irradiance, V (M,) open fraction) at hits on faces prim (M,) of surface g
