@@ -619,10 +619,10 @@ def _add_dataset_arguments(p) -> None:
     p.add_argument("--size", type=number(int, 8, o.MAX_SIZE), default=run.size, metavar="N",
                    help=f"square image size in pixels (default {run.size})")
     _add_antialiasing_options(p, run.samples, run.aa_shading)
-    _add_shading_options(p)
+    _add_shading_options(p, run.shading)
     _add_engine_options(p, run.engine, run.cycles_samples)
     _add_film_option(p, str(run.film))
-    _add_geometry_options(p)
+    _add_geometry_options(p, run.geometry)
     p.add_argument("--processes", type=number(int, 1, 100_000), default=None, metavar="N",
                    help="worker processes, each rendering whole frames (default: the number of cores; 1 renders "
                         "in this process)")
@@ -713,12 +713,12 @@ def _add_antialiasing_options(p, samples: int, aa_shading: str = "triangle") -> 
                         "default), or each one (sample: slower, exact supersampling)")
 
 
-def _add_shading_options(p) -> None:
+def _add_shading_options(p, defaults: dict | None = None) -> None:
     """--ao-rays, --no-interreflection, --skin, --skin-specular, --skin-detail, defaulting to the renderer's
-    (shade.ShadingOptions)."""
+    (shade.ShadingOptions) updated with `defaults` (a dataset's)."""
     from darthand.render.shade import SKIN_MODELS, SKIN_SPECULAR, ShadingOptions
 
-    d = ShadingOptions()
+    d = ShadingOptions(**(defaults or {}))
     p.add_argument("--ao-rays", type=number(int, 0, 4096), default=d.ao_rays, metavar="N",
                    help="rays per vertex for the ambient light's occlusion and light reflected between surfaces; "
                         f"0: ambient light reaches everything, nothing is interreflected (default {d.ao_rays})")
@@ -759,19 +759,21 @@ def _add_film_option(p, default: str) -> None:
                         f"renderer's own image (default {default})")
 
 
-def _add_geometry_options(p) -> None:
-    """--subdivision, --arm, defaulting to the renderer's (render/dress.GeometryOptions: both off)."""
+def _add_geometry_options(p, defaults: dict | None = None) -> None:
+    """--subdivision, --arm, defaulting to the renderer's (render/dress.GeometryOptions: both off) updated with
+    `defaults` (a dataset's)."""
     # Imported when the parser is built: `darthand --help` does not load the renderer (as _add_shading_options).
     from darthand.render.dress import GeometryOptions
     from darthand.render.subdivision import MAX_LEVEL
 
-    d = GeometryOptions()
+    d = GeometryOptions(**(defaults or {}))
     p.add_argument("--subdivision", type=number(int, 0, MAX_LEVEL), default=d.subdivision, metavar="N",
                    help="Loop subdivision levels of the skin at render time, for round outlines and shading; the "
                         f"labels keep the model's own vertices (0 off, 1 or 2; default {d.subdivision})")
     p.add_argument("--arm", type=_arm_length, default=d.arm, metavar="METRES|on|off",
                    help="draw the forearm this far past the model's cut instead of its flat cap, so it goes on out "
-                        "of the frame ('on': 0.3 m; default off); the camera and labels are unchanged")
+                        "of the frame ('on': 0.3 m; a model source only: a USD package's frames keep the cap); the "
+                        f"camera and labels are unchanged (default {f'{d.arm:g} m' if d.arm else 'off'})")
 
 
 def _arm_length(text: str) -> float:

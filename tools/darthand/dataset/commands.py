@@ -65,7 +65,7 @@ def dataset_options(args) -> DatasetOptions:
                  "skin_specular": args.skin_specular, "skin_detail": args.skin_detail},
         engine=args.engine, cycles_samples=args.cycles_samples, film=args.film, processes=args.processes,
         threads=args.threads,
-        geometry={"subdivision": args.subdivision, "arm": args.arm} if args.subdivision or args.arm else None,
+        geometry={"subdivision": args.subdivision, "arm": args.arm},
         cluster=None if args.ray is None else ClusterOptions(args.ray or None, args.ray_files),
         resume=args.resume, shard_size=args.shard_size, max_frames=args.max_frames,
         maps=tuple(_names(args.maps) or ()), formats=tuple(_names(args.formats) or ()), left=args.left,

@@ -34,6 +34,12 @@ DEFAULT_SHARD_SIZE = 16384
 # instead of the renderer's 8 save 7.2 of 56.6 ms a frame for +0.05 sRGB codes of mean error (0.62 -> 0.67); 8
 # indirect rays instead of 16 would save 1.6 ms more for +0.18 codes (0.67 -> 0.85), so the shading defaults stay.
 DEFAULT_SAMPLES = 4
+# What a dataset draws beyond the renderer's defaults, for frames that look like photographs (issue 28; measured in
+# benchmarks/realism.py and render_dataset.py): the skin's two specular lobes, sheen and relief, and the forearm
+# going on out of the frame (a model source; 0.3 m, render/arm.ARM_ON_M). The lights and backgrounds are the plan's
+# (an environment map per frame, seen behind the hand) and the film a random camera per frame.
+PHOTO_SHADING = {"skin_specular": "dual", "skin_detail": 1.0}
+PHOTO_GEOMETRY = {"subdivision": 0, "arm": 0.3}
 DEFAULT_SIZE = 512
 DEFAULT_COUNT = 100
 DEFAULT_MAX_FRAMES = 1_000_000    # a budget: more needs max_frames= (--max-frames)
@@ -97,9 +103,9 @@ class DatasetOptions:
     size: int = DEFAULT_SIZE
     samples: int = DEFAULT_SAMPLES
     aa_shading: str = "triangle"
-    shading: dict | None = None
-    film: str | dict = "none"
-    geometry: dict | None = None
+    shading: dict | None = field(default_factory=lambda: dict(PHOTO_SHADING))
+    film: str | dict = "random"
+    geometry: dict | None = field(default_factory=lambda: dict(PHOTO_GEOMETRY))
     processes: int | None = None
     threads: int | None = None
     cluster: ClusterOptions | None = None

@@ -94,9 +94,9 @@ class PlanOptions:
     fov_range_deg: tuple = (30.0, 60.0)
     margin_range: tuple = (0.03, 0.15)
     distance_range: tuple | None = None
-    lights: str | dict = "random"
+    lights: str | dict = "environment"
     environments: str = "builtin"
-    backgrounds: str = "builtin"
+    backgrounds: str = "environment"
     split: tuple = (0.8, 0.1, 0.1)
     shapes: ShapeOptions = field(default_factory=ShapeOptions)
 

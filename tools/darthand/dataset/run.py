@@ -70,6 +70,8 @@ def render_frames(options: DatasetOptions, sources: dict, specs: dict, planner=N
     aa.check_options(samples, aa_shading)
     shading = shading_options(o.shading).to_json()
     geometry = geometry_options(o.geometry).to_json()
+    if geometry.get("arm") and any(source.kind != "model" for source in sources.values()):
+        del geometry["arm"]          # a USD package's forearm has no rig to extend: its frames keep their cap
     size = bounded_int(o.size, "size", 8, MAX_SIZE, "pixels")
     if cluster is None:
         processes = bounded_int(len(os.sched_getaffinity(0)) if processes is None else processes, "processes", 1,
