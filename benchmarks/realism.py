@@ -68,10 +68,19 @@ DEFAULT_CONFIDENCE = 0.5          # MediaPipe's min_detection_confidence (its ow
 # so any DatasetOptions field). A new setting is one line, e.g. "environments": ["--environments", "builtin"] or
 # "cycles": ["--engine", "cycles"] (the CPU figures count the command's child processes, Blender's too). The headline
 # is 'default''s (else the first row run).
+BEFORE = ["--lights", "random", "--backgrounds", "builtin", "--film", "none", "--skin-specular", "single",
+          "--skin-detail", "0", "--arm", "off"]          # the defaults before issue 28
 SETTINGS: dict[str, list[str]] = {
     "default": [],
+    "before": BEFORE,
+    "lights-random": ["--lights", "random", "--backgrounds", "builtin"],
+    "no-backdrop": ["--backgrounds", "builtin"],
+    "no-film": ["--film", "none"],
+    "no-arm": ["--arm", "off"],
+    "single-lobe-skin": ["--skin-specular", "single", "--skin-detail", "0"],
+    "subdivision": ["--subdivision", "1"],
     "no-background": ["--backgrounds", "none"],
-    "default-lights": ["--lights", "default"],
+    "cycles": ["--engine", "cycles", "--film", "none"],
 }
 
 

@@ -69,6 +69,9 @@ def test_wheel_holds_every_module_and_the_package_data(wheel_files):
     expected = {f"darthand/{p.relative_to(PACKAGE).as_posix()}" for p in PACKAGE.rglob("*.py")}
     expected |= {"darthand/py.typed"}
     expected |= {f"darthand/{p.relative_to(PACKAGE).as_posix()}" for p in (PACKAGE / "studio" / "static").iterdir()}
+    maps = {f"darthand/{p.relative_to(PACKAGE).as_posix()}" for p in (PACKAGE / "render" / "environments").iterdir()}
+    assert len(maps) == 10                              # the 8 built-in environment maps, their licence and README
+    expected |= maps
     assert len(expected) > 100
     assert not expected - wheel_files, f"missing from the wheel: {sorted(expected - wheel_files)}"
 

@@ -230,7 +230,7 @@ def test_environments_listing_marks_bad_maps_with_their_reason(server):
     assert not maps["broken.exr"]["usable"] and "cannot read environment map" in maps["broken.exr"]["reason"]
     assert not maps["wide.exr"]["usable"] and "48x16, not 2:1" in maps["wide.exr"]["reason"]
     builtin = [k for k, e in maps.items() if e["source"] == "builtin"]
-    assert {"studio", "city", "forest", "sunset"} <= set(builtin)      # the vendored maps (assets_src/environments)
+    assert {"studio", "city", "forest", "sunset"} <= set(builtin)      # the vendored maps (render/environments)
     assert all(maps[k]["usable"] for k in builtin)
     assert list(maps)[:len(builtin)] == builtin            # built-ins first
 

@@ -2,7 +2,7 @@
 
 The contract (schemas/lights.schema.json, field "environment"):
 
-- A map is named by its stem (a built-in map of `assets_src/environments/`, `list_builtin()`) or given by path (an
+- A map is named by its stem (a built-in map of `render/environments/`, `list_builtin()`) or given by path (an
   equirectangular .exr or .hdr, width = 2 x height, linear RGB, no NaN, Inf or negative texel).
 - The environment's radiance in direction d is map(d) x strength x white_balance, in the map's own units: a white
   Lambertian surface under a uniform map of value L renders radiance L (lights.py's pi-folded intensities).
@@ -47,7 +47,7 @@ from darthand.errors import InputError
 from darthand.jit import kernel
 from darthand.render.image import read_image_buf
 
-BUILTIN_DIR = Path(__file__).resolve().parents[3] / "assets_src" / "environments"
+BUILTIN_DIR = Path(__file__).resolve().parent / "environments"     # package data: a pip install has them
 SUFFIXES = (".exr", ".hdr")
 FRAMES = ("camera", "world")
 ENVIRONMENT_BACKGROUND = "environment"      # the background that is the environment itself (render_subject)
@@ -73,7 +73,7 @@ LUMA = np.array([0.2126, 0.7152, 0.0722])      # Rec. 709 luminance of linear RG
 
 
 def list_builtin() -> list[str]:
-    """The built-in maps' names (stems of assets_src/environments/*.exr), sorted."""
+    """The built-in maps' names (stems of render/environments/*.exr), sorted."""
     return sorted(p.stem for p in BUILTIN_DIR.glob("*.exr"))
 
 
