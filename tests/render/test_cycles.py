@@ -1,7 +1,8 @@
 """The path-traced tier (render/cycles.py): Blender's Cycles against closed forms (a white Lambertian plane under a
 sun, a point light, ambient light and a uniform environment renders the intensity the lights' units promise), against
-the fast renderer (the same frame's mask: IoU and centroid; labels unchanged), the environment seen behind the hand
-against a numpy lookup written from issue 28's environment contract, a missing Blender as one line, and a dataset
+the fast renderer (the same frame's mask: IoU and centroid; labels unchanged; the hand's mean colour under an
+environment; the environment backdrop's pixels), the environment seen behind the hand against a numpy lookup written
+from issue 28's environment contract, a left hand after a right one, a missing Blender as one line, and a dataset
 rendered with --engine cycles that resumes after an interruption.
 
 Tests that need bpy skip when .venv-blender is missing."""
