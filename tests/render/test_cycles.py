@@ -98,7 +98,7 @@ def test_euler_xyz_rebuilds_the_rotation():
         assert np.allclose(Rz @ Ry @ Rx, R, atol=1e-9)
 
 
-def test_world_spec_takes_the_lightings_environment():
+def test_world_spec_takes_the_lightings_environment(tmp_path):
     """The worker's world is the lights document's environment as render/lights.load_lighting parses it (the one
     Environment of render/environment.py): its map resolved by map_path, strength x white balance as the scale."""
     lighting = load_lighting({"ambient": {"intensity": 0.1},
@@ -112,6 +112,12 @@ def test_world_spec_takes_the_lightings_environment():
     assert "environment" not in world_spec(load_lighting({}), cam)
     with pytest.raises(InputError, match="no_such_map"):
         load_lighting({"environment": {"map": "no_such_map"}})
+    square = tmp_path / "square.exr"
+    buf = oiio.ImageBuf(oiio.ImageSpec(16, 16, 3, oiio.FLOAT))
+    assert buf.write(str(square))
+    with pytest.raises(InputError, match="not 2:1") as e:               # an Environment made without from_json
+        world_spec(Lighting(environment=Environment(str(square))), cam)
+    assert "\n" not in str(e.value)
 
 
 def test_cycles_lookup_reads_the_contracts_texel():

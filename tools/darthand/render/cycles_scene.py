@@ -31,7 +31,7 @@ import numpy as np
 
 from darthand.errors import InputError
 from darthand.render.camera import Camera
-from darthand.render.environment import Environment, frame_matrix, map_path
+from darthand.render.environment import Environment, frame_matrix, map_path, read_map
 from darthand.render.image import write_png
 from darthand.render.lights import Lighting, world_lights
 from darthand.render.subject import Material, Subject, Surface
@@ -245,10 +245,12 @@ def euler_xyz(R: np.ndarray) -> list[float]:
 
 def world_spec(lighting: Lighting, cam: Camera) -> dict:
     """The worker's world: the ambient radiance, plus the lighting's environment (if any): its map file
-    (environment.map_path; read_map has checked it when the lights were loaded), rotation and colour scale."""
+    (environment.map_path, checked by read_map: InputError, one line, before Blender sees it), rotation and colour
+    scale."""
     spec: dict = {"ambient": [float(a) for a in lighting.ambient]}
     env = lighting.environment
     if env is not None:
+        read_map(env.map)                     # cached per process: the fast render of the frame has read it
         spec["environment"] = {"map": str(map_path(env.map).resolve()),
                                "rotation": euler_xyz(environment_matrix(env, cam)),
                                "scale": [float(s) for s in env.scale]}
