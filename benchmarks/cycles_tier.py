@@ -2,17 +2,18 @@
 seconds of CPU per 256^2 frame on the same planned frames, and a side-by-side sheet to look at.
 
 Frames: the first FRAMES of the default plan at seed 11 (right hands; its lights and procedural backgrounds), each
-rendered as render-dataset renders it (dataset/frames.render_job): by the fast renderer, by Cycles with the frame's
-own lights (DEFAULT_CYCLES_SAMPLES samples, OpenImageDenoise), and by Cycles lit by one of Blender's CC0 environment
-maps instead (ENVIRONMENTS, the frame's camera frame, a rotation per frame), composited over the environment itself
-as Cycles sees it (its Environment pass): how the issue's 86 % frames were made. One thread each.
+rendered as render-dataset renders it (dataset/frames.render_job): by the fast renderer and by Cycles with the
+frame's own lights (DEFAULT_CYCLES_SAMPLES samples, OpenImageDenoise), then both again lit by one of the built-in CC0
+environment maps instead (ENVIRONMENTS, the frame's camera frame, a rotation per frame) over the environment itself
+as the backdrop (the dataset's {'environment': true, 'blur': BLUR}: environment.background_view, the same pixels
+in both tiers): how the issue's 86 % frames were made. One thread each.
 
 CPU: the fast renderer's is this process's CPU time over render_job; Cycles' adds the worker process's CPU time of
 its render (Blender's own threads included) to the fast frame's (its labels). Wall seconds are reported too. The
 first Cycles frame of the run (the worker's start and first scene build) is rendered before timing starts.
 
-Sheet: build/bench/cycles_tier/side_by_side.png (run(out) for another folder), a row per frame: fast | Cycles,
-the frame's lights | Cycles, an environment.
+Sheet: build/bench/cycles_tier/side_by_side.png (run(out) for another folder), a row per frame: fast | Cycles
+under the frame's lights, then fast | Cycles under an environment.
 """
 
 from __future__ import annotations
@@ -27,7 +28,9 @@ FRAMES = 4
 SIZE = 256
 SEED = 11
 ENVIRONMENTS = ("studio", "courtyard", "interior", "forest")
+BLUR = 2.0                  # degrees: the environment backdrop's blur (the plan draws about 1-3 at this size)
 OUT = ROOT / "build" / "bench" / "cycles_tier"
+NAMES = ("fast", "cycles", "fast_environment", "cycles_environment")
 
 
 def _planned_jobs(source, count: int) -> list[dict]:
@@ -46,23 +49,15 @@ def _render(renderer, job: dict, settings: dict):
     return frame, cpu, time.perf_counter() - t
 
 
-def _environment_frame(cycles, job: dict, settings: dict, k: int):
-    """The frame lit by an environment map and composited over that environment (Cycles' own view of it)."""
-    from darthand.render.image import compose
-    from darthand.render.scenes import Scene
-
+def _environment_job(job: dict, k: int) -> dict:
+    """The job lit by an environment map instead of its lights, over that environment as its backdrop."""
     environment = {"map": ENVIRONMENTS[k % len(ENVIRONMENTS)], "rotation": 90.0 * k}
-    scene = Scene.from_job({**job, "lights": {"environment": environment}})
-    t, c = time.perf_counter(), time.process_time()
-    frame, image = cycles.render_scene_image(scene, width=SIZE, height=SIZE, samples=settings["samples"])
-    _, rgba = compose(np.moveaxis(image.premult, -1, 0), image.alpha, (0, 0), image.environment, (SIZE, SIZE))
-    cpu = time.process_time() - c + image.cpu_seconds
-    return rgba, cpu, time.perf_counter() - t
+    return {**job, "lights": {"environment": environment}, "background": {"environment": True, "blur": BLUR}}
 
 
 def run(out: Path | None = None) -> dict:
     from darthand.render.api import Renderer, open_source
-    from darthand.render.cycles import CyclesRenderer, close_shared_worker
+    from darthand.render.cycles import close_shared_worker
     from darthand.render.engines import DEFAULT_CYCLES_SAMPLES
     from darthand.render.image import write_png
 
@@ -74,16 +69,14 @@ def run(out: Path | None = None) -> dict:
     cycles_settings = {**settings, "engine": {"name": "cycles", "samples": DEFAULT_CYCLES_SAMPLES}}
     try:
         _render(fast, jobs[0], cycles_settings)                           # compile, load, start Blender: not timed
-        cycles = CyclesRenderer(fast, DEFAULT_CYCLES_SAMPLES)
-        rows, figures = [], {"fast": [], "cycles": [], "cycles_environment": []}
+        rows, figures = [], {name: [] for name in NAMES}
         for k, job in enumerate(jobs):
-            a, cpu_a, wall_a = _render(fast, job, settings)
-            b, cpu_b, wall_b = _render(fast, job, cycles_settings)
-            env_rgba, cpu_c, wall_c = _environment_frame(cycles, job, settings, k)
-            figures["fast"].append((cpu_a, wall_a))
-            figures["cycles"].append((cpu_b, wall_b))
-            figures["cycles_environment"].append((cpu_c, wall_c))
-            rows.append(np.concatenate([a.rgba, b.rgba, env_rgba], axis=1))
+            lit = _environment_job(job, k)
+            renders = [_render(fast, j, s) for j, s in ((job, settings), (job, cycles_settings), (lit, settings),
+                                                        (lit, cycles_settings))]
+            for name, (_, cpu, wall) in zip(NAMES, renders):
+                figures[name].append((cpu, wall))
+            rows.append(np.concatenate([frame.rgba for frame, _, _ in renders], axis=1))
     finally:
         close_shared_worker()
     folder = Path(out) if out is not None else OUT
@@ -103,8 +96,8 @@ def summary(result: dict) -> str:
     lines = [f"{result['frames']} planned frames (seed {SEED}) at {result['size']}^2, one thread each; Cycles at "
              f"{result['cycles_samples']} samples with OpenImageDenoise.", "",
              "| engine | CPU s / frame | wall s / frame |", "|---|---|---|"]
-    for name in ("fast", "cycles", "cycles_environment"):
+    for name in NAMES:
         lines.append(f"| {name} | {result[name]['cpu_s_per_frame']} | {result[name]['wall_s_per_frame']} |")
     lines += ["", f"Cycles costs {result['cycles_over_fast_cpu']}x the fast renderer's CPU. Sheet: "
-              f"{result['sheet']} (fast | Cycles, the frame's lights | Cycles, an environment map)."]
+              f"{result['sheet']} (fast | Cycles under the frame's lights, fast | Cycles under an environment map)."]
     return "\n".join(lines)

@@ -202,7 +202,7 @@ def _mixture_directions(rng, normals: np.ndarray, cdf: np.ndarray, h: int, w: in
 
 
 def _texel_of(d: np.ndarray, h: int, w: int) -> np.ndarray:
-    """Flat texel index (P, R) of lookup directions d (P, R, 3) (Blender's convention)."""
+    """Flat texel index (P, R) of lookup directions d (P, R, 3) (environment.direction_uv's formula)."""
     u = np.arctan2(d[..., 1], -d[..., 0]) / (2 * np.pi) + 0.5
     v = np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])) / np.pi + 0.5
     col = np.clip((u * w).astype(np.int64), 0, w - 1)

@@ -279,18 +279,7 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
     full_geom[region] = geom
     full_depth = np.zeros((H, W), np.float32)
     full_depth[region] = np.where(geom >= 0, primary.depth.reshape(h, w), 0)
-    bg, bg_name = None, None
-    blur = backdrop_blur(background)
-    if blur is not None:
-        if lighting.environment is None:
-            raise InputError("background: 'environment' needs lights with an environment (--environment)")
-        bg, bg_name = background_view(lighting.environment, cam, blur), ENVIRONMENT_BACKGROUND
-    elif background is not None:
-        bg_name = Path(background).name if isinstance(background, (str, Path)) else "array"
-        bg = (load_background(background, W, H) if isinstance(background, (str, Path))
-              else np.asarray(background, np.float32))
-        if bg.shape != (H, W, 3):
-            raise InputError(f"background: shape {bg.shape} does not match the image ({H}, {W}, 3)")
+    bg, bg_name = frame_background(background, lighting, cam)
     colour, rgba = compose(premult, alpha, (r0, c0), bg, (H, W))
     full_alpha = model_coverage(full_alpha, full_geom, subject.surfaces)      # the image's alpha keeps an arm
     timings["compose"] = _lap(t)
@@ -322,6 +311,25 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
     stats["total_rays"] = (stats.get("rays", 0) + stats.get("shadow_rays", 0) + stats.get("indirect_rays", 0)
                            + (21 if labels else 0))
     return Frame(rgba, colour, full_alpha, full_geom, full_depth, doc, subject, cam, timings, stats, truth_maps)
+
+
+def frame_background(background, lighting: Lighting, cam: Camera) -> tuple:
+    """(pixels (H, W, 3) float32 linear or None, the name labels record or None) of `render`'s background argument:
+    the environment seen through `cam` (environment.background_view) for 'environment' or {'environment': True,
+    'blur': degrees}, an image path loaded to the camera's size, an array as given, None for none."""
+    H, W = cam.height, cam.width
+    blur = backdrop_blur(background)
+    if blur is not None:
+        if lighting.environment is None:
+            raise InputError("background: 'environment' needs lights with an environment (--environment)")
+        return background_view(lighting.environment, cam, blur), ENVIRONMENT_BACKGROUND
+    if background is None:
+        return None, None
+    path = isinstance(background, (str, Path))
+    bg = load_background(background, W, H) if path else np.asarray(background, np.float32)
+    if bg.shape != (H, W, 3):
+        raise InputError(f"background: shape {bg.shape} does not match the image ({H}, {W}, 3)")
+    return bg, Path(background).name if path else "array"
 
 
 def scatter(samples: Samples, index: np.ndarray, n: int) -> Samples:

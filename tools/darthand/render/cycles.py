@@ -2,8 +2,8 @@
 
 `CyclesRenderer` wraps a render.api.Renderer: `render_scene` renders the frame with the fast path (the pose, camera,
 labels, mask and truth maps are the fast renderer's, unchanged), then the same posed subject, camera, lights and
-environment (render/cycles_scene.py) in Cycles, and composites Cycles' image over the frame's background. The labels
-record the engine and its samples.
+environment (render/cycles_scene.py) in Cycles, and composites Cycles' image over the frame's background (the same
+pixels as the fast renderer's, the environment backdrop included). The labels record the engine and its samples.
 
 Cycles runs in a persistent worker process under Blender's Python (render/blender/cycles_worker.py; which Python:
 $DARTHAND_BLENDER_PYTHON, else <repo>/.venv-blender/bin/python), one per process that renders (`shared_worker`),
@@ -16,7 +16,6 @@ and Environment (the world seen through each pixel).
 from __future__ import annotations
 
 import atexit
-import dataclasses
 import json
 import subprocess
 import tempfile
@@ -30,11 +29,11 @@ import OpenImageIO as oiio
 
 from darthand.errors import DarthandError, InputError
 from darthand.export.blender_engine import BlenderUnavailable, blender_python
+from darthand.render.api import frame_background
 from darthand.render.camera import Camera
 from darthand.render.engines import DEFAULT_CYCLES_SAMPLES, MAX_CYCLES_SAMPLES
-from darthand.render.cycles_scene import (Environment, MaterialFiles, camera_spec, frame_arrays, light_specs,
-                                          split_environment, world_spec)
-from darthand.render.image import compose, load_background
+from darthand.render.cycles_scene import MaterialFiles, camera_spec, frame_arrays, light_specs, world_spec
+from darthand.render.image import compose
 from darthand.render.lights import Lighting, load_lighting
 from darthand.render.scenes import Scene
 from darthand.render.subject import Subject
@@ -103,10 +102,9 @@ class CyclesWorker:
         log.close()
         return self._proc
 
-    def render(self, subject: Subject, cam: Camera, lighting: Lighting, environment: Environment | None, *,
-               samples: int = DEFAULT_CYCLES_SAMPLES, seed: int = 0, threads: int = 1,
-               denoise: bool = True) -> CyclesImage:
-        """One frame of the posed subject seen by `cam` under `lighting` (and `environment`)."""
+    def render(self, subject: Subject, cam: Camera, lighting: Lighting, *, samples: int = DEFAULT_CYCLES_SAMPLES,
+               seed: int = 0, threads: int = 1, denoise: bool = True) -> CyclesImage:
+        """One frame of the posed subject seen by `cam` under `lighting` (its ambient, lights and environment)."""
         with self._lock:
             n = self._frames = self._frames + 1
             arrays, surfaces = frame_arrays(subject, self.materials)
@@ -116,7 +114,7 @@ class CyclesWorker:
                        "height": cam.height, "samples": int(samples), "seed": int(seed) & 0x7FFFFFFF,
                        "threads": int(threads), "denoise": bool(denoise), "camera": camera_spec(cam),
                        "surfaces": surfaces, "lights": light_specs(lighting, cam),
-                       "world": world_spec(lighting, environment, cam, self.python or blender_python())}
+                       "world": world_spec(lighting, cam)}
             answer = self._ask(request)
             premult, alpha, env = read_layers(exr, cam.height, cam.width)
             return CyclesImage(premult, alpha, env, float(answer["seconds"]), float(answer["cpu_seconds"]))
@@ -177,7 +175,7 @@ def close_shared_worker() -> None:
 
 def read_layers(path: Path, height: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(premult (H, W, 3), alpha (H, W), environment (H, W, 3)) float32 of the worker's multilayer EXR (its
-    'Combined' and 'Environment' layers, top row first)."""
+    'Combined' and 'Environment' layers, top row first); premult is 0 where alpha is."""
     layers: dict = {}
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
@@ -196,6 +194,7 @@ def read_layers(path: Path, height: int, width: int) -> tuple[np.ndarray, np.nda
     premult, alpha, env = rgb("Combined"), layers["Combined.A"].astype(np.float32), rgb("Environment")
     if premult.shape != (height, width, 3):
         raise DarthandError(f"Cycles: image of shape {premult.shape}, expected ({height}, {width}, 3)")
+    premult[alpha <= 0] = 0        # the denoiser spreads colour past the silhouette into pixels nothing covers
     return premult, alpha, env
 
 
@@ -221,28 +220,30 @@ class CyclesRenderer:
 
     def render_scene(self, scene: Scene, *, background=None, **options):
         """One frame (render.api.Frame) of a scene: labels from the fast renderer, the image from Cycles over the
-        same background. The scene's lights may carry an environment (cycles_scene.Environment)."""
+        same background (`render_scene_image`)."""
         return self.render_scene_image(scene, background=background, **options)[0]
 
     def render_scene_image(self, scene: Scene, *, background=None, **options) -> tuple:
-        """(render.api.Frame, CyclesImage) of a scene: `render_scene`'s frame and Cycles' own layers."""
-        lights, environment = split_environment(scene.lights)
-        plain = dataclasses.replace(scene, lights=lights)
-        frame = self.renderer.render_scene(plain, background=background, **options)
+        """(render.api.Frame, CyclesImage) of a scene: `render_scene`'s frame and Cycles' own layers.
+
+        Both renderers light the frame with the scene's whole lighting, its environment included (the fast one for
+        the labels, mask and maps, Cycles for the image). The background is api.frame_background's, as the fast
+        renderer composites it: for the environment backdrop ('environment' or {'environment': True, 'blur'}) that
+        is the fast renderer's environment.background_view at the same blur under Cycles' image with its alpha, so
+        both tiers show the same backdrop pixels (Cycles' film is transparent; its own view of the world is only in
+        CyclesImage.environment)."""
+        frame = self.renderer.render_scene(scene, background=background, **options)
         if background is None and isinstance(scene.background, str):
             background = scene.background
+        lighting = load_lighting(scene.lights)
         worker = self.worker or shared_worker()
-        image = worker.render(frame.subject, frame.camera, load_lighting(lights), environment, samples=self.samples,
-                              seed=scene_seed(scene), threads=self.renderer.threads)
+        image = worker.render(frame.subject, frame.camera, lighting, samples=self.samples, seed=scene_seed(scene),
+                              threads=self.renderer.threads)
         H, W = frame.camera.height, frame.camera.width
-        bg = None
-        if background is not None:
-            bg = (load_background(background, W, H) if isinstance(background, (str, Path))
-                  else np.asarray(background, np.float32))
+        bg, _ = frame_background(background, lighting, frame.camera)
         frame.colour, frame.rgba = compose(np.moveaxis(image.premult, -1, 0), image.alpha, (0, 0), bg, (H, W))
         frame.timings["cycles"] = image.seconds
         frame.stats["cycles_cpu_s"] = image.cpu_seconds
         frame.labels.setdefault("render", {}).update(
-            engine="cycles", cycles={"samples": self.samples, "denoiser": "OpenImageDenoise"},
-            **({"environment": environment.to_json()} if environment is not None else {}))
+            engine="cycles", cycles={"samples": self.samples, "denoiser": "OpenImageDenoise"})
         return frame, image

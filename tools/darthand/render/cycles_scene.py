@@ -15,28 +15,23 @@ gives that at 1 m, which in Cycles is a point light of power P = 4 pi^2 I watts 
 so that P watts give radiant intensity P / (4 pi^2) W/sr). tests/render/test_cycles.py checks both against closed
 forms. Ambient light of intensity I is a uniform world of radiance I (its own closed form).
 
-The environment (the environment contract of issue 28): {"map": NAME or PATH, "rotation": degrees, "strength",
-"white_balance": [r, g, b], "frame": "camera" | "world"}; radiance map(d) * strength * white_balance with Blender's
-equirectangular lookup in the environment frame E: world E = Blender's world axes; camera E_x = -z_cam,
-E_y = x_cam, E_z = -y_cam; then a direction d_E is looked up as Rz(-rotation) d_E. Built-in maps by name are
-assets_src/environments/NAME.exr, or (until those are vendored) Blender's own studio lights, the same CC0 files.
+The environment: the lighting's own (render/environment.Environment, parsed into Lighting.environment by
+lights.load_lighting; its map resolved by environment.map_path), looked up by the contract's formula (environment.py's
+docstring). Cycles' Environment Texture reads a direction half a turn from that formula (HALF_TURN), so the Mapping
+node turns each direction by environment.frame_matrix and the half turn before Cycles reads it.
 """
 
 from __future__ import annotations
 
-import glob
 import math
 from collections import OrderedDict
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 
 from darthand.errors import InputError
-from darthand.fileio import read_json
-from darthand.processes import native_stderr_captured
 from darthand.render.camera import Camera
+from darthand.render.environment import Environment, frame_matrix, map_path, read_map
 from darthand.render.image import write_png
 from darthand.render.lights import Lighting, world_lights
 from darthand.render.subject import Material, Subject, Surface
@@ -44,15 +39,12 @@ from darthand.render.texture import MipTexture, srgb8_to_linear_lut
 
 TO_BLENDER = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])   # model (Y up) -> Blender (Z up)
 CV_TO_BLENDER_CAMERA = np.diag([1.0, -1.0, -1.0])
-CAMERA_TO_ENVIRONMENT = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])   # d_E = P d_cam
 # Cycles' Environment Texture reads u = atan2(d_y, -d_x) / 2pi (measured: tests/render/test_cycles.py), half a turn
 # from the contract's u = atan2(d_y, -d_x) / 2pi + 0.5: a direction is turned by pi about z before Cycles reads it.
 HALF_TURN = np.diag([-1.0, -1.0, 1.0])
 SENSOR_MM = 36.0
 CLIP_M = (1e-3, 1e4)
 NAIL = 0                             # model.layout.FACE_LABELS' id of 'nail'
-REPO_ROOT = Path(__file__).resolve().parents[3]
-MAP_SUFFIXES = (".exr", ".hdr")
 
 
 # ------------------------------------------------------------------------------------------------ geometry
@@ -235,113 +227,11 @@ def frame_along(direction: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------------------------------------ environment
 
 
-@dataclass(frozen=True)
-class Environment:
-    """A lights document's "environment" (module docstring): map (a built-in name or a file path), rotation
-    (degrees about the environment frame's z), strength (linear), white_balance (3,) linear, frame 'camera' or
-    'world'."""
-
-    map: str
-    rotation: float = 0.0
-    strength: float = 1.0
-    white_balance: tuple = (1.0, 1.0, 1.0)
-    frame: str = "camera"
-
-    @classmethod
-    def from_json(cls, doc, source: str = "lights") -> "Environment":
-        if not isinstance(doc, dict) or not isinstance(doc.get("map"), str) or not doc["map"]:
-            raise InputError(f"{source}: field 'environment.map' must name a map or an .exr/.hdr file")
-        unknown = sorted(set(doc) - {"map", "rotation", "strength", "white_balance", "frame"})
-        if unknown:
-            raise InputError(f"{source}: field 'environment.{unknown[0]}' is not an environment field")
-        env = cls(doc["map"], _number(doc.get("rotation", 0.0), "rotation", source),
-                  _number(doc.get("strength", 1.0), "strength", source, 0.0),
-                  tuple(_number(x, "white_balance", source, 0.0) for x in _triple(doc, source)),
-                  doc.get("frame", "camera"))
-        if env.frame not in ("camera", "world"):
-            raise InputError(f"{source}: field 'environment.frame' must be 'camera' or 'world', got {env.frame!r}")
-        return env
-
-    def to_json(self) -> dict:
-        return {"map": self.map, "rotation": self.rotation, "strength": self.strength,
-                "white_balance": list(self.white_balance), "frame": self.frame}
-
-
-def _number(value, field: str, source: str, lo: float = -1e6) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= 1e6:
-        raise InputError(f"{source}: field 'environment.{field}' must be a number in {lo:g}..1e6, got {value!r}")
-    return float(value)
-
-
-def _triple(doc: dict, source: str) -> list:
-    wb = doc.get("white_balance", [1.0, 1.0, 1.0])
-    if not isinstance(wb, (list, tuple)) or len(wb) != 3:
-        raise InputError(f"{source}: field 'environment.white_balance' must be three numbers")
-    return list(wb)
-
-
-def split_environment(lights) -> tuple:
-    """(the lights without their environment, Environment or None) of a lights argument (None, a Lighting, a lights
-    file path or its dict): the fast renderer takes the first until its own environment lighting lands."""
-    if isinstance(lights, (str, Path)) and Path(lights).suffix == ".json" and Path(lights).is_file():
-        doc = read_json(Path(lights), "lights file")
-        if isinstance(doc, dict) and "environment" in doc:
-            return {k: v for k, v in doc.items() if k != "environment"}, Environment.from_json(
-                doc["environment"], str(lights))
-        return lights, None
-    if isinstance(lights, dict) and "environment" in lights:
-        return {k: v for k, v in lights.items() if k != "environment"}, Environment.from_json(lights["environment"])
-    return lights, None
-
-
-def environment_map_path(name: str, blender_python: Path | None = None) -> Path:
-    """The map file of an environment: a path to an .exr/.hdr file, or a built-in name (assets_src/environments/
-    NAME.exr, else the same CC0 map in the Blender install beside `blender_python`)."""
-    path = Path(name)
-    if path.suffix.lower() in MAP_SUFFIXES or len(path.parts) > 1:
-        if not path.is_file():
-            raise InputError(f"environment map {name}: no such file")
-        return check_equirectangular(path.resolve())
-    vendored = REPO_ROOT / "assets_src" / "environments" / f"{name}.exr"
-    if vendored.is_file():
-        return vendored
-    builtin = builtin_maps(blender_python)
-    if name not in builtin:
-        raise InputError(f"environment map {name!r}: not a built-in map ({', '.join(sorted(builtin)) or 'none'}) "
-                         "nor an .exr/.hdr file")
-    return builtin[name]
-
-
-def check_equirectangular(path: Path) -> Path:
-    """`path`, after checking that it decodes as an image twice as wide as it is high (InputError, one line)."""
-    with native_stderr_captured():
-        image = oiio.ImageInput.open(str(path))
-    if image is None:
-        oiio.geterror()
-        raise InputError(f"environment map {path}: does not decode as an image")
-    width, height = image.spec().width, image.spec().height
-    image.close()
-    if width != 2 * height:
-        raise InputError(f"environment map {path}: {width}x{height} is not equirectangular (width = 2 x height)")
-    return path
-
-
-def builtin_maps(blender_python: Path | None = None) -> dict:
-    """{name: path} of the studio-light world maps shipped with the Blender beside `blender_python` (default the
-    project's .venv-blender)."""
-    venv = (Path(blender_python).parent.parent if blender_python is not None else REPO_ROOT / ".venv-blender")
-    pattern = str(venv / "lib" / "python3*" / "site-packages" / "bpy" / "*" / "datafiles" / "studiolights" / "world"
-                  / "*.exr")
-    return {Path(p).stem: Path(p) for p in sorted(glob.glob(pattern))}
-
-
 def environment_matrix(env: Environment, cam: Camera) -> np.ndarray:
     """(3, 3) Blender world direction -> the direction Cycles' Environment Texture is to look up, so that it reads the
-    texel the contract gives (module docstring; HALF_TURN)."""
-    a = math.radians(env.rotation)
-    unrotate = np.array([[math.cos(a), math.sin(a), 0.0], [-math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
-    to_environment = np.eye(3) if env.frame == "world" else CAMERA_TO_ENVIRONMENT @ cam.R @ TO_BLENDER.T
-    return HALF_TURN @ unrotate @ to_environment
+    texel the contract gives: environment.frame_matrix (model world -> the contract's lookup direction) after
+    Blender's world -> the model's (TO_BLENDER.T), then HALF_TURN (Cycles' own lookup)."""
+    return HALF_TURN @ frame_matrix(env.frame, cam.R, env.rotation) @ TO_BLENDER.T
 
 
 def euler_xyz(R: np.ndarray) -> list[float]:
@@ -353,13 +243,17 @@ def euler_xyz(R: np.ndarray) -> list[float]:
     return [math.atan2(-R[0, 1], R[1, 1]), -math.pi / 2, 0.0]
 
 
-def world_spec(lighting: Lighting, env: Environment | None, cam: Camera, blender_python: Path | None = None) -> dict:
-    """The worker's world: the ambient radiance, plus the environment's map, rotation and scale."""
+def world_spec(lighting: Lighting, cam: Camera) -> dict:
+    """The worker's world: the ambient radiance, plus the lighting's environment (if any): its map file
+    (environment.map_path, checked by read_map: InputError, one line, before Blender sees it), rotation and colour
+    scale."""
     spec: dict = {"ambient": [float(a) for a in lighting.ambient]}
+    env = lighting.environment
     if env is not None:
-        spec["environment"] = {"map": str(environment_map_path(env.map, blender_python)),
+        read_map(env.map)                     # cached per process: the fast render of the frame has read it
+        spec["environment"] = {"map": str(map_path(env.map).resolve()),
                                "rotation": euler_xyz(environment_matrix(env, cam)),
-                               "scale": [float(env.strength * w) for w in env.white_balance]}
+                               "scale": [float(s) for s in env.scale]}
     return spec
 
 

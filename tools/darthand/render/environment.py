@@ -6,8 +6,11 @@ The contract (schemas/lights.schema.json, field "environment"):
   equirectangular .exr or .hdr, width = 2 x height, linear RGB, no NaN, Inf or negative texel).
 - The environment's radiance in direction d is map(d) x strength x white_balance, in the map's own units: a white
   Lambertian surface under a uniform map of value L renders radiance L (lights.py's pi-folded intensities).
-- Direction -> texel, Blender's convention in the environment frame E (right-handed, z up):
-  u = atan2(d_y, -d_x) / (2 pi) + 0.5, v = atan2(d_z, hypot(d_x, d_y)) / pi + 0.5, v = 1 the image's top row.
+- Direction -> texel in the environment frame E (right-handed, z up): u = atan2(d_y, -d_x) / (2 pi) + 0.5,
+  v = atan2(d_z, hypot(d_x, d_y)) / pi + 0.5, v = 1 the image's top row (the map's centre column seen along E's -x).
+  This is the contract's own formula, not Blender's: Blender's equirectangular lookup is u = atan2(d_y, -d_x) /
+  (2 pi), half a turn away (measured by tests/render/test_cycles.py), so the Cycles tier turns each direction by
+  pi about z before Cycles reads it (cycles_scene.HALF_TURN); both renderers follow the formula above.
   `rotation` turns the environment about E's z by that many degrees (d_E is looked up as Rz(-rotation) d_E).
 - Frame 'camera': d_E = (-d_cam.z, d_cam.x, -d_cam.y) (OpenCV camera axes), so with rotation 0 the camera looks at
   the map's centre column, the map's up the image's up. Frame 'world': d_E = (d.x, -d.z, d.y) (the model's world,
@@ -179,7 +182,7 @@ def env_directions(directions: np.ndarray, frame: str, R: np.ndarray, rotation: 
 
 
 def direction_uv(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(u, v) in [0, 1] of lookup directions d (N, 3) (need not be unit): Blender's equirectangular convention,
+    """(u, v) in [0, 1] of lookup directions d (N, 3) (need not be unit): the contract's equirectangular formula,
     u = atan2(d_y, -d_x) / (2 pi) + 0.5, v = atan2(d_z, hypot(d_x, d_y)) / pi + 0.5 (v = 1 the top row)."""
     d = np.asarray(d, np.float64)
     u = np.arctan2(d[:, 1], -d[:, 0]) / (2 * np.pi) + 0.5

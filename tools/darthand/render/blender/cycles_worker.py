@@ -9,7 +9,7 @@ output goes to stderr).
     a failure                                                                -> {"ok": false, "error": "one line"}
 
 Everything is already in Blender's frame (Z up, metres): render/cycles.py converts. The scene is built once; each
-request updates it: a surface's mesh in place when its vertex and face counts are unchanged (else a new mesh), its
+request updates it: a surface's mesh in place when its vertex count and faces are unchanged (else a new mesh), its
 materials (made once per key), the camera, the lights (made again: a few) and the world. The output is a multilayer
 EXR with the Combined pass (linear, premultiplied, denoised when asked; film transparent so alpha is coverage) and
 the Environment pass (the world seen by each pixel's camera ray, behind everything).
@@ -28,7 +28,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-STATE: dict = {"meshes": {}, "materials": {}, "images": {}, "lights": []}
+STATE: dict = {"meshes": {}, "faces": {}, "materials": {}, "images": {}, "lights": []}
 KEEP_MATERIALS = 16        # materials kept for later frames (a catalogue texture is 16-64 MB in Blender's memory)
 
 
@@ -116,8 +116,9 @@ def set_camera(obj, spec):
 
 
 def set_surfaces(scene, surfaces, arrays):
-    """One object per surface name: its mesh updated in place when its counts match, else replaced; objects of
-    surfaces not in this frame are hidden."""
+    """One object per surface name: its mesh updated in place when its faces are the same, else replaced (a left
+    and a right hand have the same counts but opposite windings and corner UVs); objects of surfaces not in this
+    frame are hidden."""
     shown = set()
     for k, spec in enumerate(surfaces):
         name = spec["name"]
@@ -130,11 +131,12 @@ def set_surfaces(scene, surfaces, arrays):
             scene.collection.objects.link(obj)
             STATE["meshes"][name] = obj
         mesh = obj.data
-        if len(mesh.vertices) != len(v) or len(mesh.polygons) != len(f):
+        if len(mesh.vertices) != len(v) or not np.array_equal(STATE["faces"].get(name), f):
             old = mesh
             mesh = new_mesh(name, len(v), f, uv is not None)
             obj.data = mesh
             bpy.data.meshes.remove(old)
+            STATE["faces"][name] = np.array(f)
         update_mesh(mesh, v, n, uv, arrays[f"mi{k}"])
         set_materials(mesh, spec["materials"])
         obj.hide_render = False
