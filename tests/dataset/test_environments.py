@@ -96,7 +96,7 @@ def test_planned_environments_follow_their_own_stream(sources, map_folder):
     assert [j["camera"] for j in backdrop] == [j["camera"] for j in jobs]
     assert lit.describe()["environments"]["maps"] == 2
     with pytest.raises(InputError, match="needs lights 'environment'"):
-        plan.Planner({"seed": 5, "backgrounds": "environment"}, sources[0])
+        plan.Planner({"seed": 5, "lights": "random", "backgrounds": "environment"}, sources[0])
 
 
 def test_render_dataset_refuses_a_set_of_bad_maps_in_one_line(package, tmp_path, map_folder):

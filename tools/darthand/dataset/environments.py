@@ -28,7 +28,7 @@ MAP_SUFFIXES = (".exr", ".hdr")
 TARGET_RADIANCE = 0.6          # a map's solid-angle mean luminance is scaled to this (a white wall facing it: 0.6)
 STRENGTH_STOPS = (-0.75, 0.75)  # then varied by this many stops
 KELVIN_RANGE = (5000.0, 8000.0)  # white balance: the light's colour as a camera balanced for 6500 K sees it
-BLUR_RANGE_DEG = (0.5, 3.0)    # the backdrop's blur (render/environment.background_view)
+BLUR_RANGE_DEG = (1.0, 3.0)    # the backdrop's blur (render/environment.background_view): out of focus
 ROTATION, STRENGTH, KELVIN, BLUR = 1, 2, 3, 4
 MATCH_LIMITS = (0.25, 2.0)     # a photo backdrop scales the light by its level / TARGET_RADIANCE within these
 

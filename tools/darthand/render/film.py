@@ -471,8 +471,10 @@ def random_film(u: np.ndarray) -> dict:
     """A plausible camera's film settings (Film.to_json's dict) from RANDOM_UNIFORMS uniforms in [0, 1): automatic
     exposure with a bias in -0.7..+0.5 EV, white point 3..8, white balance errors within +-8 % on red and blue,
     ISO 100..3200 (log-uniform) with 1.5..6 e- read noise, vignetting up to 0.35; in a share of frames each: motion
-    blur (30 %, 1..8 px at any angle), defocus (30 %, 1..5 px at infinity), chromatic aberration (25 %, 0.3..1.5
-    px), JPEG (60 %, quality 50..95). Pixel sizes are for frames of a few hundred pixels a side."""
+    blur (15 %, 1..8 px at any angle), defocus (10 %, 1..5 px at infinity), chromatic aberration (10 %, 0.3..1.5
+    px), JPEG (60 %, quality 50..95). Pixel sizes are for frames of a few hundred pixels a side. The blurs' shares
+    are what a dataset can afford (benchmarks/film.py: at 512^2 defocus costs ~110 ms, aberration ~33 ms, motion
+    blur ~26 ms, the rest ~40 ms) and the environment backdrop is out of focus already."""
     u = np.asarray(u, np.float64)
     if u.shape != (RANDOM_UNIFORMS,):
         raise ValueError(f"random_film takes {RANDOM_UNIFORMS} uniforms, got shape {u.shape}")
@@ -482,9 +484,9 @@ def random_film(u: np.ndarray) -> dict:
         exposure_ev=None, exposure_bias_ev=between(0, -0.7, 0.5), white_point=between(1, 3.0, 8.0),
         white_balance=(round(math.exp(between(2, -0.08, 0.08)), 4), 1.0, round(math.exp(between(3, -0.08, 0.08)), 4)),
         iso=round(100.0 * 32.0 ** float(u[4]), 1), read_noise=between(5, 1.5, 6.0),
-        motion_blur_px=sometimes(6, 0.3, between(7, 1.0, 8.0)), motion_blur_deg=between(8, 0.0, 180.0),
-        defocus_px=sometimes(9, 0.3, between(10, 1.0, 5.0)), vignetting=between(11, 0.0, 0.35),
-        chromatic_aberration_px=sometimes(12, 0.25, between(13, 0.3, 1.5)),
+        motion_blur_px=sometimes(6, 0.15, between(7, 1.0, 8.0)), motion_blur_deg=between(8, 0.0, 180.0),
+        defocus_px=sometimes(9, 0.1, between(10, 1.0, 5.0)), vignetting=between(11, 0.0, 0.35),
+        chromatic_aberration_px=sometimes(12, 0.1, between(13, 0.3, 1.5)),
         jpeg_quality=int(50 + min(int(u[15] * 46), 45)) if u[14] < 0.6 else 0)
     return film.to_json()
 
