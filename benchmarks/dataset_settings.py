@@ -53,19 +53,12 @@ def frame_errors(frame, reference) -> dict:
 
 
 def run(frames: int | None = None) -> dict:
-    from benchmarks.render_dataset import dataset_inputs
-    from darthand.dataset.plan import Planner, plan_spec
-    from darthand.dataset.sources import source_specs
-    from darthand.render.api import Renderer
+    from benchmarks.render_dataset import planned_renderers
 
     frames = int(os.environ.get("DARTHAND_BENCH_SETTINGS_FRAMES", frames or 24))
     size = 512
     with tempfile.TemporaryDirectory() as tmp:
-        model, textures, accessories, where = dataset_inputs(Path(tmp))
-        specs = source_specs(str(model), ("right", "left"), textures=str(textures), accessories=str(accessories))
-        sources = {side: spec.open() for side, spec in specs.items()}
-        planner = Planner({**plan_spec(seed=0), "sides": list(sources)}, sources)
-        renderers = {side: Renderer(src, 1) for side, src in sources.items()}
+        planner, sources, renderers, where = planned_renderers(Path(tmp))
         names = list(SETTINGS)
         pooled = {name: {"linear": [], "srgb": [], "alpha": []} for name in names}
         cpu = {name: [] for name in names}

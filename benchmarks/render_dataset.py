@@ -33,6 +33,20 @@ def dataset_inputs(tmp: Path) -> tuple:
     return model, textures, accessories, where + " (one texture: run `make assets` for the DART-style catalogue run)"
 
 
+def planned_renderers(tmp: Path) -> tuple:
+    """(planner, {side: opened source}, {side: one-thread Renderer}, where from) of the default plan (seed 0) over
+    `dataset_inputs(tmp)`: what the per-frame benchmarks render."""
+    from darthand.dataset.plan import Planner, plan_spec
+    from darthand.dataset.sources import source_specs
+    from darthand.render.api import Renderer
+
+    model, textures, accessories, where = dataset_inputs(tmp)
+    specs = source_specs(str(model), ("right", "left"), textures=str(textures), accessories=str(accessories))
+    sources = {side: spec.open() for side, spec in specs.items()}
+    planner = Planner({**plan_spec(seed=0), "sides": list(sources)}, sources)
+    return planner, sources, {side: Renderer(src, 1) for side, src in sources.items()}, where
+
+
 def run(frames: int | None = None) -> dict:
     from darthand.dataset.api import render_dataset
     from darthand.dataset.options import DatasetOptions

@@ -32,21 +32,14 @@ def render_cpu(renderer, job: dict, shading: dict, size: int) -> float:
 
 
 def run(frames: int | None = None) -> dict:
-    from benchmarks.render_dataset import dataset_inputs
-    from darthand.dataset.plan import Planner, plan_spec
-    from darthand.dataset.sources import source_specs
-    from darthand.render.api import Renderer
+    from benchmarks.render_dataset import planned_renderers
 
     frames = int(os.environ.get("DARTHAND_BENCH_SKIN_FRAMES", frames or 12))
     names = list(VARIANTS)
     cpu: dict = {(v, s): [] for v in names for s in SIZES}
     build_s = {}
     with tempfile.TemporaryDirectory() as tmp:
-        model, textures, accessories, where = dataset_inputs(Path(tmp))
-        specs = source_specs(str(model), ("right", "left"), textures=str(textures), accessories=str(accessories))
-        sources = {side: spec.open() for side, spec in specs.items()}
-        planner = Planner({**plan_spec(seed=0), "sides": list(sources)}, sources)
-        renderers = {side: Renderer(src, 1) for side, src in sources.items()}
+        planner, sources, renderers, where = planned_renderers(Path(tmp))
         for side, src in sources.items():
             c = time.process_time()
             src.detail_map().texture()

@@ -30,12 +30,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from darthand.jit import kernel
-from darthand.model.layout import FINGERS
-from darthand.model.regions import PALM_NORMAL, hand_frame
+from darthand.model.regions import hand_frame
 from darthand.render.texture import MipTexture, float_pyramid
 from darthand.textures.bake import Bake, bake, bake_key, prepare_model
 from darthand.textures.curves import bezier, curve_distance
 from darthand.textures.noise import smoothstep
+from darthand.textures.overlays import finger_crease_profiles
 from darthand.textures.surface import Surface as BakeSurface
 
 MM = 1e-3
@@ -95,34 +95,10 @@ def palm_creases(b: Bake) -> np.ndarray:
 
 def finger_creases(b: Bake) -> np.ndarray:
     """(N,) float32 in [0, 1]: a single crease at each finger's base and double creases at its two next joints,
-    across the palmar side, bowed toward the tip at the sides (the palm-prints overlay's layout)."""
-    surface = BakeSurface(b)
+    across the palmar side, bowed toward the tip at the sides (the palm-prints overlay's layout:
+    textures/overlays.finger_crease_profiles)."""
     out = np.zeros(b.num_texels, np.float32)
-    for f, name in enumerate(FINGERS):
-        chain = surface.chain(name)
-        lengths = [float(np.linalg.norm(chain[k + 1] - chain[k])) for k in range(3)]
-        idx = surface.texels_of_bones([f * 3, f * 3 + 1])
-        idx = idx[b.fields["palmar"][idx] > 0.3]
-        if not len(idx):
-            continue
-        level = (b.fields["bone"][idx] % 3).astype(int)
-        pos = b.position[idx].astype(np.float64)
-        axial, lateral = np.zeros(len(idx)), np.zeros(len(idx))
-        for k in range(2):
-            sel = level == k
-            d = (chain[k + 1] - chain[k]) / lengths[k]
-            across = np.cross(d, -PALM_NORMAL)
-            rel = pos[sel] - chain[k]
-            axial[sel] = sum(lengths[:k]) + rel @ d
-            lateral[sel] = rel @ (across / np.linalg.norm(across))
-        bend = 6.0 * lateral ** 2
-        creases = [(0.33 * lengths[0] if name != "thumb" else 0.55 * lengths[0], 0.0),
-                   (lengths[0] - 0.4 * MM, 0.7 * MM), (lengths[0] + lengths[1] - 0.3 * MM, 0.6 * MM)]
-        prof = np.zeros(len(idx), np.float32)
-        for centre, gap in creases:
-            for off in ((-0.5 * gap, 0.5 * gap) if gap else (0.0,)):
-                dd = (axial - centre - off - bend) / (0.8 * CREASE_WIDTH)
-                prof = np.maximum(prof, np.exp(-dd * dd).astype(np.float32))
+    for idx, prof in finger_crease_profiles(b, BakeSurface(b), CREASE_WIDTH):
         out[idx] = prof * smoothstep(0.3, 0.55, b.fields["palmar"][idx])
     return out
 

@@ -254,7 +254,15 @@ def _crease(canvas, idx, strength):
 def _finger_creases(canvas, surface, p, width):
     """Double creases across the palmar side at each finger joint and a single one at the finger base, bowed
     slightly toward the fingertip at the sides."""
-    b = canvas.bake
+    for idx, prof in finger_crease_profiles(canvas.bake, surface, width):
+        _crease(canvas, idx, prof * np.float32(0.8 * p["depth"]))
+
+
+def finger_crease_profiles(b, surface, width: float):
+    """Per finger, (texel ids (K,), crease profile (K,) float32 in [0, 1]) of its palmar texels: a single crease at
+    the finger's base (the thumb's further along) and double creases at its next two joints, bowed toward the tip
+    at the sides, each a Gaussian across `width` (metres); 0 beyond 3 widths. The layout the palm-prints overlay
+    draws and the skin relief (render/skin_detail.py) carves."""
     for f, name in enumerate(FINGERS):
         chain = surface.chain(name)
         lengths = [float(np.linalg.norm(chain[k + 1] - chain[k])) for k in range(3)]
@@ -283,7 +291,7 @@ def _finger_creases(canvas, surface, p, width):
                 near = np.abs(axial - centre - off - bend) < 3 * width
                 dd = (axial[near] - centre - off - bend[near]) / (0.8 * width)
                 prof[near] = np.maximum(prof[near], np.exp(-dd * dd).astype(np.float32))
-        _crease(canvas, idx, prof * np.float32(0.8 * p["depth"]))
+        yield idx, prof
 
 
 def _ridges(canvas, surface, p):
