@@ -82,6 +82,11 @@ SETTINGS: dict[str, list[str]] = {
     "no-background": ["--backgrounds", "none"],
     "cycles": ["--engine", "cycles", "--film", "none"],
 }
+# Rows too slow for the whole plan render the first SUBSET_FRAMES qualifying frames of the first row's plan (the
+# contact sheet's 16 first), through a jobs file of those frames; their figures are compared with the first row's
+# on the same frames. DARTHAND_REALISM_SUBSET changes the count.
+SUBSET_ROWS = ("cycles",)
+SUBSET_FRAMES = 64
 
 
 # ------------------------------------------------------------------ the maths (tests/benchmarks/)
@@ -200,12 +205,16 @@ def detector_problem() -> str | None:
     return None
 
 
-def render_setting(folder: Path, frames: int, options: list[str]) -> dict:
-    """Render the plan's frames with a setting's options into `folder` (resuming frames already there) through the
-    CLI; {'rendered', 'cpu_s_per_frame', 'cpu_ms_per_image', 'command'}, or {'error': the command's last line}. The
-    CPU figures of the run that last rendered frames there are kept in folder/realism_render.json."""
-    command = ["render-dataset", str(MODEL), "--out", str(folder), "--count", str(frames), "--seed", str(SEED),
-               *options]
+def render_setting(folder: Path, frames: int, options: list[str], subset: list[int] | None = None) -> dict:
+    """Render the plan's frames (or only the frames `subset`, through a jobs file) with a setting's options into
+    `folder` (resuming frames already there) through the CLI; {'rendered', 'cpu_s_per_frame', 'cpu_ms_per_image',
+    'command'}, or {'error': the command's last line}. The CPU figures of the run that last rendered frames there
+    are kept in folder/realism_render.json."""
+    plan = ["--count", str(frames), "--seed", str(SEED)]
+    if subset is not None:
+        folder.mkdir(parents=True, exist_ok=True)
+        plan = ["--jobs", str(subset_jobs(folder, frames, subset))]
+    command = ["render-dataset", str(MODEL), "--out", str(folder), *plan, *options]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     done = subprocess.run([sys.executable, "-m", "darthand.cli", *command], capture_output=True, text=True)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -221,6 +230,21 @@ def render_setting(folder: Path, frames: int, options: list[str]) -> dict:
     measured = json.loads(record.read_text()) if record.is_file() else \
         {"rendered": 0, "cpu_s_per_frame": None, "cpu_ms_per_image": None}       # frames another run left there
     return {**measured, "command": "darthand " + " ".join(command)}
+
+
+def subset_jobs(folder: Path, frames: int, subset: list[int]) -> Path:
+    """folder/subset_jobs.json: the planned jobs (render-dataset --plan, the plan's defaults) of the frames
+    `subset`."""
+    planned = folder / "planned_jobs.json"
+    if not planned.is_file():
+        subprocess.run([sys.executable, "-m", "darthand.cli", "render-dataset", str(MODEL), "--out", str(folder),
+                        "--count", str(frames), "--seed", str(SEED), "--plan", str(planned)], check=True,
+                       capture_output=True)
+    lines = [json.loads(line) for line in planned.read_text().splitlines() if line.strip().startswith("{")]
+    wanted = set(subset)
+    path = folder / "subset_jobs.json"
+    path.write_text(json.dumps({"frames": [job for job in lines if job.get("index") in wanted]}))
+    return path
 
 
 def detect(images: Path, out: Path, confidence: float) -> dict:
@@ -239,18 +263,21 @@ def detect(images: Path, out: Path, confidence: float) -> dict:
     return json.loads(out.read_text())
 
 
-def read_labels(folder: Path, frames: int) -> dict:
-    """{frame index: labels} of the frames rendered in a dataset folder."""
-    return {i: json.loads((folder / frame_names(i)["labels"]).read_text()) for i in range(frames)}
+def read_labels(folder: Path, frames: int, subset: list[int] | None = None) -> dict:
+    """{frame index: labels} of the frames rendered in a dataset folder (all `frames`, or the frames `subset`)."""
+    return {i: json.loads((folder / frame_names(i)["labels"]).read_text())
+            for i in (range(frames) if subset is None else subset)}
 
 
-def measure_setting(folder: Path, frames: int, options: list[str], confidence: float) -> tuple[dict, dict]:
-    """(figures of one setting, {frame index: detection}): render, detect, compare."""
-    render = render_setting(folder, frames, options)
+def measure_setting(folder: Path, frames: int, options: list[str], confidence: float,
+                    subset: list[int] | None = None) -> tuple[dict, dict]:
+    """(figures of one setting, {frame index: detection}): render, detect, compare (only the frames `subset`, when
+    given)."""
+    render = render_setting(folder, frames, options, subset)
     if "error" in render:
         return render, {}
     t0 = time.process_time()
-    labels = read_labels(folder, frames)
+    labels = read_labels(folder, frames, subset)
     try:
         found = detect(folder / "images", folder / "detections.json", confidence)["images"]
     except RuntimeError as e:
@@ -271,6 +298,23 @@ def sheet_frames(labels: dict, count: int = SHEET_FRAMES) -> list[int]:
     if not bare:
         return []
     return [bare[k] for k in sorted(set(np.linspace(0, len(bare) - 1, min(count, len(bare))).round().astype(int)))]
+
+
+def subset_frames(labels: dict, sheet: list[int], count: int) -> list[int]:
+    """The frames a subset row renders: the sheet's, then the plan's other bare frames with at least MIN_VISIBLE
+    visible keypoints in order, `count` in all (sorted)."""
+    bare = [i for i in sorted(labels) if (labels[i].get("accessory") or {}).get("id", "none") in (None, "none")
+            and labels_openpose(labels[i])[1].sum() >= MIN_VISIBLE]
+    chosen = list(dict.fromkeys([*sheet, *bare]))[:max(count, len(sheet))]
+    return sorted(chosen)
+
+
+def same_frames(folder: Path, subset: list[int]) -> dict:
+    """subsets() of a full row's frames `subset` only (its labels and detections in `folder`)."""
+    labels = read_labels(folder, 0, subset)
+    found = json.loads((folder / "detections.json").read_text())["images"]
+    return subsets([{"index": i, **frame_record(labels[i], found[Path(frame_names(i)["image"]).name])}
+                    for i in subset])
 
 
 def shrink(image: np.ndarray, size: int) -> np.ndarray:
@@ -355,12 +399,21 @@ def run(out: Path | None = None, frames: int | None = None, settings: str | None
     work = os.environ.get("DARTHAND_REALISM_WORK")
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(work or tmp)
-        results, rows, indices = {}, [], []
+        results, rows, indices, subset, first = {}, [], [], None, None
         for name, options in table.items():
-            print(f"[bench] realism: {name} ({frames} frames)", file=sys.stderr, flush=True)
-            results[name], detections = measure_setting(root / name, frames, options, confidence)
+            partial = name in SUBSET_ROWS and first is not None
+            if partial and subset is None:
+                subset = subset_frames(read_labels(root / first, frames), indices, int(
+                    os.environ.get("DARTHAND_REALISM_SUBSET") or SUBSET_FRAMES))
+            print(f"[bench] realism: {name} ({len(subset) if partial else frames} frames)", file=sys.stderr,
+                  flush=True)
+            results[name], detections = measure_setting(root / name, frames, options, confidence,
+                                                        subset if partial else None)
             if "error" in results[name]:
                 continue
+            if partial:
+                results[name]["compared_with"] = {"setting": first, **same_frames(root / first, subset)}
+            first = first or name
             indices = indices or sheet_frames(read_labels(root / name, frames))
             rows.append((f"{name}\n{_pct(results[name]['bare']['detection_rate'])} found", root / name, detections))
         sheet = Path(out or ROOT / "build" / "bench") / "realism_sheet.png"
@@ -399,6 +452,11 @@ def summary(res: dict) -> str:
                      f"{_num(b['pck_0.1'])} | {_num(b['pck_0.2'])} | {_pct(b['handedness'])} | "
                      f"{_pct(r['accessory']['detection_rate'])} of {r['accessory']['frames']} | "
                      f"{_ms(r['cpu_ms_per_image'])}, {_ms(r['cpu_s_per_frame'] and 1000 * r['cpu_s_per_frame'])} |")
+        if r.get("compared_with"):
+            c = r["compared_with"]
+            lines.append(f"| ({c['setting']} on {name}'s frames) | {c['bare']['frames']} | "
+                         f"{_pct(c['bare']['detection_rate'])} | {_num(c['bare']['pck_0.1'])} | "
+                         f"{_num(c['bare']['pck_0.2'])} | {_pct(c['bare']['handedness'])} | | |")
     if res.get("sheet"):
         lines += ["", f"Contact sheet: `{res['sheet']}` (frames {', '.join(map(str, res['sheet_frames']))})."]
     return "\n".join(lines)
