@@ -38,9 +38,13 @@ def test_planned_jobs_follow_the_defaults_and_the_schema(planner, sources):
     assert tones.min() >= -0.15 and tones.max() <= 0.15 and abs(tones.mean()) < 0.02
     assert 0.19 < np.mean([j["accessory"] != "none" for j in jobs]) < 0.31              # DART's 25 %
     assert 0.4 < np.mean([j["side"] == "left" for j in jobs]) < 0.6
-    for j in jobs:
-        assert j["lights"]["lights"][0]["shadows"] and j["background"]["builtin"] < backgrounds.BUILTIN_COUNT
+    for j in jobs:              # the defaults: an environment per frame, seen behind the hand
+        assert set(j["lights"]) == {"environment"} and j["background"]["environment"] is True
         assert 30 <= j["camera"]["fov_deg"] <= 60 and -45 <= j["camera"]["roll_deg"] <= 45
+        check_schema(j["lights"], "lights.schema.json", "lights")
+    assert len({j["lights"]["environment"]["map"] for j in jobs}) == 8                  # the built-in set
+    for j in plan.Planner({"seed": 1, "lights": "random", "backgrounds": "builtin"}, sources[0]).jobs(0, 50):
+        assert j["lights"]["lights"][0]["shadows"] and j["background"]["builtin"] < backgrounds.BUILTIN_COUNT
         check_schema(j["lights"], "lights.schema.json", "lights")
     # splits: by pose group (the 8 frames of a slerp path share one), about 0.8 / 0.1 / 0.1
     assert all(len({j["split"] for j in jobs[g:g + 8]}) == 1 for g in range(0, 400, 8))

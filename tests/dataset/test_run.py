@@ -55,7 +55,7 @@ def test_labels_match_the_forward_pass_in_the_camera_frame(small_dataset, source
         uv = (np.asarray(labels["keypoints_3d"]) @ K.T)
         assert np.allclose(uv[:, :2] / uv[:, 2:], labels["keypoints_2d"], atol=1e-6)
         assert labels["sample"]["pose"]["mode"] == "dart" and labels["split"] in ("train", "val", "test")
-        assert labels["render"]["background"]["used"].startswith("builtin:")
+        assert labels["render"]["background"]["used"].startswith("environment:")             # the default backdrop
         assert all(labels["in_image"])                                            # the hand kept in frame
         worn = labels["accessory"].get("worn")
         assert (worn is not None) == (labels["accessory"]["id"] == "ring_test")   # rings are worn per pose
@@ -137,8 +137,8 @@ def test_shading_options_reach_the_frames_and_their_resume_digest(package, tmp_p
     args = _cli(package, "--processes", "1", "--count", "1", "--out", str(tmp_path))
     assert main(["render-dataset", *args, "--ao-rays", "0", "--skin", "lambert"]) == 0
     labels = json.loads((tmp_path / "labels" / "000000.json").read_text())
-    expected = {"ao_rays": 0, "interreflection": True, "skin": "lambert"}
-    assert labels["render"]["shading"] == expected
+    expected = {"ao_rays": 0, "interreflection": True, "skin": "lambert", "skin_specular": "dual", "skin_detail": 1.0}
+    assert labels["render"]["shading"] == expected                  # a dataset's skin: two lobes and relief
     assert json.loads((tmp_path / "dataset.json").read_text())["shading"] == expected
     unblocked = (tmp_path / "images" / "000000.png").read_bytes()
     assert main(["render-dataset", *args, "--ao-rays", "0", "--skin", "lambert"]) == 0

@@ -18,7 +18,7 @@ import numpy as np
 
 from darthand.dataset.frames import render_job
 from darthand.dataset.jobs import check_jobs
-from darthand.dataset.options import DEFAULT_SAMPLES
+from darthand.dataset.options import DEFAULT_SAMPLES, PHOTO_GEOMETRY, PHOTO_SHADING
 from darthand.errors import InputError
 from darthand.fileio import write_json
 from darthand.model.anatomy import angles_to_axis_angle
@@ -126,7 +126,9 @@ def render_scene(build: StudioBuild, scene: dict) -> dict:
     job = scene_job(build, scene)
     side = build.side(scene["side"])
     size = int(scene["camera"]["width"]) if scene.get("camera") else 512
-    settings = {"size": size, "samples": SAMPLES, "aa_shading": AA_SHADING}
+    # a dataset's skin and arm (dataset/options.py), so that render-dataset --jobs draws the export the same
+    settings = {"size": size, "samples": SAMPLES, "aa_shading": AA_SHADING, "shading": dict(PHOTO_SHADING),
+                "geometry": dict(PHOTO_GEOMETRY)}
     if scene.get("film") is not None:
         settings["film"] = scene["film"]
     t = time.perf_counter()
