@@ -118,8 +118,9 @@ def test_images_are_the_frames_over_black(open_export):
 def assert_images_over_black(dataset, out, items, colour: bool = True) -> int:
     """The JPEGs of `items` against their frames over black (straight colour, decoded here): luma within 2 codes on
     average, mean colour within 1 (`colour`: a small hand over black, or a detailed environment backdrop, moves a
-    channel's mean by JPEG's halved chroma at its edges: 0.62 codes on the photo-like defaults), and luma within 8 codes on average over the partly covered edge pixels alone (where alpha
-    applied twice is 15 or more codes off); returns how many edge pixels there were."""
+    channel's mean by JPEG's halved chroma at its edges: 0.62 codes on the photo-like defaults), and luma within 8
+    codes on average over the partly covered edge pixels alone (where alpha applied twice is 15 or more codes off);
+    returns how many edge pixels there were."""
     luma = np.array([0.299, 0.587, 0.114])
     edges = 0
     for item in items:
