@@ -275,11 +275,12 @@ def test_exported_scene_renders_identically_in_batch(session, tmp_path):
     doc = json.loads(jobs.read_text())
     frame = doc["frames"][0]
     assert len(doc["frames"]) == 1 and frame["side"] == "left" and frame["accessory"] == GLOVE
+    assert "--arm off" in doc["studio"]["command"]            # the studio draws the package's forearm cap
     assert frame["texture"] == "dark_tattoos_00" and "color" in frame["background"]
     assert frame["skin_tone_offset"] == pytest.approx(0.10)
     out = tmp_path / "out"
     proc = subprocess.run([sys.executable, "-m", "darthand.cli", "render-dataset", str(build / "model" / "left.npz"),
-                           "--jobs", str(jobs), "--size", str(doc["studio"]["size"]), "--out", str(out),
+                           "--jobs", str(jobs), "--size", str(doc["studio"]["size"]), "--arm", "off", "--out", str(out),
                            "--processes", "1"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     batch = read_png(next((out / "images").glob("*.png"))).astype(np.int64)

@@ -18,7 +18,7 @@ import numpy as np
 
 from darthand.dataset.frames import render_job
 from darthand.dataset.jobs import check_jobs
-from darthand.dataset.options import DEFAULT_SAMPLES, PHOTO_GEOMETRY, PHOTO_SHADING
+from darthand.dataset.options import DEFAULT_SAMPLES, PHOTO_SHADING
 from darthand.errors import InputError
 from darthand.fileio import write_json
 from darthand.model.anatomy import angles_to_axis_angle
@@ -126,9 +126,9 @@ def render_scene(build: StudioBuild, scene: dict) -> dict:
     job = scene_job(build, scene)
     side = build.side(scene["side"])
     size = int(scene["camera"]["width"]) if scene.get("camera") else 512
-    # a dataset's skin and arm (dataset/options.py), so that render-dataset --jobs draws the export the same
-    settings = {"size": size, "samples": SAMPLES, "aa_shading": AA_SHADING, "shading": dict(PHOTO_SHADING),
-                "geometry": dict(PHOTO_GEOMETRY)}
+    # a dataset's skin (dataset/options.py), so that render-dataset --jobs draws the export the same; no arm: the
+    # live view shows the package's forearm cap (the export's command says --arm off)
+    settings = {"size": size, "samples": SAMPLES, "aa_shading": AA_SHADING, "shading": dict(PHOTO_SHADING)}
     if scene.get("film") is not None:
         settings["film"] = scene["film"]
     t = time.perf_counter()
@@ -217,7 +217,7 @@ def scene_export(build: StudioBuild, scene: dict, path_hint: str) -> dict:
     size = int(scene["camera"]["width"]) if scene.get("camera") else 512
     model = build.side(scene["side"]).source.source
     studio: dict = {"size": size, "samples": SAMPLES, "aa_shading": AA_SHADING,
-                    "command": f"darthand render-dataset {model} --jobs {path_hint} --size {size} --out OUT",
+                    "command": f"darthand render-dataset {model} --jobs {path_hint} --size {size} --arm off --out OUT",
                     "scene": {k: v for k, v in scene.items() if k != "name"}}
     if scene.get("film") is not None:
         studio["film"] = scene["film"]
