@@ -240,10 +240,11 @@ def subset_jobs(folder: Path, frames: int, subset: list[int]) -> Path:
         subprocess.run([sys.executable, "-m", "darthand.cli", "render-dataset", str(MODEL), "--out", str(folder),
                         "--count", str(frames), "--seed", str(SEED), "--plan", str(planned)], check=True,
                        capture_output=True)
-    lines = [json.loads(line) for line in planned.read_text().splitlines() if line.strip().startswith("{")]
+    from darthand.dataset.jobs import load_jobs
+
     wanted = set(subset)
     path = folder / "subset_jobs.json"
-    path.write_text(json.dumps({"frames": [job for job in lines if job.get("index") in wanted]}))
+    path.write_text(json.dumps({"frames": [job for job in load_jobs(planned) if job.get("index") in wanted]}))
     return path
 
 
