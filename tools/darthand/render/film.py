@@ -378,7 +378,7 @@ def sensor_noise(image: np.ndarray, film: Film, rng: np.random.Generator) -> np.
 
 def jpeg_round_trip(rgb: np.ndarray, quality: int) -> np.ndarray:
     """(H, W, 3) uint8 after encoding as JPEG at `quality` (Pillow's libjpeg, 4:2:0) and decoding; deterministic."""
-    from PIL import Image  # lazy: only frames with JPEG on pay Pillow's import (matplotlib's dependency, installed)
+    from PIL import Image  # lazy: only frames with JPEG on pay Pillow's import
 
     buffer = io.BytesIO()
     Image.fromarray(np.ascontiguousarray(rgb, np.uint8), "RGB").save(buffer, "JPEG", quality=int(quality))
