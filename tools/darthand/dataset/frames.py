@@ -101,8 +101,8 @@ def render_job(renderer, job: dict, settings: dict):
         info = {"used": f"environment:{Path(str(environment.get('map', '?'))).stem}", "blur": blur, "skipped": []}
     elif isinstance(scene.background, dict):
         background, info = background_pixels(scene.background, size, size)
-        if isinstance(scene.lights, dict) and "environment" in scene.lights:
-            scene = replace(scene, lights={**scene.lights, "environment": match_background(
+        if "folder" in scene.background and isinstance(scene.lights, dict) and "environment" in scene.lights:
+            scene = replace(scene, lights={**scene.lights, "environment": match_background(     # a photo behind
                 scene.lights["environment"], background)})
     t = time.perf_counter() - t
     film, film_seed = frame_film(settings.get("film"), job)
