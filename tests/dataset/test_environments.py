@@ -108,3 +108,15 @@ def test_render_dataset_refuses_a_set_of_bad_maps_in_one_line(package, tmp_path,
     assert run.returncode == 2, run.stderr
     assert len(run.stderr.strip().splitlines()) == 1 and "square.exr" in run.stderr
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").rglob("*.png"))
+
+
+def test_a_photo_backdrop_sets_the_lights_level_and_tint():
+    doc = {"map": "studio", "strength": 2.0, "white_balance": [1.0, 1.0, 1.0]}
+    grey = environments.match_background(doc, np.full((8, 8, 3), 0.3, np.float32))
+    assert grey["strength"] == pytest.approx(2.0 * 0.3 / environments.TARGET_RADIANCE, rel=1e-5)
+    assert grey["white_balance"] == pytest.approx([1.0, 1.0, 1.0], abs=1e-5) and grey["map"] == "studio"
+    bright = environments.match_background(doc, np.full((8, 8, 3), 50.0, np.float32))
+    assert bright["strength"] == pytest.approx(2.0 * environments.MATCH_LIMITS[1])       # within its limits
+    red = environments.match_background(doc, np.broadcast_to(np.float32([0.6, 0.3, 0.15]), (8, 8, 3)))
+    r, g, b = red["white_balance"]
+    assert r > g > b and np.mean(red["white_balance"]) == pytest.approx(1.0, abs=1e-4)
