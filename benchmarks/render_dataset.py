@@ -1,6 +1,7 @@
 """DART-style dataset benchmark: `darthand render-dataset` end to end as a researcher runs it. 10,000 frames of
-512^2 over every texture of the build's catalogue (325), both hands, an accessory on 25 % of the frames, random
-lights, built-in backgrounds, poses from DART's grid-and-slerp sampler over the gesture library, labels with MANO
+512^2 over every texture of the build's catalogue (325), both hands, an accessory on 25 % of the frames, the
+dataset defaults' look (an environment map per frame lighting the hand and seen behind it, two-lobe skin with its
+relief, the arm going on), poses from DART's grid-and-slerp sampler over the gesture library, labels with MANO
 parameters and meshes; worker processes, one per core. DARTHAND_BENCH_DATASET_FRAMES changes the frame count.
 
 Figures (dataset/run.RunStats.timings): images_per_second is the steady state after every worker has started
@@ -80,7 +81,8 @@ def run(frames: int | None = None) -> dict:
         "accessory_share": round(1 - counts.get("accessory_type", {}).get("none", 0) / max(1, frames), 4),
         "sides": counts.get("side"), "kb_per_frame_on_disk": round(disk / max(1, frames) / 1024, 1),
         "what": "512x512, DART poses (grid + slerp over the gestures), all catalogue textures, 25 % accessories, "
-                "both hands, random lights, built-in backgrounds, labels with MANO parameters and meshes",
+                "both hands, the dataset defaults (environment light and backdrop, two-lobe skin and relief, arm), "
+                "labels with MANO parameters and meshes",
     }
 
 
