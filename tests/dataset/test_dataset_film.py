@@ -6,12 +6,11 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
 import pytest
 from helpers_dataset import SIZE, files_of
 
 from darthand.dataset.api import render_dataset
-from darthand.dataset.film import UNIFORMS, film_setting, frame_film, random_film
+from darthand.dataset.film import film_setting, frame_film
 from darthand.dataset.options import DatasetOptions
 from darthand.errors import InputError
 from darthand.render.film import Film
@@ -58,4 +57,4 @@ def test_film_settings_of_a_run():
     assert frame_film({"random": True}, job) == frame_film({"random": True}, dict(job))
     assert frame_film({"random": True}, job) != frame_film({"random": True}, {**job, "index": 5})
     assert frame_film(None, job)[0] is None and frame_film({"iso": 400}, job)[0] == {"iso": 400}
-    assert Film.from_json(random_film(np.full(UNIFORMS, 0.5)))
+    assert Film.from_json(frame_film({"random": True}, job)[0])               # the frame's draw is a film

@@ -24,7 +24,6 @@ from darthand.errors import InputError
 from darthand.render import environment
 
 UNIFORMS = 8
-MAP_SUFFIXES = (".exr", ".hdr")
 TARGET_RADIANCE = 0.6          # a map's solid-angle mean luminance is scaled to this (a white wall facing it: 0.6)
 STRENGTH_STOPS = (-0.75, 0.75)  # then varied by this many stops
 KELVIN_RANGE = (5000.0, 8000.0)  # white balance: the light's colour as a camera balanced for 6500 K sees it
@@ -40,9 +39,9 @@ def list_maps(folder) -> list[str]:
     for dirpath, dirnames, filenames in os.walk(root):
         dirnames.sort()
         found += [Path(dirpath, name).relative_to(root).as_posix() for name in filenames
-                  if name.lower().endswith(MAP_SUFFIXES) and not name.startswith(".")]
+                  if name.lower().endswith(environment.SUFFIXES) and not name.startswith(".")]
     if not found:
-        raise InputError(f"{folder}: no environment maps ({', '.join(MAP_SUFFIXES)})")
+        raise InputError(f"{folder}: no environment maps ({', '.join(environment.SUFFIXES)})")
     return sorted(found)
 
 
@@ -100,7 +99,7 @@ def match_background(doc: dict, pixels: np.ndarray) -> dict:
     it, in a product with the drawn tint). pixels (H, W, 3) linear. A photo's own light is unknown, so its level
     and colour are what a viewer judges the hand against."""
     mean = np.asarray(pixels, np.float32).reshape(-1, 3).mean(0).astype(np.float64)
-    level = float(mean @ np.array([0.2126, 0.7152, 0.0722]))
+    level = float(mean @ environment.LUMA)
     scale = float(np.clip(level / TARGET_RADIANCE, *MATCH_LIMITS))
     tint = np.sqrt(np.maximum(mean, 1e-4) / max(float(mean.mean()), 1e-4))
     balance = np.asarray(doc.get("white_balance", [1.0, 1.0, 1.0])) * tint
@@ -110,9 +109,8 @@ def match_background(doc: dict, pixels: np.ndarray) -> dict:
 
 def mean_luminance(pixels: np.ndarray) -> float:
     """Solid-angle mean of an equirectangular map's luminance (Rec. 709 weights). pixels (H, 2H, 3) linear."""
-    rows = pixels.shape[0]
-    weight = np.cos((np.arange(rows) + 0.5) / rows * np.pi - np.pi / 2)          # solid angle of a texel's row
-    luminance = pixels[..., :3] @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    weight = environment.texel_solid_angles(pixels.shape[0])[:, 0]
+    luminance = pixels[..., :3] @ environment.LUMA.astype(np.float32)
     return float((luminance.mean(1) * weight).sum() / weight.sum())
 
 

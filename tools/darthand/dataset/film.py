@@ -3,9 +3,8 @@ seed.
 
 The setting (DatasetOptions.film) is 'none' (the renderer's own image, byte-identical to a run without films),
 'random' (a plausible camera drawn per frame: `random_film`), or fixed settings (a FILM.json path or a dict of
-render/film.Film's fields). A frame's draws and its noise seed come from a hash of its job, which is itself a
-function of (seed, index): frame i is the same on any machine, runner or shard. The planner may later draw films
-on its own stream with `random_film` and UNIFORMS.
+render/film.Film's fields). A frame's draws (render/film.random_film) and its noise seed come from a hash of its
+job, which is itself a function of (seed, index): frame i is the same on any machine, runner or shard.
 """
 
 from __future__ import annotations
@@ -17,14 +16,6 @@ import numpy as np
 
 from darthand.errors import InputError
 from darthand.render import film as render_film
-
-UNIFORMS = render_film.RANDOM_UNIFORMS
-
-
-def random_film(u: np.ndarray) -> dict:
-    """A plausible camera's film settings (render/film.Film.to_json's dict) from UNIFORMS uniforms in [0, 1)."""
-    return render_film.random_film(u)
-
 
 def film_setting(value) -> dict | None:
     """The run's film setting in the JSON form the workers get: None ('none'), {'random': True} ('random'), or a
@@ -47,7 +38,7 @@ def frame_film(setting: dict | None, job: dict) -> tuple[dict | None, int]:
     if setting is None:
         return None, seed
     if setting.get("random"):
-        return random_film(np.random.default_rng([seed, 1]).random(UNIFORMS)), seed
+        return render_film.random_film(np.random.default_rng([seed, 1]).random(render_film.RANDOM_UNIFORMS)), seed
     return setting, seed
 
 

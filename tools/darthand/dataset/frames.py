@@ -97,7 +97,7 @@ def render_job(renderer, job: dict, settings: dict):
     blur = backdrop_blur(scene.background)
     if blur is not None:
         background = scene.background                 # the environment itself: drawn through the frame's camera
-        environment = (scene.lights or {}).get("environment", {}) if isinstance(scene.lights, dict) else {}
+        environment = scene.lights.get("environment", {}) if isinstance(scene.lights, dict) else {}
         info = {"used": f"environment:{Path(str(environment.get('map', '?'))).stem}", "blur": blur, "skipped": []}
     elif isinstance(scene.background, dict):
         background, info = background_pixels(scene.background, size, size)
