@@ -1,0 +1,213 @@
+"""Two hands of one person in one frame: the interaction types, each a sampler of the two poses and of the left
+hand's placement relative to the right, resolved so that neither hand passes into the other (model/hand_pair.py).
+
+The world is the right hand's model frame (MANO's: fingers toward -X, thumb toward +Z, palm facing -Y, wrist toward
++X); the right hand's placement is the identity and the left hand's (its own model frame into the world) is what a
+type draws (issue 29's contract). Types:
+
+- apart: DART poses, the left hand turned at random, 5-15 cm from the right, no contact;
+- touching: palms facing; fingertips to fingertips (fingers slightly bent) or palm to palm (flat hands);
+- clasped: palms facing, the left turned 70-110 deg about the palm normal, fingers curled over the other hand;
+- interlaced: palms facing, fingers spread and bent, the left shifted by half a finger's spacing;
+- holding: the left hand in a C grip on the right's wrist, its palm on the back of the wrist;
+- overlapping: the left hand over the back of the right (1-4 cm above), both DART poses: one in front of the other;
+- mirrored: the mirror-image DART pose side by side (thumbs toward each other, 1-5 cm apart).
+
+Each is placed by bringing the left hand along an approach direction to first contact (hand_pair.first_contact_shift)
+and backing it off by the type's gap, then resolved by `hand_pair.resolve`, with the contacts the type asks for.
+A draw that does not resolve is redrawn: attempt k of frame i draws from [seed, INTERACTION_STREAM, i, k]; after
+ATTEMPTS the frame falls back to 'apart' (which resolves by construction), so a frame is never emitted penetrating.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from darthand.errors import InputError
+from darthand.model import hand_pair
+from darthand.model.anatomy import angles_to_axis_angle, joint_frames, limits_radians
+from darthand.model.layout import FINGER_JOINTS, NUM_JOINTS
+from darthand.model.mirror import mirror_pose
+
+TYPES = ("apart", "touching", "clasped", "interlaced", "holding", "overlapping", "mirrored")
+INTERACTION_STREAM = 9
+ATTEMPTS = 3
+JITTER_DEG = 5.0
+PALM = (0,)
+FINGERS = tuple(range(1, 16))
+MIRROR_Y = np.diag([-1.0, -1.0, 1.0])   # a left hand's own frame -> palm facing the right's palm (+Y)
+MIRROR_Z = np.diag([-1.0, 1.0, -1.0])   # -> lying beside the right, palm down, thumb toward -Z
+
+
+def parse_shares(text) -> dict:
+    """Shares per type from 'apart=0.2,clasped=0.8' or a dict; None: equal shares. InputError naming the fault."""
+    if text is None:
+        return {t: 1.0 / len(TYPES) for t in TYPES}
+    if isinstance(text, str):
+        pairs = {}
+        for item in (t for t in text.replace(" ", "").split(",") if t):
+            name, eq, value = item.partition("=")
+            if not eq:
+                raise InputError(f"interactions: {item!r} is not TYPE=SHARE")
+            try:
+                pairs[name] = float(value)
+            except ValueError:
+                raise InputError(f"interactions: share {value!r} of {name!r} is not a number") from None
+        text = pairs
+    return check_shares(text)
+
+
+def check_shares(shares: dict) -> dict:
+    """{type: share} checked: known types, shares within [0, 1] summing to 1 (types left out get 0)."""
+    if not isinstance(shares, dict) or not shares:
+        raise InputError("interactions: give shares per type, e.g. apart=0.5,clasped=0.5")
+    out = {t: 0.0 for t in TYPES}
+    for name, value in shares.items():
+        if name not in TYPES:
+            raise InputError(f"interactions: {name!r} is not an interaction type ({', '.join(TYPES)})")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+                math.isfinite(value) and 0 <= value <= 1):
+            raise InputError(f"interactions: share {value!r} of {name!r} is outside 0..1")
+        out[name] = float(value)
+    total = sum(out.values())
+    if abs(total - 1) > 1e-6:
+        raise InputError(f"interactions: shares sum to {total:g}, not 1")
+    return out
+
+
+def choose_type(u: float, shares: dict) -> str:
+    """The type whose cumulative share interval holds the uniform u."""
+    edge = 0.0
+    for name in TYPES:
+        edge += shares[name]
+        if u < edge:
+            return name
+    return next(t for t in reversed(TYPES) if shares[t] > 0)
+
+
+class InteractionSampler:
+    """Two-hand draws on a right model and a left model (each the model its side's source poses)."""
+
+    def __init__(self, right, left, shares: dict):
+        self.right, self.left, self.shares = right, left, parse_shares(shares)
+        self.frames = {"right": joint_frames(right), "left": joint_frames(left)}
+        self.limits = limits_radians()
+
+    def sample(self, seed: int, index: int, u: float, dart_pose: np.ndarray, betas) -> dict:
+        """Frame `index`'s two hands: {'type', 'right_pose' (48,), 'left_pose' (48,), 'placement' (4, 4) of the
+        left hand, 'record'} (record: the job's interaction record). u: the frame's uniform choosing the type;
+        dart_pose: the plan's pose of the frame (right-handed, (48,)); betas: both hands' shape (or None)."""
+        asked = choose_type(u, self.shares)
+        draws = [(asked, k) for k in range(ATTEMPTS)] + [("apart", ATTEMPTS)]
+        for kind, k in draws:
+            rng = np.random.default_rng([int(seed), INTERACTION_STREAM, int(index), k])
+            out = self.draw(kind, rng, np.asarray(dart_pose, np.float64), betas)
+            if out["resolution"].resolved:
+                record = {"type": kind, "contact_parts": out["contact_parts"], "attempts": k + 1,
+                          "resolved": out["resolution"].figures()}
+                if kind != asked:
+                    record["redrawn_from"] = asked
+                return {"type": kind, "right_pose": out["right_pose"], "left_pose": out["left_pose"],
+                        "placement": out["placement"], "record": record}
+        raise InputError(f"frame {index}: two hands could not be placed apart")  # 'apart' resolves by construction
+
+    # ------------------------------------------------------------------------------------------------ one draw
+    def draw(self, kind: str, rng: np.random.Generator, dart_pose: np.ndarray, betas) -> dict:
+        """One attempt at type `kind`: poses, the placement and its resolution."""
+        right_pose, left_pose = self.poses(kind, rng, dart_pose)
+        a = hand_pair.pose_hand(self.right, right_pose, betas)
+        b0 = hand_pair.pose_hand(self.left, left_pose, betas)
+        R, offset, approach, gap, touch = self.arrangement(kind, rng, a, b0)
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = a.vertices.mean(0) + offset - R @ b0.vertices.mean(0)
+        b = b0.moved(T)
+        shift = hand_pair.first_contact_shift(a, b, approach)
+        if np.isfinite(shift):
+            T[:3, 3] += (shift - gap) * approach
+        res = hand_pair.resolve(a, b0.moved(T), touch)
+        placement = res.T @ T
+        return {"right_pose": right_pose, "left_pose": left_pose, "placement": placement, "resolution": res,
+                "contact_parts": [[_region_name(jb), _region_name(ja)] for jb, ja in touch]}
+
+    def poses(self, kind: str, rng: np.random.Generator, dart_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(right (48,), left (48,)) axis-angle poses, each of its own side's model."""
+        if kind in ("apart", "overlapping"):
+            other = self.preshape("left", rng, {"bend": (0, 60), "spread": (-8, 8)})
+            return dart_pose, other
+        if kind == "mirrored":
+            return dart_pose, mirror_pose(dart_pose)
+        shape = {"touching": {"bend": (5, 30), "spread": (-5, 5)},
+                 "clasped": {"bend": (50, 80), "spread": (-3, 3)},
+                 "interlaced": {"bend": (35, 60), "spread": (10, 15)},
+                 "holding": {"bend": (45, 70), "spread": (-3, 3)}}[kind]
+        right = dart_pose if kind == "holding" else self.preshape("right", rng, shape)
+        return right, self.preshape("left", rng, shape)
+
+    def preshape(self, side: str, rng: np.random.Generator, shape: dict) -> np.ndarray:
+        """(48,) a hand's pose: every finger joint bent by a draw from shape['bend'] (degrees; the DIP 0.7 of it),
+        fingers spread by shape['spread'], the thumb half as much, jittered by JITTER_DEG, within the limits."""
+        angles = np.zeros((NUM_JOINTS, 3))
+        bend = rng.uniform(*shape["bend"])
+        spread = rng.uniform(*shape["spread"])
+        for k, finger in enumerate(("index", "middle", "ring", "pinky")):
+            mcp, pip, dip = FINGER_JOINTS[finger]
+            angles[[mcp, pip, dip], 2] = [bend, bend, 0.7 * bend]
+            angles[mcp, 1] = spread * (k - 1.5) / 1.5
+        cmc, mcp, ip = FINGER_JOINTS["thumb"]
+        angles[[cmc, mcp, ip], 2] = 0.5 * bend
+        angles = np.deg2rad(angles + JITTER_DEG * rng.standard_normal(angles.shape) * (angles != 0))
+        angles = np.clip(angles, self.limits[..., 0], self.limits[..., 1])
+        angles[0] = 0.0
+        model = self.right if side == "right" else self.left
+        return angles_to_axis_angle(model, angles, self.frames[side]).reshape(-1)
+
+    def arrangement(self, kind: str, rng: np.random.Generator, a, b):
+        """(R (3, 3) the left hand's turn, offset (3,) of its centre from the right's (m), approach (3,) unit
+        direction it is brought in along, gap (m) it stops short of contact, touch: joint-set pairs (left's,
+        right's) to bring into contact)."""
+        jitter = Rotation.from_rotvec(np.deg2rad(JITTER_DEG) * rng.standard_normal(3)).as_matrix()
+        up = np.array([0.0, 1.0, 0.0])
+        if kind == "apart":
+            R = Rotation.random(random_state=rng).as_matrix()
+            return R, np.zeros(3), _unit(rng.standard_normal(3)), rng.uniform(0.05, 0.15), ()
+        if kind == "overlapping":
+            return jitter @ MIRROR_Z, rng.uniform(-0.02, 0.02, 3), -up, rng.uniform(0.01, 0.04), ()
+        if kind == "mirrored":
+            return jitter @ MIRROR_Z, np.array([0.0, 0.0, 0.1]), np.array([0.0, 0.0, -1.0]), \
+                rng.uniform(0.01, 0.05), ()
+        if kind == "touching":
+            tips = rng.random() < 0.5
+            touch = ((hand_pair.TIPS, hand_pair.TIPS),) if tips else ((PALM, PALM),)
+            return jitter @ MIRROR_Y, np.array([0.0, -0.1, 0.0]), up, hand_pair.CONTACT_GAP, touch
+        if kind == "clasped":
+            turn = Rotation.from_rotvec(np.deg2rad(rng.uniform(70, 110)) * up).as_matrix()
+            return turn @ jitter @ MIRROR_Y, np.array([0.0, -0.1, 0.0]), up, hand_pair.CONTACT_GAP, \
+                ((FINGERS, None),)
+        if kind == "interlaced":
+            side = np.array([0.0, -0.1, rng.choice([-1.0, 1.0]) * 0.009])
+            return jitter @ MIRROR_Y, side, up, hand_pair.CONTACT_GAP, ((FINGERS, FINGERS),)
+        # holding: the left's fingers across the right's wrist (toward -Z), its palm on the back of the wrist
+        turn = Rotation.from_rotvec(np.deg2rad(90) * up).as_matrix()
+        wrist = a.vertices[np.isin(a.vertex_joint, PALM)]
+        target = np.array([wrist[:, 0].max() - 0.02, 0.1, 0.0]) - a.vertices.mean(0)
+        return jitter @ turn, target, -up, hand_pair.CONTACT_GAP, ((PALM + FINGERS, PALM),)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def _region_name(joints) -> str:
+    if joints is None:
+        return "hand"
+    if tuple(joints) == hand_pair.TIPS:
+        return "fingertips"
+    if tuple(joints) == PALM:
+        return "palm"
+    if tuple(joints) == FINGERS:
+        return "fingers"
+    return "palm+fingers"

@@ -1,0 +1,369 @@
+"""Two posed hands in one world: how far one passes into the other, and the rigid move that resolves it.
+
+Penetration is measured as the signed distances (m, negative inside) of each hand's vertices to the other hand's
+surface: the distance to the nearest surface point (model/proximity.closest_surface_points), negative when the
+vertex lies behind the surface there (against the normal interpolated at that point). As in model/proximity, a
+vertex whose offset makes more than ~45 degrees with that normal (at the open wrist's cut edge, say) says nothing
+about inside or out and is left out. The guard is MeshLab's face intersection test on the two meshes together
+(model/intersections.self_intersecting), less the faces each hand crosses on its own.
+
+The resolution follows model/gesture_fit's model: a small bounded least-squares problem,
+
+    minimise   sum (x_k / sigma_k)^2                                  stay near the sampled placement
+             + sum_i (max(0, c - d_i) / s)^2                          the hands at least c apart (clearance)
+             + sum_contacts ((softmin_i d_i - g) / s)^2               the asked-for regions end g apart (touching)
+    within     |rotation| <= MAX_TURN_DEG per axis, |translation| <= MAX_SHIFT_M per axis
+
+over x = (rotation vector (3, radians, about the moved hand's centre), translation (3, m)) of the second hand (the
+left, in the right hand's frame). The Jacobian is the rigid motion's: a vertex p of the moved hand at distance d
+along the unit direction u moves d by u . (dt + dw x (p - c)), a nearest point y on the moved hand's surface by
+minus that. The samples in the fit are those within clearance + REACH of the other hand, re-selected after each
+solve until none comes near. When MeshLab still finds crossing faces the clearance grows by STEP, up to ROUNDS.
+
+The digits' angles are not moved here: the poses stay as sampled (the interaction types choose pre-shapes that
+leave room, dataset/interactions.py), so "how far the poses moved" is the rigid move only (degrees of turn).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+from threadpoolctl import threadpool_limits
+
+from darthand.model.forward import forward
+from darthand.model.hand_model import HandModel
+from darthand.model.intersections import self_intersecting
+from darthand.model.proximity import FACING_COS, TOUCHING, closest_surface_points
+from darthand.model.topology import face_joints, vertex_normals
+
+CLEARANCE = 0.5e-3       # m: hands not asked to touch stay at least this far apart
+CONTACT_GAP = 0.5e-3     # m: regions asked to touch end this far apart (touching, not inside)
+CONTACT_M = 3e-3         # m: a vertex this near the other hand's surface (or inside it) is in contact (labels)
+STEP = 0.5e-3            # m: added to the clearance when the guard still finds crossing faces
+ROUNDS = 3
+REACH = 6e-3             # m: samples farther than clearance + REACH from the other hand are left out of a fit
+SOFTMIN = 0.3e-3         # m: temperature of the soft minimum over a contact's distances
+PENALTY_SCALE = 0.05e-3  # m of violated clearance that costs as much as one sigma of move
+TURN_SIGMA_DEG = 3.0
+SHIFT_SIGMA_M = 3e-3
+MAX_TURN_DEG = 30.0
+MAX_SHIFT_M = 0.06
+TIPS = (3, 6, 9, 12, 15)  # MANO's distal joints: the fingertips' segments
+
+
+@dataclass
+class PosedHand:
+    """One posed hand in the world: vertices (V, 3) m, faces (F, 3), unit vertex normals (V, 3), the dominant
+    joint of each vertex (V,) and of each face (F,)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+    vertex_joint: np.ndarray
+    face_joint: np.ndarray
+    _alone: np.ndarray | None = field(default=None, repr=False)
+
+    def moved(self, T: np.ndarray) -> "PosedHand":
+        """This hand under the rigid transform T (4, 4) (its own crossings carried over: a rigid move keeps them)."""
+        v = self.vertices @ T[:3, :3].T + T[:3, 3]
+        return PosedHand(v, self.faces, self.normals @ T[:3, :3].T, self.vertex_joint, self.face_joint, self._alone)
+
+    def crossing_alone(self) -> np.ndarray:
+        """(F,) bool faces crossing another face of this same hand (MeshLab), computed once."""
+        if self._alone is None:
+            self._alone = self_intersecting(self.vertices, self.faces)
+        return self._alone
+
+    def region(self, joints) -> tuple[np.ndarray, np.ndarray]:
+        """(vertex ids, face ids) whose dominant joint is one of `joints` (all of them for None)."""
+        if joints is None:
+            return np.arange(len(self.vertices)), np.arange(len(self.faces))
+        return np.flatnonzero(np.isin(self.vertex_joint, joints)), np.flatnonzero(np.isin(self.face_joint, joints))
+
+
+def pose_hand(model: HandModel, pose, betas=None, T: np.ndarray | None = None) -> PosedHand:
+    """`model` posed by the (48,) axis-angle `pose` and `betas` (model forward), placed by T (4, 4; None: identity)."""
+    v = forward(model, np.asarray(pose, np.float64).reshape(1, -1),
+                None if betas is None else np.asarray(betas, np.float64).reshape(1, -1)).vertices[0]
+    v = np.asarray(v, np.float64)
+    vj = np.argmax(model.weights, axis=1)
+    hand = PosedHand(v, model.faces, vertex_normals(v, model.faces), vj, face_joints(model.faces, model.weights))
+    return hand if T is None else hand.moved(T)
+
+
+def rigid(x: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """(4, 4) transform of x = (rotation vector (3,) about `centre` (3,), translation (3,) m)."""
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec(x[:3]).as_matrix()
+    T[:3, 3] = centre - T[:3, :3] @ centre + x[3:]
+    return T
+
+
+@dataclass
+class Distances:
+    """Signed distances of points to a hand's surface: distance (K,) m, negative inside (inf: not facing it),
+    direction (K, 3) the unit direction along which the distance grows, nearest (K, 3) the surface points."""
+
+    distance: np.ndarray
+    direction: np.ndarray
+    nearest: np.ndarray
+
+
+def signed_distances(points: np.ndarray, hand: PosedHand, faces: np.ndarray | None = None) -> Distances:
+    """Signed distances of `points` (K, 3) to `hand`'s surface (or its `faces` ids only); see the module docstring."""
+    tri_faces = hand.faces if faces is None else hand.faces[faces]
+    if len(points) == 0 or len(tri_faces) == 0:
+        return Distances(np.full(len(points), np.inf), np.zeros((len(points), 3)), np.zeros((len(points), 3)))
+    tri, bary, dist = closest_surface_points(hand.vertices, tri_faces, points, candidates=8)
+    corners = tri_faces[tri]
+    on = np.einsum("pk,pkd->pd", bary, hand.vertices[corners])
+    n = np.einsum("pk,pkd->pd", bary, hand.normals[corners])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    offset = points - on
+    along = np.einsum("pd,pd->p", offset, n)
+    facing = (np.abs(along) >= FACING_COS * dist) | (dist < TOUCHING)
+    sign = np.where(along < 0, -1.0, 1.0)
+    direction = np.where(dist[:, None] > 1e-7, offset / np.maximum(dist, 1e-300)[:, None] * sign[:, None], n)
+    return Distances(np.where(facing, sign * dist, np.inf), direction, on)
+
+
+def near_ids(points: np.ndarray, other: np.ndarray, reach: float) -> np.ndarray:
+    """Ids of `points` (K, 3) within `reach` (m, plus the other's vertex spacing) of the point set `other` (M, 3)."""
+    lo, hi = other.min(0) - reach - 0.01, other.max(0) + reach + 0.01
+    inside = np.flatnonzero(((points >= lo) & (points <= hi)).all(1))
+    if len(inside) == 0:
+        return inside
+    d, _ = cKDTree(other).query(points[inside], distance_upper_bound=reach + 0.006)
+    return inside[np.isfinite(d)]
+
+
+# ------------------------------------------------------------------------------------------------ measures
+
+
+@dataclass
+class Penetration:
+    """How far two hands pass into each other: max and p99 (over the vertices inside) depth (m), the vertices
+    inside, MeshLab's crossing faces between the hands."""
+
+    max_m: float
+    p99_m: float
+    inside: int
+    crossing_faces: int
+
+    @property
+    def clear(self) -> bool:
+        return self.inside == 0 and self.crossing_faces == 0
+
+
+def depths(a: PosedHand, b: PosedHand) -> np.ndarray:
+    """Depths (m, > 0) of every vertex of either hand lying inside the other."""
+    out = []
+    for p, q in ((a, b), (b, a)):
+        ids = near_ids(p.vertices, q.vertices, 0.0)
+        d = signed_distances(p.vertices[ids], q).distance
+        out.append(-d[d < 0])
+    return np.concatenate(out)
+
+
+def crossing_faces(a: PosedHand, b: PosedHand) -> int:
+    """Faces of either hand crossing a face of the other (MeshLab's test on the two meshes, less each one's own).
+
+    Only the faces inside the other hand's bounding box (grown by a few mm) can cross it, so the test runs on
+    those: the two crops together, less what each crop crosses alone."""
+    fa, fb = _faces_near(a, b), _faces_near(b, a)
+    if len(fa) == 0 or len(fb) == 0:
+        return 0
+    va, vb = a.vertices, b.vertices
+    both = self_intersecting(np.concatenate([va, vb]), np.concatenate([a.faces[fa], b.faces[fb] + len(va)]))
+    alone_a = self_intersecting(va, a.faces[fa])
+    alone_b = self_intersecting(vb, b.faces[fb])
+    return int((both[:len(fa)] & ~alone_a).sum() + (both[len(fa):] & ~alone_b).sum())
+
+
+def _faces_near(a: PosedHand, b: PosedHand, margin: float = 3e-3) -> np.ndarray:
+    """Ids of a's faces with a corner inside b's bounding box grown by `margin` (m)."""
+    lo, hi = b.vertices.min(0) - margin, b.vertices.max(0) + margin
+    inside = ((a.vertices >= lo) & (a.vertices <= hi)).all(1)
+    return np.flatnonzero(inside[a.faces].any(1))
+
+
+def first_contact_shift(a: PosedHand, b: PosedHand, direction: np.ndarray, cell: float = 2.5e-3) -> float:
+    """How far (m) hand `b` moves along the unit `direction` (3,) until it first touches hand `a` (negative: it
+    must move back): both vertex sets are binned on a grid of `cell` (m) across the direction, and in every cell
+    (and its neighbours) b's front must stay behind a's back. inf when they never meet."""
+    u = np.asarray(direction, np.float64) / np.linalg.norm(direction)
+    e1 = np.cross(u, [1.0, 0, 0] if abs(u[0]) < 0.9 else [0, 1.0, 0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(u, e1)
+    basis = np.stack([e1, e2], 1)
+    ka = np.floor(a.vertices @ basis / cell).astype(np.int64)
+    kb = np.floor(b.vertices @ basis / cell).astype(np.int64)
+    codes, inverse = np.unique(_cell_code(ka), return_inverse=True)
+    back = np.full(len(codes), np.inf)              # per cell: a's smallest height along u
+    np.minimum.at(back, inverse.reshape(-1), a.vertices @ u)
+    front = b.vertices @ u
+    best = np.inf
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            code = _cell_code(kb + [di, dj])
+            at = np.minimum(np.searchsorted(codes, code), len(codes) - 1)
+            hit = codes[at] == code
+            if hit.any():
+                best = min(best, float((back[at[hit]] - front[hit]).min()))
+    return best
+
+
+def _cell_code(k: np.ndarray) -> np.ndarray:
+    """One int64 per 2D grid cell (K, 2) (cells within +-2^20 of the origin)."""
+    return (k[:, 0] + (1 << 20)) * (1 << 21) + (k[:, 1] + (1 << 20))
+
+
+def penetration(a: PosedHand, b: PosedHand) -> Penetration:
+    """The penetration measures of two posed hands."""
+    d = depths(a, b)
+    return Penetration(float(d.max(initial=0.0)), float(np.percentile(d, 99)) if len(d) else 0.0, len(d),
+                       crossing_faces(a, b))
+
+
+def contacts(a: PosedHand, b: PosedHand, within: float = CONTACT_M) -> np.ndarray:
+    """Sorted vertex ids of `a` within `within` (m) of `b`'s surface, or inside it."""
+    ids = near_ids(a.vertices, b.vertices, within)
+    d = signed_distances(a.vertices[ids], b).distance
+    return np.sort(ids[d <= within])
+
+
+def region_gap(a: PosedHand, b: PosedHand, joints_a, joints_b) -> float:
+    """Smallest signed distance (m) from `a`'s vertices of region joints_a to `b`'s faces of region joints_b."""
+    va, _ = a.region(joints_a)
+    _, fb = b.region(joints_b)
+    return float(signed_distances(a.vertices[va], b, fb).distance.min(initial=np.inf))
+
+
+# ------------------------------------------------------------------------------------------------ resolution
+
+
+@dataclass
+class Resolution:
+    """The outcome of `resolve`: T (4, 4) the move applied to the second hand (world to world); resolved: no
+    vertex inside and no crossing face; penetration before/after; turn_deg, shift_m: the move; contacts: per asked
+    pair the final gap (m); rounds; cpu_s."""
+
+    T: np.ndarray
+    resolved: bool
+    before: Penetration
+    after: Penetration
+    turn_deg: float
+    shift_m: float
+    contacts: list
+    rounds: int
+    cpu_s: float
+
+    def figures(self) -> dict:
+        """The plain-JSON record of the resolution (what a job's interaction record carries)."""
+        return {"resolved": self.resolved, "rounds": self.rounds,
+                "max_mm": round(self.after.max_m * 1e3, 4), "p99_mm": round(self.after.p99_m * 1e3, 4),
+                "crossing_faces": self.after.crossing_faces, "before_max_mm": round(self.before.max_m * 1e3, 3),
+                "turn_deg": round(self.turn_deg, 3), "shift_mm": round(self.shift_m * 1e3, 3),
+                "contact_gaps_mm": [round(g * 1e3, 3) for g in self.contacts], "cpu_ms": round(self.cpu_s * 1e3, 2)}
+
+
+class PairProblem:
+    """The least-squares problem of placing hand `b` against hand `a` (module docstring). touch: pairs of joint
+    sets (b's region, a's region) to bring into contact."""
+
+    def __init__(self, a: PosedHand, b: PosedHand, touch, clearance: float):
+        self.a, self.b, self.clearance = a, b, clearance
+        self.centre = b.vertices.mean(0)
+        self.touch = [(b.region(jb)[0], a.region(ja)[1]) for jb, ja in touch]
+        self.sigma = np.r_[np.full(3, np.deg2rad(TURN_SIGMA_DEG)), np.full(3, SHIFT_SIGMA_M)]
+        self.b_ids = np.zeros(0, np.int64)   # b's vertices tested against a's surface
+        self.a_ids = np.zeros(0, np.int64)   # a's vertices tested against b's surface
+
+    def select(self, x: np.ndarray) -> bool:
+        """Add the samples within clearance + REACH of the other hand at x; True if any was added."""
+        b = self.b.moved(rigid(x, self.centre))
+        reach = self.clearance + REACH
+        b_new = np.union1d(self.b_ids, near_ids(b.vertices, self.a.vertices, reach))
+        a_new = np.union1d(self.a_ids, near_ids(self.a.vertices, b.vertices, reach))
+        added = len(b_new) > len(self.b_ids) or len(a_new) > len(self.a_ids)
+        self.b_ids, self.a_ids = b_new, a_new
+        return added
+
+    def residuals(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(residuals (R,), Jacobian (R, 6)) at x."""
+        T = rigid(x, self.centre)
+        b = self.b.moved(T)
+        c = T[:3, :3] @ self.centre + T[:3, 3]
+        res, jac = [x / self.sigma], [np.diag(1.0 / self.sigma)]
+        pb = b.vertices[self.b_ids]
+        hb = signed_distances(pb, self.a)                               # b's vertices on a: they move
+        gb = np.concatenate([np.cross(pb - c, hb.direction), hb.direction], 1)
+        ha = signed_distances(self.a.vertices[self.a_ids], b)           # a's vertices on b: b's surface moves
+        ga = -np.concatenate([np.cross(ha.nearest - c, ha.direction), ha.direction], 1)
+        for h, g in ((hb, gb), (ha, ga)):
+            short = h.distance < self.clearance
+            res.append(np.where(short, (self.clearance - h.distance) / PENALTY_SCALE, 0.0))
+            jac.append(np.where(short[:, None], -g / PENALTY_SCALE, 0.0))
+        for vb, fa in self.touch:
+            p = b.vertices[vb]
+            h = signed_distances(p, self.a, fa)
+            ok = np.isfinite(h.distance)
+            if not ok.any():
+                res.append(np.zeros(1))
+                jac.append(np.zeros((1, 6)))
+                continue
+            d, g = h.distance[ok], np.concatenate([np.cross(p - c, h.direction), h.direction], 1)[ok]
+            w = np.exp(-(d - d.min()) / SOFTMIN)
+            soft = d.min() - SOFTMIN * np.log(w.sum())
+            res.append(np.array([(soft - CONTACT_GAP) / PENALTY_SCALE]))
+            jac.append((w / w.sum()) @ g / PENALTY_SCALE)
+        return np.concatenate(res), np.vstack(jac)
+
+    def solve(self, x0: np.ndarray) -> np.ndarray:
+        """The fitted x: least squares, re-selecting the samples until none new comes near."""
+        x = x0.copy()
+        lim = np.r_[np.full(3, np.deg2rad(MAX_TURN_DEG)), np.full(3, MAX_SHIFT_M)]
+        cache: dict = {}
+
+        def evaluate(y):
+            key = y.tobytes()
+            if key not in cache:
+                cache.clear()
+                cache[key] = self.residuals(y)
+            return cache[key]
+
+        for k in range(2):
+            if not self.select(x) and k > 0:
+                break
+            cache.clear()
+            x = least_squares(lambda y: evaluate(y)[0], np.clip(x, -lim, lim), jac=lambda y: evaluate(y)[1],
+                              bounds=(-lim, lim), method="trf", x_scale=self.sigma, max_nfev=12,
+                              xtol=1e-6, ftol=1e-6).x
+        return x
+
+
+def resolve(a: PosedHand, b: PosedHand, touch=(), rounds: int = ROUNDS) -> Resolution:
+    """Move hand `b` rigidly off hand `a` (and onto it where `touch` asks: pairs of joint sets (b's, a's)); see the
+    module docstring. The result is checked by `penetration` (MeshLab's test included)."""
+    start = time.process_time()
+    with threadpool_limits(limits=1, user_api="blas"):
+        before = penetration(a, b)
+        x, after, moved = np.zeros(6), before, b
+        used = 0
+        if not before.clear or touch:
+            for used in range(1, rounds + 1):
+                problem = PairProblem(a, b, touch, CLEARANCE + (used - 1) * STEP)
+                x = problem.solve(x)
+                moved = b.moved(rigid(x, problem.centre))
+                after = penetration(a, moved)
+                if after.clear:
+                    break
+        T = rigid(x, b.vertices.mean(0))
+        gaps = [region_gap(moved, a, jb, ja) for jb, ja in touch]
+    return Resolution(T, after.clear, before, after, float(np.rad2deg(np.linalg.norm(x[:3]))),
+                      float(np.linalg.norm(x[3:])), gaps, used, time.process_time() - start)
