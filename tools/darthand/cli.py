@@ -616,6 +616,12 @@ def _add_dataset_arguments(p) -> None:
                         f"(default {plan.backgrounds})")
     p.add_argument("--split", type=numbers(3, float, 0, 1), default=plan.split, metavar="TRAIN,VAL,TEST",
                    help=f"deterministic split fractions (by pose group) (default {_listed(plan.split)})")
+    p.add_argument("--two-hands", type=number(float, 0, 1), default=plan.two_hands, metavar="SHARE",
+                   help="share of the frames with both of a person's hands in one of the --interactions (needs a "
+                        f"model and both sides; default {plan.two_hands:g}: none)")
+    p.add_argument("--interactions", default=None, metavar="TYPE=SHARE,...",
+                   help="shares of the two-hand interaction types, summing to 1: apart, touching, clasped, "
+                        "interlaced, holding, overlapping, mirrored (default: equal shares)")
     p.add_argument("--size", type=number(int, 8, o.MAX_SIZE), default=run.size, metavar="N",
                    help=f"square image size in pixels (default {run.size})")
     _add_antialiasing_options(p, run.samples, run.aa_shading)

@@ -19,7 +19,13 @@ A plan's options are one JSON document (`plan_spec`), recorded in dataset.json a
 - background: dataset/backgrounds.py (built-in set, a folder, or none), or the frame's environment seen through its
   camera ('environment');
 - split: train/val/test by `split` fractions, drawn per pose group (the frames of one slerp path share a split, so
-  near-identical poses never straddle train and test).
+  near-identical poses never straddle train and test);
+- two hands: on `two_hands` of the frames (default none), the user's right and left hand in an interaction type
+  drawn by `interactions` shares (dataset/interactions.py), as a job of two `bodies` (the right hand at the world's
+  identity, the left with its placement; both wearing the frame's shape, texture and tone; the accessory on the hand
+  of the frame's side draw) with the `interaction` record. Whether a frame has two hands is drawn on its own stream
+  (TWO_HANDS_STREAM), so one-hand frames draw as they would without the option; with `two_hands` 0 the plan document
+  leaves both options out and every job is as before.
 
 Frame i's choices use numpy's Generator seeded with [seed, FRAME_STREAM, i] (a fixed number of uniforms, each with
 a fixed role, so that one option never shifts another's draws); poses, views, shapes and the environment have
@@ -34,7 +40,7 @@ from dataclasses import dataclass, field, fields, is_dataclass
 
 import numpy as np
 
-from darthand.dataset import backgrounds, environments, lighting, poses, shapes, views
+from darthand.dataset import backgrounds, environments, interaction_shares, lighting, poses, shapes, views
 from darthand.dataset.shapes import ShapeOptions
 from darthand.errors import InputError
 from darthand.fileio import read_json
@@ -45,6 +51,7 @@ PLAN_VERSION = 2
 FRAME_STREAM = 0
 SPLIT_STREAM = 4
 ENVIRONMENT_STREAM = 6
+TWO_HANDS_STREAM = 8                         # 2 uniforms: two hands or one, the interaction type
 SPLITS = ("train", "val", "test")
 # Which of a frame's uniforms decides what.
 TEXTURE, TONE, BARE, ACCESSORY, SIDE = 0, 1, 2, 3, 4
@@ -79,7 +86,8 @@ class PlanOptions:
     and accessories: ids to draw from (None: every one of the catalogue; accessories [] for none); lights 'environment',
     'random', 'default' or a lights document or file; environments (the maps 'environment' lights draw from)
     'builtin', a folder or a map; backgrounds 'builtin', 'none', 'environment' (the frame's environment behind the
-    hand), a folder or an image; split the train/val/test fractions."""
+    hand), a folder or an image; split the train/val/test fractions; two_hands the share of frames with two hands
+    (0: none, and the plan document leaves it and interactions out); interactions {type: share} (None: equal)."""
 
     seed: int = 0
     poses: PoseOptions = field(default_factory=PoseOptions)
@@ -99,6 +107,8 @@ class PlanOptions:
     backgrounds: str = "environment"
     split: tuple = (0.8, 0.1, 0.1)
     shapes: ShapeOptions = field(default_factory=ShapeOptions)
+    two_hands: float = 0.0
+    interactions: dict | str | None = None
 
     def spec(self) -> dict:
         """The plan document (plain JSON values: lists for tuples)."""
@@ -114,15 +124,17 @@ def _plain(value):
     return value
 
 
-DEFAULTS: dict = _plain(PlanOptions())
+# Options in the plan document only when two hands are asked for, so that every plan without them is as before.
+TWO_HAND_OPTIONS = ("two_hands", "interactions")
+DEFAULTS: dict = {k: v for k, v in _plain(PlanOptions()).items() if k not in TWO_HAND_OPTIONS}
 
 
 def plan_spec(**options) -> dict:
     """DEFAULTS updated with `options` (None leaves a default; 'poses' merges), checked for unknown names."""
     spec = copy.deepcopy(DEFAULTS)
     for key, value in options.items():
-        if key not in spec:
-            raise InputError(f"plan: unknown option {key!r} (known: {', '.join(spec)})")
+        if key not in spec and key not in TWO_HAND_OPTIONS:
+            raise InputError(f"plan: unknown option {key!r} (known: {', '.join(list(spec) + list(TWO_HAND_OPTIONS))})")
         if key in ("poses", "shapes"):
             if isinstance(value, str):                  # a shape distribution given by its name
                 value = {"mode": value}
@@ -133,7 +145,19 @@ def plan_spec(**options) -> dict:
                     spec[key][k] = v
         elif value is not None:
             spec[key] = list(value) if isinstance(value, tuple) else value
-    return spec
+    return _two_hand_options(spec)
+
+
+def _two_hand_options(spec: dict) -> dict:
+    """The spec with two_hands checked (a share in 0..1) and interactions as checked shares; both left out when
+    two_hands is 0."""
+    share = spec.get("two_hands", 0.0)
+    if isinstance(share, bool) or not isinstance(share, (int, float)) or not (math.isfinite(share) and 0 <= share <= 1):
+        raise InputError(f"two hands: {share!r} is not a share within 0..1")
+    shares = interaction_shares.parse_shares(spec.get("interactions"))
+    if share == 0:
+        return {k: v for k, v in spec.items() if k not in TWO_HAND_OPTIONS}
+    return {**spec, "two_hands": float(share), "interactions": shares}
 
 
 def split_of(unit: int, seed: int, fractions) -> str:
@@ -209,6 +233,8 @@ class Planner:
         self.group_size = self.poses.steps if isinstance(self.poses, poses.GridSlerp) else 1
         self.shapes = _shape_sampler(spec["shapes"], self.model)
         spec["shapes"] = self.shapes.spec()
+        self.two_hands = spec.get("two_hands", 0.0)
+        self.pairs = _interaction_sampler(spec, sources, self.model) if self.two_hands else None
 
     def describe(self) -> dict:
         """What the plan draws from (for dataset.json and the report)."""
@@ -267,7 +293,33 @@ class Planner:
                "sample": sample}
         if betas is not None:
             job["betas"] = betas
+        if self.pairs is not None:
+            u2 = np.random.default_rng([self.seed, TWO_HANDS_STREAM, i]).random(2)
+            if u2[0] < self.two_hands:
+                return self._two_hand_job(job, u2[1])
         return job
+
+    def _two_hand_job(self, job: dict, u: float) -> dict:
+        """A one-hand job made the frame's two-hand job: the contract's `bodies` form and its interaction record."""
+        assert self.pairs is not None
+        i = job["index"]
+        pose, _ = self.poses.sample(self.seed, i)
+        pair = self.pairs.sample(self.seed, i, u, np.asarray(pose, np.float64), job.get("betas"))
+        bodies = []
+        for side, key in (("right", "right_pose"), ("left", "left_pose")):
+            body = {"kind": "hand", "side": side, "pose": np.asarray(pair[key], np.float64).tolist(),
+                    "texture": job["texture"], "skin_tone_offset": job["skin_tone_offset"],
+                    "accessory": job["accessory"] if side == job["side"] else "none"}
+            if "betas" in job:
+                body["betas"] = job["betas"]
+            if side == "left":
+                body["placement"] = np.round(pair["placement"], 9).tolist()
+            bodies.append(body)
+        out = {k: v for k, v in job.items() if k not in ("side", "pose", "texture", "skin_tone_offset",
+                                                          "accessory", "betas")}
+        if pair["type"] not in ("apart", "overlapping", "mirrored"):
+            out["gesture"] = None                       # a type's pre-shape, not the sampled pose
+        return {**out, "bodies": bodies, "interaction": pair["record"]}
 
     def _lights(self, u, side: str):
         if self.lights == "random":
@@ -299,6 +351,19 @@ def _pose_sampler(opts: dict, model, first):
     if mode in ("auto", "dart"):
         return poses.GridSlerp(model, reference, levels=opts["levels"], draws=opts["draws"], steps=opts["steps"])
     return poses.GestureJitter(model, reference, 0.0 if mode == "gestures" else opts["jitter_deg"])
+
+
+def _interaction_sampler(spec: dict, sources: dict, model):
+    """The two-hand sampler (dataset/interactions.InteractionSampler) on the models both sides' sources pose."""
+    # Imported here: the pair geometry (MeshLab, the fit) loads only for plans with two hands.
+    from darthand.dataset import interactions
+
+    if model is None:
+        raise InputError("two hands: a USD package renders baked gestures; two-hand frames need a model")
+    if set(sources) != {"right", "left"}:
+        raise InputError("two hands: the plan needs both sides' sources (--sides right,left)")
+    return interactions.InteractionSampler(sources["right"].pose_model() or model, sources["left"].pose_model(),
+                                           spec["interactions"])
 
 
 def _shape_sampler(opts: dict, model) -> shapes.ShapeSampler:
