@@ -47,7 +47,7 @@ CONTACT_M = 3e-3         # m: a vertex this near the other hand's surface (or in
 STEP = 0.5e-3            # m: added to the clearance when the guard still finds crossing faces
 ROUNDS = 3
 REACH = 6e-3             # m: samples farther than clearance + REACH from the other hand are left out of a fit
-SOFTMIN = 0.3e-3         # m: temperature of the soft minimum over a contact's distances
+SOFTMIN = 0.1e-3         # m: temperature of the soft minimum over a contact's distances
 PENALTY_SCALE = 0.05e-3  # m of violated clearance that costs as much as one sigma of move
 TURN_SIGMA_DEG = 3.0
 SHIFT_SIGMA_M = 3e-3
@@ -132,10 +132,16 @@ def signed_distances(points: np.ndarray, hand: PosedHand, faces: np.ndarray | No
     return Distances(np.where(facing, sign * dist, np.inf), direction, on)
 
 
+def in_box(points: np.ndarray, other: np.ndarray, margin: float = 0.0) -> np.ndarray:
+    """Ids of `points` (K, 3) inside the bounding box of `other` (M, 3) grown by `margin` (m)."""
+    lo, hi = other.min(0) - margin, other.max(0) + margin
+    return np.flatnonzero(((points >= lo) & (points <= hi)).all(1))
+
+
 def near_ids(points: np.ndarray, other: np.ndarray, reach: float) -> np.ndarray:
-    """Ids of `points` (K, 3) within `reach` (m, plus the other's vertex spacing) of the point set `other` (M, 3)."""
-    lo, hi = other.min(0) - reach - 0.01, other.max(0) + reach + 0.01
-    inside = np.flatnonzero(((points >= lo) & (points <= hi)).all(1))
+    """Ids of `points` (K, 3) within `reach` (m, plus the other's vertex spacing) of the point set `other` (M, 3).
+    (Not for points deep inside a closed surface: they may lie farther than that from every vertex.)"""
+    inside = in_box(points, other, reach + 0.01)
     if len(inside) == 0:
         return inside
     d, _ = cKDTree(other).query(points[inside], distance_upper_bound=reach + 0.006)
@@ -164,7 +170,7 @@ def depths(a: PosedHand, b: PosedHand) -> np.ndarray:
     """Depths (m, > 0) of every vertex of either hand lying inside the other."""
     out = []
     for p, q in ((a, b), (b, a)):
-        ids = near_ids(p.vertices, q.vertices, 0.0)
+        ids = in_box(p.vertices, q.vertices)
         d = signed_distances(p.vertices[ids], q).distance
         out.append(-d[d < 0])
     return np.concatenate(out)
