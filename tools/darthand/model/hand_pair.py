@@ -270,12 +270,13 @@ class Resolution:
     cpu_s: float
 
     def figures(self) -> dict:
-        """The plain-JSON record of the resolution (what a job's interaction record carries)."""
+        """The plain-JSON record of the resolution (what a job's interaction record carries: no CPU time, so that
+        a frame's job depends only on (seed, index))."""
         return {"resolved": self.resolved, "rounds": self.rounds,
                 "max_mm": round(self.after.max_m * 1e3, 4), "p99_mm": round(self.after.p99_m * 1e3, 4),
                 "crossing_faces": self.after.crossing_faces, "before_max_mm": round(self.before.max_m * 1e3, 3),
                 "turn_deg": round(self.turn_deg, 3), "shift_mm": round(self.shift_m * 1e3, 3),
-                "contact_gaps_mm": [round(g * 1e3, 3) for g in self.contacts], "cpu_ms": round(self.cpu_s * 1e3, 2)}
+                "contact_gaps_mm": [round(g * 1e3, 3) for g in self.contacts]}
 
 
 class PairProblem:

@@ -1,0 +1,122 @@
+"""Two-hand frames (dataset/interactions.py and the plan's two_hands option): every interaction type's frames are
+free of penetration by MeshLab's intersection test and trimesh's inside test (independent of the fit's measure),
+the contacts a type asks for touch, frames depend only on (seed, index), and a plan without two hands is as before."""
+
+from __future__ import annotations
+
+import numpy as np
+import pymeshlab
+import pytest
+import trimesh
+from scipy.spatial import cKDTree
+
+from darthand.dataset import plan
+from darthand.dataset.interaction_shares import TYPES, parse_shares
+from darthand.dataset.interactions import InteractionSampler
+from darthand.errors import InputError
+from darthand.model.forward import forward
+from darthand.model.hand_pair import CONTACT_M
+from darthand.model.topology import close_loops
+
+FRAMES_PER_TYPE = 2
+
+
+@pytest.fixture(scope="module")
+def models(sources):
+    opened = sources[0]
+    return opened["right"].pose_model(), opened["left"].pose_model()
+
+
+def posed(model, pose, T=None, betas=None) -> np.ndarray:
+    v = np.asarray(forward(model, np.asarray(pose).reshape(1, -1), betas).vertices[0], np.float64)
+    return v if T is None else v @ np.asarray(T)[:3, :3].T + np.asarray(T)[:3, 3]
+
+
+def meshlab_crossing(va, fa, vb, fb) -> int:
+    """Faces of the two meshes together that MeshLab flags, less those it flags on each mesh alone."""
+    def flagged(v, f):
+        ms = pymeshlab.MeshSet()
+        ms.add_mesh(pymeshlab.Mesh(vertex_matrix=v, face_matrix=f))
+        ms.compute_selection_by_self_intersections_per_face()
+        return ms.current_mesh().face_selection_array().astype(bool)
+    both = flagged(np.concatenate([va, vb]), np.concatenate([fa, fb + len(va)]))
+    return int((both & ~np.concatenate([flagged(va, fa), flagged(vb, fb)])).sum())
+
+
+def trimesh_inside(va, fa, vb, fb) -> int:
+    """Vertices of either hand inside the other (trimesh's ray test on the wrist-capped meshes)."""
+    n = 0
+    for p, (v, f) in ((va, (vb, fb)), (vb, (va, fa))):
+        n += int(trimesh.Trimesh(*close_loops(v, f), process=False).contains(p).sum())
+    return n
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", TYPES)
+def test_every_type_is_free_of_penetration_and_touches_where_asked(models, kind):
+    right, left = models
+    sampler = InteractionSampler(right, left, {kind: 1.0})
+    for i in range(FRAMES_PER_TYPE):
+        dart = np.zeros(48)
+        out = sampler.sample(5, i, 0.5, dart, None)
+        T = np.asarray(out["placement"])
+        assert np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-9) and np.linalg.det(T[:3, :3]) > 0
+        va, vb = posed(right, out["right_pose"]), posed(left, out["left_pose"], T)
+        assert meshlab_crossing(va, right.faces, vb, left.faces) == 0
+        assert trimesh_inside(va, right.faces, vb, left.faces) == 0
+        record = out["record"]
+        assert record["resolved"]["resolved"] and record["type"] in TYPES
+        gap = cKDTree(va).query(vb)[0].min()          # nearest vertices of the two hands (m)
+        if record["type"] == kind and record["contact_parts"]:
+            assert gap < CONTACT_M, (kind, gap)       # touching, by the labels' contact distance
+        if record["type"] == "apart":
+            assert gap > 0.01
+
+
+def test_two_hand_jobs_depend_only_on_seed_and_index(sources):
+    a = plan.Planner({"seed": 2, "two_hands": 1.0, "interactions": "touching=0.5,mirrored=0.5"}, sources[0])
+    b = plan.Planner({"seed": 2, "two_hands": 1.0, "interactions": {"touching": 0.5, "mirrored": 0.5}}, sources[0])
+    jobs = [a.job(i) for i in (3, 0)]
+    assert jobs == [b.job(i) for i in (3, 0)] == [a.job(i) for i in (3, 0)]
+    for job in jobs:
+        assert [body["side"] for body in job["bodies"]] == ["right", "left"]
+        assert "placement" not in job["bodies"][0] and len(job["bodies"][1]["placement"]) == 4
+        assert job["interaction"]["type"] in ("touching", "mirrored", "apart")
+        assert not {"side", "pose", "texture", "accessory", "betas"} & set(job)
+        assert job["bodies"][0]["betas"] == job["bodies"][1]["betas"]                 # one person's hands
+        assert job["bodies"][0]["skin_tone_offset"] == job["bodies"][1]["skin_tone_offset"]
+
+
+def test_without_two_hands_the_plan_is_as_before(sources):
+    base = plan.Planner({"seed": 3}, sources[0])
+    off = plan.Planner({"seed": 3, "two_hands": 0.0, "interactions": None}, sources[0])
+    assert "two_hands" not in off.spec and "interactions" not in off.spec and off.spec == base.spec
+    assert plan.PlanOptions().spec() == plan.DEFAULTS
+    some = plan.Planner({"seed": 3, "two_hands": 0.3, "interactions": "apart=1"}, sources[0])
+    jobs = [some.job(i) for i in range(12)]
+    assert any("bodies" in j for j in jobs) and any("bodies" not in j for j in jobs)
+    for i, job in enumerate(jobs):
+        if "bodies" not in job:
+            assert job == base.job(i)                  # one-hand frames draw as without the option
+
+
+@pytest.mark.parametrize("spec, message", [
+    ({"two_hands": 1.5}, "two hands: 1.5 is not a share"),
+    ({"two_hands": 0.5, "interactions": "hugging=1"}, "'hugging' is not an interaction type"),
+    ({"two_hands": 0.5, "interactions": "apart=0.5,clasped=0.2"}, "shares sum to 0.7, not 1"),
+    ({"two_hands": 0.5, "interactions": "apart=-0.5,clasped=1.5"}, "share -0.5 of 'apart' is outside 0..1"),
+    ({"two_hands": 0.5, "interactions": "apart"}, "'apart' is not TYPE=SHARE"),
+])
+def test_bad_two_hand_options_are_one_line(spec, message):
+    with pytest.raises(InputError, match=message) as e:
+        plan.plan_spec(**spec)
+    assert "\n" not in str(e.value)
+
+
+def test_two_hands_need_both_sides(sources):
+    with pytest.raises(InputError, match="needs both sides"):
+        plan.Planner({"two_hands": 0.5}, {"right": sources[0]["right"]})
+
+
+def test_shares_default_to_equal():
+    assert parse_shares(None) == pytest.approx({t: 1 / len(TYPES) for t in TYPES})
