@@ -51,7 +51,8 @@ class InteractionSampler:
 
     def sample(self, seed: int, index: int, u: float, dart_pose: np.ndarray, betas) -> dict:
         """Frame `index`'s two hands: {'type', 'right_pose' (48,), 'left_pose' (48,), 'placement' (4, 4) of the
-        left hand, 'record'} (record: the job's interaction record). u: the frame's uniform choosing the type;
+        left hand, 'record', 'resolution'} (record: the job's interaction record; resolution: the last draw's
+        hand_pair.Resolution, with its CPU time). u: the frame's uniform choosing the type;
         dart_pose: the plan's pose of the frame (right-handed, (48,)); betas: both hands' shape (or None)."""
         asked = choose_type(u, self.shares)
         draws = [(asked, k) for k in range(ATTEMPTS)] + [("apart", ATTEMPTS)]
@@ -64,7 +65,7 @@ class InteractionSampler:
                 if kind != asked:
                     record["redrawn_from"] = asked
                 return {"type": kind, "right_pose": out["right_pose"], "left_pose": out["left_pose"],
-                        "placement": out["placement"], "record": record}
+                        "placement": out["placement"], "record": record, "resolution": out["resolution"]}
         raise InputError(f"frame {index}: two hands could not be placed apart")  # 'apart' resolves by construction
 
     # ------------------------------------------------------------------------------------------------ one draw
