@@ -38,7 +38,7 @@ from threadpoolctl import threadpool_limits
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
 from darthand.model.intersections import self_intersecting
-from darthand.model.proximity import FACING_COS, TOUCHING, closest_surface_points
+from darthand.model.proximity import FACING_COS, TOUCHING, _closest_barycentric
 from darthand.model.topology import face_joints, vertex_normals
 
 CLEARANCE = 0.5e-3       # m: hands not asked to touch stay at least this far apart
@@ -47,12 +47,14 @@ CONTACT_M = 3e-3         # m: a vertex this near the other hand's surface (or in
 STEP = 0.5e-3            # m: added to the clearance when the guard still finds crossing faces
 ROUNDS = 3
 REACH = 6e-3             # m: samples farther than clearance + REACH from the other hand are left out of a fit
+TOUCH_REACH = 2e-3       # m: a contact's fit holds its vertices within this of its nearest one (the soft minimum's)
 SOFTMIN = 0.1e-3         # m: temperature of the soft minimum over a contact's distances
 PENALTY_SCALE = 0.05e-3  # m of violated clearance that costs as much as one sigma of move
 TURN_SIGMA_DEG = 3.0
 SHIFT_SIGMA_M = 3e-3
 MAX_TURN_DEG = 30.0
 MAX_SHIFT_M = 0.06
+CANDIDATES = 8           # nearest face centroids whose triangles are searched for a point's nearest point
 TIPS = (3, 6, 9, 12, 15)  # MANO's distal joints: the fingertips' segments
 
 
@@ -114,22 +116,47 @@ class Distances:
     nearest: np.ndarray
 
 
+class Surface:
+    """A hand's surface (or only its faces `faces`), indexed once for signed-distance queries in any rigid placement
+    of the hand: the k-d tree of its face centroids that proximity.closest_surface_points builds on every call."""
+
+    def __init__(self, hand: PosedHand, faces: np.ndarray | None = None):
+        self.hand = hand
+        self.faces = hand.faces if faces is None else hand.faces[faces]
+        self.tris = hand.vertices[self.faces]
+        self.tree = cKDTree(self.tris.mean(1)) if len(self.faces) else None
+
+    def signed_distances(self, points: np.ndarray, T: np.ndarray | None = None) -> Distances:
+        """Signed distances of `points` (K, 3) to the surface moved by T (4, 4; None: as indexed)."""
+        if T is None:
+            return self._signed(points)
+        local = self._signed((points - T[:3, 3]) @ T[:3, :3])
+        return Distances(local.distance, local.direction @ T[:3, :3].T, local.nearest @ T[:3, :3].T + T[:3, 3])
+
+    def _signed(self, points: np.ndarray) -> Distances:
+        if len(points) == 0 or self.tree is None:
+            return Distances(np.full(len(points), np.inf), np.zeros((len(points), 3)), np.zeros((len(points), 3)))
+        k = min(CANDIDATES, len(self.faces))
+        cand = self.tree.query(points, k=k)[1].reshape(len(points), k)
+        bary = _closest_barycentric(self.tris[cand], points[:, None, :])               # (P, k, 3)
+        dist = np.linalg.norm(np.einsum("pkc,pkcd->pkd", bary, self.tris[cand]) - points[:, None], axis=2)
+        best = np.argmin(dist, axis=1)
+        rows = np.arange(len(points))
+        bary, dist, corners = bary[rows, best], dist[rows, best], self.faces[cand[rows, best]]
+        on = np.einsum("pk,pkd->pd", bary, self.hand.vertices[corners])
+        n = np.einsum("pk,pkd->pd", bary, self.hand.normals[corners])
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        offset = points - on
+        along = np.einsum("pd,pd->p", offset, n)
+        facing = (np.abs(along) >= FACING_COS * dist) | (dist < TOUCHING)
+        sign = np.where(along < 0, -1.0, 1.0)
+        direction = np.where(dist[:, None] > 1e-7, offset / np.maximum(dist, 1e-300)[:, None] * sign[:, None], n)
+        return Distances(np.where(facing, sign * dist, np.inf), direction, on)
+
+
 def signed_distances(points: np.ndarray, hand: PosedHand, faces: np.ndarray | None = None) -> Distances:
     """Signed distances of `points` (K, 3) to `hand`'s surface (or its `faces` ids only); see the module docstring."""
-    tri_faces = hand.faces if faces is None else hand.faces[faces]
-    if len(points) == 0 or len(tri_faces) == 0:
-        return Distances(np.full(len(points), np.inf), np.zeros((len(points), 3)), np.zeros((len(points), 3)))
-    tri, bary, dist = closest_surface_points(hand.vertices, tri_faces, points, candidates=8)
-    corners = tri_faces[tri]
-    on = np.einsum("pk,pkd->pd", bary, hand.vertices[corners])
-    n = np.einsum("pk,pkd->pd", bary, hand.normals[corners])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-    offset = points - on
-    along = np.einsum("pd,pd->p", offset, n)
-    facing = (np.abs(along) >= FACING_COS * dist) | (dist < TOUCHING)
-    sign = np.where(along < 0, -1.0, 1.0)
-    direction = np.where(dist[:, None] > 1e-7, offset / np.maximum(dist, 1e-300)[:, None] * sign[:, None], n)
-    return Distances(np.where(facing, sign * dist, np.inf), direction, on)
+    return Surface(hand, faces).signed_distances(points)
 
 
 def in_box(points: np.ndarray, other: np.ndarray, margin: float = 0.0) -> np.ndarray:
@@ -287,6 +314,9 @@ class PairProblem:
         self.a, self.b, self.clearance = a, b, clearance
         self.centre = b.vertices.mean(0)
         self.touch = [(b.region(jb)[0], a.region(ja)[1]) for jb, ja in touch]
+        self.touch_ids = [np.zeros(0, np.int64) for _ in self.touch]   # per contact: b's vertices in its fit
+        self.surface_a, self.surface_b = Surface(a), Surface(b)
+        self.touch_surfaces = [Surface(a, fa) for _, fa in self.touch]
         self.sigma = np.r_[np.full(3, np.deg2rad(TURN_SIGMA_DEG)), np.full(3, SHIFT_SIGMA_M)]
         self.b_ids = np.zeros(0, np.int64)   # b's vertices tested against a's surface
         self.a_ids = np.zeros(0, np.int64)   # a's vertices tested against b's surface
@@ -299,6 +329,11 @@ class PairProblem:
         a_new = np.union1d(self.a_ids, near_ids(self.a.vertices, b.vertices, reach))
         added = len(b_new) > len(self.b_ids) or len(a_new) > len(self.a_ids)
         self.b_ids, self.a_ids = b_new, a_new
+        for k, (vb, _) in enumerate(self.touch):            # a contact's vertices within REACH of its nearest
+            d = self.touch_surfaces[k].signed_distances(b.vertices[vb]).distance
+            new = np.union1d(self.touch_ids[k], vb[d < d.min(initial=np.inf) + TOUCH_REACH])
+            added |= len(new) > len(self.touch_ids[k])
+            self.touch_ids[k] = new
         return added
 
     def residuals(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -308,17 +343,17 @@ class PairProblem:
         c = T[:3, :3] @ self.centre + T[:3, 3]
         res, jac = [x / self.sigma], [np.diag(1.0 / self.sigma)]
         pb = b.vertices[self.b_ids]
-        hb = signed_distances(pb, self.a)                               # b's vertices on a: they move
+        hb = self.surface_a.signed_distances(pb)                       # b's vertices on a: they move
         gb = np.concatenate([np.cross(pb - c, hb.direction), hb.direction], 1)
-        ha = signed_distances(self.a.vertices[self.a_ids], b)           # a's vertices on b: b's surface moves
+        ha = self.surface_b.signed_distances(self.a.vertices[self.a_ids], T)   # a's on b: b's surface moves
         ga = -np.concatenate([np.cross(ha.nearest - c, ha.direction), ha.direction], 1)
         for h, g in ((hb, gb), (ha, ga)):
             short = h.distance < self.clearance
             res.append(np.where(short, (self.clearance - h.distance) / PENALTY_SCALE, 0.0))
             jac.append(np.where(short[:, None], -g / PENALTY_SCALE, 0.0))
-        for vb, fa in self.touch:
+        for vb, surface in zip(self.touch_ids, self.touch_surfaces):
             p = b.vertices[vb]
-            h = signed_distances(p, self.a, fa)
+            h = surface.signed_distances(p)
             ok = np.isfinite(h.distance)
             if not ok.any():
                 res.append(np.zeros(1))
@@ -349,9 +384,17 @@ class PairProblem:
                 break
             cache.clear()
             x = least_squares(lambda y: evaluate(y)[0], np.clip(x, -lim, lim), jac=lambda y: evaluate(y)[1],
-                              bounds=(-lim, lim), method="trf", x_scale=self.sigma, max_nfev=12,
-                              xtol=1e-6, ftol=1e-6).x
+                              bounds=(-lim, lim), method="trf", x_scale=self.sigma, max_nfev=6,
+                              xtol=1e-5, ftol=1e-5).x
         return x
+
+
+def _penetration_before(a: PosedHand, b: PosedHand, fitting: bool) -> Penetration:
+    """The penetration of the sampled placement; MeshLab's test only when it decides whether to fit (no contact
+    asked, no vertex inside), else its crossing faces are left at 0 (not measured)."""
+    d = depths(a, b)
+    crossing = 0 if fitting or len(d) else crossing_faces(a, b)
+    return Penetration(float(d.max(initial=0.0)), float(np.percentile(d, 99)) if len(d) else 0.0, len(d), crossing)
 
 
 def resolve(a: PosedHand, b: PosedHand, touch=(), rounds: int = ROUNDS) -> Resolution:
@@ -359,7 +402,7 @@ def resolve(a: PosedHand, b: PosedHand, touch=(), rounds: int = ROUNDS) -> Resol
     module docstring. The result is checked by `penetration` (MeshLab's test included)."""
     start = time.process_time()
     with threadpool_limits(limits=1, user_api="blas"):
-        before = penetration(a, b)
+        before = _penetration_before(a, b, bool(touch))
         x, after, moved = np.zeros(6), before, b
         used = 0
         if not before.clear or touch:
