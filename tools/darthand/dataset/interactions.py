@@ -31,10 +31,14 @@ from darthand.model import hand_pair
 from darthand.model.anatomy import angles_to_axis_angle, joint_frames, limits_radians
 from darthand.model.layout import FINGER_JOINTS, NUM_JOINTS
 from darthand.model.mirror import mirror_pose
+from darthand.model.self_crossing import SelfCrossing
 
 INTERACTION_STREAM = 9
 ATTEMPTS = 3
-JITTER_DEG = 5.0
+JITTER_DEG = 4.0
+# The pre-shapes' thumb CMC spread (degrees): away from the index finger, which a bent index otherwise meets (the
+# open hand, 20 draws per pre-shape: 0 self-crossing at -15 or -30, most at +15).
+THUMB_AWAY_DEG = -15.0
 PALM = (0,)
 FINGERS = tuple(range(1, 16))
 MIRROR_Y = np.diag([-1.0, -1.0, 1.0])   # a left hand's own frame -> palm facing the right's palm (+Y)
@@ -47,6 +51,7 @@ class InteractionSampler:
     def __init__(self, right, left, shares: dict):
         self.right, self.left, self.shares = right, left, parse_shares(shares)
         self.frames = {"right": joint_frames(right), "left": joint_frames(left)}
+        self.self_crossing = {"right": SelfCrossing(right), "left": SelfCrossing(left)}
         self.limits = limits_radians()
 
     def sample(self, seed: int, index: int, u: float, dart_pose: np.ndarray, betas) -> dict:
@@ -59,7 +64,7 @@ class InteractionSampler:
         for kind, k in draws:
             rng = np.random.default_rng([int(seed), INTERACTION_STREAM, int(index), k])
             out = self.draw(kind, rng, np.asarray(dart_pose, np.float64), betas)
-            if out["resolution"].resolved:
+            if out is not None and out["resolution"].resolved:
                 record = {"type": kind, "contact_parts": out["contact_parts"], "attempts": k + 1,
                           "resolved": out["resolution"].figures()}
                 if kind != asked:
@@ -69,11 +74,16 @@ class InteractionSampler:
         raise InputError(f"frame {index}: two hands could not be placed apart")  # 'apart' resolves by construction
 
     # ------------------------------------------------------------------------------------------------ one draw
-    def draw(self, kind: str, rng: np.random.Generator, dart_pose: np.ndarray, betas) -> dict:
-        """One attempt at type `kind`: poses, the placement and its resolution."""
+    def draw(self, kind: str, rng: np.random.Generator, dart_pose: np.ndarray, betas) -> dict | None:
+        """One attempt at type `kind`: poses, the placement and its resolution; None when a pre-shaped hand passes
+        through itself (model/self_crossing.py: two digits inside each other)."""
         right_pose, left_pose = self.poses(kind, rng, dart_pose)
         a = hand_pair.pose_hand(self.right, right_pose, betas)
         b0 = hand_pair.pose_hand(self.left, left_pose, betas)
+        for side, pose, hand in (("right", right_pose, a), ("left", left_pose, b0)):
+            shaped = pose is not dart_pose and kind != "mirrored"      # the plan's own poses are its sampler's
+            if shaped and self.self_crossing[side].crossing(hand.vertices) is not None:
+                return None
         R, offset, approach, gap, touch = self.arrangement(kind, rng, a, b0)
         T = np.eye(4)
         T[:3, :3] = R
@@ -103,7 +113,8 @@ class InteractionSampler:
 
     def preshape(self, side: str, rng: np.random.Generator, shape: dict) -> np.ndarray:
         """(48,) a hand's pose: every finger joint bent by a draw from shape['bend'] (degrees; the DIP 0.7 of it),
-        fingers spread by shape['spread'], the thumb half as much, jittered by JITTER_DEG, within the limits."""
+        fingers fanned by shape['spread'], the thumb bent less (its CMC 0.2, MCP and IP 0.4 of it) and spread away
+        from the index finger, each bend jittered by JITTER_DEG, within the limits."""
         angles = np.zeros((NUM_JOINTS, 3))
         bend = rng.uniform(*shape["bend"])
         spread = rng.uniform(*shape["spread"])
@@ -112,9 +123,10 @@ class InteractionSampler:
             angles[[mcp, pip, dip], 2] = [bend, bend, 0.7 * bend]
             angles[mcp, 1] = spread * (k - 1.5) / 1.5
         cmc, mcp, ip = FINGER_JOINTS["thumb"]
-        angles[[cmc, mcp, ip], 2] = 0.5 * bend
-        angles = np.deg2rad(angles + JITTER_DEG * rng.standard_normal(angles.shape) * (angles != 0))
-        angles = np.clip(angles, self.limits[..., 0], self.limits[..., 1])
+        angles[[cmc, mcp, ip], 2] = [0.2 * bend, 0.4 * bend, 0.4 * bend]
+        angles[cmc, 1] = THUMB_AWAY_DEG
+        angles[:, 2] += JITTER_DEG * rng.standard_normal(NUM_JOINTS) * (angles[:, 2] != 0)
+        angles = np.clip(np.deg2rad(angles), self.limits[..., 0], self.limits[..., 1])
         angles[0] = 0.0
         model = self.right if side == "right" else self.left
         return angles_to_axis_angle(model, angles, self.frames[side]).reshape(-1)
