@@ -9,6 +9,7 @@ import pymeshlab
 import pytest
 import trimesh
 from scipy.spatial import cKDTree
+from trimesh.proximity import closest_point_naive
 
 from darthand.dataset import plan
 from darthand.dataset.interaction_shares import TYPES, parse_shares
@@ -51,7 +52,15 @@ def trimesh_inside(va, fa, vb, fb) -> int:
     return n
 
 
-@pytest.mark.slow
+def surface_gap(va, fa, vb) -> float:
+    """Smallest distance (m) from hand b's vertices to hand a's surface (trimesh's exact closest point, over the
+    vertices within 1 cm of a's)."""
+    near = cKDTree(va).query(vb, distance_upper_bound=0.01)[0] < np.inf
+    if not near.any():
+        return float(cKDTree(va).query(vb)[0].min())
+    return float(closest_point_naive(trimesh.Trimesh(va, fa, process=False), vb[near])[1].min())
+
+
 @pytest.mark.parametrize("kind", TYPES)
 def test_every_type_is_free_of_penetration_and_touches_where_asked(models, kind):
     right, left = models
@@ -66,7 +75,7 @@ def test_every_type_is_free_of_penetration_and_touches_where_asked(models, kind)
         assert trimesh_inside(va, right.faces, vb, left.faces) == 0
         record = out["record"]
         assert record["resolved"]["resolved"] and record["type"] in TYPES
-        gap = cKDTree(va).query(vb)[0].min()          # nearest vertices of the two hands (m)
+        gap = surface_gap(va, right.faces, vb)
         if record["type"] == kind and record["contact_parts"]:
             assert gap < CONTACT_M, (kind, gap)       # touching, by the labels' contact distance
         if record["type"] == "apart":
