@@ -9,7 +9,7 @@ type draws (issue 29's contract). Types:
 - touching: palms facing; fingertips to fingertips (fingers slightly bent) or palm to palm (flat hands);
 - clasped: palms facing, the left turned 70-110 deg about the palm normal, fingers curled over the other hand;
 - interlaced: palms facing, fingers spread and bent, the left shifted by half a finger's spacing;
-- holding: the left hand in a C grip on the right's wrist, its palm on the back of the wrist;
+- holding: the left hand in a C grip around the right's wrist, its palm on the back of the wrist;
 - overlapping: the left hand over the back of the right (1-4 cm above), both DART poses: one in front of the other;
 - mirrored: the mirror-image DART pose side by side (thumbs toward each other, 1-5 cm apart).
 
@@ -28,7 +28,7 @@ from scipy.spatial.transform import Rotation
 from darthand.dataset.interaction_shares import choose_type, parse_shares
 from darthand.errors import InputError
 from darthand.model import hand_pair
-from darthand.model.anatomy import angles_to_axis_angle, joint_frames, limits_radians
+from darthand.model.anatomy import angles_to_axis_angle, joint_frames, limits_radians, rest_joints
 from darthand.model.layout import FINGER_JOINTS, NUM_JOINTS
 from darthand.model.mirror import mirror_pose
 from darthand.model.self_crossing import SelfCrossing
@@ -39,6 +39,7 @@ JITTER_DEG = 4.0
 # The pre-shapes' thumb CMC spread (degrees): away from the index finger, which a bent index otherwise meets (the
 # open hand, 20 draws per pre-shape: 0 self-crossing at -15 or -30, most at +15).
 THUMB_AWAY_DEG = -15.0
+WRIST_HOLD_M = (0.0, 0.04)    # the holding hand's centre this far up the forearm (+X) from the wrist joint
 PALM = (0,)
 FINGERS = tuple(range(1, 16))
 MIRROR_Y = np.diag([-1.0, -1.0, 1.0])   # a left hand's own frame -> palm facing the right's palm (+Y)
@@ -52,6 +53,7 @@ class InteractionSampler:
         self.right, self.left, self.shares = right, left, parse_shares(shares)
         self.frames = {"right": joint_frames(right), "left": joint_frames(left)}
         self.self_crossing = {"right": SelfCrossing(right), "left": SelfCrossing(left)}
+        self.wrist = rest_joints(right)[0]
         self.limits = limits_radians()
 
     def sample(self, seed: int, index: int, u: float, dart_pose: np.ndarray, betas) -> dict:
@@ -156,10 +158,10 @@ class InteractionSampler:
         if kind == "interlaced":
             side = np.array([0.0, -0.1, rng.choice([-1.0, 1.0]) * 0.009])
             return jitter @ MIRROR_Y, side, up, hand_pair.CONTACT_GAP, ((FINGERS, FINGERS),)
-        # holding: the left's fingers across the right's wrist (toward -Z), its palm on the back of the wrist
+        # holding: the left's fingers across the right's wrist (toward -Z), its palm on the back of the wrist, its
+        # centre WRIST_HOLD_M up the forearm from the wrist joint
         turn = Rotation.from_rotvec(np.deg2rad(90) * up).as_matrix()
-        wrist = a.vertices[np.isin(a.vertex_joint, PALM)]
-        target = np.array([wrist[:, 0].max() - 0.02, 0.1, 0.0]) - a.vertices.mean(0)
+        target = self.wrist + np.array([rng.uniform(*WRIST_HOLD_M), 0.1, 0.0]) - a.vertices.mean(0)
         return jitter @ turn, target, -up, hand_pair.CONTACT_GAP, ((PALM + FINGERS, PALM),)
 
 
