@@ -4,7 +4,8 @@
 test and by trimesh (an independent measure: vertices inside the other hand's wrist-capped mesh by its ray test,
 their depth by its exact closest point), how far the left hand moved, and CPU per frame of planning.
 
-FRAMES: the TWO_HANDS_FRAMES environment variable (default 4 per type).
+FRAMES: the TWO_HANDS_FRAMES environment variable (default 4 per type). CPU is process time of one sampler call (the
+one-hand draws a plan makes besides, ~1.3 ms, left out), after a warm-up draw (numba's first compilations).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ def run() -> dict:
     right, where = bench_model()
     left = mirror_model(right)
     dart = poses.GridSlerp(right, poses.load_reference("gestures", right))
+    InteractionSampler(right, left, {"touching": 1.0}).sample(1, 0, 0.5, dart.sample(1, 0)[0], None)  # warm-up
     per = {}
     for kind in TYPES:
         sampler = InteractionSampler(right, left, {kind: 1.0})
