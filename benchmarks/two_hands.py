@@ -4,6 +4,7 @@
 test and by trimesh (an independent measure: vertices inside the other hand's wrist-capped mesh by its ray test,
 their depth by its exact closest point), how far the left hand moved, and CPU per frame of planning.
 
+Writes two_hands_sheet.png into the output folder: the first two frames of each type (right hand tan, left blue).
 FRAMES: the TWO_HANDS_FRAMES environment variable (default 4 per type). CPU is process time of one sampler call (the
 one-hand draws a plan makes besides, ~1.3 ms, left out), after a warm-up draw (numba's first compilations).
 """
@@ -12,13 +13,14 @@ from __future__ import annotations
 
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 
 from benchmarks._common import bench_model
 
 
-def run() -> dict:
+def run(out) -> dict:
     from darthand.dataset import poses
     from darthand.dataset.interaction_shares import TYPES
     from darthand.dataset.interactions import InteractionSampler
@@ -29,21 +31,54 @@ def run() -> dict:
     left = mirror_model(right)
     dart = poses.GridSlerp(right, poses.load_reference("gestures", right))
     InteractionSampler(right, left, {"touching": 1.0}).sample(1, 0, 0.5, dart.sample(1, 0)[0], None)  # warm-up
-    per = {}
+    per, shown = {}, {}
     for kind in TYPES:
         sampler = InteractionSampler(right, left, {kind: 1.0})
         rows = []
         for i in range(frames):
             pose, _ = dart.sample(0, i * 7)
             t = time.process_time()
-            out = sampler.sample(0, i, 0.5, pose, None)
+            drawn = sampler.sample(0, i, 0.5, pose, None)
             cpu = time.process_time() - t
-            rows.append(_frame_figures(right, left, out, cpu))
+            rows.append(_frame_figures(right, left, drawn, cpu))
+            shown.setdefault(kind, []).append(drawn)
         per[kind] = _type_figures(rows)
     cpu = [per[k]["cpu_ms_mean"] for k in TYPES]
+    _contact_sheet(right, left, shown, Path(out) / "two_hands_sheet.png")
     return {"model": where, "frames_per_type": frames, "cpu_ms_per_frame_mean": round(float(np.mean(cpu)), 1),
             "resolved_share": round(float(np.mean([per[k]["resolved_share"] for k in TYPES])), 3),
             "trimesh_inside_vertices": int(sum(per[k]["trimesh_inside_vertices"] for k in TYPES)), "types": per}
+
+
+def _contact_sheet(right, left, shown: dict, path: Path, per_type: int = 2) -> None:
+    """A PNG of the first frames of each type: the two posed meshes (right tan, left blue) by matplotlib."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from darthand.model import hand_pair
+
+    fig = plt.figure(figsize=(2.4 * len(shown), 2.4 * per_type))
+    for col, frames in enumerate(shown.values()):
+        for row, drawn in enumerate(frames[:per_type]):
+            hands = [hand_pair.pose_hand(right, drawn["right_pose"]),
+                     hand_pair.pose_hand(left, drawn["left_pose"], T=np.asarray(drawn["placement"]))]
+            ax = fig.add_subplot(per_type, len(shown), row * len(shown) + col + 1, projection="3d")
+            for hand, colour in zip(hands, ("#d9a27a", "#7a9fd9")):
+                v = hand.vertices
+                ax.plot_trisurf(v[:, 0], v[:, 2], -v[:, 1], triangles=hand.faces, color=colour, linewidth=0)
+            both = np.concatenate([h.vertices for h in hands])
+            c, r = both.mean(0), (both.max(0) - both.min(0)).max() / 2.2
+            ax.set_xlim(c[0] - r, c[0] + r)
+            ax.set_ylim(c[2] - r, c[2] + r)
+            ax.set_zlim(-c[1] - r, -c[1] + r)
+            ax.view_init(elev=30 if row == 0 else -30, azim=-70)
+            ax.set_axis_off()
+            ax.set_title(f"{drawn['type']} {drawn['record']['resolved']['contact_gaps_mm'] or ''}", fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
 
 
 def _frame_figures(right, left, out, cpu: float) -> dict:
