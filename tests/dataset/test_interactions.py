@@ -129,3 +129,15 @@ def test_two_hands_need_both_sides(sources):
 
 def test_shares_default_to_equal():
     assert parse_shares(None) == pytest.approx({t: 1 / len(TYPES) for t in TYPES})
+
+
+def test_a_type_that_never_resolves_falls_back_to_apart(models, monkeypatch):
+    right, left = models
+    sampler = InteractionSampler(right, left, {"clasped": 1.0})
+    original = sampler.draw
+    monkeypatch.setattr(sampler, "draw", lambda kind, *a: None if kind == "clasped" else original(kind, *a))
+    out = sampler.sample(1, 0, 0.5, np.zeros(48), None)
+    assert out["record"]["type"] == "apart" and out["record"]["redrawn_from"] == "clasped"
+    assert out["record"]["attempts"] == 4 and out["record"]["resolved"]["resolved"]
+    va, vb = posed(right, out["right_pose"]), posed(left, out["left_pose"], out["placement"])
+    assert trimesh_inside(va, right.faces, vb, left.faces) == 0

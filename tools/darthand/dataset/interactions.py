@@ -16,7 +16,8 @@ type draws (issue 29's contract). Types:
 Each is placed by bringing the left hand along an approach direction to first contact (hand_pair.first_contact_shift)
 and backing it off by the type's gap, then resolved by `hand_pair.resolve`, with the contacts the type asks for.
 A draw that does not resolve is redrawn: attempt k of frame i draws from [seed, INTERACTION_STREAM, i, k]; after
-ATTEMPTS the frame falls back to 'apart' (which resolves by construction), so a frame is never emitted penetrating.
+ATTEMPTS the frame falls back to 'apart' with the plan's pose mirrored (no pre-shape to redraw, the hands 5-15 cm
+apart along a line: it resolves by construction), so a frame is never emitted penetrating.
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ JITTER_DEG = 4.0
 # The pre-shapes' thumb CMC spread (degrees): away from the index finger, which a bent index otherwise meets (the
 # open hand, 20 draws per pre-shape: 0 self-crossing at -15 or -30, most at +15).
 THUMB_AWAY_DEG = -15.0
+FALLBACK = "apart-mirrored"    # the last draw of a frame: apart, the plan's pose mirrored (resolves by construction)
 WRIST_HOLD_M = (0.0, 0.04)    # the holding hand's centre this far up the forearm (+X) from the wrist joint
 PALM = (0,)
 FINGERS = tuple(range(1, 16))
@@ -62,10 +64,11 @@ class InteractionSampler:
         hand_pair.Resolution, with its CPU time). u: the frame's uniform choosing the type;
         dart_pose: the plan's pose of the frame (right-handed, (48,)); betas: both hands' shape (or None)."""
         asked = choose_type(u, self.shares)
-        draws = [(asked, k) for k in range(ATTEMPTS)] + [("apart", ATTEMPTS)]
+        draws = [(asked, k) for k in range(ATTEMPTS)] + [(FALLBACK, ATTEMPTS)]
         for kind, k in draws:
             rng = np.random.default_rng([int(seed), INTERACTION_STREAM, int(index), k])
             out = self.draw(kind, rng, np.asarray(dart_pose, np.float64), betas)
+            kind = "apart" if kind == FALLBACK else kind
             if out is not None and out["resolution"].resolved:
                 record = {"type": kind, "contact_parts": out["contact_parts"], "attempts": k + 1,
                           "resolved": out["resolution"].figures()}
@@ -79,39 +82,40 @@ class InteractionSampler:
     def draw(self, kind: str, rng: np.random.Generator, dart_pose: np.ndarray, betas) -> dict | None:
         """One attempt at type `kind`: poses, the placement and its resolution; None when a pre-shaped hand passes
         through itself (model/self_crossing.py: two digits inside each other)."""
-        right_pose, left_pose = self.poses(kind, rng, dart_pose)
+        right_pose, left_pose, shaped = self.poses(kind, rng, dart_pose)
         a = hand_pair.pose_hand(self.right, right_pose, betas)
         b0 = hand_pair.pose_hand(self.left, left_pose, betas)
-        for side, pose, hand in (("right", right_pose, a), ("left", left_pose, b0)):
-            shaped = pose is not dart_pose and kind != "mirrored"      # the plan's own poses are its sampler's
-            if shaped and self.self_crossing[side].crossing(hand.vertices) is not None:
+        for side, hand, own in zip(("right", "left"), (a, b0), shaped):   # the plan's own poses are its sampler's
+            if own and self.self_crossing[side].crossing(hand.vertices) is not None:
                 return None
-        R, offset, approach, gap, touch = self.arrangement(kind, rng, a, b0)
+        R, offset, approach, gap, touch = self.arrangement("apart" if kind == FALLBACK else kind, rng, a, b0)
         T = np.eye(4)
         T[:3, :3] = R
         T[:3, 3] = a.vertices.mean(0) + offset - R @ b0.vertices.mean(0)
         b = b0.moved(T)
         shift = hand_pair.first_contact_shift(a, b, approach)
-        if np.isfinite(shift):
-            T[:3, 3] += (shift - gap) * approach
+        if not np.isfinite(shift):
+            return None
+        T[:3, 3] += (shift - gap) * approach
         res = hand_pair.resolve(a, b0.moved(T), touch)
         placement = res.T @ T
         return {"right_pose": right_pose, "left_pose": left_pose, "placement": placement, "resolution": res,
                 "contact_parts": [[_region_name(jb), _region_name(ja)] for jb, ja in touch]}
 
-    def poses(self, kind: str, rng: np.random.Generator, dart_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(right (48,), left (48,)) axis-angle poses, each of its own side's model."""
+    def poses(self, kind: str, rng: np.random.Generator, dart_pose: np.ndarray):
+        """(right (48,), left (48,), (right pre-shaped, left pre-shaped)): axis-angle poses, each of its own side's
+        model, and which of them this module shaped (the others are the plan's pose or its mirror image)."""
         if kind in ("apart", "overlapping"):
             other = self.preshape("left", rng, {"bend": (0, 60), "spread": (-8, 8)})
-            return dart_pose, other
-        if kind == "mirrored":
-            return dart_pose, mirror_pose(dart_pose)
+            return dart_pose, other, (False, True)
+        if kind in ("mirrored", FALLBACK):
+            return dart_pose, mirror_pose(dart_pose), (False, False)
         shape = {"touching": {"bend": (5, 30), "spread": (-5, 5)},
                  "clasped": {"bend": (50, 80), "spread": (-3, 3)},
                  "interlaced": {"bend": (35, 60), "spread": (10, 15)},
                  "holding": {"bend": (45, 70), "spread": (-3, 3)}}[kind]
         right = dart_pose if kind == "holding" else self.preshape("right", rng, shape)
-        return right, self.preshape("left", rng, shape)
+        return right, self.preshape("left", rng, shape), (kind != "holding", True)
 
     def preshape(self, side: str, rng: np.random.Generator, shape: dict) -> np.ndarray:
         """(48,) a hand's pose: every finger joint bent by a draw from shape['bend'] (degrees; the DIP 0.7 of it),
