@@ -1,0 +1,159 @@
+"""`darthand eval` of per-hand predictions, the form two-hand frames need (schemas/hand_predictions.schema.json):
+
+    {"format": "darthand-hand-predictions", "version": 1,
+     "frames": [{"index": frame index, "hands": [{"side": "right" | "left", "keypoints_3d": (21, 3) camera frame,
+                 metres, "keypoints_2d": (21, 2) pixels (optional)}, ...]}, ...]}
+
+keypoints in the ground truth's keypoint order (its labels' keypoint_names: openpose by default). The ground truth
+is a darthand dataset folder; a dataset folder is also read as predictions (its labels' hands). Figures:
+
+- per side: FreiHAND's keypoint figures (dataset/metrics.evaluate) over every hand of that side the predictions
+  name, and the mean 2-D error (pixels) where the prediction has 2-D keypoints;
+- MRRPE (InterHand2.6M's mean relative-root position error) over interacting frames (both hands in the ground
+  truth and the prediction): root = the wrist, |(R_pred - L_pred) - (R_gt - L_gt)|, mm.
+
+A ground-truth hand the predictions leave out is counted ('missing'), not scored.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from darthand.dataset.frames import frame_names
+from darthand.dataset.hands import hand_type, hands_of
+from darthand.dataset.metrics import evaluate
+from darthand.dataset.run import read_shard_records
+from darthand.errors import InputError
+from darthand.fileio import read_json, write_bytes
+
+PREDICTIONS_FORMAT = "darthand-hand-predictions"
+SIDES = ("right", "left")
+
+
+def is_hand_predictions(path) -> bool:
+    """Whether `path` is a per-hand predictions file (module docstring)."""
+    path = Path(path)
+    if not (path.is_file() and path.suffix == ".json"):
+        return False
+    doc = read_json(path, "predictions file")
+    return isinstance(doc, dict) and doc.get("format") == PREDICTIONS_FORMAT
+
+
+def dataset_hands(folder) -> tuple[dict, list[str]]:
+    """({frame index: (hand type, [{side, keypoints_3d, keypoints_2d}])}, keypoint names) of a dataset folder."""
+    folder = Path(folder)
+    frames = read_shard_records(folder)
+    if not frames:
+        raise InputError(f"{folder}: no rendered frames")
+    out, names = {}, []
+    for f in frames:
+        labels = read_json(folder / frame_names(f["index"])["labels"], "labels")
+        names = labels["keypoint_names"]
+        out[int(f["index"])] = (hand_type(labels), [_hand(h) for h in hands_of(labels)])
+    return out, names
+
+
+def _hand(h: dict) -> dict:
+    return {"side": h["side"], "keypoints_3d": np.asarray(h["keypoints_3d"], np.float64),
+            "keypoints_2d": None if h.get("keypoints_2d") is None else np.asarray(h["keypoints_2d"], np.float64)}
+
+
+def load_hand_predictions(path) -> dict:
+    """{frame index: [{side, keypoints_3d (21, 3), keypoints_2d (21, 2) or None}]} of a predictions file or a
+    dataset folder."""
+    path = Path(path)
+    if path.is_dir():
+        return {i: hands for i, (_, hands) in dataset_hands(path)[0].items()}
+    doc = read_json(path, "predictions file")
+    if not (isinstance(doc, dict) and doc.get("format") == PREDICTIONS_FORMAT and isinstance(doc.get("frames"), list)):
+        raise InputError(f"{path}: not a {PREDICTIONS_FORMAT} file (format, frames)")
+    out = {}
+    for k, frame in enumerate(doc["frames"]):
+        try:
+            hands = [_checked_hand(h) for h in frame["hands"]]
+            out[int(frame["index"])] = hands
+        except (KeyError, TypeError, ValueError) as e:
+            raise InputError(f"{path}: frames[{k}]: {e}") from None
+    return out
+
+
+def _checked_hand(h: dict) -> dict:
+    if h.get("side") not in SIDES:
+        raise ValueError(f"side {h.get('side')!r} is not right or left")
+    hand = _hand(h)
+    if hand["keypoints_3d"].shape != (21, 3) or not np.isfinite(hand["keypoints_3d"]).all():
+        raise ValueError("keypoints_3d is not 21 finite points (x, y, z)")
+    if hand["keypoints_2d"] is not None and hand["keypoints_2d"].shape != (21, 2):
+        raise ValueError("keypoints_2d is not 21 points (u, v)")
+    return hand
+
+
+def mrrpe_mm(pred: dict, gt: dict, root: int) -> float:
+    """InterHand2.6M's relative-root error of one frame (mm): pred and gt {side: (21, 3) keypoints}, root the wrist's
+    index."""
+    rel_pred = pred["right"][root] - pred["left"][root]
+    rel_gt = gt["right"][root] - gt["left"][root]
+    return float(1000 * np.linalg.norm(rel_pred - rel_gt))
+
+
+def evaluate_hands(pred, gt) -> dict:
+    """The per-side figures and MRRPE of predictions `pred` (a predictions file or dataset folder) against the
+    dataset folder `gt` (module docstring)."""
+    if not (Path(gt).is_dir() and (Path(gt) / "dataset.json").is_file()):
+        raise InputError(f"{gt}: per-hand predictions are evaluated against a darthand dataset folder")
+    truth, names = dataset_hands(gt)
+    predicted = load_hand_predictions(pred)
+    unknown = sorted(set(predicted) - set(truth))
+    if unknown:
+        raise InputError(f"{pred}: frame {unknown[0]} is not in the ground truth {gt}")
+    root = names.index("wrist")
+    pairs: dict = {side: [] for side in SIDES}
+    pixels: dict = {side: [] for side in SIDES}
+    mrrpe, missing = [], 0
+    for index, (kind, gt_hands) in sorted(truth.items()):
+        mine = {h["side"]: h for h in predicted.get(index, [])}
+        for h in gt_hands:
+            p = mine.get(h["side"])
+            if p is None:
+                missing += 1
+                continue
+            pairs[h["side"]].append((p["keypoints_3d"], h["keypoints_3d"]))
+            if p["keypoints_2d"] is not None and h["keypoints_2d"] is not None:
+                pixels[h["side"]].append(np.linalg.norm(p["keypoints_2d"] - h["keypoints_2d"], axis=-1).mean())
+        if kind == "interacting" and all(s in mine for s in SIDES):
+            mrrpe.append(mrrpe_mm({s: mine[s]["keypoints_3d"] for s in SIDES},
+                                  {h["side"]: h["keypoints_3d"] for h in gt_hands}, root))
+    result: dict = {"pred": str(pred), "gt": str(gt), "samples": sum(len(v) for v in pairs.values()),
+                    "missing_hands": missing, "per_side": {}}
+    for side, some in pairs.items():
+        if some:
+            figures = evaluate(np.stack([p for p, _ in some]), np.stack([g for _, g in some]))
+            if pixels[side]:
+                figures["keypoints"]["mean_2d_px"] = round(float(np.mean(pixels[side])), 4)
+            result["per_side"][side] = figures
+    result["mrrpe"] = {"frames": len(mrrpe), "mm": round(float(np.mean(mrrpe)), 4) if mrrpe else None}
+    return result
+
+
+def hands_markdown(result: dict) -> str:
+    """The figures of evaluate_hands as a markdown table."""
+    lines = [f"# darthand eval: {result['samples']} hands ({result['missing_hands']} not predicted)", "",
+             "| figure | value |", "|---|---|"]
+    for side, figures in result["per_side"].items():
+        for key, value in figures["keypoints"].items():
+            lines.append(f"| {side} {key} | {value} |")
+    lines.append(f"| MRRPE mm ({result['mrrpe']['frames']} interacting frames) | {result['mrrpe']['mm']} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_hand_predictions(path, frames: dict) -> None:
+    """Write a predictions file: frames {index: [{side, keypoints_3d (21, 3), keypoints_2d (21, 2) optional}]}."""
+    doc = {"format": PREDICTIONS_FORMAT, "version": 1, "frames": [
+        {"index": int(i), "hands": [{"side": h["side"], "keypoints_3d": np.asarray(h["keypoints_3d"]).tolist(),
+                                     **({} if h.get("keypoints_2d") is None else
+                                        {"keypoints_2d": np.asarray(h["keypoints_2d"]).tolist()})}
+                                    for h in hands]} for i, hands in sorted(frames.items())]}
+    write_bytes(path, json.dumps(doc).encode())
