@@ -87,16 +87,16 @@ def camera_entry(labels: dict) -> dict:
 
 def world_mano(hand: dict, mean: np.ndarray) -> dict:
     """A hand's MANO parameters in the world frame: {pose (48): world root rotation, then the finger pose less the
-    model's mean hand `mean` (45,) (flat_hand_mean false); shape (10); trans (3) m}. The shaped rest root joint J0
-    follows from the camera-frame parameters (their root joint is J0 + trans), the world translation from the world
-    root joint (J0 + trans in the world)."""
+    model's mean hand `mean` (45,) (flat_hand_mean false); shape (10, or the model's count when more); trans (3) m}.
+    The shaped rest root joint J0 follows from the camera-frame parameters (their root joint is J0 + trans), the
+    world translation from the world root joint (J0 + trans in the world)."""
     mano = hand["mano"]
     j0 = np.asarray(hand["joints_3d"][0], np.float64) - np.asarray(mano["trans"], np.float64)
     trans = np.asarray(hand["joints_3d_world"][0], np.float64) - j0
     pose = np.asarray(hand["mano_pose"], np.float64).copy()
     pose[3:] -= mean
-    shape = np.zeros(10)
-    betas = np.asarray(mano["betas"], np.float64)[:10]
+    betas = np.asarray(mano["betas"], np.float64)
+    shape = np.zeros(max(10, len(betas)))             # MANO's 10; a model with more keeps them all
     shape[:len(betas)] = betas
     return {"pose": pose.tolist(), "shape": shape.tolist(), "trans": trans.tolist()}
 
