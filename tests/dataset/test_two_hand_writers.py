@@ -142,3 +142,16 @@ def test_eval_counts_missing_hands_and_refuses_unknown_frames(two_hand_dataset, 
     write_hand_predictions(tmp_path / "bad.json", frames)
     with pytest.raises(InputError, match="frame 999"):
         evaluate_files(tmp_path / "bad.json", root)
+
+
+def test_report_counts_two_hand_frames_per_interaction_type(two_hand_dataset, tmp_path):
+    from two_hand_fixture import INTERACTIONS
+
+    root, made = two_hand_dataset
+    assert main(["dataset", "report", str(root), "--out", str(tmp_path), "--sheet", "8"]) == 0
+    figures = json.loads((tmp_path / "report.json").read_text())
+    assert figures["two_hands"]["interaction"] == {t: 1 for t in INTERACTIONS[:len(made)]}
+    kinds = figures["two_hands"]["hand_type"]
+    assert kinds["interacting"] == len(made) and sum(kinds.values()) == 16
+    assert figures["pose_coverage"]["embedding"]["dataset_poses"] == 16 + len(made)     # both hands' poses
+    assert (tmp_path / "two_hands.png").stat().st_size > 20_000
