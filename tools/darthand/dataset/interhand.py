@@ -4,8 +4,8 @@ reads a darthand dataset of one- and two-hand frames:
     OUT/images/<split>/Capture0/<seq>/cam<n>/image<n>.jpg
     OUT/annotations/<split>/InterHand2.6M_<split>_data.json       COCO-style: images (id, file_name relative to
         images/<split>, width, height, capture, subject, seq_name, camera, frame_idx) and one annotation per image
-        (id, image_id, bbox [x, y, w, h] in pixels, area, joint_valid (42), hand_type 'right' | 'left' |
-        'interacting', hand_type_valid 1, category_id 1, iscrowd 0)
+        (id (frame index + 1: COCOeval takes 0 for no match), image_id, bbox [x, y, w, h] in pixels, area,
+        joint_valid (42), hand_type 'right' | 'left' | 'interacting', hand_type_valid 1, category_id 1, iscrowd 0)
     OUT/annotations/<split>/InterHand2.6M_<split>_camera.json     {capture: {campos|camrot|focal|princpt: {cam: ...}}}:
         X_cam = camrot (X - campos), campos in mm; pixel = X_cam[:2] / X_cam[2] * focal + princpt (pixel centres
         at integers: darthand's K with 0.5 subtracted from cx, cy)
@@ -131,7 +131,7 @@ class _Split:
                                     "frame_idx": index})
         joints, valid = world_joints(labels)
         box = keypoint_bbox(labels)
-        self.data["annotations"].append({"id": index, "image_id": index, "bbox": box, "area": box[2] * box[3],
+        self.data["annotations"].append({"id": index + 1, "image_id": index, "bbox": box, "area": box[2] * box[3],
                                          "joint_valid": [[int(v)] for v in valid], "hand_type": kind,
                                          "hand_type_valid": 1, "category_id": 1, "iscrowd": 0})
         for key, value in camera_entry(labels).items():
