@@ -155,3 +155,25 @@ def test_report_counts_two_hand_frames_per_interaction_type(two_hand_dataset, tm
     assert kinds["interacting"] == len(made) and sum(kinds.values()) == 16
     assert figures["pose_coverage"]["embedding"]["dataset_poses"] == 16 + len(made)     # both hands' poses
     assert (tmp_path / "two_hands.png").stat().st_size > 20_000
+
+
+def test_eval_command_of_a_dataset_against_itself_and_bad_predictions(two_hand_dataset, tmp_path, capsys):
+    """The dataset as its own prediction scores zero everywhere; the predictions file follows its schema; a hand
+    with a side that does not exist is one line, exit 2."""
+    from darthand.schemas import check_schema
+
+    root, made = two_hand_dataset
+    assert main(["eval", str(root), str(root), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["mrrpe"] == {"frames": len(made), "mm": 0.0}
+    assert all(f["keypoints"]["mpjpe_mm"] == 0 for f in result["per_side"].values())
+    assert result["per_side"]["right"]["keypoints"]["mean_2d_px"] == 0
+    frames = _truth(root)
+    write_hand_predictions(tmp_path / "pred.json", frames)
+    check_schema(json.loads((tmp_path / "pred.json").read_text()), "hand_predictions.schema.json", "pred.json")
+    doc = json.loads((tmp_path / "pred.json").read_text())
+    doc["frames"][0]["hands"][0]["side"] = "up"
+    (tmp_path / "bad.json").write_text(json.dumps(doc))
+    assert main(["eval", str(tmp_path / "bad.json"), str(root)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "bad.json" in err and "side" in err and len(err.splitlines()) == 1

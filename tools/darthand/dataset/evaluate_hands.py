@@ -28,8 +28,10 @@ from darthand.dataset.metrics import evaluate
 from darthand.dataset.run import read_shard_records
 from darthand.errors import InputError
 from darthand.fileio import read_json, write_bytes
+from darthand.schemas import check_schema
 
 PREDICTIONS_FORMAT = "darthand-hand-predictions"
+SCHEMA = "hand_predictions.schema.json"
 SIDES = ("right", "left")
 
 
@@ -68,27 +70,16 @@ def load_hand_predictions(path) -> dict:
     if path.is_dir():
         return {i: hands for i, (_, hands) in dataset_hands(path)[0].items()}
     doc = read_json(path, "predictions file")
-    if not (isinstance(doc, dict) and doc.get("format") == PREDICTIONS_FORMAT and isinstance(doc.get("frames"), list)):
-        raise InputError(f"{path}: not a {PREDICTIONS_FORMAT} file (format, frames)")
-    out = {}
-    for k, frame in enumerate(doc["frames"]):
-        try:
-            hands = [_checked_hand(h) for h in frame["hands"]]
-            out[int(frame["index"])] = hands
-        except (KeyError, TypeError, ValueError) as e:
-            raise InputError(f"{path}: frames[{k}]: {e}") from None
+    check_schema(doc, SCHEMA, str(path))
+    out: dict = {}
+    for frame in doc["frames"]:
+        if int(frame["index"]) in out:
+            raise InputError(f"{path}: frame {frame['index']} is listed twice")
+        sides = [h["side"] for h in frame["hands"]]
+        if len(set(sides)) < len(sides):
+            raise InputError(f"{path}: frame {frame['index']} has two {sides[0]} hands")
+        out[int(frame["index"])] = [_hand(h) for h in frame["hands"]]
     return out
-
-
-def _checked_hand(h: dict) -> dict:
-    if h.get("side") not in SIDES:
-        raise ValueError(f"side {h.get('side')!r} is not right or left")
-    hand = _hand(h)
-    if hand["keypoints_3d"].shape != (21, 3) or not np.isfinite(hand["keypoints_3d"]).all():
-        raise ValueError("keypoints_3d is not 21 finite points (x, y, z)")
-    if hand["keypoints_2d"] is not None and hand["keypoints_2d"].shape != (21, 2):
-        raise ValueError("keypoints_2d is not 21 points (u, v)")
-    return hand
 
 
 def mrrpe_mm(pred: dict, gt: dict, root: int) -> float:
