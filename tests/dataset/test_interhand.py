@@ -35,7 +35,7 @@ def _annotations(out, split):
 
 
 def _splits(out):
-    return sorted(p.name for p in (out / "annotations").iterdir())
+    return sorted(p.name for p in (out / "annotations").iterdir() if p.is_dir())
 
 
 def _labels(root, index):
@@ -124,3 +124,24 @@ def test_mano_parameters_pose_the_sides_model_into_the_written_joints(interhand,
                 assert np.abs(posed.keypoints[0][order] * 1000 - X[at:at + 21]).max() < 1e-4
                 checked += 1
     assert checked >= 19
+
+
+def test_skeleton_file_names_the_joints_and_their_bones(interhand):
+    """annotations/skeleton.txt parsed as InterHand's load_skeleton does: each joint's parent is the next joint
+    toward the wrist of its own hand, so each bone joins two of the hand's keypoints one finger segment apart."""
+    root, made, out = interhand
+    rows = [line.split(" ") for line in (out / "annotations" / "skeleton.txt").read_text().splitlines()
+            if line[0] != "#"]
+    names = {int(i): n for n, i, _ in rows}
+    parents = {int(i): int(p) for _, i, p in rows}
+    assert [names[i] for i in range(42)] == [f"r_{n}" for n in NAMES] + [f"l_{n}" for n in NAMES]
+    labels = _labels(root, made[0])
+    finger_order = ["wrist"] + [f"{f}{k}" for f in FINGERS for k in (1, 2, 3, 4)]
+    for j, p in parents.items():
+        if p < 0:
+            assert names[j].endswith("wrist")
+            continue
+        a, b = names[j][2:], names[p][2:]
+        assert names[j][0] == names[p][0]
+        assert b == "wrist" and a.endswith("1") or (a[:-1] == b[:-1] and int(a[-1]) == int(b[-1]) + 1)
+        assert a in finger_order and b in labels["keypoint_names"]

@@ -14,6 +14,7 @@ reads a darthand dataset of one- and two-hand frames:
     OUT/annotations/<split>/InterHand2.6M_<split>_MANO_NeuralAnnot.json  {capture: {frame_idx: {right|left: {pose
         (48), shape (10), trans (3)} or None}}}: the world frame, metres, the finger pose with the side's mean hand
         left out (smplx's MANO layer with its default flat_hand_mean false), as InterHand's tool/MANO_render reads it
+    OUT/annotations/skeleton.txt  the 42 joints' names and parents (its loader's load_skeleton)
     OUT/README.md
 
 Joints: 42 per frame, the right hand 0-20 then the left 21-41, each in InterHand's order (thumb tip to root, index,
@@ -53,6 +54,18 @@ JOINT_NAMES = [f"{s[0]}_{f}{k}" for s in SIDES for f in FINGERS for k in (4, 3, 
 JOINT_NAMES = [*JOINT_NAMES[:20], "r_wrist", *JOINT_NAMES[20:], "l_wrist"]
 """InterHand2.6M's 42 joint names in its order (its skeleton.txt)."""
 MM = 1000.0
+
+
+def skeleton_text() -> str:
+    """annotations/skeleton.txt as InterHand's load_skeleton reads it: '<name> <id> <parent id>' per joint (a tip's
+    parent the joint below it, a finger's root's the wrist, the wrist's -1)."""
+    lines = ["# joint_name joint_id joint_parent_id"]
+    for j, name in enumerate(JOINT_NAMES):
+        hand, k = divmod(j, 21)
+        wrist = 21 * hand + 20
+        parent = -1 if k == 20 else (wrist if k % 4 == 3 else j + 1)
+        lines.append(f"{name} {j} {parent}")
+    return "\n".join(lines) + "\n"
 
 
 def interhand_order(keypoint_names: list[str]) -> np.ndarray:
@@ -182,6 +195,7 @@ def write_interhand(dataset, out=None) -> Path:
         counts[seq] = counts.get(seq, 0) + 1
     for split in splits.values():
         split.write(out)
+    write_bytes(out / "annotations" / "skeleton.txt", skeleton_text().encode())
     write_bytes(out / "README.md", _readme(models, counts).encode())
     return out
 
