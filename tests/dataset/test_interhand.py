@@ -145,3 +145,32 @@ def test_skeleton_file_names_the_joints_and_their_bones(interhand):
         assert names[j][0] == names[p][0]
         assert b == "wrist" and a.endswith("1") or (a[:-1] == b[:-1] and int(a[-1]) == int(b[-1]) + 1)
         assert a in finger_order and b in labels["keypoint_names"]
+
+
+def test_mano_files_pose_manos_own_models_into_the_written_joints(mano_dataset, tmp_path):
+    """A dataset rendered from MANO-format pickles: each hand's parameters pose MANO_RIGHT / MANO_LEFT read from
+    the pickles (778 vertices, no wrist, their own mean hands: flat_hand_mean false) into the written world joints,
+    and the README says the parameters are MANO's."""
+    from darthand.model.load import load_model
+
+    root, right_pkl, left_pkl = mano_dataset
+    assert main(["dataset", "export", str(root), "--format", "interhand", "--out", str(tmp_path)]) == 0
+    models = {"right": load_model(str(right_pkl)), "left": load_model(str(left_pkl))}
+    assert all(np.abs(m.hands_mean).max() > 0.01 for m in models.values())      # the mean hand is not zero
+    order = [keypoint_names("openpose").index(n) for n in NAMES]
+    sides = []
+    for split in _splits(tmp_path):
+        ann = _annotations(tmp_path, split)
+        for frame, by_side in ann["MANO_NeuralAnnot"]["0"].items():
+            X = np.asarray(ann["joint_3d"]["0"][frame]["world_coord"])
+            for side, params in by_side.items():
+                if params is None:
+                    continue
+                posed = forward(models[side], np.asarray(params["pose"])[None], np.asarray(params["shape"])[None],
+                                flat_hand_mean=False, trans=np.asarray(params["trans"])[None],
+                                keypoint_order="openpose")
+                at = 0 if side == "right" else 21
+                assert np.abs(posed.keypoints[0][order] * 1000 - X[at:at + 21]).max() < 1e-3
+                sides.append(side)
+    assert len(sides) == 12 and set(sides) == {"right", "left"}
+    assert "Models: MANO files" in (tmp_path / "README.md").read_text()
