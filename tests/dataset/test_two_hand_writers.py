@@ -128,6 +128,7 @@ def test_eval_mrrpe_is_the_length_of_a_left_hand_shift(two_hand_dataset, tmp_pat
     assert result["per_side"]["left"]["keypoints"]["mpjpe_mm"] == pytest.approx(13.0, abs=1e-3)
     assert result["per_side"]["left"]["keypoints"]["pa_mpjpe_mm"] == pytest.approx(0, abs=1e-3)
     assert result["samples"] == 16 + len(made) and result["missing_hands"] == 0
+    assert result["root_relative_mpjpe_mm"] == {"single": 0.0, "interacting": 0.0}      # a shift moves the root too
     assert "MRRPE" in (tmp_path / "eval" / "eval.md").read_text()
 
 
@@ -177,3 +178,23 @@ def test_eval_command_of_a_dataset_against_itself_and_bad_predictions(two_hand_d
     assert main(["eval", str(tmp_path / "bad.json"), str(root)]) == 2
     err = capsys.readouterr().err.strip()
     assert "bad.json" in err and "side" in err and len(err.splitlines()) == 1
+
+
+def test_eval_root_relative_error_of_a_moved_fingertip(two_hand_dataset, tmp_path):
+    """Every right hand's index tip moved by e: the right hands' root-relative MPJPE is |e| / 21, the left hands'
+    0, and MRRPE 0 (the roots did not move)."""
+    root, made = two_hand_dataset
+    e = np.array([0.0, 0.021, 0.0])
+    frames = _truth(root)
+    names = _labels(root, made[0])["keypoint_names"]
+    tip = names.index("index4")
+    for hands in frames.values():
+        for h in hands:
+            if h["side"] == "right":
+                h["keypoints_3d"] = h["keypoints_3d"].copy()
+                h["keypoints_3d"][tip] += e
+    write_hand_predictions(tmp_path / "pred.json", frames)
+    result = evaluate_files(tmp_path / "pred.json", root)
+    assert result["per_side"]["right"]["keypoints"]["root_relative_mpjpe_mm"] == pytest.approx(1.0, abs=1e-6)
+    assert result["per_side"]["left"]["keypoints"]["root_relative_mpjpe_mm"] == pytest.approx(0.0, abs=1e-9)
+    assert result["mrrpe"]["mm"] == pytest.approx(0.0, abs=1e-9)

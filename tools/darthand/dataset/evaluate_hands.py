@@ -8,7 +8,9 @@ keypoints in the ground truth's keypoint order (its labels' keypoint_names: open
 is a darthand dataset folder; a dataset folder is also read as predictions (its labels' hands). Figures:
 
 - per side: FreiHAND's keypoint figures (dataset/metrics.evaluate) over every hand of that side the predictions
-  name, and the mean 2-D error (pixels) where the prediction has 2-D keypoints;
+  name, InterHand's root-relative MPJPE (each hand's wrist at the origin), and the mean 2-D error (pixels) where
+  the prediction has 2-D keypoints;
+- root-relative MPJPE of the hands of single-hand frames and of interacting frames (InterHand's two figures);
 - MRRPE (InterHand2.6M's mean relative-root position error) over interacting frames (both hands in the ground
   truth and the prediction): root = the wrist, |(R_pred - L_pred) - (R_gt - L_gt)|, mm.
 
@@ -90,9 +92,48 @@ def mrrpe_mm(pred: dict, gt: dict, root: int) -> float:
     return float(1000 * np.linalg.norm(rel_pred - rel_gt))
 
 
+def root_relative_mpjpe_mm(pred: np.ndarray, gt: np.ndarray, root: int) -> float:
+    """InterHand2.6M's MPJPE (mm) of keypoints (N, 21, 3), metres: each hand moved so that its root (index `root`)
+    is at the origin, then the mean Euclidean distance."""
+    pred = pred - pred[:, root:root + 1]
+    gt = gt - gt[:, root:root + 1]
+    return float(1000 * np.linalg.norm(pred - gt, axis=-1).mean())
+
+
+def matched_hands(truth: dict, predicted: dict, root: int) -> tuple[list, int, list]:
+    """([(side, 'single' | 'interacting', predicted hand, true hand)], hands not predicted, [MRRPE (mm) per
+    interacting frame with both hands predicted])."""
+    pairs, missing, mrrpe = [], 0, []
+    for index, (kind, gt_hands) in sorted(truth.items()):
+        mine = {h["side"]: h for h in predicted.get(index, [])}
+        for h in gt_hands:
+            if h["side"] in mine:
+                pairs.append((h["side"], "interacting" if kind == "interacting" else "single", mine[h["side"]], h))
+            else:
+                missing += 1
+        if kind == "interacting" and all(s in mine for s in SIDES):
+            mrrpe.append(mrrpe_mm({s: mine[s]["keypoints_3d"] for s in SIDES},
+                                  {h["side"]: h["keypoints_3d"] for h in gt_hands}, root))
+    return pairs, missing, mrrpe
+
+
+def side_figures(pairs: list, root: int) -> dict:
+    """FreiHAND's keypoint figures of matched hands (matched_hands' pairs), the root-relative MPJPE, and the mean
+    2-D error (pixels) where both have 2-D keypoints."""
+    pred = np.stack([p["keypoints_3d"] for _, _, p, _ in pairs])
+    gt = np.stack([g["keypoints_3d"] for _, _, _, g in pairs])
+    figures = evaluate(pred, gt)
+    figures["keypoints"]["root_relative_mpjpe_mm"] = round(root_relative_mpjpe_mm(pred, gt, root), 4)
+    px = [np.linalg.norm(p["keypoints_2d"] - g["keypoints_2d"], axis=-1).mean() for _, _, p, g in pairs
+          if p["keypoints_2d"] is not None and g["keypoints_2d"] is not None]
+    if px:
+        figures["keypoints"]["mean_2d_px"] = round(float(np.mean(px)), 4)
+    return figures
+
+
 def evaluate_hands(pred, gt) -> dict:
-    """The per-side figures and MRRPE of predictions `pred` (a predictions file or dataset folder) against the
-    dataset folder `gt` (module docstring)."""
+    """The per-side figures, the root-relative MPJPE of single and interacting frames' hands, and MRRPE of
+    predictions `pred` (a predictions file or dataset folder) against the dataset folder `gt` (module docstring)."""
     if not (Path(gt).is_dir() and (Path(gt) / "dataset.json").is_file()):
         raise InputError(f"{gt}: per-hand predictions are evaluated against a darthand dataset folder")
     truth, names = dataset_hands(gt)
@@ -101,30 +142,19 @@ def evaluate_hands(pred, gt) -> dict:
     if unknown:
         raise InputError(f"{pred}: frame {unknown[0]} is not in the ground truth {gt}")
     root = names.index("wrist")
-    pairs: dict = {side: [] for side in SIDES}
-    pixels: dict = {side: [] for side in SIDES}
-    mrrpe, missing = [], 0
-    for index, (kind, gt_hands) in sorted(truth.items()):
-        mine = {h["side"]: h for h in predicted.get(index, [])}
-        for h in gt_hands:
-            p = mine.get(h["side"])
-            if p is None:
-                missing += 1
-                continue
-            pairs[h["side"]].append((p["keypoints_3d"], h["keypoints_3d"]))
-            if p["keypoints_2d"] is not None and h["keypoints_2d"] is not None:
-                pixels[h["side"]].append(np.linalg.norm(p["keypoints_2d"] - h["keypoints_2d"], axis=-1).mean())
-        if kind == "interacting" and all(s in mine for s in SIDES):
-            mrrpe.append(mrrpe_mm({s: mine[s]["keypoints_3d"] for s in SIDES},
-                                  {h["side"]: h["keypoints_3d"] for h in gt_hands}, root))
-    result: dict = {"pred": str(pred), "gt": str(gt), "samples": sum(len(v) for v in pairs.values()),
-                    "missing_hands": missing, "per_side": {}}
-    for side, some in pairs.items():
+    pairs, missing, mrrpe = matched_hands(truth, predicted, root)
+    result: dict = {"pred": str(pred), "gt": str(gt), "samples": len(pairs), "missing_hands": missing,
+                    "per_side": {}, "root_relative_mpjpe_mm": {}}
+    for side in SIDES:
+        some = [pair for pair in pairs if pair[0] == side]
         if some:
-            figures = evaluate(np.stack([p for p, _ in some]), np.stack([g for _, g in some]))
-            if pixels[side]:
-                figures["keypoints"]["mean_2d_px"] = round(float(np.mean(pixels[side])), 4)
-            result["per_side"][side] = figures
+            result["per_side"][side] = side_figures(some, root)
+    for kind in ("single", "interacting"):
+        some = [pair for pair in pairs if pair[1] == kind]
+        if some:
+            result["root_relative_mpjpe_mm"][kind] = round(root_relative_mpjpe_mm(
+                np.stack([p["keypoints_3d"] for _, _, p, _ in some]),
+                np.stack([g["keypoints_3d"] for _, _, _, g in some]), root), 4)
     result["mrrpe"] = {"frames": len(mrrpe), "mm": round(float(np.mean(mrrpe)), 4) if mrrpe else None}
     return result
 
@@ -136,6 +166,8 @@ def hands_markdown(result: dict) -> str:
     for side, figures in result["per_side"].items():
         for key, value in figures["keypoints"].items():
             lines.append(f"| {side} {key} | {value} |")
+    for kind, value in result["root_relative_mpjpe_mm"].items():
+        lines.append(f"| root-relative MPJPE mm, {kind} frames' hands | {value} |")
     lines.append(f"| MRRPE mm ({result['mrrpe']['frames']} interacting frames) | {result['mrrpe']['mm']} |")
     return "\n".join(lines) + "\n"
 
