@@ -139,6 +139,9 @@ def test_eval_counts_missing_hands_and_refuses_unknown_frames(two_hand_dataset, 
     write_hand_predictions(tmp_path / "pred.json", frames)
     result = evaluate_files(tmp_path / "pred.json", root)
     assert result["missing_hands"] == 1 and result["mrrpe"]["frames"] == len(made) - 1
+    np.savez(tmp_path / "old.npz", keypoints=np.zeros((16, 21, 3)))
+    with pytest.raises(InputError, match="holds two-hand frames"):
+        evaluate_files(tmp_path / "old.npz", root)
     frames[999] = frames[made[1]]
     write_hand_predictions(tmp_path / "bad.json", frames)
     with pytest.raises(InputError, match="frame 999"):

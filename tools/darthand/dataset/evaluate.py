@@ -95,6 +95,9 @@ def evaluate_files(pred, gt, out=None) -> dict:
     written to out/eval.json and out/eval.md. Per-hand predictions (dataset/evaluate_hands.py), or a dataset
     against a dataset with two-hand frames, get per-side figures and MRRPE instead."""
     if is_hand_predictions(pred) or _has_two_hands(gt):
+        if not (is_hand_predictions(pred) or Path(pred, "dataset.json").is_file()):
+            raise InputError(f"{pred}: the ground truth {gt} holds two-hand frames: give per-hand predictions "
+                             f"(schemas/hand_predictions.schema.json) or a dataset folder")
         result = evaluate_hands(pred, gt)
         if out is not None:
             write_json(Path(out) / "eval.json", result)
