@@ -50,6 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from darthand.dataset.frames import frame_names
+from darthand.dataset.hands import hands_of
 from darthand.dataset.run import read_shard_records
 from darthand.errors import InputError
 from darthand.fileio import read_json, replace_folder, staging_folder
@@ -229,12 +230,13 @@ def frame_annotations(root: Path, names: dict, index: int, labels: dict) -> list
     index + 1."""
     where = str(root / names["labels"])
     mask = _read_mask(root / names["mask"])
-    if "hands" not in labels:
-        ann = annotation(index, labels, mask, where)
+    hands = hands_of(labels)
+    if len(hands) == 1:
+        ann = annotation(index, {**labels, **hands[0]}, mask, where)
         return [] if ann is None else [ann]
     instances = _read_mask(root / "instances" / Path(names["image"]).name)
     anns = []
-    for b, hand in enumerate(labels["hands"]):
+    for b, hand in enumerate(hands):
         own = np.where((instances == 1 + 2 * b) | (instances == 2 + 2 * b), mask, 0).astype(np.uint8)
         ann = annotation(index, {**labels, **hand}, own, where)
         if ann is not None:
