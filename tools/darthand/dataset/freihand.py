@@ -40,7 +40,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from darthand.dataset.frames import frame_names
-from darthand.dataset.hands import hands_mean, is_multi_hand
+from darthand.dataset.hands import hands_mean, hands_of, is_multi_hand
 from darthand.dataset.run import read_shard_records
 from darthand.errors import InputError
 from darthand.fileio import atomic_path, read_json, write_bytes
@@ -168,13 +168,16 @@ def write_freihand(dataset, out=None, *, left: str = "mirror", allow_non_mano: b
             if is_multi_hand(labels):
                 counts["two_hands"] = counts.get("two_hands", 0) + 1       # FreiHAND holds one hand per image
                 continue
+            labels = {**labels, **hands_of(labels)[0]}            # a one-body 'hands' list: its hand at top level
             flip = labels["side"] != "right"
             if flip and left == "skip":
                 counts["skipped_left"] += 1
                 continue
             if labels.get("keypoint_order") != "openpose" or "mano" not in labels:
                 raise InputError(f"{root / names['labels']}: needs openpose keypoints and MANO parameters")
-            vertices = np.asarray(np.load(root / names["vertices"])[:labels["mesh"]["base_vertices"]], np.float64)
+            vertices = np.load(root / names["vertices"])
+            vertices = np.asarray((vertices[0] if vertices.ndim == 3 else vertices)[:labels["mesh"]["base_vertices"]],
+                                  np.float64)
             if flip:
                 labels, vertices = mirror_labels(labels), mirror_points(vertices)
             name = SETS[frame["split"]]
