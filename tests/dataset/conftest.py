@@ -127,3 +127,13 @@ def mano_dataset(tmp_path_factory):
 
 def _write(path, doc) -> None:
     path.write_text(json.dumps(doc))
+
+
+@pytest.fixture(scope="session")
+def two_hand_dataset(small_dataset, tmp_path_factory):
+    """(dataset folder, two-hand frame indices): small_dataset with three of its right frames made two-hand frames
+    (issue 29's labels, (2, V, 3) meshes, instances PNG; two_hand_fixture.py)."""
+    from two_hand_fixture import make_two_hand_dataset
+
+    out = tmp_path_factory.mktemp("two_hands") / "dataset"
+    return out, make_two_hand_dataset(small_dataset[0], out)

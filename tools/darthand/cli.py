@@ -701,7 +701,8 @@ def _add_dataset_commands(sub) -> None:
             "F-scores at 5 and 15 mm, AUC of PCK over 0-50 mm")
     p = sub.add_parser("eval", help=text, description=text)
     p.add_argument("pred", metavar="PRED", help="predictions: FreiHAND's pred.json ([xyz, verts]), an .npz "
-                                                "(keypoints, vertices) or a dataset folder")
+                                                "(keypoints, vertices), a dataset folder, or per-hand predictions "
+                                                "(schemas/hand_predictions.schema.json: per-side figures, MRRPE)")
     p.add_argument("gt", metavar="GT", help="ground truth: a dataset folder, a FreiHAND set (its *_xyz.json, "
                                             "*_verts.json) or the same forms as PRED")
     p.add_argument("--json", action="store_true", help="print JSON instead of the markdown table")

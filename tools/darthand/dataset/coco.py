@@ -33,6 +33,8 @@ skeleton is) and per frame one `annotations` entry:
                        COCO-WholeBody's hand fields (CocoWholeBodyHandDataset reads only these): the frame's hand
                        under its side, the other side zeros and valid false
 
+A two-hand frame (issue 29) has one annotation per hand, each with its side as hand_type, its segmentation the
+hand's pixels in instances/<n>.png (and its accessory's), the second hand's id TWO_HAND_IDS + frame index + 1.
 A frame with neither a mask pixel nor a labelled keypoint lists its image without an annotation. The layout is built
 in a staging folder and moved into place whole: an existing OUT that is this layout is replaced, anything else is
 refused.
@@ -48,6 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from darthand.dataset.frames import frame_names
+from darthand.dataset.hands import hands_of
 from darthand.dataset.run import read_shard_records
 from darthand.errors import InputError
 from darthand.fileio import read_json, replace_folder, staging_folder
@@ -59,6 +62,7 @@ MASK_THRESHOLD = 128
 KEYPOINT_DECIMALS = 4            # 1e-4 pixel
 RLE_GROUPS = 13                  # 5-bit groups of a 64-bit run length or difference
 ANNOTATIONS = "annotations/darthand_{split}.json"
+TWO_HAND_IDS = 1_000_000_000          # a two-hand frame's second hand's annotation id: this + frame index + 1
 README_TITLE = "# mmpose COCO-style hand layout of a darthand dataset"
 FINGERS = {"thumb": "thumb", "index": "forefinger", "middle": "middle_finger", "ring": "ring_finger",
            "pinky": "pinky_finger"}
@@ -206,10 +210,9 @@ def _write_split(root: Path, frames: list[dict], tmp: Path, split: str) -> list[
             images.append({"id": index, "file_name": names["image"], "width": width, "height": height})
             opaque = bool(labels.get("render", {}).get("background"))
             _place_image(root / names["image"], tmp / names["image"], opaque)
-            ann = annotation(index, labels, _read_mask(root / names["mask"]), str(root / names["labels"]))
-            if ann is not None:
+            for ann in frame_annotations(root, names, index, labels):
                 f.write(json.dumps(ann) + "\n")
-                n_ann, n_left = n_ann + 1, n_left + (labels["side"] == "left")
+                n_ann, n_left = n_ann + 1, n_left + (ann["hand_type"] == "left")
     head = {"info": {"description": f"darthand dataset {root.name}, split {split}"}, "licenses": [],
             "categories": [category()], "images": images}
     with open(tmp / ANNOTATIONS.format(split=split), "w") as f, open(part) as lines:
@@ -219,6 +222,26 @@ def _write_split(root: Path, frames: list[dict], tmp: Path, split: str) -> list[
         f.write("]}\n")
     part.unlink()
     return [len(images), n_ann, n_left]
+
+
+def frame_annotations(root: Path, names: dict, index: int, labels: dict) -> list[dict]:
+    """A frame's annotations: one for a one-hand frame (or none, annotation()); one per hand of a two-hand frame,
+    hand b's coverage its instances' pixels (1 + 2b its hand, 2 + 2b its accessory) and its id b * TWO_HAND_IDS +
+    index + 1."""
+    where = str(root / names["labels"])
+    mask = _read_mask(root / names["mask"])
+    hands = hands_of(labels)
+    if len(hands) == 1:
+        ann = annotation(index, {**labels, **hands[0]}, mask, where)
+        return [] if ann is None else [ann]
+    instances = _read_mask(root / "instances" / Path(names["image"]).name)
+    anns = []
+    for b, hand in enumerate(hands):
+        own = np.where((instances == 1 + 2 * b) | (instances == 2 + 2 * b), mask, 0).astype(np.uint8)
+        ann = annotation(index, {**labels, **hand}, own, where)
+        if ann is not None:
+            anns.append({**ann, "id": b * TWO_HAND_IDS + index + 1})
+    return anns
 
 
 def _place_image(src: Path, dst: Path, opaque: bool) -> None:

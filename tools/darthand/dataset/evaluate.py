@@ -1,5 +1,5 @@
 """`darthand eval PRED GT`: read predictions and ground truth in the forms training code writes, and compute
-FreiHAND's figures (dataset/metrics.py).
+FreiHAND's figures (dataset/metrics.py); per-hand predictions and two-hand frames: dataset/evaluate_hands.py.
 
 Forms: a darthand dataset folder (labels' keypoints_3d and meshes/ vertices, the hand without the wrist rings, in
 frame order); a FreiHAND set (a folder with <set>_xyz.json and <set>_verts.json, or one of those files); FreiHAND's
@@ -15,7 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+from darthand.dataset.evaluate_hands import evaluate_hands, hands_markdown, is_hand_predictions
 from darthand.dataset.frames import frame_names
+from darthand.dataset.hands import is_multi_hand
 from darthand.dataset.metrics import evaluate
 from darthand.dataset.run import read_shard_records
 from darthand.errors import InputError
@@ -90,7 +92,17 @@ def _dataset_points(folder: Path):
 
 def evaluate_files(pred, gt, out=None) -> dict:
     """The figures of predictions `pred` against ground truth `gt` (paths in the module's forms); with `out`, also
-    written to out/eval.json and out/eval.md."""
+    written to out/eval.json and out/eval.md. Per-hand predictions (dataset/evaluate_hands.py), or a dataset
+    against a dataset with two-hand frames, get per-side figures and MRRPE instead."""
+    if is_hand_predictions(pred) or _has_two_hands(gt):
+        if not (is_hand_predictions(pred) or Path(pred, "dataset.json").is_file()):
+            raise InputError(f"{pred}: the ground truth {gt} holds two-hand frames: give per-hand predictions "
+                             f"(schemas/hand_predictions.schema.json) or a dataset folder")
+        result = evaluate_hands(pred, gt)
+        if out is not None:
+            write_json(Path(out) / "eval.json", result)
+            write_bytes(Path(out) / "eval.md", hands_markdown(result).encode())
+        return result
     pk, pv = load_points(pred)
     gk, gv = load_points(gt)
     if len(pk) != len(gk):
@@ -106,7 +118,21 @@ def evaluate_files(pred, gt, out=None) -> dict:
     return result
 
 
+def _has_two_hands(path) -> bool:
+    """Whether `path` is a dataset folder holding a two-hand frame (its shard records' hand_type, else labels)."""
+    path = Path(path)
+    if not (path.is_dir() and (path / "dataset.json").is_file()):
+        return False
+    for f in read_shard_records(path):
+        labels = read_json(path / frame_names(f["index"])["labels"], "labels")
+        if is_multi_hand(labels):
+            return True
+    return False
+
+
 def markdown_table(result: dict) -> str:
+    if "per_side" in result:
+        return hands_markdown(result)
     lines = [f"# darthand eval: {result['samples']} samples", "", "| figure | value |", "|---|---|"]
     for group in ("keypoints", "vertices"):
         for key, value in result.get(group, {}).items():

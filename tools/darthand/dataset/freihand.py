@@ -40,6 +40,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from darthand.dataset.frames import frame_names
+from darthand.dataset.hands import hands_mean, hands_of, is_multi_hand
 from darthand.dataset.run import read_shard_records
 from darthand.errors import InputError
 from darthand.fileio import atomic_path, read_json, write_bytes
@@ -138,11 +139,7 @@ def check_mano(models: dict, where, allow_non_mano: bool) -> bool:
 
 def right_hands_mean(models: dict) -> np.ndarray:
     """(45,) the right model's mean hand: its own, else the left model's mirrored (a left-only dataset)."""
-    if "hands_mean" in models.get("right", {}):
-        return np.asarray(models["right"]["hands_mean"], float)
-    if "hands_mean" in models.get("left", {}):
-        return mirror_pose(np.asarray(models["left"]["hands_mean"], float))
-    return np.zeros(45)
+    return hands_mean(models, "right")
 
 
 def write_freihand(dataset, out=None, *, left: str = "mirror", allow_non_mano: bool = False) -> Path:
@@ -166,15 +163,21 @@ def write_freihand(dataset, out=None, *, left: str = "mirror", allow_non_mano: b
         for frame in frames:
             if frame["split"] not in SETS:
                 continue
-            flip = frame["side"] != "right"
+            names = frame_names(frame["index"])
+            labels = read_json(root / names["labels"], "labels")
+            if is_multi_hand(labels):
+                counts["two_hands"] = counts.get("two_hands", 0) + 1       # FreiHAND holds one hand per image
+                continue
+            labels = {**labels, **hands_of(labels)[0]}            # a one-body 'hands' list: its hand at top level
+            flip = labels["side"] != "right"
             if flip and left == "skip":
                 counts["skipped_left"] += 1
                 continue
-            names = frame_names(frame["index"])
-            labels = read_json(root / names["labels"], "labels")
             if labels.get("keypoint_order") != "openpose" or "mano" not in labels:
                 raise InputError(f"{root / names['labels']}: needs openpose keypoints and MANO parameters")
-            vertices = np.asarray(np.load(root / names["vertices"])[:labels["mesh"]["base_vertices"]], np.float64)
+            vertices = np.load(root / names["vertices"])
+            vertices = np.asarray((vertices[0] if vertices.ndim == 3 else vertices)[:labels["mesh"]["base_vertices"]],
+                                  np.float64)
             if flip:
                 labels, vertices = mirror_labels(labels), mirror_points(vertices)
             name = SETS[frame["split"]]
@@ -199,6 +202,8 @@ def write_freihand(dataset, out=None, *, left: str = "mirror", allow_non_mano: b
         print(f"[dataset] freihand: {counts['mirrored']} left-hand frames mirrored into right hands")
     if counts["skipped_left"]:
         print(f"[dataset] freihand: {counts['skipped_left']} left-hand frames left out (--left skip)")
+    if counts.get("two_hands"):
+        print(f"[dataset] freihand: {counts['two_hands']} two-hand frames left out (FreiHAND holds one hand)")
     return out
 
 
@@ -221,6 +226,8 @@ def _readme(models: dict, is_mano: bool, counts: dict, left: str) -> str:
                  "rotations (x, y, z) -> (x, -y, -z) per joint).")
     else:
         sides = f"{counts['right']} right-hand frames; {counts['skipped_left']} left-hand frames left out."
+    if counts.get("two_hands"):
+        sides += f" {counts['two_hands']} two-hand frames left out (FreiHAND holds one hand per image)."
     return (f"# FreiHAND layout of a darthand dataset\n\nModels: {sources}.\n\nRows: {sides}\n\n"
             f"<set>_mano.json, per row [[61 values]]: values 0-2 the global rotation (axis-angle, camera frame), "
             f"3-47 the finger pose with the model's mean hand left out (flat_hand_mean false); {shape} Values "
@@ -231,14 +238,17 @@ def _readme(models: dict, is_mano: bool, counts: dict, left: str) -> str:
 
 def _write_jpegs(image_png: Path, mask_png: Path, folder: Path, row: int, flip: bool = False) -> None:
     # read_png associates alpha, as OpenImageIO reads PNGs: the colour is already over black (sRGB, like FreiHAND's)
-    rgb = read_png(image_png)[..., :3].astype(np.float32) / 255
+    rgb = read_png(image_png)[..., :3]
     mask = read_png(mask_png)[..., :1]
-    for pixels, sub in ((np.rint(rgb * 255).astype(np.uint8), "rgb"), (mask, "mask")):
-        if flip:
-            pixels = pixels[:, ::-1]
-        buf = oiio.ImageBuf(oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], oiio.UINT8))
-        buf.set_pixels(oiio.ROI(), np.ascontiguousarray(pixels))
-        buf.specmod().attribute("compression", f"jpeg:{JPEG_QUALITY}")
-        with atomic_path(folder / sub / f"{row:08d}.jpg") as tmp:
-            if not buf.write(str(tmp), fileformat="jpeg"):
-                raise OSError(f"{folder / sub}: cannot write JPEG ({buf.geterror()})")
+    for pixels, sub in ((rgb, "rgb"), (mask, "mask")):
+        write_jpeg(pixels[:, ::-1] if flip else pixels, folder / sub / f"{row:08d}.jpg")
+
+
+def write_jpeg(pixels: np.ndarray, path: Path) -> None:
+    """Write (H, W, C) uint8 pixels as a JPEG (quality JPEG_QUALITY), atomically."""
+    buf = oiio.ImageBuf(oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], oiio.UINT8))
+    buf.set_pixels(oiio.ROI(), np.ascontiguousarray(pixels))
+    buf.specmod().attribute("compression", f"jpeg:{JPEG_QUALITY}")
+    with atomic_path(path) as tmp:
+        if not buf.write(str(tmp), fileformat="jpeg"):
+            raise OSError(f"{path.parent}: cannot write JPEG ({buf.geterror()})")

@@ -5,7 +5,7 @@ unchanged:
                                  .../{000000..N}.tar, read by ImageDataset.load_tars_as_webdataset): one sample per
                                  frame, up to SAMPLES_PER_SHARD per shard, in frame order; its key is the zero-padded
                                  frame index, its members <key>.jpg (the image) and <key>.data.pyd (a pickled list
-                                 with one dict per hand, below)
+                                 with one dict per hand, below: two for a two-hand frame)
     OUT/<split>.npz              val and test: HaMeR's evaluation file (configs/datasets_eval.yaml: DATASET_FILE, read
                                  by ImageDataset.__init__), one row per hand
     OUT/images/<split>/<key>.jpg the images the .npz rows name (imgname, relative to IMG_DIR = OUT/images)
@@ -46,6 +46,7 @@ import numpy as np
 
 from darthand.dataset.frames import frame_names
 from darthand.dataset.freihand import LEFT_MODES, model_kinds
+from darthand.dataset.hands import hands_of
 from darthand.dataset.run import read_shard_records
 from darthand.dataset.webdataset import add_member
 from darthand.errors import InputError
@@ -76,13 +77,13 @@ def write_hamer(dataset, out=None, *, left: str = "mirror", allow_non_mano: bool
         raise InputError(f"{root}: no rendered frames (shards/*.json)")
     kinds = model_kinds(doc.get("models") or {})
     out = Path(out) if out is not None else root / "hamer"
-    chosen = {split: [f for f in frames if f["split"] == split and (left != "skip" or f["side"] == "right")]
+    chosen = {split: [f for f in frames if f["split"] == split and (left != "skip" or f.get("side") != "left")]
               for split in SPLITS}
     for split, some in chosen.items():
         check_no_stale_shards(out / split, -(-len(some) // SAMPLES_PER_SHARD))
     counts: dict = {}
     for split, some in chosen.items():
-        rows = _write_split(root, out, split, some, kinds, allow_non_mano)
+        rows = _write_split(root, out, split, some, kinds, allow_non_mano, left)
         if rows is not None:
             counts[split] = rows
     write_bytes(out / "README.md", _readme(out, doc.get("models") or {}, counts, left, allow_non_mano).encode())
@@ -98,41 +99,55 @@ def check_no_stale_shards(folder: Path, shards: int) -> None:
                          f"writes, from an earlier export: remove them or export into another folder")
 
 
-def _write_split(root: Path, out: Path, split: str, frames: list, kinds: dict, allow_non_mano: bool):
+def _write_split(root: Path, out: Path, split: str, frames: list, kinds: dict, allow_non_mano: bool,
+                 left: str = "mirror"):
     """The shards of one split (and its .npz and images for an evaluation split); returns {shards, hands, mano}
     or None when the split has no frames."""
     if not frames:
         return None
     rows: list[dict] = []
     names: list[str] = []
+    sides: list[str] = []
     for shard, k in enumerate(range(0, len(frames), SAMPLES_PER_SHARD)):
         with atomic_path(out / split / f"{shard:06d}.tar") as tmp, \
                 tarfile.open(tmp, "w", format=tarfile.USTAR_FORMAT) as tar:
             for frame in frames[k:k + SAMPLES_PER_SHARD]:
-                key, jpeg, hand = _sample(root, out, frame, kinds, allow_non_mano)
+                key, jpeg, hands = _sample(root, out, frame, kinds, allow_non_mano, left)
                 add_member(tar, f"{key}.jpg", jpeg)
-                add_member(tar, f"{key}.data.pyd", pickle.dumps([hand], protocol=PICKLE_PROTOCOL))
+                add_member(tar, f"{key}.data.pyd", pickle.dumps(hands, protocol=PICKLE_PROTOCOL))
+                sides += [h["extra_info"]["side"] for h in hands]
                 if split in EVAL_SPLITS:
                     write_bytes(out / "images" / split / f"{key}.jpg", jpeg)
-                    rows.append(hand)
-                    names.append(f"{split}/{key}.jpg")
+                    rows += hands
+                    names += [f"{split}/{key}.jpg"] * len(hands)
     if split in EVAL_SPLITS:
         _write_npz(out / f"{split}.npz", rows, names)
     shards = -(-len(frames) // SAMPLES_PER_SHARD)
-    return {"shards": shards, "hands": len(frames), "mano": sum(bool(kinds.get(f["side"])) for f in frames)}
+    return {"shards": shards, "hands": len(sides), "mano": sum(bool(kinds.get(side)) for side in sides)}
 
 
-def _sample(root: Path, out: Path, frame: dict, kinds: dict, allow_non_mano: bool) -> tuple[str, bytes, dict]:
-    """(key, JPEG bytes, the hand's dict) of one frame."""
+def _sample(root: Path, out: Path, frame: dict, kinds: dict, allow_non_mano: bool,
+            left: str = "mirror") -> tuple[str, bytes, list[dict]]:
+    """(key, JPEG bytes, the dicts of its hands) of one frame: one per hand of a two-hand frame (its left one left
+    out with left 'skip')."""
     names = frame_names(frame["index"])
     labels = read_json(root / names["labels"], "labels")
     if labels.get("keypoint_order") != "openpose":
         raise InputError(f"{root / names['labels']}: HaMeR export needs openpose keypoints (labels keypoint_order)")
-    mano = bool(kinds.get(labels["side"])) and labels.get("mesh", {}).get("base_vertices") == MANO_VERTICES
-    vertices = np.load(root / names["vertices"]) if mano else None
-    hand = hand_record(labels, vertices, mano=mano, pose=mano or allow_non_mano, index=int(frame["index"]))
+    meshes = None
+    hands = []
+    for b, own in enumerate(hands_of(labels)):
+        if left == "skip" and own["side"] == "left":
+            continue
+        hand = {**labels, **own}
+        mano = bool(kinds.get(hand["side"])) and hand.get("mesh", {}).get("base_vertices") == MANO_VERTICES
+        vertices = None
+        if mano:
+            meshes = np.load(root / names["vertices"]) if meshes is None else meshes
+            vertices = meshes[b] if meshes.ndim == 3 else meshes
+        hands.append(hand_record(hand, vertices, mano=mano, pose=mano or allow_non_mano, index=int(frame["index"])))
     jpeg = jpeg_bytes(over_black(read_straight_png(root / names["image"])), out)
-    return Path(names["labels"]).stem, jpeg, hand
+    return Path(names["labels"]).stem, jpeg, hands
 
 
 def hand_record(labels: dict, vertices, *, mano: bool, pose: bool, index: int) -> dict:

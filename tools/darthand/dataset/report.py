@@ -4,6 +4,8 @@
 - a contact sheet of frames spread over the dataset, with their 2D keypoints and skeleton drawn (hollow markers:
   keypoints not visible);
 - counts per texture category, texture tone, accessory type, side and split; the skin-tone offsets;
+- with two-hand frames: counts per interaction type and hand type, and a sheet of them per type
+  (dataset/report_hands.py, two_hands.png);
 - the visibility rate of each keypoint and the share of keypoints inside the image;
 - pose coverage: the dataset's finger poses and the plan's reference set in one 2-D t-SNE embedding, as DART's
   figure (dataset/embedding.py; the distance between two poses is the mean rotation angle over the 15 finger joints,
@@ -21,7 +23,9 @@ import numpy as np
 
 from darthand.dataset.embedding import PERPLEXITY, tsne
 from darthand.dataset.frames import frame_names
+from darthand.dataset.hands import hand_type, hands_of
 from darthand.dataset.poses import load_reference
+from darthand.dataset.report_hands import two_hand_frames, write_two_hand_sheet
 from darthand.dataset.run import read_shard_records
 from darthand.dataset.sources import SourceSpec
 from darthand.errors import InputError
@@ -90,6 +94,10 @@ def write_report(dataset, out=None, sheet: int = 24) -> Path:
     page = out / "report.png"
     fig.savefig(page, bbox_inches="tight")
     plt.close(fig)
+    counts, by_type = two_hand_frames(root, frames)
+    if by_type:                             # only a dataset with two-hand frames: one-hand reports stay as they were
+        figures["two_hands"] = counts
+        write_two_hand_sheet(root, by_type, out / "two_hands.png", BONES)
     write_json(out / "report.json", figures)
     return page
 
@@ -117,8 +125,9 @@ def pose_sets(root: Path, doc: dict, frames: list[dict]) -> tuple[np.ndarray, np
     poses = []
     for k in pick:
         labels = read_json(root / frame_names(frames[k]["index"])["labels"], "labels")
-        pose = np.asarray(labels["mano_pose"], np.float64)
-        poses.append(mirror_pose(pose) if labels["side"] == "left" else pose)
+        for hand in hands_of(labels):
+            pose = np.asarray(hand["mano_pose"], np.float64)
+            poses.append(mirror_pose(pose) if hand["side"] == "left" else pose)
     quats = axis_angle_to_quaternion(np.asarray(poses).reshape(-1, 16, 3)[:, 1:])
     reference, name = _reference(doc)
     return quats, reference, name
@@ -211,14 +220,15 @@ def _contact_sheet(ax, root: Path, frames: list[dict], count: int) -> None:
     for n, (rgb, labels) in enumerate(tiles):
         r, c = divmod(n, cols)
         ax.imshow(rgb, extent=(c * size, (c + 1) * size, (r + 1) * size, r * size))
-        uv = np.asarray(labels["keypoints_2d"]) * (size / labels["image_size"][0]) + [c * size, r * size]
-        vis = labels["visibility"]
-        for b, (i, j) in enumerate(BONES):
-            ax.plot(uv[[i, j], 0], uv[[i, j], 1], color=FINGER_COLOURS[b // 4], lw=1.2, alpha=0.9)
-        for k, (x, y) in enumerate(uv):
-            colour = "white" if k == 0 else FINGER_COLOURS[(k - 1) // 4]
-            ax.plot(x, y, "o", ms=3.5, mfc=colour if vis[k] else "none", mec=colour, mew=1)
-        tag = f"#{labels['render']['dataset']['frame']} {labels['side'][0]} {labels['split']}"
+        for hand in hands_of(labels):
+            uv = np.asarray(hand["keypoints_2d"]) * (size / labels["image_size"][0]) + [c * size, r * size]
+            vis = hand["visibility"]
+            for b, (i, j) in enumerate(BONES):
+                ax.plot(uv[[i, j], 0], uv[[i, j], 1], color=FINGER_COLOURS[b // 4], lw=1.2, alpha=0.9)
+            for k, (x, y) in enumerate(uv):
+                colour = "white" if k == 0 else FINGER_COLOURS[(k - 1) // 4]
+                ax.plot(x, y, "o", ms=3.5, mfc=colour if vis[k] else "none", mec=colour, mew=1)
+        tag = f"#{labels['render']['dataset']['frame']} {hand_type(labels)[0]} {labels['split']}"
         ax.text(c * size + 3, r * size + 12, tag, color="white", fontsize=8,
                 bbox={"facecolor": "black", "alpha": 0.5, "pad": 1, "lw": 0})
     ax.set_xlim(0, cols * size)

@@ -5,7 +5,9 @@ first dot into key and extension); its members:
     <key>.png        the image (RGBA; opaque over a background)
     <key>.mask.png   the 8-bit coverage mask
     <key>.json       the labels (schemas/labels.schema.json)
-    <key>.verts.npy  (V, 3) float32 posed vertices, camera frame, metres
+    <key>.verts.npy  (V, 3) float32 posed vertices, camera frame, metres; (B, V, 3) for a two-hand frame (hands in
+                     the labels' `hands` order)
+    <key>.instances.png  a two-hand frame's 8-bit instance mask (0 background, 1 + 2b hand b, 2 + 2b its accessory)
     <key>.depth.png, <key>.normals.png, <key>.parts.png   the per-pixel truth maps, when the dataset has them
                      (dataset.json 'maps'; encodings in render/truth.py and each sample's labels 'maps')
 
@@ -49,7 +51,15 @@ def write_webdataset(dataset, out=None, samples_per_shard: int = SAMPLES_PER_SHA
                                          (f"{key}.json", "labels"), (f"{key}.verts.npy", "vertices"),
                                          *((f"{key}.{kind}.png", kind) for kind in maps)):
                         add_member(tar, member, (root / names[kind]).read_bytes())
+                    instances = instances_path(root, names)
+                    if instances.is_file():
+                        add_member(tar, f"{key}.instances.png", instances.read_bytes())
     return out
+
+
+def instances_path(root: Path, names: dict) -> Path:
+    """Where a frame's instance mask is (instances/<n>.png: only two-hand frames write one)."""
+    return root / "instances" / Path(names["image"]).name
 
 
 def add_member(tar: tarfile.TarFile, name: str, data: bytes) -> None:

@@ -13,6 +13,7 @@ from typing import Protocol
 from darthand.dataset.coco import write_coco
 from darthand.dataset.freihand import write_freihand
 from darthand.dataset.hamer import write_hamer
+from darthand.dataset.interhand import write_interhand
 from darthand.dataset.webdataset import write_webdataset
 
 
@@ -41,4 +42,9 @@ def _coco(dataset, out, *, left: str = "mirror", allow_non_mano: bool = False) -
     return write_coco(dataset, out)
 
 
-FORMATS: dict[str, Writer] = {"freihand": _freihand, "webdataset": _webdataset, "hamer": _hamer, "coco": _coco}
+def _interhand(dataset, out, *, left: str = "mirror", allow_non_mano: bool = False) -> Path:
+    return write_interhand(dataset, out)
+
+
+FORMATS: dict[str, Writer] = {"freihand": _freihand, "webdataset": _webdataset, "hamer": _hamer, "coco": _coco,
+                              "interhand": _interhand}
