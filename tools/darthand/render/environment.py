@@ -302,6 +302,70 @@ def lookup_blurred(levels: list[np.ndarray], d: np.ndarray, angle_deg: np.ndarra
     return out
 
 
+@dataclass(frozen=True)
+class PackedLevels:
+    """Mip levels (H_l, 2 H_l, 3) packed for one compiled lookup: texels (T, 3) float32, every level's rows one
+    after the other, finest first; offsets (L,) int64 each level's first texel; heights (L,) int64."""
+
+    texels: np.ndarray
+    offsets: np.ndarray
+    heights: np.ndarray
+
+
+def pack_levels(levels: list[np.ndarray]) -> PackedLevels:
+    """The PackedLevels of mip levels (finest first)."""
+    sizes = [lv.shape[0] * lv.shape[1] for lv in levels]
+    return PackedLevels(np.ascontiguousarray(np.concatenate([lv.reshape(-1, 3) for lv in levels]), np.float32),
+                        np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64),
+                        np.array([lv.shape[0] for lv in levels], np.int64))
+
+
+def lookup_blurred_many(packed: PackedLevels, d: np.ndarray, angle_deg: np.ndarray) -> np.ndarray:
+    """(K, N, 3) float64: lookup_blurred of the packed levels along directions d (N, 3) at each row of blur angles
+    angle_deg (K, N) degrees, in one compiled pass (a direction's map coordinates found once for its K angles)."""
+    d = np.ascontiguousarray(d, np.float64)
+    angles = np.ascontiguousarray(np.broadcast_to(angle_deg, (len(angle_deg), len(d))), np.float64)
+    out = np.zeros((len(angles), len(d), 3))
+    finest = 360.0 / (2 * float(packed.heights[0]))
+    _blurred_kernel(packed.texels, packed.offsets, packed.heights, finest, d, angles, out)
+    return out
+
+
+@kernel(error_model="numpy")
+def _blurred_kernel(texels, offsets, heights, finest, d, angles, out):
+    """out[k, i] = the lookup_blurred value of direction d[i] (N, 3) float64 at blur angles[k, i] (K, N) degrees
+    over packed levels (texels (T, 3) float32, offsets, heights (L,) int64; level l is heights[l] x 2 heights[l]):
+    the fractional level log2(max(angle, finest) / finest) clipped to the levels, bilinear in its two levels
+    (as _lookup_kernel) and linear between them. finest: the finest level's texel width (degrees, > 0)."""
+    top = np.float64(len(offsets) - 1)
+    for i in range(d.shape[0]):
+        d0, d1, d2 = d[i, 0], d[i, 1], d[i, 2]
+        u = np.arctan2(d1, -d0) / (2 * np.pi) + 0.5
+        t = 0.5 - np.arctan2(d2, np.hypot(d0, d1)) / np.pi
+        for k in range(angles.shape[0]):
+            lod = min(max(np.log2(max(angles[k, i], finest) / finest), 0.0), top)
+            lo = int(np.floor(lod))
+            frac = lod - lo
+            for step in range(2):
+                level = lo + step
+                weight = 1 - frac if step == 0 else frac
+                if level > top or (step == 1 and frac == 0):
+                    continue
+                h = heights[level]
+                w = 2 * h
+                x, y = u * w - 0.5, t * h - 0.5
+                fx0, fy0 = np.floor(x), np.floor(y)
+                fx, fy = x - fx0, y - fy0
+                x0 = int(fx0) % w
+                x1 = (x0 + 1) % w
+                y0 = offsets[level] + min(max(int(fy0), 0), h - 1) * w
+                y1 = offsets[level] + min(max(int(fy0) + 1, 0), h - 1) * w
+                for c in range(3):
+                    upper = texels[y0 + x0, c] * (1 - fx) + texels[y0 + x1, c] * fx
+                    lower = texels[y1 + x0, c] * (1 - fx) + texels[y1 + x1, c] * fx
+                    out[k, i, c] += weight * (upper * (1 - fy) + lower * fy)
+
+
 # ------------------------------------------------------------------------------------------------ per map
 
 
@@ -317,6 +381,7 @@ class MapLighting:
     remainder: list
     sh: np.ndarray
     full: list
+    packed: PackedLevels | None = None      # the remainder's levels packed for lookup_blurred_many
 
 
 def map_lighting(name_or_path: str | Path) -> MapLighting:
@@ -334,7 +399,7 @@ def _map_lighting(path: str, mtime: int) -> MapLighting:
     dirs, power, kept = median_cut(excess, MAX_LIGHTS, MIN_LIGHT_SHARE * total)
     remainder = remainder + excess * ~kept[..., None]           # what no light took stays in the remainder
     levels = pyramid(remainder.astype(np.float32))
-    return MapLighting(dirs, power, levels, sh_project(level_of_width(levels, SH_WIDTH)), full)
+    return MapLighting(dirs, power, levels, sh_project(level_of_width(levels, SH_WIDTH)), full, pack_levels(levels))
 
 
 def split_bright(level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -459,9 +524,14 @@ class FrameEnvironment:
     def specular(self, directions: np.ndarray, roughness: np.ndarray) -> np.ndarray:
         """(3, N) float32 the remainder prefiltered for GGX roughness (N,) along world reflection directions
         (3, N): blurred over about 90 alpha degrees (alpha = roughness^2, the lobe's width)."""
+        return self.specular_lobes(directions, np.asarray(roughness)[None])[0]
+
+    def specular_lobes(self, directions: np.ndarray, roughness: np.ndarray) -> np.ndarray:
+        """(K, 3, N) float32: `specular` along world directions (3, N) for each row of GGX roughness (K, N)."""
         d = np.asarray(directions, np.float64).T @ self.M.T
         angle = 90.0 * np.asarray(roughness, np.float64) ** 2
-        return (lookup_blurred(self.lighting.remainder, d, angle) * self.scale).T.astype(np.float32)
+        packed = self.lighting.packed or pack_levels(self.lighting.remainder)
+        return (lookup_blurred_many(packed, d, angle) * self.scale).transpose(0, 2, 1).astype(np.float32)
 
 
 def frame_environment(environment: Environment, R: np.ndarray) -> FrameEnvironment:

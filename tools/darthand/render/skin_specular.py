@@ -147,8 +147,9 @@ def skin_specular_radiance(hits, roughness: np.ndarray, f0, strength: float, lig
         env = (lobe_a + lobe_b + sheen) * ambient[:, None]
     else:
         reflect = 2 * (n * v).sum(axis=0) * n - v
-        around = lambda rough: environment.specular(reflect, rough) + ambient[:, None]
-        env = lobe_a * around(rough_a) + lobe_b * around(rough_b) + sheen * around(np.ones(m, np.float32))
+        seen = environment.specular_lobes(reflect, np.stack([rough_a, rough_b, np.ones(m, np.float32)]))
+        seen += ambient[None, :, None]
+        env = lobe_a * seen[0] + lobe_b * seen[1] + sheen * seen[2]
     out = env * (scale if hits.visible is None else scale * hits.visible)
     out = np.array(np.broadcast_to(out, (3, m)), np.float32)          # writable: the kernel adds into it
     f32 = lambda a: np.ascontiguousarray(a, np.float32)
