@@ -600,5 +600,22 @@ def upsample(image: np.ndarray, step: int, height: int, width: int) -> np.ndarra
         return lo, hi, (x - lo).astype(np.float32)
     r0, r1, fr = axis(height, image.shape[0])
     c0, c1, fc = axis(width, image.shape[1])
-    rows = image[r0] * (1 - fr)[:, None, None] + image[r1] * fr[:, None, None]
-    return np.ascontiguousarray(rows[:, c0] * (1 - fc)[None, :, None] + rows[:, c1] * fc[None, :, None], np.float32)
+    out = np.empty((height, width, image.shape[2]), np.float32)
+    _upsample_kernel(np.ascontiguousarray(image, np.float32), r0, r1, fr, c0, c1, fc, out)
+    return out
+
+
+@kernel
+def _upsample_kernel(image, r0, r1, fr, c0, c1, fc, out):
+    """out[i, j] = rows r0[i], r1[i] of image (h, w, C) float32 blended by fr[i], then columns c0[j], c1[j] of that
+    row blended by fc[j] (float32, in that order: the numpy separable blend's numbers)."""
+    for i in range(out.shape[0]):
+        a, b, f = r0[i], r1[i], fr[i]
+        g = np.float32(1) - f
+        for j in range(out.shape[1]):
+            p, q, e = c0[j], c1[j], fc[j]
+            h = np.float32(1) - e
+            for c in range(out.shape[2]):
+                left = image[a, p, c] * g + image[b, p, c] * f
+                right = image[a, q, c] * g + image[b, q, c] * f
+                out[i, j, c] = left * h + right * e
