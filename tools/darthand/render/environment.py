@@ -324,45 +324,47 @@ def lookup_blurred_many(packed: PackedLevels, d: np.ndarray, angle_deg: np.ndarr
     """(K, N, 3) float64: lookup_blurred of the packed levels along directions d (N, 3) at each row of blur angles
     angle_deg (K, N) degrees, in one compiled pass (a direction's map coordinates found once for its K angles)."""
     d = np.ascontiguousarray(d, np.float64)
-    angles = np.ascontiguousarray(np.broadcast_to(angle_deg, (len(angle_deg), len(d))), np.float64)
-    out = np.zeros((len(angles), len(d), 3))
+    angles = np.broadcast_to(np.asarray(angle_deg, np.float64), (len(angle_deg), len(d)))
     finest = 360.0 / (2 * float(packed.heights[0]))
-    _blurred_kernel(packed.texels, packed.offsets, packed.heights, finest, d, angles, out)
+    lod = np.clip(np.log2(np.maximum(angles, finest) / finest), 0, len(packed.heights) - 1)     # level_of_detail's
+    out = np.zeros((len(angles), len(d), 3))
+    _blurred_kernel(packed.texels, packed.offsets, packed.heights, d, np.ascontiguousarray(lod), out)
     return out
 
 
 @kernel(error_model="numpy")
-def _blurred_kernel(texels, offsets, heights, finest, d, angles, out):
-    """out[k, i] = the lookup_blurred value of direction d[i] (N, 3) float64 at blur angles[k, i] (K, N) degrees
-    over packed levels (texels (T, 3) float32, offsets, heights (L,) int64; level l is heights[l] x 2 heights[l]):
-    the fractional level log2(max(angle, finest) / finest) clipped to the levels, bilinear in its two levels
-    (as _lookup_kernel) and linear between them. finest: the finest level's texel width (degrees, > 0)."""
-    top = np.float64(len(offsets) - 1)
+def _blurred_kernel(texels, offsets, heights, d, lods, out):
+    """out[k, i] = the lookup_blurred value of direction d[i] (N, 3) float64 at fractional mip level lods[k, i]
+    (K, N) float64 in [0, L - 1] over packed levels (texels (T, 3) float32, offsets, heights (L,) int64; level l is
+    heights[l] x 2 heights[l]): bilinear in its two levels (as _lookup_kernel) and linear between them."""
+    top = len(offsets) - 1
     for i in range(d.shape[0]):
         d0, d1, d2 = d[i, 0], d[i, 1], d[i, 2]
         u = np.arctan2(d1, -d0) / (2 * np.pi) + 0.5
         t = 0.5 - np.arctan2(d2, np.hypot(d0, d1)) / np.pi
-        for k in range(angles.shape[0]):
-            lod = min(max(np.log2(max(angles[k, i], finest) / finest), 0.0), top)
-            lo = int(np.floor(lod))
+        for k in range(lods.shape[0]):
+            lod = lods[k, i]
+            lo = min(int(lod), top)
             frac = lod - lo
-            for step in range(2):
-                level = lo + step
-                weight = 1 - frac if step == 0 else frac
-                if level > top or (step == 1 and frac == 0):
+            for level in range(lo, min(lo + 1, top) + 1):
+                weight = 1 - frac if level == lo else frac
+                if weight == 0 and level > lo:
                     continue
                 h = heights[level]
                 w = 2 * h
                 x, y = u * w - 0.5, t * h - 0.5
                 fx0, fy0 = np.floor(x), np.floor(y)
                 fx, fy = x - fx0, y - fy0
-                x0 = int(fx0) % w
-                x1 = (x0 + 1) % w
-                y0 = offsets[level] + min(max(int(fy0), 0), h - 1) * w
-                y1 = offsets[level] + min(max(int(fy0) + 1, 0), h - 1) * w
+                x0 = int(fx0)                       # -1 .. w - 1: wraps as x0 % w
+                x0 = x0 + w if x0 < 0 else x0
+                x1 = x0 + 1 if x0 + 1 < w else 0
+                row = int(fy0)
+                y0 = offsets[level] + min(max(row, 0), h - 1) * w
+                y1 = offsets[level] + min(max(row + 1, 0), h - 1) * w
+                a, b, c_, e = y0 + x0, y0 + x1, y1 + x0, y1 + x1
                 for c in range(3):
-                    upper = texels[y0 + x0, c] * (1 - fx) + texels[y0 + x1, c] * fx
-                    lower = texels[y1 + x0, c] * (1 - fx) + texels[y1 + x1, c] * fx
+                    upper = texels[a, c] * (1 - fx) + texels[b, c] * fx
+                    lower = texels[c_, c] * (1 - fx) + texels[e, c] * fx
                     out[k, i, c] += weight * (upper * (1 - fy) + lower * fy)
 
 
