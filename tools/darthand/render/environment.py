@@ -320,24 +320,29 @@ def pack_levels(levels: list[np.ndarray]) -> PackedLevels:
                         np.array([lv.shape[0] for lv in levels], np.int64))
 
 
-def lookup_blurred_many(packed: PackedLevels, d: np.ndarray, angle_deg: np.ndarray) -> np.ndarray:
-    """(K, N, 3) float64: lookup_blurred of the packed levels along directions d (N, 3) at each row of blur angles
-    angle_deg (K, N) degrees, in one compiled pass (a direction's map coordinates found once for its K angles)."""
+def lookup_blurred_many(packed: PackedLevels, d: np.ndarray, angle_deg: np.ndarray, scale=(1.0, 1.0, 1.0),
+                        dtype=np.float64) -> np.ndarray:
+    """(K, 3, N) `dtype`: lookup_blurred of the packed levels along directions d (N, 3) at each row of blur angles
+    angle_deg (K, N) degrees, times a colour scale (3,) (in float64, then rounded to dtype), in one compiled pass (a
+    direction's map coordinates found once for its K angles)."""
     d = np.ascontiguousarray(d, np.float64)
     angles = np.broadcast_to(np.asarray(angle_deg, np.float64), (len(angle_deg), len(d)))
     finest = 360.0 / (2 * float(packed.heights[0]))
     lod = np.clip(np.log2(np.maximum(angles, finest) / finest), 0, len(packed.heights) - 1)     # level_of_detail's
-    out = np.zeros((len(angles), len(d), 3))
-    _blurred_kernel(packed.texels, packed.offsets, packed.heights, d, np.ascontiguousarray(lod), out)
+    out = np.empty((len(angles), 3, len(d)), dtype)
+    _blurred_kernel(packed.texels, packed.offsets, packed.heights, d, np.ascontiguousarray(lod),
+                    np.asarray(scale, np.float64), out)
     return out
 
 
 @kernel(error_model="numpy")
-def _blurred_kernel(texels, offsets, heights, d, lods, out):
-    """out[k, i] = the lookup_blurred value of direction d[i] (N, 3) float64 at fractional mip level lods[k, i]
-    (K, N) float64 in [0, L - 1] over packed levels (texels (T, 3) float32, offsets, heights (L,) int64; level l is
-    heights[l] x 2 heights[l]): bilinear in its two levels (as _lookup_kernel) and linear between them."""
+def _blurred_kernel(texels, offsets, heights, d, lods, scale, out):
+    """out[k, :, i] = scale (3,) x the lookup_blurred value of direction d[i] (N, 3) float64 at fractional mip level
+    lods[k, i] (K, N) float64 in [0, L - 1] over packed levels (texels (T, 3) float32, offsets, heights (L,) int64;
+    level l is heights[l] x 2 heights[l]): bilinear in its two levels (as _lookup_kernel) and linear between them,
+    in float64, rounded once to out's dtype."""
     top = len(offsets) - 1
+    value = np.zeros(3)
     for i in range(d.shape[0]):
         d0, d1, d2 = d[i, 0], d[i, 1], d[i, 2]
         u = np.arctan2(d1, -d0) / (2 * np.pi) + 0.5
@@ -346,6 +351,7 @@ def _blurred_kernel(texels, offsets, heights, d, lods, out):
             lod = lods[k, i]
             lo = min(int(lod), top)
             frac = lod - lo
+            value[:] = 0.0
             for level in range(lo, min(lo + 1, top) + 1):
                 weight = 1 - frac if level == lo else frac
                 if weight == 0 and level > lo:
@@ -365,7 +371,9 @@ def _blurred_kernel(texels, offsets, heights, d, lods, out):
                 for c in range(3):
                     upper = texels[a, c] * (1 - fx) + texels[b, c] * fx
                     lower = texels[c_, c] * (1 - fx) + texels[e, c] * fx
-                    out[k, i, c] += weight * (upper * (1 - fy) + lower * fy)
+                    value[c] += weight * (upper * (1 - fy) + lower * fy)
+            for c in range(3):
+                out[k, c, i] = value[c] * scale[c]
 
 
 # ------------------------------------------------------------------------------------------------ per map
@@ -533,7 +541,7 @@ class FrameEnvironment:
         d = np.asarray(directions, np.float64).T @ self.M.T
         angle = 90.0 * np.asarray(roughness, np.float64) ** 2
         packed = self.lighting.packed or pack_levels(self.lighting.remainder)
-        return (lookup_blurred_many(packed, d, angle) * self.scale).transpose(0, 2, 1).astype(np.float32)
+        return lookup_blurred_many(packed, d, angle, self.scale, np.float32)
 
 
 def frame_environment(environment: Environment, R: np.ndarray) -> FrameEnvironment:
