@@ -96,3 +96,38 @@ def test_sheen_directional_is_np_interp_on_its_table():
     grid = np.linspace(1e-3, 1, skin_specular.SHEEN_STEPS)
     expected = np.interp(nv, grid, skin_specular.sheen_albedo()).astype(np.float32)
     np.testing.assert_array_equal(skin_specular.sheen_directional(nv), expected)
+
+
+def numpy_edges(geom: np.ndarray, depth: np.ndarray, normal: np.ndarray, focal: float) -> np.ndarray:
+    """aa.edge_pixels' rule written out with array shifts: both pixels of a 4-neighbour pair that differ in what
+    they hit or, on the same surface, in depth (over 4 pixel footprints) or in normal (over 40 degrees)."""
+    edge = np.zeros(geom.shape, bool)
+    cos_tol = np.float32(np.cos(np.deg2rad(40.0)))
+    for a, b in (((slice(None, -1), slice(None)), (slice(1, None), slice(None))),
+                 ((slice(None), slice(None, -1)), (slice(None), slice(1, None)))):
+        differs = geom[a] != geom[b]
+        with np.errstate(invalid="ignore"):
+            step = np.abs(depth[a] - depth[b]) > 4.0 * np.minimum(depth[a], depth[b]) / np.float32(focal)
+            bent = (normal[(slice(None),) + a] * normal[(slice(None),) + b]).sum(axis=0) < cos_tol
+        differs |= (geom[a] >= 0) & ~differs & (step | bent)
+        edge[a] |= differs
+        edge[b] |= differs
+    return edge
+
+
+def test_edge_pixels_follow_the_neighbour_rule():
+    from darthand.render import aa
+
+    rng = np.random.default_rng(8)
+    geom = rng.integers(-1, 2, (60, 70)).astype(np.int32)
+    geom[20:40, 10:50] = 0                                  # a block of one surface: depth and normal decide there
+    depth = rng.uniform(0.5, 0.52, (60, 70)).astype(np.float32)
+    depth[geom < 0] = np.inf
+    depth[20:40, 10:50] = 0.5                               # flat inside the block (random outside it)
+    normal = rng.normal(size=(3, 60, 70)).astype(np.float32)
+    normal[:, 20:40, 10:50] = np.float32([0, 0, 1])[:, None, None]
+    normal[:, 30, 30] = [0, 1, 0]                           # one bent pixel
+    depth[25, 20] = 0.4                                     # one step in depth
+    got = aa.edge_pixels(geom, depth, normal / np.linalg.norm(normal, axis=0), 500.0)
+    np.testing.assert_array_equal(got, numpy_edges(geom, depth, normal / np.linalg.norm(normal, axis=0), 500.0))
+    assert got[30, 30] and got[29, 30] and got[25, 20] and got[25, 21] and not got[35, 40]
