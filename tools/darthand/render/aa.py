@@ -57,23 +57,35 @@ def edge_pixels(geom: np.ndarray, depth: np.ndarray, normal: np.ndarray, focal: 
     """
     edge = np.zeros(geom.shape, bool)
     cos_tol = np.float32(np.cos(np.deg2rad(NORMAL_ANGLE_DEG)))
-    for axis in (0, 1):
-        a = [slice(None)] * 2
-        b = [slice(None)] * 2
-        a[axis], b[axis] = slice(None, -1), slice(1, None)
-        a, b = tuple(a), tuple(b)
-        ga, gb = geom[a], geom[b]
-        differs = ga != gb
-        both = (ga >= 0) & ~differs
-        za, zb = depth[a], depth[b]
-        with np.errstate(invalid="ignore"):
-            step = np.abs(za - zb) > DEPTH_STEP * np.minimum(za, zb) / np.float32(focal)
-            na, nb = normal[(slice(None),) + a], normal[(slice(None),) + b]
-            bent = na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2] < cos_tol
-        differs |= both & (step | bent)
-        edge[a] |= differs
-        edge[b] |= differs
+    _edges_kernel(np.ascontiguousarray(geom), np.ascontiguousarray(depth), np.ascontiguousarray(normal),
+                  np.float32(focal), cos_tol, edge)
     return edge
+
+
+@kernel
+def _edges_kernel(geom, depth, normal, focal, cos_tol, edge):
+    """edge (H, W) |= both pixels of each 4-neighbour pair (a, b) that differ in geom, or on the same surface (geom
+    >= 0) differ in depth by more than DEPTH_STEP x min depth / focal or in normal by cos < cos_tol; the numbers of
+    edge_pixels' numpy formulas (same dtypes, same order)."""
+    step_px = np.float32(4.0)          # DEPTH_STEP (a literal: a cached kernel would not see a changed global)
+    H, W = geom.shape
+    for r in range(H):
+        for c in range(W):
+            for axis in range(2):
+                r2, c2 = (r + 1, c) if axis == 0 else (r, c + 1)
+                if r2 >= H or c2 >= W:
+                    continue
+                ga, gb = geom[r, c], geom[r2, c2]
+                differs = ga != gb
+                if not differs and ga >= 0:
+                    za, zb = depth[r, c], depth[r2, c2]
+                    step = abs(za - zb) > step_px * (za if za < zb else zb) / focal
+                    bent = (normal[0, r, c] * normal[0, r2, c2] + normal[1, r, c] * normal[1, r2, c2]
+                            + normal[2, r, c] * normal[2, r2, c2]) < cos_tol
+                    differs = step or bent
+                if differs:
+                    edge[r, c] = True
+                    edge[r2, c2] = True
 
 
 def resolve(radiance: np.ndarray, geom: np.ndarray, samples: int) -> tuple[np.ndarray, np.ndarray]:

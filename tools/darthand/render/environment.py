@@ -302,6 +302,80 @@ def lookup_blurred(levels: list[np.ndarray], d: np.ndarray, angle_deg: np.ndarra
     return out
 
 
+@dataclass(frozen=True)
+class PackedLevels:
+    """Mip levels (H_l, 2 H_l, 3) packed for one compiled lookup: texels (T, 3) float32, every level's rows one
+    after the other, finest first; offsets (L,) int64 each level's first texel; heights (L,) int64."""
+
+    texels: np.ndarray
+    offsets: np.ndarray
+    heights: np.ndarray
+
+
+def pack_levels(levels: list[np.ndarray]) -> PackedLevels:
+    """The PackedLevels of mip levels (finest first)."""
+    sizes = [lv.shape[0] * lv.shape[1] for lv in levels]
+    return PackedLevels(np.ascontiguousarray(np.concatenate([lv.reshape(-1, 3) for lv in levels]), np.float32),
+                        np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64),
+                        np.array([lv.shape[0] for lv in levels], np.int64))
+
+
+def lookup_blurred_many(packed: PackedLevels, d: np.ndarray, angle_deg: np.ndarray, scale=(1.0, 1.0, 1.0),
+                        dtype=np.float64) -> np.ndarray:
+    """(K, 3, N) `dtype`: lookup_blurred of the packed levels along directions d (N, 3) at each row of blur angles
+    angle_deg (K, N) degrees, times a colour scale (3,) (in float64, then rounded to dtype), in one compiled pass (a
+    direction's map coordinates found once for its K angles)."""
+    d = np.ascontiguousarray(d, np.float64)
+    angles = np.broadcast_to(np.asarray(angle_deg, np.float64), (len(angle_deg), len(d)))
+    finest = 360.0 / (2 * float(packed.heights[0]))
+    lod = np.clip(np.log2(np.maximum(angles, finest) / finest), 0, len(packed.heights) - 1)     # level_of_detail's
+    out = np.empty((len(angles), 3, len(d)), dtype)
+    _blurred_kernel(packed.texels, packed.offsets, packed.heights, d, np.ascontiguousarray(lod),
+                    np.asarray(scale, np.float64), out)
+    return out
+
+
+@kernel(error_model="numpy")
+def _blurred_kernel(texels, offsets, heights, d, lods, scale, out):
+    """out[k, :, i] = scale (3,) x the lookup_blurred value of direction d[i] (N, 3) float64 at fractional mip level
+    lods[k, i] (K, N) float64 in [0, L - 1] over packed levels (texels (T, 3) float32, offsets, heights (L,) int64;
+    level l is heights[l] x 2 heights[l]): bilinear in its two levels (as _lookup_kernel) and linear between them,
+    in float64, rounded once to out's dtype."""
+    top = len(offsets) - 1
+    value = np.zeros(3)
+    for i in range(d.shape[0]):
+        d0, d1, d2 = d[i, 0], d[i, 1], d[i, 2]
+        u = np.arctan2(d1, -d0) / (2 * np.pi) + 0.5
+        t = 0.5 - np.arctan2(d2, np.hypot(d0, d1)) / np.pi
+        for k in range(lods.shape[0]):
+            lod = lods[k, i]
+            lo = min(int(lod), top)
+            frac = lod - lo
+            value[:] = 0.0
+            for level in range(lo, min(lo + 1, top) + 1):
+                weight = 1 - frac if level == lo else frac
+                if weight == 0 and level > lo:
+                    continue
+                h = heights[level]
+                w = 2 * h
+                x, y = u * w - 0.5, t * h - 0.5
+                fx0, fy0 = np.floor(x), np.floor(y)
+                fx, fy = x - fx0, y - fy0
+                x0 = int(fx0)                       # -1 .. w - 1: wraps as x0 % w
+                x0 = x0 + w if x0 < 0 else x0
+                x1 = x0 + 1 if x0 + 1 < w else 0
+                row = int(fy0)
+                y0 = offsets[level] + min(max(row, 0), h - 1) * w
+                y1 = offsets[level] + min(max(row + 1, 0), h - 1) * w
+                a, b, c_, e = y0 + x0, y0 + x1, y1 + x0, y1 + x1
+                for c in range(3):
+                    upper = texels[a, c] * (1 - fx) + texels[b, c] * fx
+                    lower = texels[c_, c] * (1 - fx) + texels[e, c] * fx
+                    value[c] += weight * (upper * (1 - fy) + lower * fy)
+            for c in range(3):
+                out[k, c, i] = value[c] * scale[c]
+
+
 # ------------------------------------------------------------------------------------------------ per map
 
 
@@ -317,6 +391,7 @@ class MapLighting:
     remainder: list
     sh: np.ndarray
     full: list
+    packed: PackedLevels | None = None      # the remainder's levels packed for lookup_blurred_many
 
 
 def map_lighting(name_or_path: str | Path) -> MapLighting:
@@ -334,7 +409,7 @@ def _map_lighting(path: str, mtime: int) -> MapLighting:
     dirs, power, kept = median_cut(excess, MAX_LIGHTS, MIN_LIGHT_SHARE * total)
     remainder = remainder + excess * ~kept[..., None]           # what no light took stays in the remainder
     levels = pyramid(remainder.astype(np.float32))
-    return MapLighting(dirs, power, levels, sh_project(level_of_width(levels, SH_WIDTH)), full)
+    return MapLighting(dirs, power, levels, sh_project(level_of_width(levels, SH_WIDTH)), full, pack_levels(levels))
 
 
 def split_bright(level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -459,9 +534,14 @@ class FrameEnvironment:
     def specular(self, directions: np.ndarray, roughness: np.ndarray) -> np.ndarray:
         """(3, N) float32 the remainder prefiltered for GGX roughness (N,) along world reflection directions
         (3, N): blurred over about 90 alpha degrees (alpha = roughness^2, the lobe's width)."""
+        return self.specular_lobes(directions, np.asarray(roughness)[None])[0]
+
+    def specular_lobes(self, directions: np.ndarray, roughness: np.ndarray) -> np.ndarray:
+        """(K, 3, N) float32: `specular` along world directions (3, N) for each row of GGX roughness (K, N)."""
         d = np.asarray(directions, np.float64).T @ self.M.T
         angle = 90.0 * np.asarray(roughness, np.float64) ** 2
-        return (lookup_blurred(self.lighting.remainder, d, angle) * self.scale).T.astype(np.float32)
+        packed = self.lighting.packed or pack_levels(self.lighting.remainder)
+        return lookup_blurred_many(packed, d, angle, self.scale, np.float32)
 
 
 def frame_environment(environment: Environment, R: np.ndarray) -> FrameEnvironment:
@@ -530,5 +610,22 @@ def upsample(image: np.ndarray, step: int, height: int, width: int) -> np.ndarra
         return lo, hi, (x - lo).astype(np.float32)
     r0, r1, fr = axis(height, image.shape[0])
     c0, c1, fc = axis(width, image.shape[1])
-    rows = image[r0] * (1 - fr)[:, None, None] + image[r1] * fr[:, None, None]
-    return np.ascontiguousarray(rows[:, c0] * (1 - fc)[None, :, None] + rows[:, c1] * fc[None, :, None], np.float32)
+    out = np.empty((height, width, image.shape[2]), np.float32)
+    _upsample_kernel(np.ascontiguousarray(image, np.float32), r0, r1, fr, c0, c1, fc, out)
+    return out
+
+
+@kernel
+def _upsample_kernel(image, r0, r1, fr, c0, c1, fc, out):
+    """out[i, j] = rows r0[i], r1[i] of image (h, w, C) float32 blended by fr[i], then columns c0[j], c1[j] of that
+    row blended by fc[j] (float32, in that order: the numpy separable blend's numbers)."""
+    for i in range(out.shape[0]):
+        a, b, f = r0[i], r1[i], fr[i]
+        g = np.float32(1) - f
+        for j in range(out.shape[1]):
+            p, q, e = c0[j], c1[j], fc[j]
+            h = np.float32(1) - e
+            for c in range(out.shape[2]):
+                left = image[a, p, c] * g + image[b, p, c] * f
+                right = image[a, q, c] * g + image[b, q, c] * f
+                out[i, j, c] = left * h + right * e

@@ -112,8 +112,13 @@ def environment_lobe(f0, roughness: np.ndarray, nv: np.ndarray) -> np.ndarray:
 
 
 def sheen_directional(nv: np.ndarray) -> np.ndarray:
-    """(M,) float32 the sheen's directional albedo at n.v (M,): sheen_albedo's table, linearly interpolated."""
-    return np.interp(nv, np.linspace(1e-3, 1, SHEEN_STEPS), sheen_albedo()).astype(np.float32)
+    """(M,) float32 the sheen's directional albedo at n.v (M,): sheen_albedo's table (n.v from 1e-3 to 1 in equal
+    steps), linearly interpolated and clamped at its ends (np.interp's result on that grid, without its search)."""
+    table = sheen_albedo().astype(np.float64)
+    at = np.clip((np.asarray(nv, np.float64) - 1e-3) * ((SHEEN_STEPS - 1) / (1 - 1e-3)), 0, SHEEN_STEPS - 1)
+    below = np.minimum(at.astype(np.int64), SHEEN_STEPS - 2)
+    frac = at - below
+    return (table[below] * (1 - frac) + table[below + 1] * frac).astype(np.float32)
 
 
 def dual_specular(nl, nv, nh, vh, rough_a, rough_b, f0) -> np.ndarray:
@@ -147,8 +152,9 @@ def skin_specular_radiance(hits, roughness: np.ndarray, f0, strength: float, lig
         env = (lobe_a + lobe_b + sheen) * ambient[:, None]
     else:
         reflect = 2 * (n * v).sum(axis=0) * n - v
-        around = lambda rough: environment.specular(reflect, rough) + ambient[:, None]
-        env = lobe_a * around(rough_a) + lobe_b * around(rough_b) + sheen * around(np.ones(m, np.float32))
+        seen = environment.specular_lobes(reflect, np.stack([rough_a, rough_b, np.ones(m, np.float32)]))
+        seen += ambient[None, :, None]
+        env = lobe_a * seen[0] + lobe_b * seen[1] + sheen * seen[2]
     out = env * (scale if hits.visible is None else scale * hits.visible)
     out = np.array(np.broadcast_to(out, (3, m)), np.float32)          # writable: the kernel adds into it
     f32 = lambda a: np.ascontiguousarray(a, np.float32)
