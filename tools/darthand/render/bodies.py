@@ -38,7 +38,7 @@ def posed_hand(source, body: HandBody, *, keypoint_order: str, arm: float) -> Su
     model = source.pose_model()
     if isinstance(pose, str) and body.pose_index is not None and model is not None:
         pose = resolve_pose(model, pose, int(body.pose_index))[0]
-    shape = {} if body.betas is None else {"betas": body.betas}
+    shape: dict = {} if body.betas is None else {"betas": body.betas}
     shape.update({"arm": arm} if arm else {})
     return source.subject(pose, texture=body.texture, skin_tone_offset=float(body.skin_tone_offset),
                           accessory=body.accessory, keypoint_order=keypoint_order, **shape)
@@ -48,7 +48,7 @@ def placed(subject: Subject, placement: np.ndarray) -> Subject:
     """The subject moved by the rigid `placement` (4, 4) (see the module docstring); info['placement'] records it."""
     P = np.asarray(placement, np.float64)
     R, t = P[:3, :3], P[:3, 3]
-    move = lambda x: None if x is None else (np.asarray(x, np.float64) @ R.T + t)
+    move = lambda x: np.asarray(x, np.float64) @ R.T + t
     pose = np.array(subject.pose, np.float64)
     pose[:3] = matrix_to_axis_angle(R @ axis_angle_to_matrix(pose[:3]))
     return dataclasses.replace(

@@ -1,14 +1,16 @@
 """What one frame shows, as data: the scene model the renderer and the dataset stage share.
 
 A `Scene` is a tuple of bodies (one or two `HandBody`s: a skinned hand with its pose, shape, side, appearance, the
-accessory it wears and its placement in the scene), the camera, the lights and the background, plus `record`: what the frame's labels carry that
-nothing in the scene draws (the frame index, the gesture's name, the split, the sampling record). The dataset's
-jobs (schemas/dataset_jobs.schema.json) are its serialised form: `Scene.from_job(job).to_job() == job` for every
-job a plan writes, so a frame's digest and files do not depend on which of the two a stage holds. A job holds either
-one hand's fields at its top level or a `bodies` list (one item per body, with its `kind`), never both.
+accessory it wears and its placement), the camera, the lights and the background, plus `record`: what the frame's
+labels carry that nothing in the scene draws (the frame index, the gesture's name, the split, the sampling record).
+The dataset's jobs (schemas/dataset_jobs.schema.json) are its serialised form: `Scene.from_job(job).to_job() ==
+job` for every job a plan writes, so a frame's digest and files do not depend on which of the two a stage holds. A
+job holds either one hand's fields at its top level or a `bodies` list (one item per body, with its `kind`), never
+both.
 
 Adding a kind of body (a second hand, an object held) adds a dataclass here with its `kind`, its job fields and its
-place in `bodies`; a renderer that cannot draw a scene's bodies says so in one line (`Scene.single_hand`).
+place in `bodies`; code that draws one hand only asks `Scene.single_hand`, which refuses others in one line (the
+renderer draws scenes of several hands through render/bodies.py).
 
 Units and frames: metres; a pose is MANO axis-angle relative to the flat hand in the source's own frame (a left
 hand's pose is the left model's); a body's `placement` (4x4 rigid, row-major) moves it from that frame into the
@@ -29,7 +31,7 @@ from darthand.errors import InputError
 Pose = Union[None, str, int, tuple]
 
 # Job fields a HandBody holds; all other fields of a job are the scene's (camera, lights, background) or its record.
-_HAND_FIELDS = ("side", "pose", "pose_index", "betas", "texture", "skin_tone_offset", "accessory")
+HAND_FIELDS = ("side", "pose", "pose_index", "betas", "texture", "skin_tone_offset", "accessory")
 _SCENE_FIELDS = ("camera", "lights", "background")
 BODIES = "bodies"
 RIGID_TOLERANCE = 1e-6        # how far a placement's rotation part may be from orthonormal (float32 round trips)
@@ -86,7 +88,7 @@ Body = HandBody            # the union of body kinds, one today
 
 def _hand_values(fields: dict) -> dict:
     """HandBody's keyword values of a job's (or a bodies item's) hand fields (None values left out)."""
-    hand = {k: fields[k] for k in _HAND_FIELDS if fields.get(k) is not None}
+    hand = {k: fields[k] for k in HAND_FIELDS if fields.get(k) is not None}
     if isinstance(hand.get("pose"), list):
         hand["pose"] = tuple(hand["pose"])
     if "betas" in hand:
@@ -138,16 +140,17 @@ class Scene:
         return tuple(b for b in self.bodies if b.kind == "hand")
 
     def single_hand(self) -> HandBody:
-        """The scene's one hand; InputError for a scene this renderer cannot draw (no hand, several bodies)."""
+        """The scene's one hand, for code that draws one (the Cycles tier, the studio); InputError for a scene of no
+        hand or several bodies."""
         if len(self.bodies) != 1 or not self.hands:
             kinds = ", ".join(b.kind for b in self.bodies) or "nothing"
-            raise InputError(f"scene: the renderer draws one hand per frame; this one holds {kinds}")
+            raise InputError(f"scene: one hand per frame here; this one holds {kinds}")
         return self.hands[0]
 
     @classmethod
     def from_job(cls, job: dict) -> "Scene":
         """The scene of a dataset job (a checked job dict, dataset/jobs.py): its top-level hand, or its `bodies`."""
-        body_fields = (BODIES,) if BODIES in job else _HAND_FIELDS
+        body_fields = (BODIES,) if BODIES in job else HAND_FIELDS
         if BODIES in job:
             bodies = tuple(_body_of_item(item) for item in job[BODIES])
         else:
@@ -158,7 +161,7 @@ class Scene:
 
     def to_job(self) -> dict:
         """The job of this scene (its hand's fields or its bodies, camera, lights, background, record)."""
-        values = {"camera": self.camera, "lights": self.lights, "background": self.background}
+        values: dict = {"camera": self.camera, "lights": self.lights, "background": self.background}
         if BODIES in self.given:
             values[BODIES] = [body.to_item() for body in self.bodies]
         else:
