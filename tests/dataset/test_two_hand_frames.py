@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers_dataset import SIZE
+from helpers_dataset import SIZE, files_of
 
 from darthand.cli import main
 from darthand.dataset.jobs import load_jobs
@@ -85,6 +85,15 @@ def test_a_two_hand_run_resumes_without_rendering_again(package, two_hand_datase
     assert main([*_cli(package, "--jobs", str(JOBS), "--out", str(two_hand_dataset))]) == 0
     doc = json.loads((two_hand_dataset / "dataset.json").read_text())
     assert doc["rendered"] == 0 and doc["count"] == 4
+
+
+@pytest.mark.slow
+def test_two_worker_processes_write_the_same_two_hand_frames(package, two_hand_dataset, tmp_path):
+    """Spawned workers open both sides' sources for a two-hand job (dataset/local.job_renderer): same bytes."""
+    args = _cli(package, "--jobs", str(JOBS), "--out", str(tmp_path))
+    args[args.index("--processes") + 1] = "2"
+    assert main(args) == 0
+    assert files_of(tmp_path) == files_of(two_hand_dataset)
 
 
 HAND = {"kind": "hand", "side": "left"}
