@@ -124,8 +124,9 @@ class NodeWorker:
         out = []
         maps = tuple(self.state["settings"].get("maps") or ())
         for frame in frames:
-            names = frame_names(frame["index"], maps)
-            for kind in write_order(maps, "hands" in frame):
+            two_hands = "hands" in frame          # a frame of several hands' summary: its instance map too
+            names = frame_names(frame["index"], maps, two_hands)
+            for kind in write_order(maps, two_hands):
                 path = self.staging / names[kind]
                 out.append((names[kind], path.read_bytes()))
                 path.unlink()
