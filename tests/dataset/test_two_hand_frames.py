@@ -116,3 +116,20 @@ def test_bad_two_hand_jobs_are_one_line_errors(package, tmp_path, capsys, job, e
     rc = main([*_cli(package, "--jobs", str(tmp_path / "jobs.json"), "--out", str(tmp_path / "out"))])
     err = capsys.readouterr().err
     assert rc == 2 and err.count("\n") == 1 and err.startswith("darthand: error: ") and expected in err, err
+
+
+def test_a_one_body_bodies_job_is_the_one_hand_job(sources, tmp_path):
+    """The bodies form of one hand without a placement renders and labels exactly as the top-level form."""
+    from darthand.dataset.frames import render_job, write_dataset_frame
+    from darthand.render.api import Renderer
+
+    opened, _ = sources
+    hand = {"side": "left", "pose": "fist", "betas": [0.5], "skin_tone_offset": 0.05, "accessory": "ring_test"}
+    settings = {"size": SIZE, "samples": 4, "aa_shading": "triangle", "out_dir": str(tmp_path)}
+    written = []
+    for k, job in enumerate(({"index": 0, **hand}, {"index": 0, "bodies": [{"kind": "hand", **hand}]})):
+        renderer = Renderer(opened["left"], 1, opened)
+        frame, background = render_job(renderer, job, settings)
+        write_dataset_frame(frame, job, "digest", tmp_path / str(k), renderer.source, background, renderer.sources)
+        written.append(files_of(tmp_path / str(k)))
+    assert written[0] == written[1] and "instances/000000.png" not in written[0]

@@ -135,6 +135,7 @@ def render_job(renderer, job: dict, settings: dict):
 def dataset_labels(frame, job: dict, digest: str, source, background: dict | None) -> dict:
     """The frame's labels with the dataset's fields added (see the module docstring)."""
     labels = frame.labels
+    fields = job_hands(job)[0]            # the hand's job fields: the job itself, or its one body
     maps = tuple(frame.maps)
     names = frame_names(job["index"], maps)
     render = dict(labels.get("render", {}))
@@ -154,16 +155,16 @@ def dataset_labels(frame, job: dict, digest: str, source, background: dict | Non
         labels["maps"] = truth.describe(maps, {kind: "../" + names[kind] for kind in maps})
     if model is not None:
         labels["mano"] = mano_camera_parameters(model, frame.subject.pose, frame.camera.R, frame.camera.t,
-                                                job.get("betas"))
+                                                fields.get("betas"))
     worn = frame.subject.info.get("ring_worn")
     if worn is not None:
         labels["accessory"] = {**labels["accessory"], "worn": worn}
     labels["split"] = job.get("split", "none")
     labels["sample"] = {**job.get("sample", {}), "side": labels["side"], "skin_tone_offset":
-                        job.get("skin_tone_offset", 0.0), "texture_id": labels["texture"]["id"],
+                        fields.get("skin_tone_offset", 0.0), "texture_id": labels["texture"]["id"],
                         "accessory_id": labels["accessory"]["id"]}
     if model is not None:
-        labels["sample"]["shape"] = {**labels["sample"].get("shape", {}), **shape_record(model, job.get("betas"))}
+        labels["sample"]["shape"] = {**labels["sample"].get("shape", {}), **shape_record(model, fields.get("betas"))}
     return labels
 
 
