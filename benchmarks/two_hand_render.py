@@ -1,4 +1,4 @@
-"""Benchmark of two-hand frames (issue 29): ms per labelled frame of two hands (render/bodies.py) next to one hand,
+"""Rendering two-hand frames (issue 29, render/bodies.py): ms per labelled frame of two hands next to one hand,
 the same size, settings and poses, on one thread in one process (a dataset worker's setting), and where the extra
 time goes (posing both hands, the labels with their contacts).
 
