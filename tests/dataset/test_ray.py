@@ -250,6 +250,17 @@ def test_truth_maps_come_back_from_a_node_as_a_local_run_writes_them(package, he
     assert got == _local(args, tmp_path / "local")
 
 
+def test_two_hand_frames_come_back_from_a_node_as_a_local_run_writes_them(package, head, tmp_path):
+    """A two-hand jobs file (tests/dataset/two_hand_jobs.json) through Ray with --ray-files ship: the node opens both
+    sides and returns each frame's instance map with its other files, every byte a local run's."""
+    args = _args(package, "--jobs", str(Path(__file__).with_name("two_hand_jobs.json")))
+    done = _cli(head, [*args, "--ray", head.address, "--ray-files", "ship", "--out", str(tmp_path / "ray")])
+    assert done.returncode == 0, done.stderr
+    got = files_of(tmp_path / "ray")
+    assert sum(name.startswith("instances/") for name in got) == 3
+    assert got == _local(args, tmp_path / "local")
+
+
 @pytest.mark.slow
 def test_an_interrupted_cluster_run_resumes_by_shards_to_a_local_runs_bytes(package, head, tmp_path):
     """The driver killed mid-run: a rerun renders only the shards and frames missing, and the whole equals a local

@@ -45,12 +45,11 @@ def test_every_planned_job_round_trips(planner):
         assert Scene.from_job(job).to_job() == job
 
 
-def test_a_scene_of_several_bodies_is_refused_in_one_line():
+def test_a_scene_of_several_bodies_is_refused_in_one_line_where_one_hand_is_needed():
     scene = Scene((HandBody(side="right"), HandBody(side="left")))
     assert len(scene.hands) == 2
-    with pytest.raises(InputError, match=r"^scene: the renderer draws one hand per frame; this one holds hand, "
-                                         r"hand$"):
-        Renderer.render_scene(None, scene)
+    with pytest.raises(InputError, match=r"^scene: one hand per frame here; this one holds hand, hand$"):
+        scene.single_hand()
     with pytest.raises(InputError, match="holds nothing"):
         Scene(()).single_hand()
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from darthand.dataset import writers
 from darthand.dataset.freihand import check_mano
-from darthand.dataset.jobs import load_jobs, write_jobs
+from darthand.dataset.jobs import job_sides, load_jobs, write_jobs
 from darthand.dataset.options import DatasetOptions, bounded_int
 from darthand.dataset.plan import Planner
 from darthand.dataset.run import render_frames
@@ -79,7 +79,7 @@ def _open(options: DatasetOptions) -> _Run:
             jobs = load_jobs(jobs)
         else:
             origin = {"given": "list"}
-        sides = tuple(dict.fromkeys([first.side] + [j["side"] for j in jobs if j.get("side")]))
+        sides = tuple(dict.fromkeys([first.side] + [side for j in jobs for side in job_sides(j, first.side)]))
     else:
         sides = parse_sides(options.plan.sides)
     specs = source_specs(package, sides, textures=options.textures, accessories=options.accessories,

@@ -9,6 +9,11 @@ parameters in the camera frame, the posed mesh, the sampling record, the split) 
     maps/<kind>/<n>.png  per-pixel truth when the run asks for it (settings 'maps': depth, normals, parts;
                      render/truth.py's encodings, recorded in labels.maps)
 
+A frame of several hands (a job's `bodies`, render/bodies.py) has its labels per hand in labels.hands (with
+hand_type and the job's interaction record), meshes/<n>.npy (B, V, 3) (each hand in bodies order), and one more file:
+
+    instances/<n>.png  8-bit: 0 background, 1 + 2b hand b, 2 + 2b hand b's accessory (render/labels.instance_map)
+
 <n> is the frame index zero-padded to MIN_DIGITS digits (more when larger), so names depend on nothing else.
 """
 
@@ -25,35 +30,46 @@ import numpy as np
 from darthand.dataset.backgrounds import background_pixels
 from darthand.dataset.environments import match_background
 from darthand.dataset.film import frame_film
+from darthand.dataset.jobs import job_hands
 from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.model.shape import shaped_vertices
 from darthand.render import truth
 from darthand.render.api import shading_options, write_frame
+from darthand.render.bodies import is_group, model_pose
 from darthand.render.cycles import CyclesRenderer
 from darthand.render.environment import backdrop_blur
 from darthand.render.dress import geometry_options
-from darthand.render.labels import mano_camera_parameters
+from darthand.render.image import write_png
+from darthand.render.labels import instance_map, mano_camera_parameters
 from darthand.render.scenes import Scene
 from darthand.template.anthropometry import hand_sizes
 
 MIN_DIGITS = 6
 KINDS = ("image", "mask", "labels", "vertices")      # the files of every frame; truth maps add their kinds
+INSTANCES = "instances"
 RING_WEAR = 1             # version of how a ring frame wears its ring (accessories/wear.py), in its digest
 
 
-def frame_names(index: int, maps: tuple = ()) -> dict:
+def frame_names(index: int, maps: tuple = (), instances: bool = False) -> dict:
     """Names (relative to the dataset folder) of frame `index`'s files, by kind; maps: the truth maps' kinds the
-    run writes (render/truth.KINDS), each maps/<kind>/<n>.png."""
+    run writes (render/truth.KINDS), each maps/<kind>/<n>.png; instances: a frame of several hands' instance map."""
     n = f"{int(index):0{MIN_DIGITS}d}"
     return {"image": f"images/{n}.png", "mask": f"masks/{n}.png", "labels": f"labels/{n}.json",
-            "vertices": f"meshes/{n}.npy", **{kind: f"maps/{kind}/{n}.png" for kind in maps}}
+            "vertices": f"meshes/{n}.npy", **{kind: f"maps/{kind}/{n}.png" for kind in maps},
+            **({INSTANCES: f"instances/{n}.png"} if instances else {})}
 
 
-def write_order(maps: tuple = ()) -> tuple:
+def write_order(maps: tuple = (), instances: bool = False) -> tuple:
     """The kinds of a frame's files in the order they are written: the labels last (a frame is whole once its
     labels exist)."""
-    return ("vertices", *maps, "image", "mask", "labels")
+    return ("vertices", *maps, *((INSTANCES,) if instances else ()), "image", "mask", "labels")
+
+
+def group_job(job: dict) -> bool:
+    """Whether a job's frame is one of several hands (its scene drawn by render/bodies.py: labels per hand, an
+    instance map)."""
+    return is_group(Scene.from_job(job))
 
 
 def job_digest(job: dict, settings: dict) -> str:
@@ -79,7 +95,8 @@ def wears_ring(job: dict) -> bool:
     """Whether the job's accessory is a ring: its sampling record's accessory type, else its id's first word (as
     the planner names a type it cannot look up, plan._accessory_kind)."""
     kind = (job.get("sample") or {}).get("accessory") or str(job.get("accessory") or "").split("_")[0]
-    return kind == "ring"
+    return kind == "ring" or any(str(hand.get("accessory") or "").split("_")[0] == "ring"
+                                 for hand in job.get("bodies") or ())
 
 
 def render_job(renderer, job: dict, settings: dict):
@@ -118,6 +135,7 @@ def render_job(renderer, job: dict, settings: dict):
 def dataset_labels(frame, job: dict, digest: str, source, background: dict | None) -> dict:
     """The frame's labels with the dataset's fields added (see the module docstring)."""
     labels = frame.labels
+    fields = job_hands(job)[0]            # the hand's job fields: the job itself, or its one body
     maps = tuple(frame.maps)
     names = frame_names(job["index"], maps)
     render = dict(labels.get("render", {}))
@@ -137,17 +155,57 @@ def dataset_labels(frame, job: dict, digest: str, source, background: dict | Non
         labels["maps"] = truth.describe(maps, {kind: "../" + names[kind] for kind in maps})
     if model is not None:
         labels["mano"] = mano_camera_parameters(model, frame.subject.pose, frame.camera.R, frame.camera.t,
-                                                job.get("betas"))
+                                                fields.get("betas"))
     worn = frame.subject.info.get("ring_worn")
     if worn is not None:
         labels["accessory"] = {**labels["accessory"], "worn": worn}
     labels["split"] = job.get("split", "none")
     labels["sample"] = {**job.get("sample", {}), "side": labels["side"], "skin_tone_offset":
-                        job.get("skin_tone_offset", 0.0), "texture_id": labels["texture"]["id"],
+                        fields.get("skin_tone_offset", 0.0), "texture_id": labels["texture"]["id"],
                         "accessory_id": labels["accessory"]["id"]}
     if model is not None:
-        labels["sample"]["shape"] = {**labels["sample"].get("shape", {}), **shape_record(model, job.get("betas"))}
+        labels["sample"]["shape"] = {**labels["sample"].get("shape", {}), **shape_record(model, fields.get("betas"))}
     return labels
+
+
+def group_dataset_labels(frame, job: dict, digest: str, sources: dict, background: dict | None) -> dict:
+    """The labels of a frame of several hands (render/labels.group_labels) with the dataset's fields: as
+    `dataset_labels` for the frame, and per hand its mesh record, camera-frame MANO parameters (its placement
+    composed with the camera) and its ring's wear; the job's interaction record; the sampling record per hand."""
+    labels = frame.labels
+    maps = tuple(frame.maps)
+    names = frame_names(job["index"], maps, instances=True)
+    labels["render"] = {**labels.get("render", {}), "dataset": {"frame": job["index"], "job_sha256": digest},
+                        **({"background": background} if background is not None else {})}
+    labels["files"] = {**labels.get("files", {}), **{kind: "../" + names[kind] for kind in
+                                                     ("vertices", INSTANCES, *maps)}}
+    if maps:
+        labels["maps"] = truth.describe(maps, {kind: "../" + names[kind] for kind in maps})
+    if job.get("interaction") is not None:
+        labels["interaction"] = job["interaction"]
+    labels["split"] = job.get("split", "none")
+    samples = []
+    for entry, member, item in zip(labels["hands"], frame.subject.members, job_hands(job)):
+        model = sources[member.side].pose_model()
+        entry["mesh"] = mesh_record(model, member.hand_vertices)
+        if model is not None:
+            P = np.asarray(member.info.get("placement", np.eye(4)), np.float64)
+            R, t = frame.camera.R @ P[:3, :3], frame.camera.R @ P[:3, 3] + frame.camera.t
+            entry["mano"] = mano_camera_parameters(model, model_pose(member), R, t, item.get("betas"))
+        if member.info.get("ring_worn") is not None:
+            entry["accessory"] = {**entry["accessory"], "worn": member.info["ring_worn"]}
+        samples.append({"side": entry["side"], "skin_tone_offset": item.get("skin_tone_offset", 0.0),
+                        "texture_id": entry["texture"]["id"], "accessory_id": entry["accessory"]["id"],
+                        **({"shape": shape_record(model, item.get("betas"))} if model is not None else {})})
+    labels["sample"] = {**job.get("sample", {}), "hands": samples}
+    return labels
+
+
+def mesh_record(model, vertices: np.ndarray) -> dict:
+    """labels' mesh record of a hand's posed model vertices (N, 3) (base_vertices: those before the wrist rings)."""
+    wrist = (getattr(model, "meta", None) or {}).get("wrist") or {}
+    return {"vertices": int(len(vertices)), "base_vertices": int(wrist.get("base_vertices", len(vertices))),
+            "faces": "the model's faces (build/model/<side>.npz)", "frame": "camera", "units": "m"}
 
 
 def shape_record(model, betas) -> dict:
@@ -165,9 +223,13 @@ def shape_record(model, betas) -> dict:
             "absolute_betas": (b + baked).round(6).tolist(), **sizes}
 
 
-def write_dataset_frame(frame, job: dict, digest: str, out_dir, source, background: dict | None) -> dict:
+def write_dataset_frame(frame, job: dict, digest: str, out_dir, source, background: dict | None,
+                        sources: dict | None = None) -> dict:
     """Write the frame's four files and its truth maps (atomically, in write_order: the labels last, a frame is
-    whole once its labels exist); returns its summary for the shard record."""
+    whole once its labels exist); returns its summary for the shard record. sources: {side: source} of a frame of
+    several hands (default: `source`'s side only), which also writes its instance map."""
+    if frame.subject.members:
+        return _write_group_frame(frame, job, digest, out_dir, sources or {source.side: source}, background)
     names = frame_names(job["index"], tuple(frame.maps))
     labels = dataset_labels(frame, job, digest, source, background)
     vertices = frame.camera.to_camera(frame.subject.hand_vertices).astype(np.float32)
@@ -180,8 +242,29 @@ def write_dataset_frame(frame, job: dict, digest: str, out_dir, source, backgrou
     return summary(job, labels)
 
 
+def _write_group_frame(frame, job: dict, digest: str, out_dir, sources: dict, background: dict | None) -> dict:
+    """write_dataset_frame of a frame of several hands: meshes (B, V, 3), the instance map, then as one hand's."""
+    names = frame_names(job["index"], tuple(frame.maps), instances=True)
+    labels = group_dataset_labels(frame, job, digest, sources, background)
+    counts = {len(m.hand_vertices) for m in frame.subject.members}
+    if len(counts) != 1:
+        raise InputError(f"meshes: the hands have different vertex counts ({', '.join(map(str, sorted(counts)))})")
+    vertices = np.stack([frame.camera.to_camera(m.hand_vertices) for m in frame.subject.members]).astype(np.float32)
+    out = Path(out_dir)
+    for kind in ("vertices", INSTANCES):
+        (out / names[kind]).parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(out / names["vertices"]) as tmp, open(tmp, "wb") as f:
+        np.save(f, vertices)
+    truth.write_truth_maps(frame.maps, {kind: out / names[kind] for kind in frame.maps})
+    write_png(out / names[INSTANCES], instance_map(frame.geom, frame.subject), srgb=False)
+    write_frame(frame, out_dir, names={k: names[k] for k in ("image", "mask", "labels")})
+    return summary(job, labels)
+
+
 def summary(job: dict, labels: dict) -> dict:
     """A frame's line in its shard record: what the report and the writers need without opening the labels."""
+    if "hands" in labels:
+        return _group_summary(job, labels)
     bg = labels.get("render", {}).get("background") or {}
     sample = labels.get("sample", {})
     return {"index": job["index"], "side": labels["side"], "split": labels.get("split", "none"),
@@ -193,10 +276,27 @@ def summary(job: dict, labels: dict) -> dict:
             "background": bg.get("used"), "skipped_backgrounds": bg.get("skipped", [])}
 
 
+def _group_summary(job: dict, labels: dict) -> dict:
+    """`summary` of a frame of several hands: the first hand's fields (side: the frame's hand_type), each hand's
+    in 'hands', and the interaction type."""
+    first = labels["hands"][0]
+    bg = labels.get("render", {}).get("background") or {}
+    hands = [{"side": h["side"], "texture": h["texture"]["id"], "accessory": h["accessory"]["id"],
+              "coverage": round(float(h["coverage"]), 5), "visible": [int(v) for v in h["visibility"]],
+              "in_image": int(sum(h["in_image"]))} for h in labels["hands"]]
+    return {"index": job["index"], "side": labels["hand_type"], "split": labels.get("split", "none"),
+            "texture": first["texture"]["id"], "tone": None, "category": None,
+            "skin_tone_offset": first["texture"]["skin_tone_offset"], "accessory": first["accessory"]["id"],
+            "accessory_type": None, "coverage": round(float(labels["coverage"]), 5),
+            "visible": hands[0]["visible"], "in_image": hands[0]["in_image"], "background": bg.get("used"),
+            "skipped_backgrounds": bg.get("skipped", []), "hands": hands,
+            "interaction": (labels.get("interaction") or {}).get("type")}
+
+
 def existing_frame(out: Path, job: dict, digest: str, maps: tuple = ()) -> dict | None:
     """The summary of a frame already rendered from this job (all its files present, the truth maps' of `maps`
-    too, its labels carrying the job's digest), or None."""
-    names = frame_names(job["index"], maps)
+    too, a frame of several hands' instance map, its labels carrying the job's digest), or None."""
+    names = frame_names(job["index"], maps, group_job(job))
     if not all((out / n).is_file() for n in names.values()):
         return None
     try:

@@ -12,6 +12,7 @@ from darthand.errors import InputError
 from darthand.fileio import atomic_path, read_json
 from darthand.model.preview import VIEWS
 from darthand.render.lights import load_lighting
+from darthand.render.scenes import BODIES, HAND_FIELDS, HandBody, rigid_error
 from darthand.schemas import check_schema
 
 JOBS_SCHEMA = "dataset_jobs.schema.json"
@@ -27,15 +28,23 @@ def load_jobs(path) -> list[dict]:
     base = path.resolve().parent
     out = []
     for job in frames:
-        for key in ("pose", "lights"):
-            value = job.get(key)
-            if isinstance(value, str) and not Path(value).is_absolute() and (base / value).is_file():
-                job[key] = str(base / value)
+        if BODIES in job:
+            job[BODIES] = [_relative_to(dict(item), base, ("pose",)) for item in job[BODIES]]
+        _relative_to(job, base, ("pose", "lights"))
         bg = job.get("background")
         if isinstance(bg, dict) and "folder" in bg and not Path(bg["folder"]).is_absolute():
             job["background"] = {**bg, "folder": str(base / bg["folder"])}
         out.append(job)
     return out
+
+
+def _relative_to(fields: dict, base: Path, keys: tuple) -> dict:
+    """`fields` with its relative file paths at `keys` (those naming a file under `base`) made absolute."""
+    for key in keys:
+        value = fields.get(key)
+        if isinstance(value, str) and not Path(value).is_absolute() and (base / value).is_file():
+            fields[key] = str(base / value)
+    return fields
 
 
 def write_jobs(path, jobs, plan: dict | None = None) -> int:
@@ -55,10 +64,15 @@ def write_jobs(path, jobs, plan: dict | None = None) -> int:
 def check_jobs(doc, source: str = "jobs") -> list[dict]:
     """The frames of a jobs document (list or {"frames": [...]}) checked against the schema, with an 'index' each
     (its position when not given); InputError naming the field for a non-finite number, an index over MAX_INDEX or a
-    repeated index."""
+    repeated index; a job with both a `bodies` list and one-hand fields, a body of an unknown kind or a placement
+    that is not a rigid transform."""
+    frames = doc.get("frames") if isinstance(doc, dict) else doc
+    prefix = "frames." if isinstance(doc, dict) else ""
+    for k, job in enumerate(frames if isinstance(frames, list) else []):
+        if isinstance(job, dict) and isinstance(job.get(BODIES), list):
+            _check_bodies(job, f"{source}: field '{prefix}{k}")
     check_schema(doc, JOBS_SCHEMA, source)
     frames = doc["frames"] if isinstance(doc, dict) else doc
-    prefix = "frames." if isinstance(doc, dict) else ""
     out: list = []
     seen: dict = {}
     for k, job in enumerate(frames):
@@ -75,6 +89,34 @@ def check_jobs(doc, source: str = "jobs") -> list[dict]:
         seen[job["index"]] = k
         out.append(job)
     return out
+
+
+def job_hands(job: dict) -> list[dict]:
+    """The hand fields of a job: its `bodies` items (a two-hand job), or the job itself (a one-hand job)."""
+    return list(job[BODIES]) if BODIES in job else [job]
+
+
+def job_sides(job: dict, default: str) -> list[str]:
+    """The sides of a job's hands, each once, in its bodies' order (`default` for a hand without a side)."""
+    return list(dict.fromkeys(hand.get("side") or default for hand in job_hands(job)))
+
+
+def _check_bodies(job: dict, where: str) -> None:
+    """InputError (where: "<source>: field '<path>") for a job of both forms, a body of an unknown kind or a
+    placement that is not a 4x4 rigid transform (read before the schema: its messages would not name these)."""
+    both = [k for k in HAND_FIELDS if k in job]
+    if both:
+        raise InputError(f"{where}' holds both 'bodies' and the one-hand field {both[0]!r} (a job holds one form)")
+    for b, item in enumerate(job[BODIES]):
+        if not isinstance(item, dict):
+            continue
+        if item.get("kind") != HandBody.kind:
+            raise InputError(f"{where}.bodies.{b}.kind' {item.get('kind')!r} is not a body kind (known: "
+                             f"{HandBody.kind})")
+        if item.get("placement") is not None:
+            why = rigid_error(item["placement"])
+            if why:
+                raise InputError(f"{where}.bodies.{b}.placement' {why}")
 
 
 def _check_finite(value, where: str) -> None:
@@ -94,7 +136,8 @@ def validate_jobs(sources: dict, jobs: list[dict], where: str = "jobs") -> None:
     """InputError (naming the frame and field) for what the sources ({side: source}) cannot render: a side without a
     source, unknown texture, accessory or gesture ids, poses a USD package cannot take, bad camera, lights or
     background documents. Runs before any rendering."""
-    checked_lights, checked_folders = set(), set()
+    checked_lights: set = set()
+    checked_folders: set = set()
     known = {}
     for side, source in sources.items():
         model, gestures = source.pose_model(), set(source.gesture_names())
@@ -102,41 +145,52 @@ def validate_jobs(sources: dict, jobs: list[dict], where: str = "jobs") -> None:
     default_side = next(iter(sources))
     for job in jobs:
         at = f"{where}: frame {job['index']}"
-        side = job.get("side") or default_side
-        if side not in known:
-            raise InputError(f"{at}: side {side!r} has no source (sides: {', '.join(known)})")
-        textures, accessories, gestures, model = known[side]
-        texture, accessory, pose = job.get("texture"), job.get("accessory"), job.get("pose")
-        if texture is not None and texture not in textures:
-            raise InputError(f"{at}: texture {texture!r} is not in the source's textures")
-        if accessory is not None and accessory not in accessories:
-            raise InputError(f"{at}: accessory {accessory!r} is not in the source's accessories")
-        if isinstance(pose, str) and pose not in gestures and (model is None or not Path(pose).is_file()):
-            raise InputError(f"{at}: pose {pose!r} is not a gesture ({', '.join(sorted(gestures))})"
-                             + (" nor a pose file" if model is not None else " of the package"))
-        if job.get("betas") is not None:
-            if model is None:
-                raise InputError(f"{at}: betas: a USD package renders its baked shape")
-            if len(job["betas"]) > model.num_betas:
-                raise InputError(f"{at}: betas: {len(job['betas'])} given but the model has {model.num_betas} "
-                                 "shape directions")
-        if model is None and isinstance(pose, list):
-            raise InputError(f"{at}: pose: a USD package renders its gestures (names or time codes), not vectors")
-        if model is not None and isinstance(pose, int) and not isinstance(pose, bool):
-            raise InputError(f"{at}: pose: a time code needs a USD package")
-        camera = job.get("camera")
-        if isinstance(camera, dict):
-            check_schema(camera, "camera.schema.json", f"{at}: camera")
-        elif isinstance(camera, str) and camera not in VIEWS and not Path(camera).is_file():
-            raise InputError(f"{at}: camera {camera!r} is neither a view ({', '.join(VIEWS)}) nor a camera file")
-        lights = job.get("lights")
-        key = json.dumps(lights, sort_keys=True)
-        if lights is not None and key not in checked_lights:
-            lighting = load_lighting(lights, f"{at}: lights")
-            _check_finite(lighting.to_json(), f"{at}: field 'lights")
-            checked_lights.add(key)
-        background = job.get("background")
-        if isinstance(background, dict) and "folder" in background and background["folder"] not in checked_folders:
-            if not Path(background["folder"]).is_dir():
-                raise InputError(f"{at}: background folder {background['folder']!r} is not a folder")
-            checked_folders.add(background["folder"])
+        for b, hand in enumerate(job_hands(job)):
+            _check_hand(hand, known, default_side, at + (f": bodies.{b}" if BODIES in job else ""))
+        _check_scene(job, at, checked_lights, checked_folders)
+
+
+def _check_hand(job: dict, known: dict, default_side: str, at: str) -> None:
+    """validate_jobs' checks of one hand's fields (a one-hand job, or a bodies item) against its side's source."""
+    side = job.get("side") or default_side
+    if side not in known:
+        raise InputError(f"{at}: side {side!r} has no source (sides: {', '.join(known)})")
+    textures, accessories, gestures, model = known[side]
+    texture, accessory, pose = job.get("texture"), job.get("accessory"), job.get("pose")
+    if texture is not None and texture not in textures:
+        raise InputError(f"{at}: texture {texture!r} is not in the source's textures")
+    if accessory is not None and accessory not in accessories:
+        raise InputError(f"{at}: accessory {accessory!r} is not in the source's accessories")
+    if isinstance(pose, str) and pose not in gestures and (model is None or not Path(pose).is_file()):
+        raise InputError(f"{at}: pose {pose!r} is not a gesture ({', '.join(sorted(gestures))})"
+                         + (" nor a pose file" if model is not None else " of the package"))
+    if job.get("betas") is not None:
+        if model is None:
+            raise InputError(f"{at}: betas: a USD package renders its baked shape")
+        if len(job["betas"]) > model.num_betas:
+            raise InputError(f"{at}: betas: {len(job['betas'])} given but the model has {model.num_betas} "
+                             "shape directions")
+    if model is None and isinstance(pose, list):
+        raise InputError(f"{at}: pose: a USD package renders its gestures (names or time codes), not vectors")
+    if model is not None and isinstance(pose, int) and not isinstance(pose, bool):
+        raise InputError(f"{at}: pose: a time code needs a USD package")
+
+
+def _check_scene(job: dict, at: str, checked_lights: set, checked_folders: set) -> None:
+    """validate_jobs' checks of a job's camera, lights and background (each lights document and folder once)."""
+    camera = job.get("camera")
+    if isinstance(camera, dict):
+        check_schema(camera, "camera.schema.json", f"{at}: camera")
+    elif isinstance(camera, str) and camera not in VIEWS and not Path(camera).is_file():
+        raise InputError(f"{at}: camera {camera!r} is neither a view ({', '.join(VIEWS)}) nor a camera file")
+    lights = job.get("lights")
+    key = json.dumps(lights, sort_keys=True)
+    if lights is not None and key not in checked_lights:
+        lighting = load_lighting(lights, f"{at}: lights")
+        _check_finite(lighting.to_json(), f"{at}: field 'lights")
+        checked_lights.add(key)
+    background = job.get("background")
+    if isinstance(background, dict) and "folder" in background and background["folder"] not in checked_folders:
+        if not Path(background["folder"]).is_dir():
+            raise InputError(f"{at}: background folder {background['folder']!r} is not a folder")
+        checked_folders.add(background["folder"])

@@ -19,6 +19,7 @@ import time
 from concurrent.futures import Future, ProcessPoolExecutor
 
 from darthand.dataset.frames import frame_error, render_job, write_dataset_frame
+from darthand.dataset.jobs import job_sides
 from darthand.dataset.runner import Runner
 from darthand.errors import InputError
 from darthand.processes import deaf_to_ctrl_c, init_worker
@@ -52,6 +53,15 @@ def worker_renderer(side: str):
     return renderers[side]
 
 
+def job_renderer(job: dict, default_side: str):
+    """This worker's renderer of a job: its first hand's side's, given the sources of its other hands' sides."""
+    sides = job_sides(job, default_side)
+    renderer = worker_renderer(sides[0])
+    for side in sides[1:]:
+        renderer.sources.setdefault(side, worker_renderer(side).source)
+    return renderer
+
+
 def render_chunk(items: list) -> dict:
     """Render and write one chunk [(job, digest)] with this process's renderers; per frame its summary, ms, cpu_ms,
     end (monotonic), and the chunk's per-step seconds and peak memory."""
@@ -64,10 +74,11 @@ def render_chunk(items: list) -> dict:
             break
         t, c = time.monotonic(), time.process_time()
         try:
-            renderer = worker_renderer(job.get("side") or default_side)
+            renderer = job_renderer(job, default_side)
             frame, background = render_job(renderer, job, settings)
             t_w = time.perf_counter()
-            summary = write_dataset_frame(frame, job, digest, settings["out_dir"], renderer.source, background)
+            summary = write_dataset_frame(frame, job, digest, settings["out_dir"], renderer.source, background,
+                                          renderer.sources)
             frame.timings["write"] = time.perf_counter() - t_w
         except Exception as e:            # a bug or a broken file: one line naming the frame
             raise frame_error(job["index"], e) from None
@@ -91,7 +102,7 @@ class LocalRunner(Runner):
         self._pool = None
         if processes == 1:
             set_worker_state(specs, settings, threads)
-            _STATE["renderers"].update({side: Renderer(src, threads) for side, src in (sources or {}).items()})
+            _STATE["renderers"].update({side: Renderer(src, threads, sources) for side, src in (sources or {}).items()})
             return
         ctx = multiprocessing.get_context("spawn")
         self._stop = ctx.Event()

@@ -23,13 +23,14 @@ from darthand.fileio import write_json
 from darthand.jit import kernel
 from darthand.render import aa, truth
 from darthand.render.assets import HandAssets, default_catalogues
+from darthand.render.bodies import is_group, pose_group
 from darthand.render.camera import Camera, load_camera
 from darthand.render.environment import ENVIRONMENT_BACKGROUND, backdrop_blur, background_view, frame_environment
 from darthand.render.film import Film, develop_frame
 from darthand.render.dress import Dresser, geometry_options, model_coverage
 from darthand.render.image import compose, encode_mask8, load_background, write_exr, write_png
 from darthand.render.indirect import VertexLight
-from darthand.render.labels import frame_labels
+from darthand.render.labels import frame_labels, group_labels
 from darthand.render.lights import Lighting, load_lighting, world_lights
 from darthand.render.poses import resolve_pose
 from darthand.render.scene import Scene as TraceScene, scene_for
@@ -72,10 +73,12 @@ class Frame:
 
 
 class Renderer:
-    """Renders frames of one source (assets.HandAssets or usd_source.UsdPackage), keeping what does not change."""
+    """Renders frames of one source (assets.HandAssets or usd_source.UsdPackage), keeping what does not change.
+    sources: {side: source} of the other hands a scene may hold (render_scene; `source` is its side's)."""
 
-    def __init__(self, source, threads: int | None = None):
+    def __init__(self, source, threads: int | None = None, sources: dict | None = None):
         self.source = source
+        self.sources = {**(sources or {}), source.side: source}
         self.threads = default_threads() if threads is None else max(1, int(threads))
         self._scene: TraceScene | None = None
         self._lights: tuple | None = None
@@ -123,7 +126,9 @@ class Renderer:
         camera under its lights. background: pixels or an image path to composite under it (None: the scene's own
         background when it is an image path, else transparent; a dataset resolves its background documents itself).
         options: `render`'s width, height, samples, aa_shading, shading, labels, keypoint_order, maps, film,
-        film_seed, subdivision, arm."""
+        film_seed, subdivision, arm. A scene of several hands (render/bodies.py) poses each with its side's source."""
+        if is_group(scene):
+            return self._render_group(scene, background, options)
         hand = scene.single_hand()
         pose = hand.pose_value()
         model = self.source.pose_model()
@@ -134,6 +139,21 @@ class Renderer:
         return self.render(pose, texture=hand.texture, skin_tone_offset=float(hand.skin_tone_offset),
                            accessory=hand.accessory, camera=scene.camera or "three_quarter", lights=scene.lights,
                            background=background, betas=hand.betas, **options)
+
+    def _render_group(self, scene: Scene, background, options: dict) -> Frame:
+        """render_scene of a scene of several hands (render/bodies.py), with `render`'s options."""
+        geometry = geometry_options(subdivision=options.pop("subdivision", 0), arm=options.pop("arm", 0.0))
+        framing = {"width": options.pop("width", 512), "height": options.pop("height", 512),
+                   "keypoint_order": options.pop("keypoint_order", "openpose")}
+        with single_threaded_blas():
+            timings: dict = {}
+            t = time.perf_counter()
+            subject, cam = pose_group(scene, self.sources, self.source.side, self._dresser, geometry,
+                                      camera=scene.camera or "three_quarter", **framing)
+            timings["pose"] = _lap(t)
+            self._scene = trace_scene = scene_for(subject, self._scene)
+            prepared = (subject, trace_scene, cam, self._lighting(scene.lights), timings)
+            return self._finish(prepared, background=background, **options)
 
     def render_many(self, poses, **options) -> Iterator[Frame]:
         """Frames of `poses` (an iterable of what `render` takes as pose), in order, with the other options of
@@ -305,8 +325,11 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
             record["film"] = film_record
         # A subdivided skin is labelled on the model's own faces (render/dress.py): the plain frame's visibility.
         label_scene = scene if subject.labelled is None else TraceScene(subject.labelled)
-        doc = frame_labels(subject, cam, label_scene, full_alpha, files={"image": IMAGE, "mask": MASK},
-                           extra={"render": record})
+        files = {"image": IMAGE, "mask": MASK}
+        if subject.members:
+            doc = group_labels(subject, cam, label_scene, full_alpha, full_geom, files=files, extra={"render": record})
+        else:
+            doc = frame_labels(subject, cam, label_scene, full_alpha, files=files, extra={"render": record})
     timings["labels"] = _lap(t)
     stats["total_rays"] = (stats.get("rays", 0) + stats.get("shadow_rays", 0) + stats.get("indirect_rays", 0)
                            + (21 if labels else 0))

@@ -258,10 +258,13 @@ def world_spec(lighting: Lighting, cam: Camera) -> dict:
 
 
 def frame_arrays(subject: Subject, materials: MaterialFiles) -> tuple[dict, list[dict]]:
-    """(npz arrays, the worker's surface specs [{name, materials}]) of a subject's surfaces."""
+    """(npz arrays, the worker's surface specs [{name, materials}]) of a subject's surfaces. Names are unique (the
+    worker keeps one object per name): a second hand's surfaces, named as the first's, get '#k' (k: their index)."""
     arrays: dict = {}
-    surfaces = []
+    surfaces: list = []
     for k, surface in enumerate(subject.surfaces):
         arrays.update(surface_arrays(surface, k))
-        surfaces.append({"name": f"{surface.role}:{surface.name}", "materials": materials.specs(surface)})
+        name = f"{surface.role}:{surface.name}"
+        name = f"{name}#{k}" if any(s["name"] == name for s in surfaces) else name
+        surfaces.append({"name": name, "materials": materials.specs(surface)})
     return arrays, surfaces

@@ -9,7 +9,12 @@ or the first hit lies within VISIBILITY_SLACK_M of it, or the first hit is on th
 (a face skinned mostly to the bones meeting at the joint; for a fingertip, its distal phalanx) within
 OWN_PART_FACTOR x the hand's thickness there + VISIBILITY_SLACK_M. The thickness is the keypoint's distance to the
 nearest hand vertex (a joint lies that deep inside its finger); a fingertip takes that of its distal joint. So a
-joint seen through its own finger is visible, one behind another finger, the palm or an object is not.
+joint seen through its own finger is visible, one behind another finger, the palm or an object is not. In a frame of
+several hands (`group_labels`), a hand's own part is among its own surfaces only: the other hand always occludes.
+
+A frame of several hands (render/bodies.py) has the scene's fields at the top level and each hand's in `hands` (in
+the scene's bodies order), with `hand_type` 'interacting' for two hands, per-hand instance ids (INSTANCE_HAND +
+2 b for hand b's skin, INSTANCE_ACCESSORY + 2 b for its accessory: `instance_map`) and contacts (render/contacts.py).
 """
 
 from __future__ import annotations
@@ -18,7 +23,9 @@ import numpy as np
 
 from darthand.model.layout import FINGER_JOINTS, FINGERS, JOINT_NAMES, KEYPOINT_ORDERS, MANO_PARENTS
 from darthand.model.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from darthand.render.arm import ARM, ARM_END
 from darthand.render.camera import Camera
+from darthand.render.contacts import contact_vertices
 from darthand.render.scene import Scene
 from darthand.render.subject import Subject
 
@@ -26,6 +33,7 @@ OWN_PART_FACTOR = 2.0
 VISIBILITY_SLACK_M = 0.003
 LABELS_FORMAT = "darthand-render-labels"
 LABELS_VERSION = 1
+INSTANCE_HAND, INSTANCE_ACCESSORY = 1, 2       # hand b's instance ids: these + 2 b (0: background)
 _MANO_KEYPOINT_NAMES = JOINT_NAMES + ("thumb4", "index4", "middle4", "ring4", "pinky4")
 
 
@@ -59,9 +67,9 @@ def keypoint_thickness(keypoints: np.ndarray, hand_vertices: np.ndarray, order: 
 
 
 def visibility(scene: Scene, camera: Camera, keypoints: np.ndarray, thickness: np.ndarray,
-               parts: list[frozenset]) -> np.ndarray:
+               parts: list[frozenset], own: frozenset | None = None) -> np.ndarray:
     """(K,) bool visibility of keypoints (K, 3) (see the module docstring); keypoints behind the camera are not
-    visible."""
+    visible. own: the scene's surface indices of the keypoints' hand (None: all surfaces are its own)."""
     C = camera.centre
     d = np.asarray(keypoints, np.float64) - C
     length = np.linalg.norm(d, axis=1)
@@ -76,8 +84,8 @@ def visibility(scene: Scene, camera: Camera, keypoints: np.ndarray, thickness: n
             out[k] = True
             continue
         joints = scene.surfaces[geom].face_joints
-        own = joints is not None and int(joints[prim]) in parts[k]
-        out[k] = own and gap <= OWN_PART_FACTOR * thickness[k] + VISIBILITY_SLACK_M
+        own_part = joints is not None and (own is None or geom in own) and int(joints[prim]) in parts[k]
+        out[k] = own_part and gap <= OWN_PART_FACTOR * thickness[k] + VISIBILITY_SLACK_M
     return out & (z > 0)
 
 
@@ -92,28 +100,47 @@ def mask_bbox(alpha: np.ndarray) -> list[float] | None:
 
 def frame_labels(subject: Subject, camera: Camera, scene: Scene, alpha: np.ndarray, *, files: dict,
                  extra: dict | None = None) -> dict:
-    """The labels.json document of a frame (schemas/labels.schema.json)."""
-    kp_world = np.asarray(subject.keypoints, np.float64)
-    kp_cam = camera.to_camera(kp_world)
-    kp_2d, _ = camera.project(kp_world)
-    thick = keypoint_thickness(kp_world, subject.hand_vertices, subject.keypoint_order)
-    visible = visibility(scene, camera, kp_world, thick, own_parts(subject.keypoint_order))
-    inside = (kp_2d[:, 0] >= 0) & (kp_2d[:, 0] < camera.width) & (kp_2d[:, 1] >= 0) & (kp_2d[:, 1] < camera.height)
-    kp_bbox = [float(kp_2d[:, 0].min()), float(kp_2d[:, 1].min()), float(kp_2d[:, 0].max()),
-               float(kp_2d[:, 1].max())]
-    acc = subject.accessory
-    info = subject.info
-    labels = {
+    """The labels.json document of a frame of one hand (schemas/labels.schema.json)."""
+    labels = {**scene_fields(subject, camera, alpha, files), **hand_fields(subject, camera, scene, alpha)}
+    if extra:
+        labels.update(extra)
+    return labels
+
+
+def scene_fields(subject: Subject, camera: Camera, alpha: np.ndarray, files: dict) -> dict:
+    """The labels' fields of the frame as a whole: image size, camera, keypoint order, coverage and bbox of `alpha`
+    (H, W) (all hands and accessories), source, files."""
+    return {
         "format": LABELS_FORMAT,
         "version": LABELS_VERSION,
         "image_size": [camera.width, camera.height],
         "K": camera.K.tolist(),
         "camera": {"R": camera.R.tolist(), "t": camera.t.tolist(), "extrinsics": camera.extrinsics.tolist(),
                    "centre": camera.centre.tolist(), "convention": "opencv"},
-        "side": subject.side,
         "keypoint_order": subject.keypoint_order,
         "keypoint_names": keypoint_names(subject.keypoint_order),
-        "keypoints_3d": kp_cam.tolist(),
+        "flat_hand_mean": True,
+        "bbox": mask_bbox(alpha),
+        "coverage": float(alpha.sum() / alpha.size),
+        "source": subject.info.get("source"),
+        "files": files,
+    }
+
+
+def hand_fields(subject: Subject, camera: Camera, scene: Scene, alpha: np.ndarray,
+                own: frozenset | None = None) -> dict:
+    """One hand's labels: side, keypoints (camera frame, world, 2D; visibility, in_image), joints, world pose, ids,
+    and bbox and coverage of `alpha` (H, W), its own coverage. own: as `visibility`'s."""
+    kp_world = np.asarray(subject.keypoints, np.float64)
+    kp_2d, _ = camera.project(kp_world)
+    thick = keypoint_thickness(kp_world, subject.hand_vertices, subject.keypoint_order)
+    visible = visibility(scene, camera, kp_world, thick, own_parts(subject.keypoint_order), own)
+    inside = (kp_2d[:, 0] >= 0) & (kp_2d[:, 0] < camera.width) & (kp_2d[:, 1] >= 0) & (kp_2d[:, 1] < camera.height)
+    acc = subject.accessory
+    info = subject.info
+    return {
+        "side": subject.side,
+        "keypoints_3d": camera.to_camera(kp_world).tolist(),
         "keypoints_3d_world": kp_world.tolist(),
         "keypoints_2d": kp_2d.tolist(),
         "visibility": visible.tolist(),
@@ -121,7 +148,6 @@ def frame_labels(subject: Subject, camera: Camera, scene: Scene, alpha: np.ndarr
         "joints_3d": camera.to_camera(subject.joints).tolist(),
         "joints_3d_world": np.asarray(subject.joints, np.float64).tolist(),
         "mano_pose": np.asarray(subject.pose, np.float64).tolist(),
-        "flat_hand_mean": True,
         "gesture": info.get("gesture"),
         "texture": {"id": info.get("texture"), "skin_tone_offset": info.get("skin_tone_offset", 0.0)},
         "accessory": {"id": info.get("accessory", "none"),
@@ -129,14 +155,57 @@ def frame_labels(subject: Subject, camera: Camera, scene: Scene, alpha: np.ndarr
                       "kind": "none" if acc is None else ("rigid" if info.get("accessory_parent_joint") is not None
                                                           else "skinned")},
         "bbox": mask_bbox(alpha),
-        "bbox_keypoints": kp_bbox,
+        "bbox_keypoints": [float(kp_2d[:, 0].min()), float(kp_2d[:, 1].min()), float(kp_2d[:, 0].max()),
+                           float(kp_2d[:, 1].max())],
         "coverage": float(alpha.sum() / alpha.size),
-        "source": info.get("source"),
-        "files": files,
     }
+
+
+def group_labels(subject: Subject, camera: Camera, scene: Scene, alpha: np.ndarray, geom: np.ndarray, *,
+                 files: dict, extra: dict | None = None) -> dict:
+    """The labels.json document of a frame of several hands (subject.members; see the module docstring). alpha
+    (H, W) coverage of all hands and accessories; geom (H, W) the surface index each pixel centre's ray hit."""
+    members = subject.members
+    instances = instance_map(geom, subject)
+    hands = []
+    for b, member in enumerate(members):
+        mine = np.isin(instances, (INSTANCE_HAND + 2 * b, INSTANCE_ACCESSORY + 2 * b))
+        entry = hand_fields(member, camera, scene, np.where(mine, alpha, 0), frozenset(surface_range(subject, b)))
+        others = [m for m in members if m is not member]
+        entry["instance"] = {"hand": INSTANCE_HAND + 2 * b, "accessory": INSTANCE_ACCESSORY + 2 * b}
+        entry["contacts"] = (contacts_with(member, others[0]) if len(others) == 1 else [])
+        hands.append(entry)
+    labels = {**scene_fields(subject, camera, alpha, files),
+              "hand_type": "interacting" if len(members) > 1 else members[0].side, "hands": hands}
     if extra:
         labels.update(extra)
     return labels
+
+
+def surface_range(subject: Subject, b: int) -> range:
+    """The indices in subject.surfaces of member b's surfaces (members' surfaces are concatenated in order)."""
+    start = sum(len(m.surfaces) for m in subject.members[:b])
+    return range(start, start + len(subject.members[b].surfaces))
+
+
+def instance_map(geom: np.ndarray, subject: Subject) -> np.ndarray:
+    """(H, W) uint8 instance ids of a frame of several hands from `geom` (H, W), the surface index each pixel
+    centre's ray hit (-1: background): 0 background and drawn arms (they are not in the mask), INSTANCE_HAND + 2 b
+    hand b's skin (and its cut's cap), INSTANCE_ACCESSORY + 2 b its accessory."""
+    lookup = np.zeros(len(subject.surfaces) + 1, np.uint8)           # the last entry: background (-1)
+    for b in range(len(subject.members)):
+        for i in surface_range(subject, b):
+            surface = subject.surfaces[i]
+            kind = INSTANCE_ACCESSORY if surface.role == "accessory" else INSTANCE_HAND
+            lookup[i] = 0 if surface.name in (ARM, ARM_END) else kind + 2 * b
+    return lookup[np.asarray(geom, np.int64)]
+
+
+def contacts_with(hand: Subject, other: Subject) -> list[int]:
+    """Sorted ids of `hand`'s model vertices within contacts.CONTACT_M of `other`'s model hand surface or inside
+    it (both the unsubdivided, labelled surfaces)."""
+    own, theirs = hand.labelled or hand, other.labelled or other
+    return contact_vertices(own.hand_vertices, theirs.hand.vertices, theirs.hand.faces).tolist()
 
 
 def mano_camera_parameters(model, pose, R, t, betas=None) -> dict:

@@ -99,7 +99,9 @@ class Subject:
     model's own posed hand vertices (None: the hand surface's); framing (M, 3) the points the camera is framed on
     (the plain subject's, so an arm reaching out of the frame or a subdivided skin leaves the camera as it was;
     None: all drawn vertices); labelled the subject whose surfaces the labels' visibility rays are traced against
-    (the unsubdivided one, so the labels are the plain frame's; None: this one).
+    (the unsubdivided one, so the labels are the plain frame's; None: this one). members: for a frame of several
+    hands (render/bodies.py), each hand's own placed Subject in the scene's bodies order; its surfaces are theirs
+    concatenated in that order, and its one-hand fields (joints, keypoints, side, pose) the first's. () for one hand.
     """
 
     surfaces: tuple
@@ -112,6 +114,7 @@ class Subject:
     mesh: np.ndarray | None = None
     framing: np.ndarray | None = None
     labelled: Subject | None = None
+    members: tuple = ()
 
     @property
     def hand(self) -> Surface:

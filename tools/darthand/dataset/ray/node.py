@@ -18,6 +18,7 @@ from pathlib import Path
 
 from darthand.dataset import local
 from darthand.dataset.frames import frame_names, write_order
+from darthand.dataset.jobs import job_sides
 from darthand.dataset.ray.connect import code_digest
 from darthand.dataset.ray.shipping import NodeFiles
 from darthand.errors import InputError
@@ -83,7 +84,7 @@ class NodeWorker:
             if missing:
                 return {"need": missing}
             default = next(iter(self.specs))
-            for side in dict.fromkeys(job.get("side") or default for job, _ in items):
+            for side in dict.fromkeys(side for job, _ in items for side in job_sides(job, default)):
                 self._open(side)
             result = local.render_chunk([(self.files.node_job(job), digest) for job, digest in items])
             if not self.sees_output:
@@ -123,8 +124,9 @@ class NodeWorker:
         out = []
         maps = tuple(self.state["settings"].get("maps") or ())
         for frame in frames:
-            names = frame_names(frame["index"], maps)
-            for kind in write_order(maps):
+            two_hands = "hands" in frame          # a frame of several hands' summary: its instance map too
+            names = frame_names(frame["index"], maps, two_hands)
+            for kind in write_order(maps, two_hands):
                 path = self.staging / names[kind]
                 out.append((names[kind], path.read_bytes()))
                 path.unlink()

@@ -27,6 +27,7 @@ from concurrent.futures import Future
 from pathlib import Path
 
 from darthand.dataset.frames import existing_frame
+from darthand.dataset.jobs import job_sides
 from darthand.dataset.ray.connect import code_digest, connect
 from darthand.dataset.ray.node import NodeWorker
 from darthand.dataset.ray.shipping import FILES_MODES, InputFiles
@@ -253,7 +254,7 @@ class RayRunner(Runner):
                 return
             entry = self._queue.pop(0)
             items = entry["items"]
-            sides = {job.get("side") or next(iter(self.inputs.specs)) for job, _ in items}
+            sides = {side for job, _ in items for side in job_sides(job, next(iter(self.inputs.specs)))}
             needed = self.inputs.needed(items, sides - self.actors[actor]["opened"])
             refs = {path: self._ref(path) for path in entry["ship"]}
             ref = actor.render.remote(items, needed, refs)

@@ -24,6 +24,7 @@ import os
 from dataclasses import replace
 from pathlib import Path
 
+from darthand.dataset.jobs import job_hands
 from darthand.errors import InputError
 from darthand.fileio import write_bytes
 from darthand.render.assets import default_catalogues
@@ -120,32 +121,42 @@ class InputFiles:
 
     def _job_files(self, job: dict):
         """(path, group) of the files one job reads beyond its side's open-time files."""
-        side = job.get("side") or next(iter(self.specs))
-        src = self.sources.get(side) if self.sources else None
-        spec = self.specs.get(side)
-        textures = getattr(src, "textures", None)
-        if isinstance(textures, dict) and spec is not None and spec.textures:
-            t = textures.get(job.get("texture") or getattr(src, "default_texture", None))
-            group = self._catalogue_files.get(("textures", spec.textures))
-            for path in (getattr(t, "albedo", None), getattr(t, "roughness", None)):
-                if path is not None and group:
-                    yield path, group
-        accessories = getattr(src, "accessories", None)
-        if isinstance(accessories, dict) and spec is not None and spec.accessories:
-            a = accessories.get(job.get("accessory") or "none")
-            group = self._catalogue_files.get(("accessories", spec.accessories))
-            for path in (getattr(a, "base_color_png", None), getattr(a, "metallic_roughness_png", None)):
-                if path is not None and group:
-                    yield path, group
-        for key in ("pose", "lights", "camera"):
+        for hand in job_hands(job):
+            yield from self._hand_files(hand)
+        for key in ("lights", "camera"):
             value = job.get(key)
-            if isinstance(value, str) and os.path.isabs(value):     # a file (names are gestures, views)
+            if isinstance(value, str) and os.path.isabs(value):     # a file (names are views)
                 yield value, f"file:{value}"
         bg = job.get("background")
         if isinstance(bg, dict) and bg.get("folder"):
             folder = absolute(bg["folder"])
             for name in bg.get("files", []):
                 yield Path(folder) / name, f"dir:{folder}"
+
+
+    def _hand_files(self, hand: dict):
+        """(path, group) of the files one hand of a job reads (a one-hand job, or a bodies item): its texture,
+        accessory and pose files."""
+        side = hand.get("side") or next(iter(self.specs))
+        src = self.sources.get(side) if self.sources else None
+        spec = self.specs.get(side)
+        textures = getattr(src, "textures", None)
+        if isinstance(textures, dict) and spec is not None and spec.textures:
+            t = textures.get(hand.get("texture") or getattr(src, "default_texture", None))
+            group = self._catalogue_files.get(("textures", spec.textures))
+            for path in (getattr(t, "albedo", None), getattr(t, "roughness", None)):
+                if path is not None and group:
+                    yield path, group
+        accessories = getattr(src, "accessories", None)
+        if isinstance(accessories, dict) and spec is not None and spec.accessories:
+            a = accessories.get(hand.get("accessory") or "none")
+            group = self._catalogue_files.get(("accessories", spec.accessories))
+            for path in (getattr(a, "base_color_png", None), getattr(a, "metallic_roughness_png", None)):
+                if path is not None and group:
+                    yield path, group
+        pose = hand.get("pose")
+        if isinstance(pose, str) and os.path.isabs(pose):     # a file (names are gestures)
+            yield pose, f"file:{pose}"
 
 
 class NodeFiles:
@@ -220,13 +231,19 @@ class NodeFiles:
 
     def node_job(self, job: dict) -> dict:
         """The job with the files it names as this node reads them."""
-        job = dict(job)
-        for key in ("pose", "lights", "camera"):
-            value = job.get(key)
-            if isinstance(value, str) and value in self.where:
-                job[key] = self.where[value][0]
+        job = self._node_paths(dict(job), ("pose", "lights", "camera"))
+        if "bodies" in job:
+            job["bodies"] = [self._node_paths(dict(item), ("pose",)) for item in job["bodies"]]
         bg = job.get("background")
         if isinstance(bg, dict) and bg.get("folder"):
             folder = absolute(bg["folder"])
             job["background"] = {**bg, "folder": self.node_path(folder, f"dir:{folder}")}
         return job
+
+    def _node_paths(self, fields: dict, keys: tuple) -> dict:
+        """`fields` with the files at `keys` as this node reads them."""
+        for key in keys:
+            value = fields.get(key)
+            if isinstance(value, str) and value in self.where:
+                fields[key] = self.where[value][0]
+        return fields
