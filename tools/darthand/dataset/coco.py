@@ -51,7 +51,7 @@ import numpy as np
 
 from darthand.dataset.frames import frame_names
 from darthand.dataset.hands import hands_of
-from darthand.dataset.run import read_shard_records
+from darthand.dataset.run import rendered_dataset
 from darthand.errors import InputError
 from darthand.fileio import read_json, replace_folder, staging_folder
 from darthand.render.image import over_black, read_png, read_straight_png, write_png
@@ -168,10 +168,7 @@ def write_coco(dataset, out=None) -> Path:
     """Write the COCO-style layout of a rendered dataset folder into `out` (default DATASET/coco); returns `out`.
     An existing `out` is replaced when it is this layout, else refused (InputError)."""
     root = Path(dataset)
-    read_json(root / "dataset.json", "dataset.json")
-    frames = [f for f in read_shard_records(root) if f["split"] in SPLITS]
-    if not frames:
-        raise InputError(f"{root}: no rendered frames in train, val or test (shards/*.json)")
+    _, frames = rendered_dataset(root, SPLITS)
     out = Path(out) if out is not None else root / "coco"
     _check_replaceable(out)
     tmp = staging_folder(out)

@@ -41,7 +41,7 @@ import OpenImageIO as oiio
 
 from darthand.dataset.frames import frame_names
 from darthand.dataset.hands import hands_mean, hands_of, is_multi_hand
-from darthand.dataset.run import read_shard_records
+from darthand.dataset.run import rendered_dataset
 from darthand.errors import InputError
 from darthand.fileio import atomic_path, read_json, write_bytes
 from darthand.model.mano_pkl import MANO_FORMAT
@@ -149,11 +149,8 @@ def write_freihand(dataset, out=None, *, left: str = "mirror", allow_non_mano: b
     if left not in LEFT_MODES:
         raise InputError(f"--left: {left!r} is not one of {', '.join(LEFT_MODES)}")
     root = Path(dataset)
-    doc = read_json(root / "dataset.json", "dataset.json")
+    doc, frames = rendered_dataset(root)
     models = doc.get("models") or {}
-    frames = read_shard_records(root)
-    if not frames:
-        raise InputError(f"{root}: no rendered frames (shards/*.json)")
     is_mano = check_mano(models, root, allow_non_mano)
     hands_mean = right_hands_mean(models)
     out = Path(out) if out is not None else root / "freihand"

@@ -47,7 +47,7 @@ import numpy as np
 from darthand.dataset.frames import frame_names
 from darthand.dataset.freihand import LEFT_MODES, model_kinds
 from darthand.dataset.hands import hands_of
-from darthand.dataset.run import read_shard_records
+from darthand.dataset.run import rendered_dataset
 from darthand.dataset.webdataset import add_member
 from darthand.errors import InputError
 from darthand.fileio import atomic_path, read_json, write_bytes
@@ -71,10 +71,7 @@ def write_hamer(dataset, out=None, *, left: str = "mirror", allow_non_mano: bool
     if left not in LEFT_MODES:
         raise InputError(f"--left: {left!r} is not one of {', '.join(LEFT_MODES)}")
     root = Path(dataset)
-    doc = read_json(root / "dataset.json", "dataset.json")
-    frames = [f for f in read_shard_records(root) if f["split"] in SPLITS]
-    if not frames:
-        raise InputError(f"{root}: no rendered frames (shards/*.json)")
+    doc, frames = rendered_dataset(root, SPLITS)
     kinds = model_kinds(doc.get("models") or {})
     out = Path(out) if out is not None else root / "hamer"
     chosen = {split: [f for f in frames if f["split"] == split and (left != "skip" or f.get("side") != "left")]

@@ -41,7 +41,7 @@ import numpy as np
 from darthand.dataset.frames import frame_names
 from darthand.dataset.freihand import model_kinds, write_jpeg
 from darthand.dataset.hands import hand_type, hands_mean, hands_of, interaction_type
-from darthand.dataset.run import read_shard_records
+from darthand.dataset.run import rendered_dataset
 from darthand.errors import InputError
 from darthand.fileio import read_json, write_bytes, write_json
 from darthand.render.image import read_png
@@ -172,11 +172,8 @@ def write_interhand(dataset, out=None) -> Path:
     """Write the InterHand2.6M layout of a rendered dataset folder into `out` (default DATASET/interhand); returns
     `out`. Frames outside the train/val/test splits are left out."""
     root = Path(dataset)
-    doc = read_json(root / "dataset.json", "dataset.json")
+    doc, frames = rendered_dataset(root)
     models = doc.get("models") or {}
-    frames = read_shard_records(root)
-    if not frames:
-        raise InputError(f"{root}: no rendered frames (shards/*.json)")
     out = Path(out) if out is not None else root / "interhand"
     means = {side: hands_mean(models, side) for side in SIDES}
     splits: dict = {}

@@ -26,7 +26,7 @@ from darthand.dataset.frames import frame_names
 from darthand.dataset.hands import hand_type, hands_of
 from darthand.dataset.poses import load_reference
 from darthand.dataset.report_hands import two_hand_frames, write_two_hand_sheet
-from darthand.dataset.run import read_shard_records
+from darthand.dataset.run import rendered_dataset
 from darthand.dataset.sources import SourceSpec
 from darthand.errors import InputError
 from darthand.fileio import read_json, write_json
@@ -52,10 +52,7 @@ def write_report(dataset, out=None, sheet: int = 24) -> Path:
     import matplotlib.pyplot as plt
 
     root = Path(dataset)
-    doc = read_json(root / "dataset.json", "dataset.json")
-    frames = read_shard_records(root)
-    if not frames:
-        raise InputError(f"{root}: no rendered frames (shards/*.json)")
+    doc, frames = rendered_dataset(root)
     out = Path(out) if out is not None else root / "report"
     out.mkdir(parents=True, exist_ok=True)
     figures = dataset_figures(frames)

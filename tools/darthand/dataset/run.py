@@ -237,6 +237,18 @@ def read_shard_records(out) -> list[dict]:
     return frames
 
 
+def rendered_dataset(folder, splits: tuple | None = None) -> tuple[dict, list[dict]]:
+    """(dataset.json, its frame summaries in index order, only those of `splits` when given) of a rendered dataset
+    folder; InputError naming the folder when it holds no such frame."""
+    root = Path(folder)
+    doc = read_json(root / "dataset.json", "dataset.json")
+    frames = [f for f in read_shard_records(root) if splits is None or f["split"] in splits]
+    if not frames:
+        within = "" if splits is None else f" in {', '.join(splits)}"
+        raise InputError(f"{root}: no rendered frames{within} (shards/*.json)")
+    return doc, frames
+
+
 def _prepare_folders(out: Path, maps: tuple = ()) -> None:
     """Make the output folders (maps/<kind> of the truth maps asked for too); remove temporary files an interrupted
     run left (fileio.atomic_path's '.name.*')."""

@@ -22,9 +22,8 @@ import tarfile
 from pathlib import Path
 
 from darthand.dataset.frames import frame_names
-from darthand.dataset.run import read_shard_records
-from darthand.errors import InputError
-from darthand.fileio import atomic_path, read_json
+from darthand.dataset.run import rendered_dataset
+from darthand.fileio import atomic_path
 
 SAMPLES_PER_SHARD = 1000
 SPLITS = ("train", "val", "test")
@@ -33,12 +32,10 @@ SPLITS = ("train", "val", "test")
 def write_webdataset(dataset, out=None, samples_per_shard: int = SAMPLES_PER_SHARD) -> Path:
     """Write the shards of a rendered dataset folder into `out` (default DATASET/webdataset)."""
     root = Path(dataset)
-    maps = tuple(read_json(root / "dataset.json", "dataset.json").get("maps") or ())      # the truth maps' kinds
+    doc, frames = rendered_dataset(root)
+    maps = tuple(doc.get("maps") or ())                              # the truth maps' kinds
     out = Path(out) if out is not None else root / "webdataset"
     out.mkdir(parents=True, exist_ok=True)
-    frames = read_shard_records(root)
-    if not frames:
-        raise InputError(f"{root}: no rendered frames (shards/*.json)")
     for split in SPLITS:
         indices = [f["index"] for f in frames if f["split"] == split]
         for shard, k in enumerate(range(0, len(indices), samples_per_shard)):
