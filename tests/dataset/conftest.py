@@ -130,10 +130,12 @@ def _write(path, doc) -> None:
 
 
 @pytest.fixture(scope="session")
-def two_hand_dataset(small_dataset, tmp_path_factory):
-    """(dataset folder, two-hand frame indices): small_dataset with three of its right frames made two-hand frames
-    (issue 29's labels, (2, V, 3) meshes, instances PNG; two_hand_fixture.py)."""
-    from two_hand_fixture import make_two_hand_dataset
+def two_hand_dataset(sources, tmp_path_factory):
+    """(dataset folder, two-hand frame indices): 16 frames planned with two hands on half of them (issue 29: the
+    interaction sampler, the renderer's per-hand labels, (2, V, 3) meshes and instance maps), as `small_dataset`'s
+    plan otherwise."""
+    from darthand.dataset.plan import Planner
 
     out = tmp_path_factory.mktemp("two_hands") / "dataset"
-    return out, make_two_hand_dataset(small_dataset[0], out)
+    render(Planner({"seed": 3, "accessory_share": 0.5, "two_hands": 0.5}, sources[0]), sources, out, 16)
+    return out, [int(p.stem) for p in sorted((out / "labels").glob("*.json")) if "hands" in json.loads(p.read_text())]
