@@ -141,3 +141,20 @@ def test_a_type_that_never_resolves_falls_back_to_apart(models, monkeypatch):
     assert out["record"]["attempts"] == 4 and out["record"]["resolved"]["resolved"]
     va, vb = posed(right, out["right_pose"]), posed(left, out["left_pose"], out["placement"])
     assert trimesh_inside(va, right.faces, vb, left.faces) == 0
+
+
+@pytest.mark.parametrize("kind", ["touching", "clasped", "interlaced"])
+def test_a_mirrored_preshape_is_the_mirror_image_hand(models, kind):
+    """One self-crossing test covers both pre-shaped hands: with the build's left model (the right's mirror image),
+    the left hand of a symmetric type is the right hand reflected (x -> -x) vertex for vertex, and MeshLab finds the
+    same self-intersecting faces on both."""
+    from darthand.model.intersections import self_intersecting
+
+    right, left = models
+    sampler = InteractionSampler(right, left, {kind: 1.0})
+    assert sampler.mirrored
+    r, left_pose, shaped = sampler.poses(kind, np.random.default_rng(5), np.zeros(48))
+    assert shaped == (True, False)
+    vr, vl = posed(right, r), posed(left, left_pose)
+    np.testing.assert_allclose(vl, vr * [-1, 1, 1], atol=1e-9)
+    assert (self_intersecting(vr, right.faces) == self_intersecting(vl, left.faces)).all()

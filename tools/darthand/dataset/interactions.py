@@ -13,6 +13,10 @@ type draws (issue 29's contract). Types:
 - overlapping: the left hand over the back of the right (1-4 cm above), both DART poses: one in front of the other;
 - mirrored: the mirror-image DART pose side by side (thumbs toward each other, 1-5 cm apart).
 
+The touching, clasped and interlaced pre-shapes are one draw of finger angles for both hands (the left's the right's
+mirror image) when the left model is the right's mirror image, as a build's are: a mirrored hand self-crosses exactly
+where the right one does, so one self-crossing test covers both.
+
 Each is placed by bringing the left hand along an approach direction to first contact (hand_pair.first_contact_shift)
 and backing it off by the type's gap, then resolved by `hand_pair.resolve`, with the contacts the type asks for.
 A draw that does not resolve is redrawn: attempt k of frame i draws from [seed, INTERACTION_STREAM, i, k]; after
@@ -31,7 +35,7 @@ from darthand.errors import InputError
 from darthand.model import hand_pair
 from darthand.model.anatomy import angles_to_axis_angle, joint_frames, limits_radians, rest_joints
 from darthand.model.layout import FINGER_JOINTS, NUM_JOINTS
-from darthand.model.mirror import mirror_pose
+from darthand.model.mirror import mirror_model, mirror_pose
 from darthand.model.self_crossing import SelfCrossing
 
 INTERACTION_STREAM = 9
@@ -57,6 +61,7 @@ class InteractionSampler:
         self.self_crossing = {"right": SelfCrossing(right), "left": SelfCrossing(left)}
         self.wrist = rest_joints(right)[0]
         self.limits = limits_radians()
+        self.mirrored = _mirror_images(right, left)
 
     def sample(self, seed: int, index: int, u: float, dart_pose: np.ndarray, betas) -> dict:
         """Frame `index`'s two hands: {'type', 'right_pose' (48,), 'left_pose' (48,), 'placement' (4, 4) of the
@@ -114,8 +119,12 @@ class InteractionSampler:
                  "clasped": {"bend": (50, 80), "spread": (-3, 3)},
                  "interlaced": {"bend": (35, 60), "spread": (10, 15)},
                  "holding": {"bend": (45, 70), "spread": (-3, 3)}}[kind]
-        right = dart_pose if kind == "holding" else self.preshape("right", rng, shape)
-        return right, self.preshape("left", rng, shape), (kind != "holding", True)
+        if kind == "holding":
+            return dart_pose, self.preshape("left", rng, shape), (False, True)
+        right = self.preshape("right", rng, shape)
+        if self.mirrored:             # the left hand the right's mirror image: its self-crossing test is the right's
+            return right, mirror_pose(right), (True, False)
+        return right, self.preshape("left", rng, shape), (True, True)
 
     def preshape(self, side: str, rng: np.random.Generator, shape: dict) -> np.ndarray:
         """(48,) a hand's pose: every finger joint bent by a draw from shape['bend'] (degrees; the DIP 0.7 of it),
@@ -167,6 +176,16 @@ class InteractionSampler:
         turn = Rotation.from_rotvec(np.deg2rad(90) * up).as_matrix()
         target = self.wrist + np.array([rng.uniform(*WRIST_HOLD_M), 0.1, 0.0]) - a.vertices.mean(0)
         return jitter @ turn, target, -up, hand_pair.CONTACT_GAP, ((PALM + FINGERS, PALM),)
+
+
+def _mirror_images(right, left) -> bool:
+    """Whether the left model is the right's mirror image (model/mirror.mirror_model), so that a mirrored pose on it
+    is the mirrored hand, self-crossing exactly where the right hand does."""
+    m = mirror_model(right)
+    same = all(np.shape(getattr(m, f)) == np.shape(getattr(left, f)) and np.allclose(getattr(m, f), getattr(left, f),
+                                                                                     rtol=0, atol=1e-9)
+               for f in ("v_template", "faces", "weights", "posedirs", "shapedirs", "parents"))
+    return same and abs(m.J_regressor - left.J_regressor).max() <= 1e-9
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

@@ -38,7 +38,8 @@ from threadpoolctl import threadpool_limits
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
 from darthand.model.intersections import self_intersecting
-from darthand.model.proximity import FACING_COS, TOUCHING, _closest_barycentric
+from darthand.model.pair_kernels import nearest_on_candidates
+from darthand.model.proximity import FACING_COS, TOUCHING
 from darthand.model.topology import face_joints, vertex_normals
 
 CLEARANCE = 0.5e-3       # m: hands not asked to touch stay at least this far apart
@@ -138,11 +139,8 @@ class Surface:
             return Distances(np.full(len(points), np.inf), np.zeros((len(points), 3)), np.zeros((len(points), 3)))
         k = min(CANDIDATES, len(self.faces))
         cand = self.tree.query(points, k=k)[1].reshape(len(points), k)
-        bary = _closest_barycentric(self.tris[cand], points[:, None, :])               # (P, k, 3)
-        dist = np.linalg.norm(np.einsum("pkc,pkcd->pkd", bary, self.tris[cand]) - points[:, None], axis=2)
-        best = np.argmin(dist, axis=1)
-        rows = np.arange(len(points))
-        bary, dist, corners = bary[rows, best], dist[rows, best], self.faces[cand[rows, best]]
+        best, bary, dist = nearest_on_candidates(self.tris, cand, points)
+        corners = self.faces[cand[np.arange(len(points)), best]]
         on = np.einsum("pk,pkd->pd", bary, self.hand.vertices[corners])
         n = np.einsum("pk,pkd->pd", bary, self.hand.normals[corners])
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
