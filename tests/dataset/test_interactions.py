@@ -158,3 +158,24 @@ def test_a_mirrored_preshape_is_the_mirror_image_hand(models, kind):
     vr, vl = posed(right, r), posed(left, left_pose)
     np.testing.assert_allclose(vl, vr * [-1, 1, 1], atol=1e-9)
     assert (self_intersecting(vr, right.faces) == self_intersecting(vl, left.faces)).all()
+
+
+@pytest.mark.parametrize("kind,wearer", [("clasped", "right"), ("holding", "right"), ("clasped", "left")])
+def test_a_worn_ring_stays_out_of_the_other_hand(sources, kind, wearer):
+    """The ring a hand wears (as its source poses it for the renderer) crosses no face of the other hand (MeshLab)
+    and neither has a vertex inside the other (trimesh's ray test; the ring a closed mesh, the hand wrist-capped)."""
+    opened = sources[0]
+    right, left = opened["right"].pose_model(), opened["left"].pose_model()
+    sampler = InteractionSampler(right, left, {kind: 1.0}, opened)
+    for i in range(FRAMES_PER_TYPE):
+        d = sampler.sample(2, i, 0.5, np.zeros(48), None, "ring_test", wearer)
+        pose = d["right_pose"] if wearer == "right" else d["left_pose"]
+        ring = opened[wearer].subject(pose, accessory="ring_test").accessory
+        T = np.eye(4) if wearer == "right" else np.asarray(d["placement"])
+        vr = np.asarray(ring.vertices, np.float64) @ T[:3, :3].T + T[:3, 3]
+        fr = np.asarray(ring.faces, np.int64)
+        other = (left, d["left_pose"], d["placement"]) if wearer == "right" else (right, d["right_pose"], None)
+        vo, fo = posed(other[0], other[1], other[2]), other[0].faces
+        assert meshlab_crossing(vr, fr, vo, fo) == 0, (kind, wearer, i)
+        assert int(trimesh.Trimesh(*close_loops(vo, fo), process=False).contains(vr).sum()) == 0
+        assert int(trimesh.Trimesh(vr, fr, process=False).contains(vo).sum()) == 0

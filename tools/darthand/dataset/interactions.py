@@ -55,24 +55,27 @@ MIRROR_Z = np.diag([-1.0, 1.0, -1.0])   # -> lying beside the right, palm down, 
 class InteractionSampler:
     """Two-hand draws on a right model and a left model (each the model its side's source poses)."""
 
-    def __init__(self, right, left, shares: dict):
+    def __init__(self, right, left, shares: dict, sources: dict | None = None):
         self.right, self.left, self.shares = right, left, parse_shares(shares)
+        self.sources = sources or {}     # {side: FrameSource}: the posed accessories of the hands that wear one
         self.frames = {"right": joint_frames(right), "left": joint_frames(left)}
         self.self_crossing = {"right": SelfCrossing(right), "left": SelfCrossing(left)}
         self.wrist = rest_joints(right)[0]
         self.limits = limits_radians()
         self.mirrored = _mirror_images(right, left)
 
-    def sample(self, seed: int, index: int, u: float, dart_pose: np.ndarray, betas) -> dict:
+    def sample(self, seed: int, index: int, u: float, dart_pose: np.ndarray, betas, accessory: str = "none",
+               wearer: str = "right") -> dict:
         """Frame `index`'s two hands: {'type', 'right_pose' (48,), 'left_pose' (48,), 'placement' (4, 4) of the
         left hand, 'record', 'resolution'} (record: the job's interaction record; resolution: the last draw's
         hand_pair.Resolution, with its CPU time). u: the frame's uniform choosing the type;
-        dart_pose: the plan's pose of the frame (right-handed, (48,)); betas: both hands' shape (or None)."""
+        dart_pose: the plan's pose of the frame (right-handed, (48,)); betas: both hands' shape (or None); accessory:
+        the catalogue id the `wearer` side's hand wears ('none': none), part of that hand in the penetration fit."""
         asked = choose_type(u, self.shares)
         draws = [(asked, k) for k in range(ATTEMPTS)] + [(FALLBACK, ATTEMPTS)]
         for kind, k in draws:
             rng = np.random.default_rng([int(seed), INTERACTION_STREAM, int(index), k])
-            out = self.draw(kind, rng, np.asarray(dart_pose, np.float64), betas)
+            out = self.draw(kind, rng, np.asarray(dart_pose, np.float64), betas, (accessory, wearer))
             kind = "apart" if kind == FALLBACK else kind
             if out is not None and out["resolution"].resolved:
                 record = {"type": kind, "contact_parts": out["contact_parts"], "attempts": k + 1,
@@ -84,15 +87,19 @@ class InteractionSampler:
         raise InputError(f"frame {index}: two hands could not be placed apart")  # 'apart' resolves by construction
 
     # ------------------------------------------------------------------------------------------------ one draw
-    def draw(self, kind: str, rng: np.random.Generator, dart_pose: np.ndarray, betas) -> dict | None:
+    def draw(self, kind: str, rng: np.random.Generator, dart_pose: np.ndarray, betas,
+             worn: tuple = ("none", "right")) -> dict | None:
         """One attempt at type `kind`: poses, the placement and its resolution; None when a pre-shaped hand passes
-        through itself (model/self_crossing.py: two digits inside each other)."""
+        through itself (model/self_crossing.py: two digits inside each other). worn: (accessory id, the side
+        wearing it): that hand is measured with its accessory (`wearing`)."""
         right_pose, left_pose, shaped = self.poses(kind, rng, dart_pose)
         a = hand_pair.pose_hand(self.right, right_pose, betas)
         b0 = hand_pair.pose_hand(self.left, left_pose, betas)
         for side, hand, own in zip(("right", "left"), (a, b0), shaped):   # the plan's own poses are its sampler's
             if own and self.self_crossing[side].crossing(hand.vertices) is not None:
                 return None
+        a, b0 = (self.wearing(side, hand, pose, betas, worn) for side, hand, pose in
+                 (("right", a, right_pose), ("left", b0, left_pose)))
         R, offset, approach, gap, touch = self.arrangement("apart" if kind == FALLBACK else kind, rng, a, b0)
         T = np.eye(4)
         T[:3, :3] = R
@@ -106,6 +113,19 @@ class InteractionSampler:
         placement = res.T @ T
         return {"right_pose": right_pose, "left_pose": left_pose, "placement": placement, "resolution": res,
                 "contact_parts": [[_region_name(jb), _region_name(ja)] for jb, ja in touch]}
+
+    def wearing(self, side: str, hand, pose: np.ndarray, betas, worn: tuple):
+        """`hand` (a hand_pair.PosedHand) with the accessory it wears, when `worn` puts one on this side: the hand
+        and its accessory as the side's source poses them for the renderer (render/assets.HandAssets.subject: a
+        worn ring may move the hand's pose, so the hand is the source's too), one mesh whose accessory vertices
+        and faces count as the joint it is attached to."""
+        accessory, wearer = worn
+        if accessory in (None, "none") or wearer != side or side not in self.sources:
+            return hand
+        subject = self.sources[side].subject(pose, accessory=accessory, betas=betas)
+        parts = [s for s in subject.surfaces if s.role in ("hand", "accessory")]
+        joint = subject.info.get("accessory_parent_joint") or 0
+        return hand_pair.combined_hand(parts, hand, joint)
 
     def poses(self, kind: str, rng: np.random.Generator, dart_pose: np.ndarray):
         """(right (48,), left (48,), (right pre-shaped, left pre-shaped)): axis-angle poses, each of its own side's

@@ -99,6 +99,24 @@ def pose_hand(model: HandModel, pose, betas=None, T: np.ndarray | None = None) -
     return hand if T is None else hand.moved(T)
 
 
+def combined_hand(surfaces, hand: PosedHand, joint: int) -> PosedHand:
+    """A hand and what it wears as one PosedHand: `surfaces` (objects with vertices (N, 3) m, faces (F, 3), unit
+    normals (N, 3) and a role: 'hand' or the item's), the 'hand' one of the same topology as `hand` (whose joint
+    labels it takes); the others' vertices and faces labelled `joint` (the joint the item is attached to)."""
+    verts, faces, normals, vj, fj, base = [], [], [], [], [], 0
+    for s in surfaces:
+        v = np.asarray(s.vertices, np.float64)
+        verts.append(v)
+        faces.append(np.asarray(s.faces, np.int64) + base)
+        normals.append(np.asarray(s.normals, np.float64))
+        is_hand = s.role == "hand"
+        vj.append(hand.vertex_joint if is_hand else np.full(len(v), joint, np.int64))
+        fj.append(hand.face_joint if is_hand else np.full(len(s.faces), joint, np.int64))
+        base += len(v)
+    return PosedHand(np.concatenate(verts), np.concatenate(faces), np.concatenate(normals), np.concatenate(vj),
+                     np.concatenate(fj))
+
+
 def rigid(x: np.ndarray, centre: np.ndarray) -> np.ndarray:
     """(4, 4) transform of x = (rotation vector (3,) about `centre` (3,), translation (3,) m)."""
     T = np.eye(4)
