@@ -17,6 +17,7 @@ from darthand.dataset.interactions import InteractionSampler
 from darthand.errors import InputError
 from darthand.model.forward import forward
 from darthand.model.hand_pair import CONTACT_M
+from darthand.model.layout import FINGER_JOINTS
 from darthand.model.topology import close_loops
 
 FRAMES_PER_TYPE = 2
@@ -179,3 +180,32 @@ def test_a_worn_ring_stays_out_of_the_other_hand(sources, kind, wearer):
         assert meshlab_crossing(vr, fr, vo, fo) == 0, (kind, wearer, i)
         assert int(trimesh.Trimesh(*close_loops(vo, fo), process=False).contains(vr).sum()) == 0
         assert int(trimesh.Trimesh(vr, fr, process=False).contains(vo).sum()) == 0
+
+
+def flanked_vertices(right_v, right_joints, left_v, left_joints, finger: str, tube=3e-3, reach=25e-3) -> int:
+    """Vertices of the left hand's `finger` that have a right-hand finger vertex on either side of them along the
+    spread axis (Z: the fingers' row), at the same place along the fingers and the palm normal (within `tube` m in X
+    and Y) and within `reach` m: where the finger lies between two of the other hand's fingers."""
+    fingers = [j for f in ("index", "middle", "ring", "pinky") for j in FINGER_JOINTS[f]]
+    q = right_v[np.isin(right_joints, fingers)]
+    p = left_v[np.isin(left_joints, FINGER_JOINTS[finger])]
+    beside = ((np.abs(q[None, :, 0] - p[:, None, 0]) < tube) & (np.abs(q[None, :, 1] - p[:, None, 1]) < tube))
+    dz = q[None, :, 2] - p[:, None, 2]
+    beside &= np.abs(dz) < reach
+    return int(((beside & (dz > 0)).any(1) & (beside & (dz < 0)).any(1)).sum())
+
+
+def test_interlaced_fingers_pass_between_the_other_hands(models):
+    """Interlaced: the left hand's index and middle fingers each lie between two right-hand fingers (measured along
+    the spread axis, at the same height and place along the fingers) in every frame; touching frames, palms facing
+    too, have no such finger."""
+    right, left = models
+    jr, jl = np.argmax(right.weights, 1), np.argmax(left.weights, 1)
+    for kind, expect in (("interlaced", True), ("touching", False)):
+        sampler = InteractionSampler(right, left, {kind: 1.0})
+        for i in range(3):
+            d = sampler.sample(4, i, 0.5, np.zeros(48), None)
+            assert d["type"] == kind
+            vr, vl = posed(right, d["right_pose"]), posed(left, d["left_pose"], d["placement"])
+            counts = [flanked_vertices(vr, jr, vl, jl, f) for f in ("index", "middle")]
+            assert all(c >= 5 for c in counts) if expect else sum(counts) < 5, (kind, i, counts)

@@ -8,7 +8,11 @@ type draws (issue 29's contract). Types:
 - apart: DART poses, the left hand turned at random, 5-15 cm from the right, no contact;
 - touching: palms facing; fingertips to fingertips (fingers slightly bent) or palm to palm (flat hands);
 - clasped: palms facing, the left turned 70-110 deg about the palm normal, fingers curled over the other hand;
-- interlaced: palms facing, fingers spread and bent, the left shifted by half a finger's spacing;
+- interlaced: palms facing, fingers bent toward the other palm at the knuckles and fanned so that the webs at the
+  distal phalanges are a finger wide, the left shifted along the fingers' row by half their spacing (its index and
+  middle distal phalanges in the right's index-middle and middle-ring webs) and brought in on a fine grid, so that
+  the fingers pass between each other (a rigid mesh cannot interlace deeper: at the proximal phalanges the webs,
+  even fanned to the joint limits, are 3-13 mm for a 16-18 mm finger; the pinky is too short to flank the ring);
 - holding: the left hand in a C grip around the right's wrist, its palm on the back of the wrist;
 - overlapping: the left hand over the back of the right (1-4 cm above), both DART poses: one in front of the other;
 - mirrored: the mirror-image DART pose side by side (thumbs toward each other, 1-5 cm apart).
@@ -48,6 +52,15 @@ FALLBACK = "apart-mirrored"    # the last draw of a frame: apart, the plan's pos
 WRIST_HOLD_M = (0.0, 0.04)    # the holding hand's centre this far up the forearm (+X) from the wrist joint
 PALM = (0,)
 FINGERS = tuple(range(1, 16))
+SPREAD_ORDER = ("index", "middle", "ring", "pinky")   # across the hand, from the thumb's side
+# The interlaced pre-shape: the MCPs bent toward the other palm (the two hands' fingers cross between the palms), the
+# PIPs a little, each finger's MCP spread (degrees, + toward the pinky's side) so that the three webs at the distal
+# phalanges are alike, about 19 mm (the pinky apart most: it sits closest), the thumb turned back and out (its CMC
+# bend and spread) to leave room for the other's.
+INTERLACED: dict = {"mcp": (30, 45), "bend": (0, 15), "spreads": (-15.0, -9.0, -3.0, 20.0), "thumb_cmc": (-20.0, -30.0)}
+# The grid (m) across the approach on which first contact is found: finer for interlaced, whose fingers pass a few
+# mm from each other (the coarse grid's neighbouring cells would stop them at the fingertips).
+APPROACH_CELL = {"interlaced": 1.0e-3}
 MIRROR_Y = np.diag([-1.0, -1.0, 1.0])   # a left hand's own frame -> palm facing the right's palm (+Y)
 MIRROR_Z = np.diag([-1.0, 1.0, -1.0])   # -> lying beside the right, palm down, thumb toward -Z
 
@@ -105,7 +118,7 @@ class InteractionSampler:
         T[:3, :3] = R
         T[:3, 3] = a.vertices.mean(0) + offset - R @ b0.vertices.mean(0)
         b = b0.moved(T)
-        shift = hand_pair.first_contact_shift(a, b, approach)
+        shift = hand_pair.first_contact_shift(a, b, approach, APPROACH_CELL.get(kind, 2.5e-3))
         if not np.isfinite(shift):
             return None
         T[:3, 3] += (shift - gap) * approach
@@ -135,10 +148,10 @@ class InteractionSampler:
             return dart_pose, other, (False, True)
         if kind in ("mirrored", FALLBACK):
             return dart_pose, mirror_pose(dart_pose), (False, False)
-        shape = {"touching": {"bend": (5, 30), "spread": (-5, 5)},
-                 "clasped": {"bend": (50, 80), "spread": (-3, 3)},
-                 "interlaced": {"bend": (35, 60), "spread": (10, 15)},
-                 "holding": {"bend": (45, 70), "spread": (-3, 3)}}[kind]
+        shape: dict = {"touching": {"bend": (5, 30), "spread": (-5, 5)},
+                       "clasped": {"bend": (50, 80), "spread": (-3, 3)},
+                       "interlaced": INTERLACED,
+                       "holding": {"bend": (45, 70), "spread": (-3, 3)}}[kind]
         if kind == "holding":
             return dart_pose, self.preshape("left", rng, shape), (False, True)
         right = self.preshape("right", rng, shape)
@@ -147,19 +160,24 @@ class InteractionSampler:
         return right, self.preshape("left", rng, shape), (True, True)
 
     def preshape(self, side: str, rng: np.random.Generator, shape: dict) -> np.ndarray:
-        """(48,) a hand's pose: every finger joint bent by a draw from shape['bend'] (degrees; the DIP 0.7 of it),
-        fingers fanned by shape['spread'], the thumb bent less (its CMC 0.2, MCP and IP 0.4 of it) and spread away
-        from the index finger, each bend jittered by JITTER_DEG, within the limits."""
+        """(48,) a hand's pose: every finger joint bent by a draw from shape['bend'] (degrees; the DIP 0.7 of it;
+        the MCPs by a draw from shape['mcp'] when given), fingers fanned by shape['spread'] (or each MCP spread by
+        shape['spreads'], index to pinky), the thumb bent less (its CMC 0.2, MCP and IP 0.4 of it) and spread away
+        from the index finger (or its CMC bend and spread shape['thumb_cmc']), each bend jittered by JITTER_DEG,
+        within the limits."""
         angles = np.zeros((NUM_JOINTS, 3))
         bend = rng.uniform(*shape["bend"])
-        spread = rng.uniform(*shape["spread"])
+        spread = rng.uniform(*shape.get("spread", (0, 0)))
+        knuckle = rng.uniform(*shape["mcp"]) if "mcp" in shape else bend
         for k, finger in enumerate(("index", "middle", "ring", "pinky")):
             mcp, pip, dip = FINGER_JOINTS[finger]
-            angles[[mcp, pip, dip], 2] = [bend, bend, 0.7 * bend]
-            angles[mcp, 1] = spread * (k - 1.5) / 1.5
+            angles[[mcp, pip, dip], 2] = [knuckle, bend, 0.7 * bend]
+            angles[mcp, 1] = shape["spreads"][k] if "spreads" in shape else spread * (k - 1.5) / 1.5
         cmc, mcp, ip = FINGER_JOINTS["thumb"]
         angles[[cmc, mcp, ip], 2] = [0.2 * bend, 0.4 * bend, 0.4 * bend]
         angles[cmc, 1] = THUMB_AWAY_DEG
+        if "thumb_cmc" in shape:
+            angles[cmc, 2], angles[cmc, 1] = shape["thumb_cmc"]
         angles[:, 2] += JITTER_DEG * rng.standard_normal(NUM_JOINTS) * (angles[:, 2] != 0)
         angles = np.clip(np.deg2rad(angles), self.limits[..., 0], self.limits[..., 1])
         angles[0] = 0.0
@@ -188,14 +206,31 @@ class InteractionSampler:
             turn = Rotation.from_rotvec(np.deg2rad(rng.uniform(70, 110)) * up).as_matrix()
             return turn @ jitter @ MIRROR_Y, np.array([0.0, -0.1, 0.0]), up, hand_pair.CONTACT_GAP, \
                 ((FINGERS, None),)
-        if kind == "interlaced":
-            side = np.array([0.0, -0.1, rng.choice([-1.0, 1.0]) * 0.009])
-            return jitter @ MIRROR_Y, side, up, hand_pair.CONTACT_GAP, ((FINGERS, FINGERS),)
+        if kind == "interlaced":      # the jitter a quarter: a few degrees of yaw put a fingertip on another's
+            R = Rotation.from_matrix(jitter).as_rotvec() * 0.25
+            R = Rotation.from_rotvec(R).as_matrix() @ MIRROR_Y
+            return R, interleaving_offset(a, b, R) - 0.15 * up, up, hand_pair.CONTACT_GAP, ((FINGERS, FINGERS),)
         # holding: the left's fingers across the right's wrist (toward -Z), its palm on the back of the wrist, its
         # centre WRIST_HOLD_M up the forearm from the wrist joint
         turn = Rotation.from_rotvec(np.deg2rad(90) * up).as_matrix()
         target = self.wrist + np.array([rng.uniform(*WRIST_HOLD_M), 0.1, 0.0]) - a.vertices.mean(0)
         return jitter @ turn, target, -up, hand_pair.CONTACT_GAP, ((PALM + FINGERS, PALM),)
+
+
+def segment_centres(hand, segment: int) -> np.ndarray:
+    """(4, 3) centres (m) of the index, middle, ring and pinky segment `segment` (0 proximal, 1 middle, 2 distal
+    phalanx) of a posed hand: the mean of the vertices its joint moves most."""
+    return np.stack([hand.vertices[hand.vertex_joint == FINGER_JOINTS[f][segment]].mean(0) for f in SPREAD_ORDER])
+
+
+def interleaving_offset(a, b, R: np.ndarray) -> np.ndarray:
+    """(3,) the offset (m) of the turned left hand's centre from the right's that puts its index, middle and ring
+    distal phalanges (where the fingers first meet) midway along the spread axis Z between the right's index-middle,
+    middle-ring and ring-pinky, and level with the right's along the fingers (X); Y (palm to palm) is left 0."""
+    pa = segment_centres(a, 2)
+    pb = (segment_centres(b, 2) - b.vertices.mean(0)) @ R.T
+    z = np.mean((pa[:-1, 2] + pa[1:, 2]) / 2 - pb[:-1, 2])
+    return np.array([np.mean(pa[:, 0] - pb[:, 0]), 0.0, z]) - a.vertices.mean(0) * [1, 0, 1]
 
 
 def _mirror_images(right, left) -> bool:
