@@ -18,7 +18,7 @@ from darthand.errors import InputError
 from darthand.model.forward import forward
 from darthand.model.hand_pair import CONTACT_M
 from darthand.model.layout import FINGER_JOINTS
-from darthand.model.topology import close_loops
+from darthand.model.topology import close_loops, vertex_normals
 
 FRAMES_PER_TYPE = 2
 
@@ -209,3 +209,36 @@ def test_interlaced_fingers_pass_between_the_other_hands(models):
             vr, vl = posed(right, d["right_pose"]), posed(left, d["left_pose"], d["placement"])
             counts = [flanked_vertices(vr, jr, vl, jl, f) for f in ("index", "middle")]
             assert all(c >= 5 for c in counts) if expect else sum(counts) < 5, (kind, i, counts)
+
+
+def test_the_fit_keeps_a_body_off_the_worn_ring(sources):
+    """A sphere laid 0.5 mm into the top of a worn ring, clear of the skin: the hand alone is already resolved (the
+    sphere stays, through the ring), the hand with its ring (hand_pair.combined_hand, as the sampler measures a
+    wearing hand) moves it off: no face of the ring crosses the moved sphere (MeshLab), no vertex of either is inside
+    the other (trimesh)."""
+    from darthand.model import hand_pair
+
+    opened = sources[0]
+    right = opened["right"].pose_model()
+    subject = opened["right"].subject(np.zeros(48), accessory="ring_test")
+    ring = subject.accessory
+    vr, fr = np.asarray(ring.vertices, np.float64), np.asarray(ring.faces, np.int64)
+    hand = hand_pair.pose_hand(right, np.zeros(48))
+    worn = hand_pair.combined_hand([s for s in subject.surfaces if s.role in ("hand", "accessory")], hand,
+                                   subject.info["accessory_parent_joint"])
+    top = vr[np.argmax(vr[:, 1])]
+    radius = 0.02
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=radius)
+    vs = np.asarray(sphere.vertices) + top + [0, radius - 0.5e-3, 0]
+    fs = np.asarray(sphere.faces)
+    ball = hand_pair.PosedHand(vs, fs, vertex_normals(vs, fs), np.zeros(len(vs), np.int64),
+                               np.zeros(len(fs), np.int64))
+    assert meshlab_crossing(vr, fr, vs, fs) > 0                        # the ring is in the ball to start with
+    bare = hand_pair.resolve(hand, ball)
+    assert bare.resolved and np.allclose(bare.T, np.eye(4))             # the skin alone sees nothing to resolve
+    fitted = hand_pair.resolve(worn, ball)
+    assert fitted.resolved
+    moved = vs @ fitted.T[:3, :3].T + fitted.T[:3, 3]
+    assert meshlab_crossing(vr, fr, moved, fs) == 0
+    assert int(trimesh.Trimesh(moved, fs, process=False).contains(vr).sum()) == 0
+    assert int(trimesh.Trimesh(vr, fr, process=False).contains(moved).sum()) == 0
