@@ -40,7 +40,7 @@ from darthand.model import hand_pair
 from darthand.model.anatomy import angles_to_axis_angle, joint_frames, limits_radians, rest_joints
 from darthand.model.layout import FINGER_JOINTS, NUM_JOINTS
 from darthand.model.mirror import mirror_model, mirror_pose
-from darthand.model.self_crossing import SelfCrossing
+from darthand.model.preshape_crossing import PreshapeCrossing
 
 INTERACTION_STREAM = 9
 ATTEMPTS = 3
@@ -72,7 +72,7 @@ class InteractionSampler:
         self.right, self.left, self.shares = right, left, parse_shares(shares)
         self.sources = sources or {}     # {side: FrameSource}: the posed accessories of the hands that wear one
         self.frames = {"right": joint_frames(right), "left": joint_frames(left)}
-        self.self_crossing = {"right": SelfCrossing(right), "left": SelfCrossing(left)}
+        self.self_crossing = {"right": PreshapeCrossing(right), "left": PreshapeCrossing(left)}
         self.wrist = rest_joints(right)[0]
         self.limits = limits_radians()
         self.mirrored = _mirror_images(right, left)
