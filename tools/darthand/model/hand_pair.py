@@ -20,6 +20,10 @@ along the unit direction u moves d by u . (dt + dw x (p - c)), a nearest point y
 minus that. The samples in the fit are those within clearance + REACH of the other hand, re-selected after each
 solve until none comes near. When MeshLab still finds crossing faces the clearance grows by STEP, up to ROUNDS.
 
+A hand may carry what it wears (`combined_hand`: the hand's and its accessory's posed meshes as one, the accessory
+labelled with the joint it is attached to), so that a ring or watch is kept out of the other hand like the skin.
+The nearest-point search and its signing run compiled (model/pair_kernels.py).
+
 The digits' angles are not moved here: the poses stay as sampled (the interaction types choose pre-shapes that
 leave room, dataset/interactions.py), so "how far the poses moved" is the rigid move only (degrees of turn).
 """
@@ -33,7 +37,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
@@ -445,11 +449,22 @@ def _penetration_before(a: PosedHand, b: PosedHand, fitting: bool) -> Penetratio
     return Penetration(float(d.max(initial=0.0)), float(np.percentile(d, 99)) if len(d) else 0.0, len(d), crossing)
 
 
+_BLAS: list = []      # the process's ThreadpoolController, made at the first resolve (BLAS loaded by then)
+
+
+def _one_blas_thread():
+    """A context limiting BLAS to one thread (the fit's small solves; the plan's process runs beside workers).
+    threadpool_limits would scan the loaded libraries on every call (~4 ms); the controller scans once."""
+    if not _BLAS:
+        _BLAS.append(ThreadpoolController())
+    return _BLAS[0].limit(limits=1, user_api="blas")
+
+
 def resolve(a: PosedHand, b: PosedHand, touch=(), rounds: int = ROUNDS) -> Resolution:
     """Move hand `b` rigidly off hand `a` (and onto it where `touch` asks: pairs of joint sets (b's, a's)); see the
     module docstring. The result is checked by `penetration` (MeshLab's test included)."""
     start = time.process_time()
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _one_blas_thread():
         before = _penetration_before(a, b, bool(touch))
         x, after, moved = np.zeros(6), before, b
         used = 0
