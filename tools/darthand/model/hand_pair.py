@@ -100,9 +100,22 @@ def pose_hand(model: HandModel, pose, betas=None, T: np.ndarray | None = None) -
     v = forward(model, np.asarray(pose, np.float64).reshape(1, -1),
                 None if betas is None else np.asarray(betas, np.float64).reshape(1, -1)).vertices[0]
     v = np.asarray(v, np.float64)
-    vj = np.argmax(model.weights, axis=1)
-    hand = PosedHand(v, model.faces, vertex_normals(v, model.faces), vj, face_joints(model.faces, model.weights))
+    vj, fj = _joint_labels(model)
+    hand = PosedHand(v, model.faces, vertex_normals(v, model.faces), vj, fj)
     return hand if T is None else hand.moved(T)
+
+
+_LABELS: dict = {}    # id(model) -> (model, vertex joints, face joints): a model's labels, the same every pose
+
+
+def _joint_labels(model: HandModel) -> tuple[np.ndarray, np.ndarray]:
+    """The dominant joint of each vertex (V,) and of each face (F,) of `model`, computed once per model."""
+    held = _LABELS.get(id(model))
+    if held is None or held[0] is not model:
+        if len(_LABELS) >= 8:            # a plan poses two models; tests and tools make more, kept no longer
+            _LABELS.clear()
+        held = _LABELS[id(model)] = (model, np.argmax(model.weights, axis=1), face_joints(model.faces, model.weights))
+    return held[1], held[2]
 
 
 def combined_hand(surfaces, hand: PosedHand, joint: int) -> PosedHand:
