@@ -61,6 +61,7 @@ INTERLACED: dict = {"mcp": (30, 45), "bend": (0, 15), "spreads": (-15.0, -9.0, -
 # The grid (m) across the approach on which first contact is found: finer for interlaced, whose fingers pass a few
 # mm from each other (the coarse grid's neighbouring cells would stop them at the fingertips).
 APPROACH_CELL = {"interlaced": 1.0e-3}
+PLAIN_TEXTURE = "plain"   # the texture a worn accessory's hand is posed with here: the geometry only (no maps loaded)
 MIRROR_Y = np.diag([-1.0, -1.0, 1.0])   # a left hand's own frame -> palm facing the right's palm (+Y)
 MIRROR_Z = np.diag([-1.0, 1.0, -1.0])   # -> lying beside the right, palm down, thumb toward -Z
 
@@ -135,7 +136,7 @@ class InteractionSampler:
         accessory, wearer = worn
         if accessory in (None, "none") or wearer != side or side not in self.sources:
             return hand
-        subject = self.sources[side].subject(pose, accessory=accessory, betas=betas)
+        subject = self.sources[side].subject(pose, texture=PLAIN_TEXTURE, accessory=accessory, betas=betas)
         parts = [s for s in subject.surfaces if s.role in ("hand", "accessory")]
         joint = subject.info.get("accessory_parent_joint") or 0
         return hand_pair.combined_hand(parts, hand, joint)
