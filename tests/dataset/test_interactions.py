@@ -242,3 +242,15 @@ def test_the_fit_keeps_a_body_off_the_worn_ring(sources):
     assert meshlab_crossing(vr, fr, moved, fs) == 0
     assert int(trimesh.Trimesh(moved, fs, process=False).contains(vr).sum()) == 0
     assert int(trimesh.Trimesh(vr, fr, process=False).contains(moved).sum()) == 0
+
+
+def test_two_hand_jobs_with_a_worn_accessory_depend_only_on_seed_and_index(sources):
+    """With an accessory on every frame (the wearing hand measured with it), frame i is the same whatever was
+    planned before it, and exactly one hand wears the frame's accessory."""
+    spec = {"seed": 4, "two_hands": 1.0, "accessory_share": 1.0, "interactions": "clasped=1"}
+    a, b = plan.Planner(spec, sources[0]), plan.Planner(spec, sources[0])
+    forward_order = [a.job(i) for i in (0, 1, 2)]
+    assert forward_order[::-1] == [b.job(i) for i in (2, 1, 0)]
+    for job in forward_order:
+        worn = [body["accessory"] for body in job["bodies"] if body["accessory"] != "none"]
+        assert worn == ["ring_test"] and job["interaction"]["resolved"]["resolved"]
