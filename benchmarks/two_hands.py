@@ -4,7 +4,8 @@
 test and by trimesh (an independent measure: vertices inside the other hand's wrist-capped mesh by its ray test,
 their depth by its exact closest point), how far the left hand moved, and CPU per frame of planning.
 
-Writes two_hands_sheet.png into the output folder: the first two frames of each type (right hand tan, left blue).
+Writes two_hands_sheet.png into the output folder: the first two frames of each type (right hand tan, left blue),
+and two_hands_interlaced.png: the first two interlaced frames seen down the fingers, from above and from the side.
 FRAMES: the TWO_HANDS_FRAMES environment variable (default 4 per type). CPU is process time of one sampler call (the
 one-hand draws a plan makes besides, ~1.3 ms, left out), after a warm-up draw (numba's first compilations).
 """
@@ -45,6 +46,7 @@ def run(out) -> dict:
         per[kind] = _type_figures(rows)
     cpu = [per[k]["cpu_ms_mean"] for k in TYPES]
     _contact_sheet(right, left, shown, Path(out) / "two_hands_sheet.png")
+    _end_views(right, left, shown["interlaced"][:2], Path(out) / "two_hands_interlaced.png")
     return {"model": where, "frames_per_type": frames, "cpu_ms_per_frame_mean": round(float(np.mean(cpu)), 1),
             "resolved_share": round(float(np.mean([per[k]["resolved_share"] for k in TYPES])), 3),
             "trimesh_inside_vertices": int(sum(per[k]["trimesh_inside_vertices"] for k in TYPES)), "types": per}
@@ -77,6 +79,37 @@ def _contact_sheet(right, left, shown: dict, path: Path, per_type: int = 2) -> N
             ax.set_title(f"{drawn['type']} {drawn['record']['resolved']['contact_gaps_mm'] or ''}", fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def _end_views(right, left, frames: list, path: Path) -> None:
+    """A PNG of interlaced frames seen down the fingers (from -X: the fingers' row across, palm to palm up), from
+    above the left hand's back and from the side: whether the fingers pass between each other."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from darthand.model import hand_pair
+
+    views = ((0, 180), (90, -90), (20, -60))
+    fig = plt.figure(figsize=(3.2 * len(views), 3.2 * len(frames)))
+    for row, drawn in enumerate(frames):
+        hands = [hand_pair.pose_hand(right, drawn["right_pose"]),
+                 hand_pair.pose_hand(left, drawn["left_pose"], T=np.asarray(drawn["placement"]))]
+        both = np.concatenate([h.vertices for h in hands])
+        c, r = both.mean(0), (both.max(0) - both.min(0)).max() / 2.2
+        for col, (elev, azim) in enumerate(views):
+            ax = fig.add_subplot(len(frames), len(views), row * len(views) + col + 1, projection="3d")
+            for hand, colour in zip(hands, ("#d9a27a", "#7a9fd9")):
+                v = hand.vertices
+                ax.plot_trisurf(v[:, 0], v[:, 2], -v[:, 1], triangles=hand.faces, color=colour, linewidth=0)
+            ax.set_xlim(c[0] - r, c[0] + r)
+            ax.set_ylim(c[2] - r, c[2] + r)
+            ax.set_zlim(-c[1] - r, -c[1] + r)
+            ax.view_init(elev=elev, azim=azim)
+            ax.set_axis_off()
+    fig.tight_layout()
     fig.savefig(path, dpi=80)
     plt.close(fig)
 

@@ -17,7 +17,8 @@ from darthand.dataset.interactions import InteractionSampler
 from darthand.errors import InputError
 from darthand.model.forward import forward
 from darthand.model.hand_pair import CONTACT_M
-from darthand.model.topology import close_loops
+from darthand.model.layout import FINGER_JOINTS
+from darthand.model.topology import close_loops, vertex_normals
 
 FRAMES_PER_TYPE = 2
 
@@ -141,3 +142,115 @@ def test_a_type_that_never_resolves_falls_back_to_apart(models, monkeypatch):
     assert out["record"]["attempts"] == 4 and out["record"]["resolved"]["resolved"]
     va, vb = posed(right, out["right_pose"]), posed(left, out["left_pose"], out["placement"])
     assert trimesh_inside(va, right.faces, vb, left.faces) == 0
+
+
+@pytest.mark.parametrize("kind", ["touching", "clasped", "interlaced"])
+def test_a_mirrored_preshape_is_the_mirror_image_hand(models, kind):
+    """One self-crossing test covers both pre-shaped hands: with the build's left model (the right's mirror image),
+    the left hand of a symmetric type is the right hand reflected (x -> -x) vertex for vertex, and MeshLab finds the
+    same self-intersecting faces on both."""
+    from darthand.model.intersections import self_intersecting
+
+    right, left = models
+    sampler = InteractionSampler(right, left, {kind: 1.0})
+    assert sampler.mirrored
+    r, left_pose, shaped = sampler.poses(kind, np.random.default_rng(5), np.zeros(48))
+    assert shaped == (True, False)
+    vr, vl = posed(right, r), posed(left, left_pose)
+    np.testing.assert_allclose(vl, vr * [-1, 1, 1], atol=1e-9)
+    assert (self_intersecting(vr, right.faces) == self_intersecting(vl, left.faces)).all()
+
+
+@pytest.mark.parametrize("kind,wearer", [("clasped", "right"), ("holding", "right"), ("clasped", "left")])
+def test_a_worn_ring_stays_out_of_the_other_hand(sources, kind, wearer):
+    """The ring a hand wears (as its source poses it for the renderer) crosses no face of the other hand (MeshLab)
+    and neither has a vertex inside the other (trimesh's ray test; the ring a closed mesh, the hand wrist-capped)."""
+    opened = sources[0]
+    right, left = opened["right"].pose_model(), opened["left"].pose_model()
+    sampler = InteractionSampler(right, left, {kind: 1.0}, opened)
+    for i in range(FRAMES_PER_TYPE):
+        d = sampler.sample(2, i, 0.5, np.zeros(48), None, "ring_test", wearer)
+        pose = d["right_pose"] if wearer == "right" else d["left_pose"]
+        ring = opened[wearer].subject(pose, accessory="ring_test").accessory
+        T = np.eye(4) if wearer == "right" else np.asarray(d["placement"])
+        vr = np.asarray(ring.vertices, np.float64) @ T[:3, :3].T + T[:3, 3]
+        fr = np.asarray(ring.faces, np.int64)
+        other = (left, d["left_pose"], d["placement"]) if wearer == "right" else (right, d["right_pose"], None)
+        vo, fo = posed(other[0], other[1], other[2]), other[0].faces
+        assert meshlab_crossing(vr, fr, vo, fo) == 0, (kind, wearer, i)
+        assert int(trimesh.Trimesh(*close_loops(vo, fo), process=False).contains(vr).sum()) == 0
+        assert int(trimesh.Trimesh(vr, fr, process=False).contains(vo).sum()) == 0
+
+
+def flanked_vertices(right_v, right_joints, left_v, left_joints, finger: str, tube=3e-3, reach=25e-3) -> int:
+    """Vertices of the left hand's `finger` that have a right-hand finger vertex on either side of them along the
+    spread axis (Z: the fingers' row), at the same place along the fingers and the palm normal (within `tube` m in X
+    and Y) and within `reach` m: where the finger lies between two of the other hand's fingers."""
+    fingers = [j for f in ("index", "middle", "ring", "pinky") for j in FINGER_JOINTS[f]]
+    q = right_v[np.isin(right_joints, fingers)]
+    p = left_v[np.isin(left_joints, FINGER_JOINTS[finger])]
+    beside = ((np.abs(q[None, :, 0] - p[:, None, 0]) < tube) & (np.abs(q[None, :, 1] - p[:, None, 1]) < tube))
+    dz = q[None, :, 2] - p[:, None, 2]
+    beside &= np.abs(dz) < reach
+    return int(((beside & (dz > 0)).any(1) & (beside & (dz < 0)).any(1)).sum())
+
+
+def test_interlaced_fingers_pass_between_the_other_hands(models):
+    """Interlaced: the left hand's index and middle fingers each lie between two right-hand fingers (measured along
+    the spread axis, at the same height and place along the fingers) in every frame; touching frames, palms facing
+    too, have no such finger."""
+    right, left = models
+    jr, jl = np.argmax(right.weights, 1), np.argmax(left.weights, 1)
+    for kind, expect in (("interlaced", True), ("touching", False)):
+        sampler = InteractionSampler(right, left, {kind: 1.0})
+        for i in range(3):
+            d = sampler.sample(4, i, 0.5, np.zeros(48), None)
+            assert d["type"] == kind
+            vr, vl = posed(right, d["right_pose"]), posed(left, d["left_pose"], d["placement"])
+            counts = [flanked_vertices(vr, jr, vl, jl, f) for f in ("index", "middle")]
+            assert all(c >= 5 for c in counts) if expect else sum(counts) < 5, (kind, i, counts)
+
+
+def test_the_fit_keeps_a_body_off_the_worn_ring(sources):
+    """A sphere laid 0.5 mm into the top of a worn ring, clear of the skin: the hand alone is already resolved (the
+    sphere stays, through the ring), the hand with its ring (hand_pair.combined_hand, as the sampler measures a
+    wearing hand) moves it off: no face of the ring crosses the moved sphere (MeshLab), no vertex of either is inside
+    the other (trimesh)."""
+    from darthand.model import hand_pair
+
+    opened = sources[0]
+    right = opened["right"].pose_model()
+    subject = opened["right"].subject(np.zeros(48), accessory="ring_test")
+    ring = subject.accessory
+    vr, fr = np.asarray(ring.vertices, np.float64), np.asarray(ring.faces, np.int64)
+    hand = hand_pair.pose_hand(right, np.zeros(48))
+    worn = hand_pair.combined_hand([s for s in subject.surfaces if s.role in ("hand", "accessory")], hand,
+                                   subject.info["accessory_parent_joint"])
+    top = vr[np.argmax(vr[:, 1])]
+    radius = 0.02
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=radius)
+    vs = np.asarray(sphere.vertices) + top + [0, radius - 0.5e-3, 0]
+    fs = np.asarray(sphere.faces)
+    ball = hand_pair.PosedHand(vs, fs, vertex_normals(vs, fs), np.zeros(len(vs), np.int64),
+                               np.zeros(len(fs), np.int64))
+    assert meshlab_crossing(vr, fr, vs, fs) > 0                        # the ring is in the ball to start with
+    bare = hand_pair.resolve(hand, ball)
+    assert bare.resolved and np.allclose(bare.T, np.eye(4))             # the skin alone sees nothing to resolve
+    fitted = hand_pair.resolve(worn, ball)
+    assert fitted.resolved
+    moved = vs @ fitted.T[:3, :3].T + fitted.T[:3, 3]
+    assert meshlab_crossing(vr, fr, moved, fs) == 0
+    assert int(trimesh.Trimesh(moved, fs, process=False).contains(vr).sum()) == 0
+    assert int(trimesh.Trimesh(vr, fr, process=False).contains(moved).sum()) == 0
+
+
+def test_two_hand_jobs_with_a_worn_accessory_depend_only_on_seed_and_index(sources):
+    """With an accessory on every frame (the wearing hand measured with it), frame i is the same whatever was
+    planned before it, and exactly one hand wears the frame's accessory."""
+    spec = {"seed": 4, "two_hands": 1.0, "accessory_share": 1.0, "interactions": "clasped=1"}
+    a, b = plan.Planner(spec, sources[0]), plan.Planner(spec, sources[0])
+    forward_order = [a.job(i) for i in (0, 1, 2)]
+    assert forward_order[::-1] == [b.job(i) for i in (2, 1, 0)]
+    for job in forward_order:
+        worn = [body["accessory"] for body in job["bodies"] if body["accessory"] != "none"]
+        assert worn == ["ring_test"] and job["interaction"]["resolved"]["resolved"]

@@ -89,3 +89,23 @@ def test_a_hand_pushed_into_another_is_found_and_resolved(hands):
     moved = b.moved(res.T)
     assert res.resolved and hp.penetration(a, moved).clear and inside_trimesh(a, moved) == 0
     assert res.contacts[0] == pytest.approx(hp.CONTACT_GAP, abs=0.5e-3)
+
+
+def test_nearest_point_kernel_matches_trimesh():
+    """pair_kernels.nearest_on_candidates (the compiled inner step of Surface) against trimesh's exact closest point,
+    every triangle a candidate, on points near, on and far from a random soup (vertex, edge and face regions)."""
+    from trimesh.proximity import closest_point_naive
+
+    from darthand.model.pair_kernels import nearest_on_candidates
+
+    rng = np.random.default_rng(3)
+    tris = rng.normal(size=(40, 3, 3)) * 0.01
+    points = rng.normal(size=(300, 3)) * 0.02
+    cand = np.tile(np.arange(len(tris)), (len(points), 1))
+    best, bary, dist = nearest_on_candidates(tris, cand, points)
+    mesh = trimesh.Trimesh(tris.reshape(-1, 3), np.arange(len(tris) * 3).reshape(-1, 3), process=False)
+    closest, exact, _ = closest_point_naive(mesh, points)
+    np.testing.assert_allclose(dist, exact, atol=1e-12)
+    on = np.einsum("pk,pkd->pd", bary, tris[cand[np.arange(len(points)), best]])
+    np.testing.assert_allclose(on, closest, atol=1e-9)
+    assert (bary >= -1e-12).all() and np.allclose(bary.sum(1), 1)

@@ -304,7 +304,8 @@ class Planner:
         assert self.pairs is not None
         i = job["index"]
         pose, _ = self.poses.sample(self.seed, i)
-        pair = self.pairs.sample(self.seed, i, u, np.asarray(pose, np.float64), job.get("betas"))
+        pair = self.pairs.sample(self.seed, i, u, np.asarray(pose, np.float64), job.get("betas"), job["accessory"],
+                                 job["side"])
         bodies = []
         for side, key in (("right", "right_pose"), ("left", "left_pose")):
             body = {"kind": "hand", "side": side, "pose": np.asarray(pair[key], np.float64).tolist(),
@@ -363,7 +364,7 @@ def _interaction_sampler(spec: dict, sources: dict, model):
     if set(sources) != {"right", "left"}:
         raise InputError("two hands: the plan needs both sides' sources (--sides right,left)")
     return interactions.InteractionSampler(sources["right"].pose_model() or model, sources["left"].pose_model(),
-                                           spec["interactions"])
+                                           spec["interactions"], sources)
 
 
 def _shape_sampler(opts: dict, model) -> shapes.ShapeSampler:

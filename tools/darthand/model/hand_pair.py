@@ -20,6 +20,10 @@ along the unit direction u moves d by u . (dt + dw x (p - c)), a nearest point y
 minus that. The samples in the fit are those within clearance + REACH of the other hand, re-selected after each
 solve until none comes near. When MeshLab still finds crossing faces the clearance grows by STEP, up to ROUNDS.
 
+A hand may carry what it wears (`combined_hand`: the hand's and its accessory's posed meshes as one, the accessory
+labelled with the joint it is attached to), so that a ring or watch is kept out of the other hand like the skin.
+The nearest-point search and its signing run compiled (model/pair_kernels.py).
+
 The digits' angles are not moved here: the poses stay as sampled (the interaction types choose pre-shapes that
 leave room, dataset/interactions.py), so "how far the poses moved" is the rigid move only (degrees of turn).
 """
@@ -33,12 +37,13 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
 from darthand.model.intersections import self_intersecting
-from darthand.model.proximity import FACING_COS, TOUCHING, _closest_barycentric
+from darthand.model.pair_kernels import signed_on_candidates
+from darthand.model.proximity import FACING_COS, TOUCHING
 from darthand.model.topology import face_joints, vertex_normals
 
 CLEARANCE = 0.5e-3       # m: hands not asked to touch stay at least this far apart
@@ -54,6 +59,8 @@ TURN_SIGMA_DEG = 3.0
 SHIFT_SIGMA_M = 3e-3
 MAX_TURN_DEG = 30.0
 MAX_SHIFT_M = 0.06
+PREFILTER_M = 0.015      # m: a contact's samples are chosen among those this near the other hand's vertices
+SPACING_M = 0.006        # m: more than a hand mesh's longest edge (a surface point is this near a corner)
 CANDIDATES = 8           # nearest face centroids whose triangles are searched for a point's nearest point
 TIPS = (3, 6, 9, 12, 15)  # MANO's distal joints: the fingertips' segments
 
@@ -93,9 +100,40 @@ def pose_hand(model: HandModel, pose, betas=None, T: np.ndarray | None = None) -
     v = forward(model, np.asarray(pose, np.float64).reshape(1, -1),
                 None if betas is None else np.asarray(betas, np.float64).reshape(1, -1)).vertices[0]
     v = np.asarray(v, np.float64)
-    vj = np.argmax(model.weights, axis=1)
-    hand = PosedHand(v, model.faces, vertex_normals(v, model.faces), vj, face_joints(model.faces, model.weights))
+    vj, fj = _joint_labels(model)
+    hand = PosedHand(v, model.faces, vertex_normals(v, model.faces), vj, fj)
     return hand if T is None else hand.moved(T)
+
+
+_LABELS: dict = {}    # id(model) -> (model, vertex joints, face joints): a model's labels, the same every pose
+
+
+def _joint_labels(model: HandModel) -> tuple[np.ndarray, np.ndarray]:
+    """The dominant joint of each vertex (V,) and of each face (F,) of `model`, computed once per model."""
+    held = _LABELS.get(id(model))
+    if held is None or held[0] is not model:
+        if len(_LABELS) >= 8:            # a plan poses two models; tests and tools make more, kept no longer
+            _LABELS.clear()
+        held = _LABELS[id(model)] = (model, np.argmax(model.weights, axis=1), face_joints(model.faces, model.weights))
+    return held[1], held[2]
+
+
+def combined_hand(surfaces, hand: PosedHand, joint: int) -> PosedHand:
+    """A hand and what it wears as one PosedHand: `surfaces` (objects with vertices (N, 3) m, faces (F, 3), unit
+    normals (N, 3) and a role: 'hand' or the item's), the 'hand' one of the same topology as `hand` (whose joint
+    labels it takes); the others' vertices and faces labelled `joint` (the joint the item is attached to)."""
+    verts, faces, normals, vj, fj, base = [], [], [], [], [], 0
+    for s in surfaces:
+        v = np.asarray(s.vertices, np.float64)
+        verts.append(v)
+        faces.append(np.asarray(s.faces, np.int64) + base)
+        normals.append(np.asarray(s.normals, np.float64))
+        is_hand = s.role == "hand"
+        vj.append(hand.vertex_joint if is_hand else np.full(len(v), joint, np.int64))
+        fj.append(hand.face_joint if is_hand else np.full(len(s.faces), joint, np.int64))
+        base += len(v)
+    return PosedHand(np.concatenate(verts), np.concatenate(faces), np.concatenate(normals), np.concatenate(vj),
+                     np.concatenate(fj))
 
 
 def rigid(x: np.ndarray, centre: np.ndarray) -> np.ndarray:
@@ -124,6 +162,7 @@ class Surface:
         self.hand = hand
         self.faces = hand.faces if faces is None else hand.faces[faces]
         self.tris = hand.vertices[self.faces]
+        self.tri_normals = hand.normals[self.faces]
         self.tree = cKDTree(self.tris.mean(1)) if len(self.faces) else None
 
     def signed_distances(self, points: np.ndarray, T: np.ndarray | None = None) -> Distances:
@@ -138,20 +177,9 @@ class Surface:
             return Distances(np.full(len(points), np.inf), np.zeros((len(points), 3)), np.zeros((len(points), 3)))
         k = min(CANDIDATES, len(self.faces))
         cand = self.tree.query(points, k=k)[1].reshape(len(points), k)
-        bary = _closest_barycentric(self.tris[cand], points[:, None, :])               # (P, k, 3)
-        dist = np.linalg.norm(np.einsum("pkc,pkcd->pkd", bary, self.tris[cand]) - points[:, None], axis=2)
-        best = np.argmin(dist, axis=1)
-        rows = np.arange(len(points))
-        bary, dist, corners = bary[rows, best], dist[rows, best], self.faces[cand[rows, best]]
-        on = np.einsum("pk,pkd->pd", bary, self.hand.vertices[corners])
-        n = np.einsum("pk,pkd->pd", bary, self.hand.normals[corners])
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-        offset = points - on
-        along = np.einsum("pd,pd->p", offset, n)
-        facing = (np.abs(along) >= FACING_COS * dist) | (dist < TOUCHING)
-        sign = np.where(along < 0, -1.0, 1.0)
-        direction = np.where(dist[:, None] > 1e-7, offset / np.maximum(dist, 1e-300)[:, None] * sign[:, None], n)
-        return Distances(np.where(facing, sign * dist, np.inf), direction, on)
+        _, _, _, signed, direction, on = signed_on_candidates(self.tris, self.tri_normals, cand, points, FACING_COS,
+                                                             TOUCHING)
+        return Distances(signed, direction, on)
 
 
 def signed_distances(points: np.ndarray, hand: PosedHand, faces: np.ndarray | None = None) -> Distances:
@@ -271,10 +299,20 @@ def contacts(a: PosedHand, b: PosedHand, within: float = CONTACT_M) -> np.ndarra
 
 
 def region_gap(a: PosedHand, b: PosedHand, joints_a, joints_b) -> float:
-    """Smallest signed distance (m) from `a`'s vertices of region joints_a to `b`'s faces of region joints_b."""
+    """Smallest signed distance (m) from `a`'s vertices of region joints_a to `b`'s faces of region joints_b.
+
+    Measured first on the vertices within PREFILTER_M of the region's corners: when the smallest there is under
+    PREFILTER_M - SPACING_M it is the smallest of all (a farther vertex is at least that far from the surface, for
+    hands apart: a vertex deep inside may lie farther from every corner, and a fit's figures are kept only for
+    hands apart); else all are measured."""
     va, _ = a.region(joints_a)
     _, fb = b.region(joints_b)
-    return float(signed_distances(a.vertices[va], b, fb).distance.min(initial=np.inf))
+    surface = Surface(b, fb)
+    near = cKDTree(b.vertices[np.unique(b.faces[fb])]).query(a.vertices[va], distance_upper_bound=PREFILTER_M)[0]
+    gap = surface.signed_distances(a.vertices[va[np.isfinite(near)]]).distance.min(initial=np.inf)
+    if gap < PREFILTER_M - SPACING_M:
+        return float(gap)
+    return float(surface.signed_distances(a.vertices[va]).distance.min(initial=np.inf))
 
 
 # ------------------------------------------------------------------------------------------------ resolution
@@ -316,25 +354,41 @@ class PairProblem:
         self.touch = [(b.region(jb)[0], a.region(ja)[1]) for jb, ja in touch]
         self.touch_ids = [np.zeros(0, np.int64) for _ in self.touch]   # per contact: b's vertices in its fit
         self.surface_a, self.surface_b = Surface(a), Surface(b)
-        self.touch_surfaces = [Surface(a, fa) for _, fa in self.touch]
+        self.vertex_tree_a, self.vertex_tree_b = cKDTree(a.vertices), cKDTree(b.vertices)   # for `select`
+        self.touch_surfaces = [self.surface_a if ja is None else Surface(a, fa) for (_, fa), (_, ja) in
+                               zip(self.touch, touch)]
+        self.touch_trees = [cKDTree(a.vertices[np.unique(t.faces)]) for t in self.touch_surfaces]
         self.sigma = np.r_[np.full(3, np.deg2rad(TURN_SIGMA_DEG)), np.full(3, SHIFT_SIGMA_M)]
         self.b_ids = np.zeros(0, np.int64)   # b's vertices tested against a's surface
         self.a_ids = np.zeros(0, np.int64)   # a's vertices tested against b's surface
 
     def select(self, x: np.ndarray) -> bool:
         """Add the samples within clearance + REACH of the other hand at x; True if any was added."""
-        b = self.b.moved(rigid(x, self.centre))
-        reach = self.clearance + REACH
-        b_new = np.union1d(self.b_ids, near_ids(b.vertices, self.a.vertices, reach))
-        a_new = np.union1d(self.a_ids, near_ids(self.a.vertices, b.vertices, reach))
+        T = rigid(x, self.centre)
+        b = self.b.moved(T)
+        bound = self.clearance + REACH + SPACING_M       # near_ids' reach: plus the other's vertex spacing
+        near_b = np.flatnonzero(np.isfinite(self.vertex_tree_a.query(b.vertices, distance_upper_bound=bound)[0]))
+        local_a = (self.a.vertices - T[:3, 3]) @ T[:3, :3]                 # a in b's frame as given
+        near_a = np.flatnonzero(np.isfinite(self.vertex_tree_b.query(local_a, distance_upper_bound=bound)[0]))
+        b_new, a_new = np.union1d(self.b_ids, near_b), np.union1d(self.a_ids, near_a)
         added = len(b_new) > len(self.b_ids) or len(a_new) > len(self.a_ids)
         self.b_ids, self.a_ids = b_new, a_new
         for k, (vb, _) in enumerate(self.touch):            # a contact's vertices within REACH of its nearest
+            vb = self.nearest_first(k, b.vertices, vb)
             d = self.touch_surfaces[k].signed_distances(b.vertices[vb]).distance
             new = np.union1d(self.touch_ids[k], vb[d < d.min(initial=np.inf) + TOUCH_REACH])
             added |= len(new) > len(self.touch_ids[k])
             self.touch_ids[k] = new
         return added
+
+    def nearest_first(self, k: int, vertices: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """Of b's vertices `ids` of contact k, those that can be within TOUCH_REACH of the nearest to a's region:
+        nearer a corner of it than the nearest one is plus TOUCH_REACH and the vertex spacing (all of them when
+        none comes within PREFILTER_M)."""
+        d = self.touch_trees[k].query(vertices[ids], distance_upper_bound=PREFILTER_M)[0]
+        if not np.isfinite(d).any():
+            return ids
+        return ids[d < d.min() + TOUCH_REACH + SPACING_M]
 
     def residuals(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(residuals (R,), Jacobian (R, 6)) at x."""
@@ -344,9 +398,9 @@ class PairProblem:
         res, jac = [x / self.sigma], [np.diag(1.0 / self.sigma)]
         pb = b.vertices[self.b_ids]
         hb = self.surface_a.signed_distances(pb)                       # b's vertices on a: they move
-        gb = np.concatenate([np.cross(pb - c, hb.direction), hb.direction], 1)
+        gb = _moment_rows(pb - c, hb.direction)
         ha = self.surface_b.signed_distances(self.a.vertices[self.a_ids], T)   # a's on b: b's surface moves
-        ga = -np.concatenate([np.cross(ha.nearest - c, ha.direction), ha.direction], 1)
+        ga = -_moment_rows(ha.nearest - c, ha.direction)
         for h, g in ((hb, gb), (ha, ga)):
             short = h.distance < self.clearance
             res.append(np.where(short, (self.clearance - h.distance) / PENALTY_SCALE, 0.0))
@@ -359,7 +413,7 @@ class PairProblem:
                 res.append(np.zeros(1))
                 jac.append(np.zeros((1, 6)))
                 continue
-            d, g = h.distance[ok], np.concatenate([np.cross(p - c, h.direction), h.direction], 1)[ok]
+            d, g = h.distance[ok], _moment_rows(p - c, h.direction)[ok]
             w = np.exp(-(d - d.min()) / SOFTMIN)
             soft = d.min() - SOFTMIN * np.log(w.sum())
             res.append(np.array([(soft - CONTACT_GAP) / PENALTY_SCALE]))
@@ -389,6 +443,17 @@ class PairProblem:
         return x
 
 
+def _moment_rows(r: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """(K, 6) Jacobian rows [r x u, u] of distances along unit u (K, 3) at lever arms r (K, 3) (np.cross's
+    axis handling costs more than the product at a few hundred rows)."""
+    out = np.empty((len(r), 6))
+    out[:, 0] = r[:, 1] * u[:, 2] - r[:, 2] * u[:, 1]
+    out[:, 1] = r[:, 2] * u[:, 0] - r[:, 0] * u[:, 2]
+    out[:, 2] = r[:, 0] * u[:, 1] - r[:, 1] * u[:, 0]
+    out[:, 3:] = u
+    return out
+
+
 def _penetration_before(a: PosedHand, b: PosedHand, fitting: bool) -> Penetration:
     """The penetration of the sampled placement; MeshLab's test only when it decides whether to fit (no contact
     asked, no vertex inside), else its crossing faces are left at 0 (not measured)."""
@@ -397,11 +462,22 @@ def _penetration_before(a: PosedHand, b: PosedHand, fitting: bool) -> Penetratio
     return Penetration(float(d.max(initial=0.0)), float(np.percentile(d, 99)) if len(d) else 0.0, len(d), crossing)
 
 
+_BLAS: list = []      # the process's ThreadpoolController, made at the first resolve (BLAS loaded by then)
+
+
+def _one_blas_thread():
+    """A context limiting BLAS to one thread (the fit's small solves; the plan's process runs beside workers).
+    threadpool_limits would scan the loaded libraries on every call (~4 ms); the controller scans once."""
+    if not _BLAS:
+        _BLAS.append(ThreadpoolController())
+    return _BLAS[0].limit(limits=1, user_api="blas")
+
+
 def resolve(a: PosedHand, b: PosedHand, touch=(), rounds: int = ROUNDS) -> Resolution:
     """Move hand `b` rigidly off hand `a` (and onto it where `touch` asks: pairs of joint sets (b's, a's)); see the
     module docstring. The result is checked by `penetration` (MeshLab's test included)."""
     start = time.process_time()
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _one_blas_thread():
         before = _penetration_before(a, b, bool(touch))
         x, after, moved = np.zeros(6), before, b
         used = 0
