@@ -110,6 +110,9 @@ HAND = {"kind": "hand", "side": "left"}
     ({"bodies": [HAND, HAND, HAND]}, "field 'frames.0.bodies'"),
     ({"bodies": [{**HAND, "texture": "light_nope_00"}]}, "frame 0: bodies.0: texture 'light_nope_00' is not in"),
     ({"bodies": [HAND], "interaction": {"type": "hugging"}}, "field 'frames.0.interaction.type'"),
+    ({"bodies": [{**HAND, "side": "right"}, {**HAND, "placement": [[-1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 0],
+                                                               [0, 0, 0, 1]]}]},
+     "frame 0: the two hands pass through each other"),
 ])
 def test_bad_two_hand_jobs_are_one_line_errors(package, tmp_path, capsys, job, expected):
     (tmp_path / "jobs.json").write_text(json.dumps({"frames": [job]}))

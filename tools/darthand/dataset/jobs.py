@@ -8,6 +8,8 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
+
 from darthand.errors import InputError
 from darthand.fileio import atomic_path, read_json
 from darthand.model.preview import VIEWS
@@ -17,6 +19,9 @@ from darthand.schemas import check_schema
 
 JOBS_SCHEMA = "dataset_jobs.schema.json"
 MAX_INDEX = 10**12 - 1                 # frame names have at most 12 digits
+# Two hands of a job passing into each other deeper than this (m) are refused: a hand-written placement that puts one
+# hand through the other (the plan's own jobs are resolved to no crossing at all, dataset/interactions.py).
+PASS_THROUGH_M = 1e-3
 
 
 def load_jobs(path) -> list[dict]:
@@ -148,6 +153,8 @@ def validate_jobs(sources: dict, jobs: list[dict], where: str = "jobs") -> None:
         for b, hand in enumerate(job_hands(job)):
             _check_hand(hand, known, default_side, at + (f": bodies.{b}" if BODIES in job else ""))
         _check_scene(job, at, checked_lights, checked_folders)
+        if len(job_hands(job)) == 2:
+            _check_hands_apart(job_hands(job), known, default_side, at)
 
 
 def _check_hand(job: dict, known: dict, default_side: str, at: str) -> None:
@@ -174,6 +181,28 @@ def _check_hand(job: dict, known: dict, default_side: str, at: str) -> None:
         raise InputError(f"{at}: pose: a USD package renders its gestures (names or time codes), not vectors")
     if model is not None and isinstance(pose, int) and not isinstance(pose, bool):
         raise InputError(f"{at}: pose: a time code needs a USD package")
+
+
+def _check_hands_apart(hands: list[dict], known: dict, default_side: str, at: str) -> None:
+    """InputError when a job's two hands, posed by their sides' models and placed, pass into each other deeper than
+    PASS_THROUGH_M (model/hand_pair: vertices inside the other hand; MeshLab's crossing faces counted in the
+    message). Hands of a USD package (no model to pose) are not measured."""
+    # Imported here: the pair geometry loads MeshLab, which only jobs files of two hands need.
+    from darthand.model.hand_pair import penetration, pose_hand
+    from darthand.render.poses import resolve_pose
+
+    posed = []
+    for hand in hands:
+        model = known[hand.get("side") or default_side][3]
+        if model is None:
+            return
+        pose, _ = resolve_pose(model, hand.get("pose"), int(hand.get("pose_index") or 0))
+        placement = hand.get("placement")
+        posed.append(pose_hand(model, pose, hand.get("betas"), None if placement is None else np.asarray(placement)))
+    found = penetration(*posed)
+    if found.max_m > PASS_THROUGH_M:
+        raise InputError(f"{at}: the two hands pass through each other ({1000 * found.max_m:.1f} mm deep, "
+                         f"{found.crossing_faces} faces crossing): move the left hand's placement")
 
 
 def _check_scene(job: dict, at: str, checked_lights: set, checked_folders: set) -> None:
