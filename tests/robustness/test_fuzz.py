@@ -240,6 +240,13 @@ JOBS_DOC = {"frames": [{"index": 0, "pose": "fist", "texture": "plain", "camera"
                         "skin_tone_offset": 0.05, "lights": LIGHTS_DOC}]}
 
 
+def test_a_pose_file_of_a_line_break_is_refused_in_one_line(tmp_path):
+    """What hypothesis found: a document that is the string "\\n" is named in the message without breaking it."""
+    from darthand.model.poses import load_pose_file
+
+    assert loads_or_input_error(load_pose_file, write_doc(tmp_path / "pose.json", "\n")) is None
+
+
 @FUZZ
 @given(data=st.data())
 def test_pose_files(tmp_path_factory, data):

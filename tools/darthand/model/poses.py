@@ -87,7 +87,8 @@ def _field_name(parts) -> str:
 
 
 def _short(x, n: int = 40) -> str:
-    s = repr(x) if not isinstance(x, str) else x
+    """x in at most n characters on one line (a string's repr when it holds a line break)."""
+    s = x if isinstance(x, str) and x.isprintable() else repr(x)
     return s if len(s) <= n else s[:n - 3] + "..."
 
 
