@@ -16,7 +16,7 @@ from darthand.dataset.interaction_shares import TYPES, parse_shares
 from darthand.dataset.interactions import InteractionSampler
 from darthand.errors import InputError
 from darthand.model.forward import forward
-from darthand.model.hand_pair import CONTACT_M
+from darthand.render.contacts import CONTACT_M
 from darthand.model.layout import FINGER_JOINTS
 from darthand.model.topology import close_loops, vertex_normals
 

@@ -14,6 +14,7 @@ from darthand.errors import InputError
 from darthand.fileio import atomic_path, read_json
 from darthand.model.preview import VIEWS
 from darthand.render.lights import load_lighting
+from darthand.render.poses import resolve_pose
 from darthand.render.scenes import BODIES, HAND_FIELDS, HandBody, rigid_error
 from darthand.schemas import check_schema
 
@@ -189,7 +190,6 @@ def _check_hands_apart(hands: list[dict], known: dict, default_side: str, at: st
     message). Hands of a USD package (no model to pose) are not measured."""
     # Imported here: the pair geometry loads MeshLab, which only jobs files of two hands need.
     from darthand.model.hand_pair import penetration, pose_hand
-    from darthand.render.poses import resolve_pose
 
     posed = []
     for hand in hands:

@@ -48,7 +48,6 @@ from darthand.model.topology import face_joints, vertex_normals
 
 CLEARANCE = 0.5e-3       # m: hands not asked to touch stay at least this far apart
 CONTACT_GAP = 0.5e-3     # m: regions asked to touch end this far apart (touching, not inside)
-CONTACT_M = 3e-3         # m: a vertex this near the other hand's surface (or inside it) is in contact (labels)
 STEP = 0.5e-3            # m: added to the clearance when the guard still finds crossing faces
 ROUNDS = 3
 REACH = 6e-3             # m: samples farther than clearance + REACH from the other hand are left out of a fit
@@ -289,13 +288,6 @@ def penetration(a: PosedHand, b: PosedHand) -> Penetration:
     d = depths(a, b)
     return Penetration(float(d.max(initial=0.0)), float(np.percentile(d, 99)) if len(d) else 0.0, len(d),
                        crossing_faces(a, b))
-
-
-def contacts(a: PosedHand, b: PosedHand, within: float = CONTACT_M) -> np.ndarray:
-    """Sorted vertex ids of `a` within `within` (m) of `b`'s surface, or inside it."""
-    ids = near_ids(a.vertices, b.vertices, within)
-    d = signed_distances(a.vertices[ids], b).distance
-    return np.sort(ids[d <= within])
 
 
 def region_gap(a: PosedHand, b: PosedHand, joints_a, joints_b) -> float:
