@@ -21,6 +21,10 @@ The touching, clasped and interlaced pre-shapes are one draw of finger angles fo
 mirror image) when the left model is the right's mirror image, as a build's are: a mirrored hand self-crosses exactly
 where the right one does, so one self-crossing test covers both.
 
+With `fit_digits` (off by default) the resolution also fits both hands' digits (hand_pair.resolve's `digits`;
+a hand wearing an accessory keeps its digits as drawn): the job carries the fitted poses, and each re-posed hand is
+tested for self-crossing again (a draw whose fitted hand crosses itself is redrawn).
+
 Each is placed by bringing the left hand along an approach direction to first contact (hand_pair.first_contact_shift)
 and backing it off by the type's gap, then resolved by `hand_pair.resolve`, with the contacts the type asks for.
 A draw that does not resolve is redrawn: attempt k of frame i draws from [seed, INTERACTION_STREAM, i, k]; after
@@ -40,6 +44,7 @@ from darthand.model import hand_pair
 from darthand.model.anatomy import angles_to_axis_angle, joint_frames, limits_radians, rest_joints
 from darthand.model.layout import FINGER_JOINTS, NUM_JOINTS
 from darthand.model.mirror import mirror_model, mirror_pose
+from darthand.model.pair_digits import DigitHand
 from darthand.model.preshape_crossing import PreshapeCrossing
 
 INTERACTION_STREAM = 9
@@ -69,8 +74,9 @@ MIRROR_Z = np.diag([-1.0, 1.0, -1.0])   # -> lying beside the right, palm down, 
 class InteractionSampler:
     """Two-hand draws on a right model and a left model (each the model its side's source poses)."""
 
-    def __init__(self, right, left, shares: dict, sources: dict | None = None):
+    def __init__(self, right, left, shares: dict, sources: dict | None = None, fit_digits: bool = False):
         self.right, self.left, self.shares = right, left, parse_shares(shares)
+        self.fit_digits = fit_digits
         self.sources = sources or {}     # {side: FrameSource}: the posed accessories of the hands that wear one
         self.frames = {"right": joint_frames(right), "left": joint_frames(left)}
         self.self_crossing = {"right": PreshapeCrossing(right), "left": PreshapeCrossing(left)}
@@ -123,10 +129,31 @@ class InteractionSampler:
         if not np.isfinite(shift):
             return None
         T[:3, 3] += (shift - gap) * approach
-        res = hand_pair.resolve(a, b0.moved(T), touch)
+        res = hand_pair.resolve(a, b0.moved(T), touch, digits=self.digit_hands(a, b0, right_pose, left_pose, betas,
+                                                                               T))
+        if res.poses is not None:
+            right_pose, left_pose = (p if f is None else f for p, f in zip((right_pose, left_pose), res.poses))
+            if self.fitted_crossing(res.poses, betas):
+                return None
         placement = res.T @ T
         return {"right_pose": right_pose, "left_pose": left_pose, "placement": placement, "resolution": res,
                 "contact_parts": [[_region_name(jb), _region_name(ja)] for jb, ja in touch]}
+
+    def digit_hands(self, a, b, right_pose, left_pose, betas, T: np.ndarray):
+        """(right's, left's) pair_digits.DigitHand for the fit of both hands' digits, None for a hand that wears an
+        accessory (its mesh is more than the model's) or all None when `fit_digits` is off."""
+        if not self.fit_digits:
+            return None
+        return tuple(DigitHand(model, pose, betas, place) if len(hand.vertices) == model.num_vertices else None
+                     for model, hand, pose, place in ((self.right, a, right_pose, None), (self.left, b, left_pose, T)))
+
+    def fitted_crossing(self, poses, betas) -> bool:
+        """Whether a hand re-posed by the digit fit (poses: right's, left's (48,) or None) crosses itself."""
+        for side, model, pose in zip(("right", "left"), (self.right, self.left), poses):
+            if pose is not None and self.self_crossing[side].crossing(
+                    hand_pair.pose_hand(model, pose, betas).vertices) is not None:
+                return True
+        return False
 
     def wearing(self, side: str, hand, pose: np.ndarray, betas, worn: tuple):
         """`hand` (a hand_pair.PosedHand) with the accessory it wears, when `worn` puts one on this side: the hand

@@ -24,8 +24,11 @@ A hand may carry what it wears (`combined_hand`: the hand's and its accessory's 
 labelled with the joint it is attached to), so that a ring or watch is kept out of the other hand like the skin.
 The nearest-point search and its signing run compiled (model/pair_kernels.py).
 
-The digits' angles are not moved here: the poses stay as sampled (the interaction types choose pre-shapes that
-leave room, dataset/interactions.py), so "how far the poses moved" is the rigid move only (degrees of turn).
+By default the digits' angles are not moved: the poses stay as sampled (the interaction types choose pre-shapes
+that leave room, dataset/interactions.py), so "how far the poses moved" is the rigid move only (degrees of turn).
+With `digits` (a pair_digits.DigitHand per hand, or None to hold one) the same problem also fits the digits' angles
+of both hands (DigitPairProblem, model/pair_digits.py): the terms act on the re-posed vertices, the result carries
+both fitted poses and the digits' movement.
 """
 
 from __future__ import annotations
@@ -42,6 +45,8 @@ from threadpoolctl import ThreadpoolController
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
 from darthand.model.intersections import self_intersecting
+from darthand.model.pair_digits import (angle_rows, digit_changes, least_squares_fit, nearest_share, solve_bounds,
+                                        split)
 from darthand.model.pair_kernels import signed_on_candidates
 from darthand.model.proximity import FACING_COS, TOUCHING
 from darthand.model.topology import face_joints, vertex_normals
@@ -325,15 +330,21 @@ class Resolution:
     contacts: list
     rounds: int
     cpu_s: float
+    poses: tuple | None = None      # with the digits fitted: (a's, b's) fitted (48,) axis-angle (None: held)
+    digits_max_deg: float = 0.0
+    digits_mean_deg: float = 0.0
 
     def figures(self) -> dict:
         """The plain-JSON record of the resolution (what a job's interaction record carries: no CPU time, so that
         a frame's job depends only on (seed, index))."""
-        return {"resolved": self.resolved, "rounds": self.rounds,
-                "max_mm": round(self.after.max_m * 1e3, 4), "p99_mm": round(self.after.p99_m * 1e3, 4),
-                "crossing_faces": self.after.crossing_faces, "before_max_mm": round(self.before.max_m * 1e3, 3),
-                "turn_deg": round(self.turn_deg, 3), "shift_mm": round(self.shift_m * 1e3, 3),
-                "contact_gaps_mm": [round(g * 1e3, 3) for g in self.contacts]}
+        out = {"resolved": self.resolved, "rounds": self.rounds,
+               "max_mm": round(self.after.max_m * 1e3, 4), "p99_mm": round(self.after.p99_m * 1e3, 4),
+               "crossing_faces": self.after.crossing_faces, "before_max_mm": round(self.before.max_m * 1e3, 3),
+               "turn_deg": round(self.turn_deg, 3), "shift_mm": round(self.shift_m * 1e3, 3),
+               "contact_gaps_mm": [round(g * 1e3, 3) for g in self.contacts]}
+        if self.poses is not None:
+            out.update(digits_max_deg=round(self.digits_max_deg, 3), digits_mean_deg=round(self.digits_mean_deg, 3))
+        return out
 
 
 class PairProblem:
@@ -435,6 +446,123 @@ class PairProblem:
         return x
 
 
+class DigitPairProblem:
+    """PairProblem with the digits' angles of both hands free too (module docstring; model/pair_digits.py).
+    digits: (a's, b's) pair_digits.DigitHand, None to hold that hand as posed; a and b: the hands as posed at
+    zero change (b already placed by its DigitHand's T)."""
+
+    def __init__(self, a: PosedHand, b: PosedHand, digits, touch, clearance: float, centre: np.ndarray):
+        self.a, self.b, self.digits, self.clearance, self.centre = a, b, tuple(digits), clearance, centre
+        self.touch = list(touch)
+        self.sigma = np.concatenate([np.r_[np.full(3, np.deg2rad(TURN_SIGMA_DEG)), np.full(3, SHIFT_SIGMA_M)]]
+                                    + [h.sigma[h.free] for h in self.digits if h is not None])
+        self.b_ids = np.zeros(0, np.int64)
+        self.a_ids = np.zeros(0, np.int64)
+        self.touch_ids = [np.zeros(0, np.int64) for _ in self.touch]
+        self._cache: tuple | None = None
+
+    def hands_at(self, y: np.ndarray):
+        """(a, b) PosedHands at y, and per hand (angular velocities, pivots) of its free angles (None: held)."""
+        x, deltas = split(y, self.digits)
+        T = rigid(x, self.centre)
+        out: list = []
+        motion: list = []
+        for hand, digit, delta, move in ((self.a, self.digits[0], deltas[0], np.eye(4)),
+                                         (self.b, self.digits[1], deltas[1], T)):
+            if digit is None:
+                out.append(hand.moved(move) if move is T else hand)
+                motion.append(None)
+                continue
+            v, n, omega, pivot = digit.posed(delta, move)
+            out.append(PosedHand(v, hand.faces, n, hand.vertex_joint, hand.face_joint))
+            motion.append((omega, pivot))
+        return out[0], out[1], motion
+
+    def select(self, y: np.ndarray) -> bool:
+        """Add the samples within clearance + REACH of the other hand at y; True if any was added."""
+        a, b, _ = self.hands_at(y)
+        bound = self.clearance + REACH + SPACING_M
+        near_b = np.flatnonzero(np.isfinite(cKDTree(a.vertices).query(b.vertices, distance_upper_bound=bound)[0]))
+        near_a = np.flatnonzero(np.isfinite(cKDTree(b.vertices).query(a.vertices, distance_upper_bound=bound)[0]))
+        b_new, a_new = np.union1d(self.b_ids, near_b), np.union1d(self.a_ids, near_a)
+        added = len(b_new) > len(self.b_ids) or len(a_new) > len(self.a_ids)
+        self.b_ids, self.a_ids = b_new, a_new
+        for k, (jb, ja) in enumerate(self.touch):
+            vb = b.region(jb)[0]
+            d = self.touch_surface(a, ja).signed_distances(b.vertices[vb]).distance
+            new = np.union1d(self.touch_ids[k], vb[d < d.min(initial=np.inf) + TOUCH_REACH])
+            added |= len(new) > len(self.touch_ids[k])
+            self.touch_ids[k] = new
+        return added
+
+    @staticmethod
+    def touch_surface(a: PosedHand, joints) -> Surface:
+        return Surface(a) if joints is None else Surface(a, a.region(joints)[1])
+
+    def rows(self, own: int, p: np.ndarray, ids: np.ndarray, h: Distances, c: np.ndarray, motions,
+             tree: cKDTree) -> np.ndarray:
+        """(K, 6 + n) derivative of the distances h of points p (K, 3) (vertex ids `ids`) of hand `own` (0: a,
+        1: b) to the other hand's surface: the rigid part moves b (`c` its turned centre), each free hand's angles
+        (`motions`: its angular velocities and pivots) move its own points or the nearest points on it (`tree`:
+        the other hand's vertices)."""
+        u = h.direction
+        rig = _moment_rows((p if own == 1 else h.nearest) - c, u)
+        blocks = [rig if own == 1 else -rig]
+        for k, (digit, motion) in enumerate(zip(self.digits, motions)):
+            if digit is None:
+                continue
+            if k == own:
+                blocks.append(angle_rows(p, u, digit.share[ids], *motion))
+            else:
+                blocks.append(-angle_rows(h.nearest, u, nearest_share(tree, digit.share, h.nearest), *motion))
+        return np.hstack(blocks)
+
+    def evaluate(self, y: np.ndarray):
+        """(residuals (R,), Jacobian (R, 6 + n)) at y, cached for the last y."""
+        if self._cache is not None and np.array_equal(self._cache[0], y):
+            return self._cache[1], self._cache[2]
+        a, b, motions = self.hands_at(y)
+        T = rigid(y[:6], self.centre)
+        c = T[:3, :3] @ self.centre + T[:3, 3]
+        tree_a, tree_b = cKDTree(a.vertices), cKDTree(b.vertices)
+        res, jac = [y / self.sigma], [np.diag(1.0 / self.sigma)]
+        hb = Surface(a).signed_distances(b.vertices[self.b_ids])
+        ha = Surface(b).signed_distances(a.vertices[self.a_ids])
+        for own, h, p, ids, tree in ((1, hb, b.vertices, self.b_ids, tree_a), (0, ha, a.vertices, self.a_ids, tree_b)):
+            g = self.rows(own, p[ids], ids, h, c, motions, tree)
+            short = h.distance < self.clearance
+            res.append(np.where(short, (self.clearance - h.distance) / PENALTY_SCALE, 0.0))
+            jac.append(np.where(short[:, None], -g / PENALTY_SCALE, 0.0))
+        for vb, (_, ja) in zip(self.touch_ids, self.touch):
+            h = self.touch_surface(a, ja).signed_distances(b.vertices[vb])
+            ok = np.isfinite(h.distance)
+            if not ok.any():
+                res.append(np.zeros(1))
+                jac.append(np.zeros((1, len(y))))
+                continue
+            g = self.rows(1, b.vertices[vb], vb, h, c, motions, tree_a)[ok]
+            d = h.distance[ok]
+            w = np.exp(-(d - d.min()) / SOFTMIN)
+            soft = d.min() - SOFTMIN * np.log(w.sum())
+            res.append(np.array([(soft - CONTACT_GAP) / PENALTY_SCALE]))
+            jac.append(((w / w.sum()) @ g / PENALTY_SCALE)[None])
+        r, J = np.concatenate(res), np.vstack(jac)
+        self._cache = (y.copy(), r, J)
+        return r, J
+
+    def solve(self, y0: np.ndarray) -> np.ndarray:
+        """The fitted variables (rigid 6, then the held-or-free hands' angle changes), re-selecting the samples
+        until none new comes near."""
+        lo, hi = solve_bounds(np.r_[np.full(3, np.deg2rad(MAX_TURN_DEG)), np.full(3, MAX_SHIFT_M)], self.digits)
+        y = y0.copy()
+        for k in range(2):
+            if not self.select(y) and k > 0:
+                break
+            self._cache = None
+            y = least_squares_fit(self.evaluate, y, lo, hi, self.sigma)
+        return y
+
+
 def _moment_rows(r: np.ndarray, u: np.ndarray) -> np.ndarray:
     """(K, 6) Jacobian rows [r x u, u] of distances along unit u (K, 3) at lever arms r (K, 3) (np.cross's
     axis handling costs more than the product at a few hundred rows)."""
@@ -465,9 +593,13 @@ def _one_blas_thread():
     return _BLAS[0].limit(limits=1, user_api="blas")
 
 
-def resolve(a: PosedHand, b: PosedHand, touch=(), rounds: int = ROUNDS) -> Resolution:
+def resolve(a: PosedHand, b: PosedHand, touch=(), rounds: int = ROUNDS, digits=None) -> Resolution:
     """Move hand `b` rigidly off hand `a` (and onto it where `touch` asks: pairs of joint sets (b's, a's)); see the
-    module docstring. The result is checked by `penetration` (MeshLab's test included)."""
+    module docstring. digits: (a's, b's) pair_digits.DigitHand or None: fit those hands' digits too (a and b
+    must then be those DigitHands posed and placed). The result is checked by `penetration` (MeshLab's test
+    included)."""
+    if digits is not None and any(h is not None for h in digits):
+        return resolve_digits(a, b, touch, rounds, tuple(digits))
     start = time.process_time()
     with _one_blas_thread():
         before = _penetration_before(a, b, bool(touch))
@@ -485,3 +617,27 @@ def resolve(a: PosedHand, b: PosedHand, touch=(), rounds: int = ROUNDS) -> Resol
         gaps = [region_gap(moved, a, jb, ja) for jb, ja in touch]
     return Resolution(T, after.clear, before, after, float(np.rad2deg(np.linalg.norm(x[:3]))),
                       float(np.linalg.norm(x[3:])), gaps, used, time.process_time() - start)
+
+
+def resolve_digits(a: PosedHand, b: PosedHand, touch, rounds: int, digits: tuple) -> Resolution:
+    """`resolve` with the digits of the hands in `digits` (a's, b's DigitHand or None) fitted too."""
+    start = time.process_time()
+    with _one_blas_thread():
+        before = _penetration_before(a, b, bool(touch))
+        centre = b.vertices.mean(0)
+        y = np.zeros(6 + sum(len(h.free) for h in digits if h is not None))
+        after, fitted_a, fitted_b, used = before, a, b, 0
+        if not before.clear or touch:
+            for used in range(1, rounds + 1):
+                problem = DigitPairProblem(a, b, digits, touch, CLEARANCE + (used - 1) * STEP, centre)
+                y = problem.solve(y)
+                fitted_a, fitted_b, _ = problem.hands_at(y)
+                after = penetration(fitted_a, fitted_b)
+                if after.clear:
+                    break
+        x, deltas = split(y, digits)
+        gaps = [region_gap(fitted_b, fitted_a, jb, ja) for jb, ja in touch]
+        poses = tuple(None if h is None else h.fitted_pose(d) for h, d in zip(digits, deltas))
+        most, mean = digit_changes(digits, deltas)
+    return Resolution(rigid(x, centre), after.clear, before, after, float(np.rad2deg(np.linalg.norm(x[:3]))),
+                      float(np.linalg.norm(x[3:])), gaps, used, time.process_time() - start, poses, most, mean)
