@@ -62,10 +62,11 @@ def surface_gap(va, fa, vb) -> float:
     return float(closest_point_naive(trimesh.Trimesh(va, fa, process=False), vb[near])[1].min())
 
 
+@pytest.mark.parametrize("fit_digits", [False, True])
 @pytest.mark.parametrize("kind", TYPES)
-def test_every_type_is_free_of_penetration_and_touches_where_asked(models, kind):
+def test_every_type_is_free_of_penetration_and_touches_where_asked(models, kind, fit_digits):
     right, left = models
-    sampler = InteractionSampler(right, left, {kind: 1.0})
+    sampler = InteractionSampler(right, left, {kind: 1.0}, fit_digits=fit_digits)
     for i in range(FRAMES_PER_TYPE):
         dart = np.zeros(48)
         out = sampler.sample(5, i, 0.5, dart, None)
@@ -81,6 +82,23 @@ def test_every_type_is_free_of_penetration_and_touches_where_asked(models, kind)
             assert gap < CONTACT_M, (kind, gap)       # touching, by the labels' contact distance
         if record["type"] == "apart":
             assert gap > 0.01
+        assert ("digits_max_deg" in record["resolved"]) == (fit_digits and record["resolved"]["rounds"] > 0)
+
+
+def test_the_digit_fit_is_deterministic_and_bends_the_fingers_a_clasp_closes_on(models):
+    """With fit_digits the same (seed, index) gives the same poses and placement, the record reports the digits'
+    movement, and the job's poses are the fitted ones (not the drawn pre-shape: some finger angle moved)."""
+    right, left = models
+    fitted = InteractionSampler(right, left, {"clasped": 1.0}, fit_digits=True)
+    drawn = InteractionSampler(right, left, {"clasped": 1.0})
+    a, b = fitted.sample(4, 1, 0.5, np.zeros(48), None), fitted.sample(4, 1, 0.5, np.zeros(48), None)
+    assert all(np.array_equal(a[k], b[k]) for k in ("right_pose", "left_pose", "placement"))
+    assert a["record"] == b["record"]
+    plain = drawn.sample(4, 1, 0.5, np.zeros(48), None)
+    figures = a["record"]["resolved"]
+    assert figures["digits_max_deg"] >= figures["digits_mean_deg"] > 0
+    if a["record"]["attempts"] == plain["record"]["attempts"]:       # the same draw, then fitted
+        assert not np.allclose(a["right_pose"], plain["right_pose"])
 
 
 def test_two_hand_jobs_depend_only_on_seed_and_index(sources):

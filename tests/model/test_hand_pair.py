@@ -110,3 +110,100 @@ def test_nearest_point_kernel_matches_trimesh():
     on = np.einsum("pk,pkd->pd", bary, tris[cand[np.arange(len(points)), best]])
     np.testing.assert_allclose(on, closest, atol=1e-9)
     assert (bary >= -1e-12).all() and np.allclose(bary.sum(1), 1)
+
+
+# ------------------------------------------------------------------------------------------------ the digits fitted
+
+
+def bent(model, degrees: dict) -> np.ndarray:
+    """(48,) pose of `model`: each finger's (MCP, PIP, DIP) bends (degrees) from `degrees` {finger: (3,)}."""
+    from darthand.model.anatomy import angles_to_axis_angle
+    from darthand.model.layout import FINGER_JOINTS
+
+    angles = np.zeros((16, 3))
+    for finger, bends in degrees.items():
+        angles[list(FINGER_JOINTS[finger]), 2] = np.deg2rad(bends)
+    return angles_to_axis_angle(model, angles).reshape(-1)
+
+
+def test_a_bent_finger_in_a_large_sphere_is_fitted_out_by_its_depth_and_the_clearance(hands):
+    """Closed form: the index fingertip 2 mm inside a sphere of radius 0.2 m (distance |p - c| - r, exact but for
+    the icosphere's few micrometres of sag); after the fit no vertex is nearer the surface than the clearance
+    (less the tessellation) nor much farther, the index's angles moved, trimesh finds nothing inside."""
+    from darthand.model.pair_digits import DigitHand
+
+    right, _ = hands
+    pose = bent(right, {"index": (30, 30, 20), "middle": (5, 5, 5), "ring": (5, 5, 5), "pinky": (5, 5, 5)})
+    hand = hp.pose_hand(right, pose)
+    tip = hand.vertices[hand.vertex_joint == 3]
+    radius, depth = 0.2, 2e-3
+    centre = tip[np.argmin(tip[:, 1])] - [0, radius - depth, 0]
+    m = trimesh.creation.icosphere(subdivisions=5, radius=radius)
+    v, f = np.asarray(m.vertices) + centre, np.asarray(m.faces)
+    ball = hp.PosedHand(v, f, vertex_normals(v, f), np.zeros(len(v), np.int64), np.zeros(len(f), np.int64))
+    res = hp.resolve(ball, hand, digits=(None, DigitHand(right, pose)))
+    fitted = hp.pose_hand(right, res.poses[1], T=res.T)
+    gap = (np.linalg.norm(fitted.vertices - centre, axis=1) - radius).min()
+    assert res.resolved and res.poses[0] is None
+    assert hp.CLEARANCE - 0.05e-3 <= gap <= hp.CLEARANCE + 0.3e-3
+    assert res.digits_max_deg > 0.1 and res.figures()["digits_max_deg"] == round(res.digits_max_deg, 3)
+    closed = trimesh.Trimesh(v, f, process=False)
+    assert not closed.contains(fitted.vertices).any()
+
+
+def pressed_palms(hands, bend=40.0, past=2e-3):
+    """Two hands with every finger bent by `bend` (degrees), palms facing, the left pushed `past` (m) beyond
+    first contact: (a, b, (right's, left's) DigitHand)."""
+    from darthand.model.pair_digits import DigitHand
+
+    right, left = hands
+    bends = {f: (bend, bend, 0.7 * bend) for f in ("index", "middle", "ring", "pinky")}
+    pa, pb = bent(right, bends), bent(left, bends)
+    a = hp.pose_hand(right, pa)
+    T = np.diag([-1.0, -1.0, 1.0, 1.0])
+    b = hp.pose_hand(left, pb, T=T)
+    T[1, 3] = hp.first_contact_shift(a, b, np.array([0.0, 1.0, 0.0])) + past
+    return a, hp.pose_hand(left, pb, T=T), (DigitHand(right, pa), DigitHand(left, pb, T=T))
+
+
+def test_the_digit_jacobian_matches_finite_differences(hands):
+    """DigitPairProblem's analytic Jacobian (rigid and angle columns) against central differences of its own
+    residuals, on the rows active on both sides of the step."""
+    a, b, digits = pressed_palms(hands)
+    problem = hp.DigitPairProblem(a, b, digits, [], hp.CLEARANCE, b.vertices.mean(0))
+    y = np.zeros(6 + sum(len(h.free) for h in digits))
+    problem.select(y)
+    r0, J = problem.evaluate(y)
+    active = r0 > 0
+    active[:len(y)] = False
+    assert active.sum() > 5
+    checked = 0
+    for k in range(len(y)):
+        step = np.zeros(len(y))
+        step[k] = 1e-6
+        rp, rm = problem.evaluate(y + step)[0], problem.evaluate(y - step)[0]
+        ok = active & (rp > 0) & (rm > 0)
+        fd = (rp - rm)[ok] / 2e-6
+        if np.linalg.norm(fd) > 1.0:
+            assert np.linalg.norm(J[ok, k] - fd) <= 0.05 * np.linalg.norm(fd), k
+            checked += 1
+    assert checked >= 10          # the rigid part and angles of both hands
+
+
+def test_the_digit_fit_keeps_joint_limits_and_the_maximum_change_and_is_deterministic(hands):
+    from darthand.model.anatomy import axis_angle_to_angles, within_limits
+    from darthand.model.gesture_fit import MAX_CHANGE_DEG
+
+    right, left = hands
+    a, b, digits = pressed_palms(hands, bend=85.0, past=4e-3)     # near the bend limits, deep in
+    res = hp.resolve(a, b, digits=digits)
+    again = hp.resolve(a, b, digits=digits)
+    assert res.resolved and res.digits_max_deg > 0
+    for model, pose, digit in zip((right, left), res.poses, digits):
+        angles = axis_angle_to_angles(model, pose)
+        assert within_limits(angles, tol=1e-6).all()
+        assert np.rad2deg(np.abs(angles - digit.angles)).max() <= MAX_CHANGE_DEG + 1e-6
+    assert res.digits_max_deg <= MAX_CHANGE_DEG + 1e-6
+    assert all(np.array_equal(p, q) for p, q in zip(res.poses, again.poses)) and np.array_equal(res.T, again.T)
+    moved = (hp.pose_hand(right, res.poses[0]), hp.pose_hand(left, res.poses[1], T=res.T @ digits[1].place))
+    assert hp.penetration(*moved).clear and inside_trimesh(*moved) == 0

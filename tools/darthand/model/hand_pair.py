@@ -637,7 +637,7 @@ def resolve_digits(a: PosedHand, b: PosedHand, touch, rounds: int, digits: tuple
                     break
         x, deltas = split(y, digits)
         gaps = [region_gap(fitted_b, fitted_a, jb, ja) for jb, ja in touch]
-        poses = tuple(None if h is None else h.fitted_pose(d) for h, d in zip(digits, deltas))
+        poses = tuple(None if h is None else h.fitted_pose(d) for h, d in zip(digits, deltas)) if used else None
         most, mean = digit_changes(digits, deltas)
     return Resolution(rigid(x, centre), after.clear, before, after, float(np.rad2deg(np.linalg.norm(x[:3]))),
                       float(np.linalg.norm(x[3:])), gaps, used, time.process_time() - start, poses, most, mean)

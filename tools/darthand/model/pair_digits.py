@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 
 from darthand.model.anatomy import angles_to_axis_angle, axis_angle_to_angles, joint_frames, limits_radians
 from darthand.model.forward import forward
-from darthand.model.gesture_fit import MAX_CHANGE_DEG, angular_velocities, freedom, subtree_mask
+from darthand.model.gesture_fit import MAX_CHANGE_DEG, freedom, subtree_mask
 from darthand.model.hand_model import HandModel
 from darthand.model.topology import vertex_normals
 
@@ -76,10 +76,27 @@ class DigitHand:
         aa = angles_to_axis_angle(self.model, angles, self.frames).reshape(1, -1)
         out = forward(self.model, aa, None if self.betas is None else np.asarray(self.betas).reshape(1, -1),
                       dtype=np.float64)
-        omega, pivot = angular_velocities(self.model, self.frames, angles, out, self.free)
+        omega = turn_axes(self.frames, angles, out.world_rotations[0], self.model.parents, self.free)
+        pivot = np.asarray(out.joints[0, self.free // 3], np.float64)
         M = T @ self.place
         v = np.asarray(out.vertices[0], np.float64) @ M[:3, :3].T + M[:3, 3]
         return v, vertex_normals(v, self.model.faces), omega @ M[:3, :3].T, pivot @ M[:3, :3].T + M[:3, 3]
+
+
+def turn_axes(frames: np.ndarray, angles: np.ndarray, world: np.ndarray, parents: np.ndarray,
+              free: np.ndarray) -> np.ndarray:
+    """(n, 3) unit world axis (angular velocity per radian) of each free angle (flat index into (16, 3)):
+    gesture_fit.angular_velocities' W_parent F Rz(bend) Ry(spread) e_x for a twist, W_parent F Rz(bend) e_y for a
+    spread, W_parent F e_z for a bend, in closed form for all at once. frames (16, 3, 3), angles (16, 3) radians,
+    world (16, 3, 3) the posed joints' world rotations."""
+    joints, axes = np.divmod(np.asarray(free), 3)
+    s, b = angles[joints, 1], angles[joints, 2]
+    local = np.zeros((len(joints), 3))
+    twist, spread, bend = axes == 0, axes == 1, axes == 2
+    local[twist] = np.stack([np.cos(b) * np.cos(s), np.sin(b) * np.cos(s), -np.sin(s)], 1)[twist]
+    local[spread] = np.stack([-np.sin(b), np.cos(b), np.zeros_like(b)], 1)[spread]
+    local[bend, 2] = 1.0
+    return np.einsum("nab,nbc,nc->na", world[parents[joints]], frames[joints], local)
 
 
 def angle_rows(p: np.ndarray, u: np.ndarray, share: np.ndarray, omega: np.ndarray, pivot: np.ndarray) -> np.ndarray:
