@@ -115,9 +115,8 @@ class InteractionSampler:
         right_pose, left_pose, shaped = self.poses(kind, rng, dart_pose)
         a = hand_pair.pose_hand(self.right, right_pose, betas)
         b0 = hand_pair.pose_hand(self.left, left_pose, betas)
-        for side, hand, own in zip(("right", "left"), (a, b0), shaped):   # the plan's own poses are its sampler's
-            if own and self.self_crossing[side].crossing(hand.vertices) is not None:
-                return None
+        if not self.fit_digits and self.crossing(shaped, (a, b0)):   # with the fit: tested on what it emits
+            return None
         a, b0 = (self.wearing(side, hand, pose, betas, worn) for side, hand, pose in
                  (("right", a, right_pose), ("left", b0, left_pose)))
         R, offset, approach, gap, touch = self.arrangement("apart" if kind == FALLBACK else kind, rng, a, b0)
@@ -131,9 +130,13 @@ class InteractionSampler:
         T[:3, 3] += (shift - gap) * approach
         res = hand_pair.resolve(a, b0.moved(T), touch, digits=self.digit_hands(a, b0, right_pose, left_pose, betas,
                                                                                T))
-        if res.poses is not None:
-            right_pose, left_pose = (p if f is None else f for p, f in zip((right_pose, left_pose), res.poses))
-            if self.fitted_crossing(res.poses, betas):
+        if self.fit_digits:
+            fitted = res.poses or (None, None)
+            tested = [own if f is None else True for own, f in zip(shaped, fitted)]
+            right_pose, left_pose = (p if f is None else f for p, f in zip((right_pose, left_pose), fitted))
+            hands = [hand_pair.pose_hand(m, p, betas) if t else None
+                     for m, p, t in ((self.right, right_pose, tested[0]), (self.left, left_pose, tested[1]))]
+            if self.crossing(tested, hands):
                 return None
         placement = res.T @ T
         return {"right_pose": right_pose, "left_pose": left_pose, "placement": placement, "resolution": res,
@@ -147,13 +150,11 @@ class InteractionSampler:
         return tuple(DigitHand(model, pose, betas, place) if len(hand.vertices) == model.num_vertices else None
                      for model, hand, pose, place in ((self.right, a, right_pose, None), (self.left, b, left_pose, T)))
 
-    def fitted_crossing(self, poses, betas) -> bool:
-        """Whether a hand re-posed by the digit fit (poses: right's, left's (48,) or None) crosses itself."""
-        for side, model, pose in zip(("right", "left"), (self.right, self.left), poses):
-            if pose is not None and self.self_crossing[side].crossing(
-                    hand_pair.pose_hand(model, pose, betas).vertices) is not None:
-                return True
-        return False
+    def crossing(self, tested, hands) -> bool:
+        """Whether a hand crosses itself (model/self_crossing.py), of the (right, left) `hands` (PosedHands as
+        posed, without accessories) whose `tested` flag is set (the plan's own poses are its sampler's)."""
+        return any(own and self.self_crossing[side].crossing(hand.vertices) is not None
+                   for side, hand, own in zip(("right", "left"), hands, tested))
 
     def wearing(self, side: str, hand, pose: np.ndarray, betas, worn: tuple):
         """`hand` (a hand_pair.PosedHand) with the accessory it wears, when `worn` puts one on this side: the hand

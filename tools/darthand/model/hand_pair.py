@@ -526,7 +526,8 @@ class DigitPairProblem:
         c = T[:3, :3] @ self.centre + T[:3, 3]
         tree_a, tree_b = cKDTree(a.vertices), cKDTree(b.vertices)
         res, jac = [y / self.sigma], [np.diag(1.0 / self.sigma)]
-        hb = Surface(a).signed_distances(b.vertices[self.b_ids])
+        surface_a = Surface(a)
+        hb = surface_a.signed_distances(b.vertices[self.b_ids])
         ha = Surface(b).signed_distances(a.vertices[self.a_ids])
         for own, h, p, ids, tree in ((1, hb, b.vertices, self.b_ids, tree_a), (0, ha, a.vertices, self.a_ids, tree_b)):
             g = self.rows(own, p[ids], ids, h, c, motions, tree)
@@ -534,7 +535,7 @@ class DigitPairProblem:
             res.append(np.where(short, (self.clearance - h.distance) / PENALTY_SCALE, 0.0))
             jac.append(np.where(short[:, None], -g / PENALTY_SCALE, 0.0))
         for vb, (_, ja) in zip(self.touch_ids, self.touch):
-            h = self.touch_surface(a, ja).signed_distances(b.vertices[vb])
+            h = (surface_a if ja is None else self.touch_surface(a, ja)).signed_distances(b.vertices[vb])
             ok = np.isfinite(h.distance)
             if not ok.any():
                 res.append(np.zeros(1))

@@ -29,7 +29,7 @@ from darthand.model.gesture_fit import MAX_CHANGE_DEG, freedom, subtree_mask
 from darthand.model.hand_model import HandModel
 from darthand.model.topology import vertex_normals
 
-MAX_NFEV = 8          # least-squares evaluations per solve (the rigid fit's 6, plus a little for the angles)
+MAX_NFEV = 6          # least-squares evaluations per solve (as the rigid fit's)
 
 
 @dataclass
