@@ -6,8 +6,10 @@ their depth by its exact closest point), how far the left hand moved, and CPU pe
 
 Writes two_hands_sheet.png into the output folder: the first two frames of each type (right hand tan, left blue),
 and two_hands_interlaced.png: the first two interlaced frames seen down the fingers, from above and from the side.
-FRAMES: the TWO_HANDS_FRAMES environment variable (default 4 per type). CPU is process time of one sampler call (the
-one-hand draws a plan makes besides, ~1.3 ms, left out), after a warm-up draw (numba's first compilations).
+FRAMES: the TWO_HANDS_FRAMES environment variable (default 4 per type); TWO_HANDS_DIGITS=1 fits the digits too
+(InteractionSampler's fit_digits) and reports their movement (max and mean degrees over the fitted angles).
+CPU is process time of one sampler call (the one-hand draws a plan makes besides, ~1.3 ms, left out), after a
+warm-up draw (numba's first compilations).
 """
 
 from __future__ import annotations
@@ -28,13 +30,14 @@ def run(out) -> dict:
     from darthand.model.mirror import mirror_model
 
     frames = int(os.environ.get("TWO_HANDS_FRAMES", "4"))
+    digits = os.environ.get("TWO_HANDS_DIGITS", "0") == "1"
     right, where = bench_model()
     left = mirror_model(right)
     dart = poses.GridSlerp(right, poses.load_reference("gestures", right))
     InteractionSampler(right, left, {"touching": 1.0}).sample(1, 0, 0.5, dart.sample(1, 0)[0], None)  # warm-up
     per, shown = {}, {}
     for kind in TYPES:
-        sampler = InteractionSampler(right, left, {kind: 1.0})
+        sampler = InteractionSampler(right, left, {kind: 1.0}, fit_digits=digits)
         rows = []
         for i in range(frames):
             pose, _ = dart.sample(0, i * 7)
@@ -47,7 +50,8 @@ def run(out) -> dict:
     cpu = [per[k]["cpu_ms_mean"] for k in TYPES]
     _contact_sheet(right, left, shown, Path(out) / "two_hands_sheet.png")
     _end_views(right, left, shown["interlaced"][:2], Path(out) / "two_hands_interlaced.png")
-    return {"model": where, "frames_per_type": frames, "cpu_ms_per_frame_mean": round(float(np.mean(cpu)), 1),
+    return {"model": where, "frames_per_type": frames, "fit_digits": digits,
+            "cpu_ms_per_frame_mean": round(float(np.mean(cpu)), 1),
             "resolved_share": round(float(np.mean([per[k]["resolved_share"] for k in TYPES])), 3),
             "trimesh_inside_vertices": int(sum(per[k]["trimesh_inside_vertices"] for k in TYPES)), "types": per}
 
@@ -126,7 +130,9 @@ def _frame_figures(right, left, out, cpu: float) -> dict:
             "meshlab_faces": rec["resolved"]["crossing_faces"], "trimesh_inside": inside, "trimesh_depth_mm": depth,
             "before_max_mm": rec["resolved"]["before_max_mm"], "turn_deg": rec["resolved"]["turn_deg"],
             "shift_mm": rec["resolved"]["shift_mm"], "cpu_ms": cpu * 1e3,
-            "fit_cpu_ms": out["resolution"].cpu_s * 1e3, "gaps_mm": rec["resolved"]["contact_gaps_mm"]}
+            "fit_cpu_ms": out["resolution"].cpu_s * 1e3, "gaps_mm": rec["resolved"]["contact_gaps_mm"],
+            "digits_max_deg": rec["resolved"].get("digits_max_deg", 0.0),
+            "digits_mean_deg": rec["resolved"].get("digits_mean_deg", 0.0)}
 
 
 def _trimesh_inside(a, b) -> tuple[int, float]:
@@ -161,6 +167,8 @@ def _type_figures(rows: list[dict]) -> dict:
             "before_max_mm_mean": round(float(col("before_max_mm").mean()), 3),
             "turn_deg_mean": round(float(col("turn_deg").mean()), 3), "turn_deg_max": float(col("turn_deg").max()),
             "shift_mm_mean": round(float(col("shift_mm").mean()), 3),
+            "digits_max_deg": float(col("digits_max_deg").max()),
+            "digits_mean_deg": round(float(col("digits_mean_deg").mean()), 3),
             "contact_gap_mm_max": max(gaps) if gaps else None,
             "cpu_ms_mean": round(float(col("cpu_ms").mean()), 1), "cpu_ms_max": round(float(col("cpu_ms").max()), 1),
             "fit_cpu_ms_mean": round(float(col("fit_cpu_ms").mean()), 1)}
@@ -168,13 +176,16 @@ def _type_figures(rows: list[dict]) -> dict:
 
 def summary(result: dict) -> str:
     lines = [f"Model: {result['model']}; {result['frames_per_type']} frames per type; mean CPU per two-hand frame "
-             f"of planning {result['cpu_ms_per_frame_mean']} ms (goal 50 ms).", "",
+             f"of planning {result['cpu_ms_per_frame_mean']} ms (goal 50 ms); digits fitted: "
+             f"{result.get('fit_digits', False)}.", "",
              "| type | resolved first draw | redraws | fallbacks | max / p99 mm | MeshLab fails | trimesh inside "
-             "| turn deg (mean) | shift mm (mean) | contact gap mm (max) | CPU ms mean / max (fit) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| turn deg (mean) | shift mm (mean) | digits deg max / mean | contact gap mm (max) "
+             "| CPU ms mean / max (fit) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for kind, r in result["types"].items():
         lines.append(f"| {kind} | {r['resolved_share']:.0%} | {r['redraws']} | {r['fallbacks']} | {r['max_mm']:.3g} / "
                      f"{r['p99_mm']:.3g} | {r['meshlab_failures']} | {r['trimesh_inside_vertices']} | "
-                     f"{r['turn_deg_mean']} | {r['shift_mm_mean']} | {r['contact_gap_mm_max']} | "
+                     f"{r['turn_deg_mean']} | {r['shift_mm_mean']} | {r.get('digits_max_deg', 0.0)} / "
+                     f"{r.get('digits_mean_deg', 0.0)} | {r['contact_gap_mm_max']} | "
                      f"{r['cpu_ms_mean']} / {r['cpu_ms_max']} ({r['fit_cpu_ms_mean']}) |")
     return "\n".join(lines)

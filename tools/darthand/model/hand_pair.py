@@ -459,6 +459,9 @@ class DigitPairProblem:
         self.b_ids = np.zeros(0, np.int64)
         self.a_ids = np.zeros(0, np.int64)
         self.touch_ids = [np.zeros(0, np.int64) for _ in self.touch]
+        self.touch_faces = [np.zeros(0, np.int64) for _ in self.touch]     # per contact: a's faces in its fit
+        self.faces_a = np.zeros(0, np.int64)      # a's faces b's samples are measured against (`select`)
+        self.faces_b = np.zeros(0, np.int64)
         self._cache: tuple | None = None
 
     def hands_at(self, y: np.ndarray):
@@ -479,25 +482,31 @@ class DigitPairProblem:
         return out[0], out[1], motion
 
     def select(self, y: np.ndarray) -> bool:
-        """Add the samples within clearance + REACH of the other hand at y; True if any was added."""
+        """Add the samples within clearance + REACH of the other hand at y, and the faces their nearest points can
+        lie on during a solve (a corner within that, a longest edge and another REACH: the hands move a few mm in
+        one); True if any sample was added."""
         a, b, _ = self.hands_at(y)
         bound = self.clearance + REACH + SPACING_M
-        near_b = np.flatnonzero(np.isfinite(cKDTree(a.vertices).query(b.vertices, distance_upper_bound=bound)[0]))
-        near_a = np.flatnonzero(np.isfinite(cKDTree(b.vertices).query(a.vertices, distance_upper_bound=bound)[0]))
-        b_new, a_new = np.union1d(self.b_ids, near_b), np.union1d(self.a_ids, near_a)
+        tree_a, tree_b = cKDTree(a.vertices), cKDTree(b.vertices)
+        d_b, d_a = tree_a.query(b.vertices, distance_upper_bound=bound + SPACING_M + REACH)[0], \
+            tree_b.query(a.vertices, distance_upper_bound=bound + SPACING_M + REACH)[0]
+        b_new, a_new = np.union1d(self.b_ids, np.flatnonzero(d_b < bound)), np.union1d(self.a_ids,
+                                                                                       np.flatnonzero(d_a < bound))
+        self.faces_a = np.union1d(self.faces_a, np.flatnonzero(np.isfinite(d_a)[a.faces].any(1)))
+        self.faces_b = np.union1d(self.faces_b, np.flatnonzero(np.isfinite(d_b)[b.faces].any(1)))
         added = len(b_new) > len(self.b_ids) or len(a_new) > len(self.a_ids)
         self.b_ids, self.a_ids = b_new, a_new
         for k, (jb, ja) in enumerate(self.touch):
             vb = b.region(jb)[0]
-            d = self.touch_surface(a, ja).signed_distances(b.vertices[vb]).distance
+            fa = a.region(ja)[1]
+            d = Surface(a, fa).signed_distances(b.vertices[vb]).distance
             new = np.union1d(self.touch_ids[k], vb[d < d.min(initial=np.inf) + TOUCH_REACH])
             added |= len(new) > len(self.touch_ids[k])
             self.touch_ids[k] = new
+            far = d[np.isin(vb, new) & np.isfinite(d)].max(initial=0.0) + SPACING_M + REACH
+            near = np.isfinite(cKDTree(b.vertices[new]).query(a.vertices, distance_upper_bound=far)[0])
+            self.touch_faces[k] = np.union1d(self.touch_faces[k], fa[near[a.faces[fa]].any(1)])
         return added
-
-    @staticmethod
-    def touch_surface(a: PosedHand, joints) -> Surface:
-        return Surface(a) if joints is None else Surface(a, a.region(joints)[1])
 
     def rows(self, own: int, p: np.ndarray, ids: np.ndarray, h: Distances, c: np.ndarray, motions,
              tree: cKDTree) -> np.ndarray:
@@ -526,16 +535,15 @@ class DigitPairProblem:
         c = T[:3, :3] @ self.centre + T[:3, 3]
         tree_a, tree_b = cKDTree(a.vertices), cKDTree(b.vertices)
         res, jac = [y / self.sigma], [np.diag(1.0 / self.sigma)]
-        surface_a = Surface(a)
-        hb = surface_a.signed_distances(b.vertices[self.b_ids])
-        ha = Surface(b).signed_distances(a.vertices[self.a_ids])
+        hb = Surface(a, self.faces_a).signed_distances(b.vertices[self.b_ids])
+        ha = Surface(b, self.faces_b).signed_distances(a.vertices[self.a_ids])
         for own, h, p, ids, tree in ((1, hb, b.vertices, self.b_ids, tree_a), (0, ha, a.vertices, self.a_ids, tree_b)):
             g = self.rows(own, p[ids], ids, h, c, motions, tree)
             short = h.distance < self.clearance
             res.append(np.where(short, (self.clearance - h.distance) / PENALTY_SCALE, 0.0))
             jac.append(np.where(short[:, None], -g / PENALTY_SCALE, 0.0))
-        for vb, (_, ja) in zip(self.touch_ids, self.touch):
-            h = (surface_a if ja is None else self.touch_surface(a, ja)).signed_distances(b.vertices[vb])
+        for vb, faces in zip(self.touch_ids, self.touch_faces):
+            h = Surface(a, faces).signed_distances(b.vertices[vb])
             ok = np.isfinite(h.distance)
             if not ok.any():
                 res.append(np.zeros(1))
