@@ -147,8 +147,9 @@ class InteractionSampler:
         accessory (its mesh is more than the model's) or all None when `fit_digits` is off."""
         if not self.fit_digits:
             return None
-        return tuple(DigitHand(model, pose, betas, place) if len(hand.vertices) == model.num_vertices else None
-                     for model, hand, pose, place in ((self.right, a, right_pose, None), (self.left, b, left_pose, T)))
+        return tuple(DigitHand(model, pose, betas, place, self.frames[side])
+                     if len(hand.vertices) == model.num_vertices else None for side, model, hand, pose, place in
+                     (("right", self.right, a, right_pose, None), ("left", self.left, b, left_pose, T)))
 
     def crossing(self, tested, hands) -> bool:
         """Whether a hand crosses itself (model/self_crossing.py), of the (right, left) `hands` (PosedHands as

@@ -45,8 +45,8 @@ from threadpoolctl import ThreadpoolController
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
 from darthand.model.intersections import self_intersecting
-from darthand.model.pair_digits import (angle_rows, digit_changes, least_squares_fit, nearest_share, solve_bounds,
-                                        split)
+from darthand.model.pair_digits import (SELECTIONS, angle_rows, digit_changes, least_squares_fit, nearest_share,
+                                        solve_bounds, split)
 from darthand.model.pair_kernels import signed_on_candidates
 from darthand.model.proximity import FACING_COS, TOUCHING
 from darthand.model.topology import face_joints, vertex_normals
@@ -564,7 +564,7 @@ class DigitPairProblem:
         until none new comes near."""
         lo, hi = solve_bounds(np.r_[np.full(3, np.deg2rad(MAX_TURN_DEG)), np.full(3, MAX_SHIFT_M)], self.digits)
         y = y0.copy()
-        for k in range(2):
+        for k in range(SELECTIONS):
             if not self.select(y) and k > 0:
                 break
             self._cache = None

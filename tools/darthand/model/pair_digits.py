@@ -29,23 +29,26 @@ from darthand.model.gesture_fit import MAX_CHANGE_DEG, freedom, subtree_mask
 from darthand.model.hand_model import HandModel
 from darthand.model.topology import vertex_normals
 
-MAX_NFEV = 6          # least-squares evaluations per solve (as the rigid fit's)
+MAX_NFEV = 6          # least-squares evaluations per solve (as the rigid fit's; 4: contacts end short)
+SELECTIONS = 2        # sample selections (each then a solve) per round (one: contacts end ~2 mm short)
 
 
 @dataclass
 class DigitHand:
     """One hand whose digits the pair fit may bend: its model, sampled pose (48,) axis-angle, betas (or None), and
-    its placement T (4, 4: the model frame into the world, before the fit's rigid move)."""
+    its placement T (4, 4: the model frame into the world, before the fit's rigid move); frames: the model's
+    joint_frames (16, 3, 3) when already at hand."""
 
     model: HandModel
     pose: np.ndarray
     betas: np.ndarray | None = None
     T: np.ndarray | None = None
+    frames: np.ndarray | None = None
 
     def __post_init__(self):
-        self.frames = joint_frames(self.model)
+        self.axes: np.ndarray = joint_frames(self.model) if self.frames is None else self.frames
         self.angles = axis_angle_to_angles(self.model, np.asarray(self.pose, np.float64).reshape(16, 3),
-                                           self.frames)
+                                           self.axes)
         self.sigma = freedom(self.angles).reshape(-1)
         self.sigma[:3] = 0.0                               # the root: the placement is the rigid part's
         self.free = np.flatnonzero(self.sigma > 0)
@@ -67,16 +70,16 @@ class DigitHand:
 
     def fitted_pose(self, delta: np.ndarray) -> np.ndarray:
         """(48,) axis-angle of the fitted angles."""
-        return angles_to_axis_angle(self.model, self.fitted_angles(delta), self.frames).reshape(-1)
+        return angles_to_axis_angle(self.model, self.fitted_angles(delta), self.axes).reshape(-1)
 
     def posed(self, delta: np.ndarray, T: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(vertices (V, 3), normals (V, 3), angular velocities (n, 3), pivots (n, 3)) in the world, the hand
         re-posed by `delta` and placed by T @ its placement."""
         angles = self.fitted_angles(delta)
-        aa = angles_to_axis_angle(self.model, angles, self.frames).reshape(1, -1)
+        aa = angles_to_axis_angle(self.model, angles, self.axes).reshape(1, -1)
         out = forward(self.model, aa, None if self.betas is None else np.asarray(self.betas).reshape(1, -1),
                       dtype=np.float64)
-        omega = turn_axes(self.frames, angles, out.world_rotations[0], self.model.parents, self.free)
+        omega = turn_axes(self.axes, angles, out.world_rotations[0], self.model.parents, self.free)
         pivot = np.asarray(out.joints[0, self.free // 3], np.float64)
         M = T @ self.place
         v = np.asarray(out.vertices[0], np.float64) @ M[:3, :3].T + M[:3, 3]
