@@ -179,13 +179,15 @@ def test_a_mirrored_preshape_is_the_mirror_image_hand(models, kind):
     assert (self_intersecting(vr, right.faces) == self_intersecting(vl, left.faces)).all()
 
 
+@pytest.mark.parametrize("fit_digits", [False, True])
 @pytest.mark.parametrize("kind,wearer", [("clasped", "right"), ("holding", "right"), ("clasped", "left")])
-def test_a_worn_ring_stays_out_of_the_other_hand(sources, kind, wearer):
+def test_a_worn_ring_stays_out_of_the_other_hand(sources, kind, wearer, fit_digits):
     """The ring a hand wears (as its source poses it for the renderer) crosses no face of the other hand (MeshLab)
-    and neither has a vertex inside the other (trimesh's ray test; the ring a closed mesh, the hand wrist-capped)."""
+    and neither has a vertex inside the other (trimesh's ray test; the ring a closed mesh, the hand wrist-capped).
+    With the digits fitted, the wearing hand's are held (its ring posed as drawn) and the other's fitted."""
     opened = sources[0]
     right, left = opened["right"].pose_model(), opened["left"].pose_model()
-    sampler = InteractionSampler(right, left, {kind: 1.0}, opened)
+    sampler = InteractionSampler(right, left, {kind: 1.0}, opened, fit_digits=fit_digits)
     for i in range(FRAMES_PER_TYPE):
         d = sampler.sample(2, i, 0.5, np.zeros(48), None, "ring_test", wearer)
         pose = d["right_pose"] if wearer == "right" else d["left_pose"]
