@@ -45,8 +45,8 @@ from threadpoolctl import ThreadpoolController
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
 from darthand.model.intersections import self_intersecting
-from darthand.model.pair_digits import (SELECTIONS, angle_rows, digit_changes, least_squares_fit, nearest_share,
-                                        solve_bounds, split)
+from darthand.model.pair_digits import (SELECTIONS, angle_rows, digit_changes, least_squares_fit, near_digits,
+                                        nearest_share, solve_bounds, split)
 from darthand.model.pair_kernels import signed_on_candidates
 from darthand.model.proximity import FACING_COS, TOUCHING
 from darthand.model.topology import face_joints, vertex_normals
@@ -67,6 +67,7 @@ PREFILTER_M = 0.015      # m: a contact's samples are chosen among those this ne
 SPACING_M = 0.006        # m: more than a hand mesh's longest edge (a surface point is this near a corner)
 CANDIDATES = 8           # nearest face centroids whose triangles are searched for a point's nearest point
 TIPS = (3, 6, 9, 12, 15)  # MANO's distal joints: the fingertips' segments
+DIGIT_REACH = 0.02       # m: a digit this near the other hand at the start has its angles fitted (with `digits`)
 
 
 @dataclass
@@ -629,8 +630,13 @@ def resolve(a: PosedHand, b: PosedHand, touch=(), rounds: int = ROUNDS, digits=N
 
 
 def resolve_digits(a: PosedHand, b: PosedHand, touch, rounds: int, digits: tuple) -> Resolution:
-    """`resolve` with the digits of the hands in `digits` (a's, b's DigitHand or None) fitted too."""
+    """`resolve` with the digits of the hands in `digits` (a's, b's DigitHand or None) fitted too: those of them
+    within DIGIT_REACH of the other hand (the others keep their angles: a hand with none near is not re-posed)."""
     start = time.process_time()
+    digits = tuple(None if h is None else h.only(near_digits(p.vertex_joint, p.vertices, q.vertices, DIGIT_REACH))
+                   for h, p, q in zip(digits, (a, b), (b, a)))
+    if all(h is None for h in digits):
+        return resolve(a, b, touch, rounds)
     with _one_blas_thread():
         before = _penetration_before(a, b, bool(touch))
         centre = b.vertices.mean(0)

@@ -17,6 +17,7 @@ the weights of the vertex nearest to it.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,6 +28,7 @@ from darthand.model.anatomy import angles_to_axis_angle, axis_angle_to_angles, j
 from darthand.model.forward import forward
 from darthand.model.gesture_fit import MAX_CHANGE_DEG, freedom, subtree_mask
 from darthand.model.hand_model import HandModel
+from darthand.model.layout import FINGER_JOINTS
 from darthand.model.topology import vertex_normals
 
 MAX_NFEV = 6          # least-squares evaluations per solve (as the rigid fit's; 4: contacts end short)
@@ -61,6 +63,15 @@ class DigitHand:
         self.hi = np.maximum(np.minimum(lim[:, 1] - base, change), 0.0)
         held = self.hi <= self.lo                         # at a limit on both sides: nothing to move
         self.hi[held] = self.lo[held] + 1e-12
+
+    def only(self, joints) -> "DigitHand | None":
+        """This hand with only the angles of `joints` (ids) free (None when none of its free angles is there)."""
+        keep = np.isin(self.free // 3, list(joints))
+        if not keep.any():
+            return None
+        out = copy.copy(self)
+        out.free, out.share, out.lo, out.hi = self.free[keep], self.share[:, keep], self.lo[keep], self.hi[keep]
+        return out
 
     def fitted_angles(self, delta: np.ndarray) -> np.ndarray:
         """(16, 3) radians: the sampled angles plus `delta` (n,) on the free ones."""
@@ -100,6 +111,14 @@ def turn_axes(frames: np.ndarray, angles: np.ndarray, world: np.ndarray, parents
     local[spread] = np.stack([-np.sin(b), np.cos(b), np.zeros_like(b)], 1)[spread]
     local[bend, 2] = 1.0
     return np.einsum("nab,nbc,nc->na", world[parents[joints]], frames[joints], local)
+
+
+def near_digits(vertex_joint: np.ndarray, vertices: np.ndarray, other: np.ndarray, reach: float) -> list[int]:
+    """The joints (ids) of the digits (MANO's chains, wrist excluded) that own a vertex of `vertices` (V, 3) within
+    `reach` (m) of the point set `other` (M, 3) (vertex_joint (V,): each vertex's dominant joint)."""
+    near = np.isfinite(cKDTree(other).query(vertices, distance_upper_bound=reach)[0])
+    owners = set(vertex_joint[near].tolist())
+    return [j for chain in FINGER_JOINTS.values() if owners & set(chain) for j in chain]
 
 
 def angle_rows(p: np.ndarray, u: np.ndarray, share: np.ndarray, omega: np.ndarray, pivot: np.ndarray) -> np.ndarray:
