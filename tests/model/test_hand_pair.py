@@ -207,3 +207,22 @@ def test_the_digit_fit_keeps_joint_limits_and_the_maximum_change_and_is_determin
     assert all(np.array_equal(p, q) for p, q in zip(res.poses, again.poses)) and np.array_equal(res.T, again.T)
     moved = (hp.pose_hand(right, res.poses[0]), hp.pose_hand(left, res.poses[1], T=res.T @ digits[1].place))
     assert hp.penetration(*moved).clear and inside_trimesh(*moved) == 0
+
+
+def test_only_the_digits_near_the_other_hand_are_freed(hands):
+    """A point 5 mm off the index fingertip frees the index's angles only (its MCP's three, the PIP's and DIP's
+    bends: gesture_fit.freedom of a bent finger); a point far from every digit frees none."""
+    from darthand.model.layout import FINGER_JOINTS
+    from darthand.model.pair_digits import DigitHand, near_digits
+
+    right, _ = hands
+    pose = bent(right, {f: (20, 20, 14) for f in ("index", "middle", "ring", "pinky")})
+    hand = hp.pose_hand(right, pose)
+    index = list(FINGER_JOINTS["index"])
+    tip = hand.vertices[hand.vertex_joint == index[-1]].mean(0)
+    near = near_digits(hand.vertex_joint, hand.vertices, tip[None] + [0, -0.005, 0], 0.01)
+    assert near == index
+    freed = DigitHand(right, pose).only(near)
+    assert sorted(set((freed.free // 3).tolist())) == index and len(freed.free) == 5
+    assert near_digits(hand.vertex_joint, hand.vertices, np.array([[1.0, 1.0, 1.0]]), 0.01) == []
+    assert DigitHand(right, pose).only([]) is None
