@@ -134,11 +134,22 @@ def test_without_two_hands_the_plan_is_as_before(sources):
     ({"two_hands": 0.5, "interactions": "apart=0.5,clasped=0.2"}, "shares sum to 0.7, not 1"),
     ({"two_hands": 0.5, "interactions": "apart=-0.5,clasped=1.5"}, "share -0.5 of 'apart' is outside 0..1"),
     ({"two_hands": 0.5, "interactions": "apart"}, "'apart' is not TYPE=SHARE"),
+    ({"two_hands": 0.5, "interaction_fit": "wobbly"}, "interaction fit: 'wobbly' is not one of digits, rigid"),
 ])
 def test_bad_two_hand_options_are_one_line(spec, message):
     with pytest.raises(InputError, match=message) as e:
         plan.plan_spec(**spec)
     assert "\n" not in str(e.value)
+
+
+def test_the_plan_fits_the_digits_unless_asked_for_a_rigid_fit(sources):
+    """The plan's jobs carry the digit fit's figures by default and not with interaction_fit 'rigid'; the option is in
+    the plan document only with two hands."""
+    spec = {"seed": 4, "two_hands": 1.0, "interactions": "clasped=1"}
+    digits, rigid = plan.Planner(spec, sources[0]), plan.Planner({**spec, "interaction_fit": "rigid"}, sources[0])
+    assert digits.spec["interaction_fit"] == "digits" and rigid.spec["interaction_fit"] == "rigid"
+    fitted, moved = digits.job(0)["interaction"], rigid.job(0)["interaction"]
+    assert "digits_max_deg" in fitted["resolved"] and "digits_max_deg" not in moved["resolved"]
 
 
 def test_two_hands_need_both_sides(sources):

@@ -512,6 +512,7 @@ def _add_render_arguments(p) -> None:
 
 def _add_dataset_arguments(p) -> None:
     from darthand.dataset import options as o
+    from darthand.dataset.interaction_shares import FITS
     from darthand.dataset.plan import PlanOptions
     from darthand.dataset.writers import FORMATS
     from darthand.model.preview import VIEWS
@@ -622,6 +623,9 @@ def _add_dataset_arguments(p) -> None:
     p.add_argument("--interactions", default=None, metavar="TYPE=SHARE,...",
                    help="shares of the two-hand interaction types, summing to 1: apart, touching, clasped, "
                         "interlaced, holding, overlapping, mirrored (default: equal shares)")
+    p.add_argument("--interaction-fit", choices=FITS, default=plan.interaction_fit,
+                   help="what the fit that keeps two hands out of each other moves: the left hand and the digits "
+                        f"near the other hand, or the left hand only (faster) (default {plan.interaction_fit})")
     p.add_argument("--size", type=number(int, 8, o.MAX_SIZE), default=run.size, metavar="N",
                    help=f"square image size in pixels (default {run.size})")
     _add_antialiasing_options(p, run.samples, run.aa_shading)

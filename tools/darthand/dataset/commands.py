@@ -57,7 +57,8 @@ def dataset_options(args) -> DatasetOptions:
         views=tuple(_names(args.views) or ()), roll_range_deg=args.roll_range, fov_range_deg=args.fov_range,
         margin_range=args.margin_range, distance_range=args.distance_range, lights=args.lights,
         environments=args.environments, backgrounds=args.backgrounds, split=args.split,
-        two_hands=args.two_hands, interactions=args.interactions)
+        two_hands=args.two_hands, interactions=args.interactions,
+        interaction_fit=args.interaction_fit)
     return DatasetOptions(
         str(args.package), args.out, count=args.count, start=args.start, jobs=args.jobs, plan=plan,
         textures=args.textures, accessories=args.accessories, model=args.model, size=args.size,

@@ -8,6 +8,8 @@ import math
 from darthand.errors import InputError
 
 TYPES = ("apart", "touching", "clasped", "interlaced", "holding", "overlapping", "mirrored")
+# What the two-hand fit moves (model/hand_pair.resolve): the left hand rigidly, or that and the digits near the other.
+FITS = ("digits", "rigid")
 
 
 def parse_shares(text) -> dict:

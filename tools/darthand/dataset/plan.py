@@ -87,7 +87,9 @@ class PlanOptions:
     'random', 'default' or a lights document or file; environments (the maps 'environment' lights draw from)
     'builtin', a folder or a map; backgrounds 'builtin', 'none', 'environment' (the frame's environment behind the
     hand), a folder or an image; split the train/val/test fractions; two_hands the share of frames with two hands
-    (0: none, and the plan document leaves it and interactions out); interactions {type: share} (None: equal)."""
+    (0: none, and the plan document leaves it and interactions out); interactions {type: share} (None: equal);
+    interaction_fit what the two hands' fit moves: 'digits' (the left hand and the digits near the other hand) or
+    'rigid' (the left hand only)."""
 
     seed: int = 0
     poses: PoseOptions = field(default_factory=PoseOptions)
@@ -109,6 +111,7 @@ class PlanOptions:
     shapes: ShapeOptions = field(default_factory=ShapeOptions)
     two_hands: float = 0.0
     interactions: dict | str | None = None
+    interaction_fit: str = interaction_shares.FITS[0]
 
     def spec(self) -> dict:
         """The plan document (plain JSON values: lists for tuples)."""
@@ -125,7 +128,7 @@ def _plain(value):
 
 
 # Options in the plan document only when two hands are asked for, so that every plan without them is as before.
-TWO_HAND_OPTIONS = ("two_hands", "interactions")
+TWO_HAND_OPTIONS = ("two_hands", "interactions", "interaction_fit")
 DEFAULTS: dict = {k: v for k, v in _plain(PlanOptions()).items() if k not in TWO_HAND_OPTIONS}
 
 
@@ -155,9 +158,12 @@ def _two_hand_options(spec: dict) -> dict:
     if isinstance(share, bool) or not isinstance(share, (int, float)) or not (math.isfinite(share) and 0 <= share <= 1):
         raise InputError(f"two hands: {share!r} is not a share within 0..1")
     shares = interaction_shares.parse_shares(spec.get("interactions"))
+    fit = spec.get("interaction_fit", interaction_shares.FITS[0])
+    if fit not in interaction_shares.FITS:
+        raise InputError(f"interaction fit: {fit!r} is not one of {', '.join(interaction_shares.FITS)}")
     if share == 0:
         return {k: v for k, v in spec.items() if k not in TWO_HAND_OPTIONS}
-    return {**spec, "two_hands": float(share), "interactions": shares}
+    return {**spec, "two_hands": float(share), "interactions": shares, "interaction_fit": fit}
 
 
 def split_of(unit: int, seed: int, fractions) -> str:
@@ -364,7 +370,8 @@ def _interaction_sampler(spec: dict, sources: dict, model):
     if set(sources) != {"right", "left"}:
         raise InputError("two hands: the plan needs both sides' sources (--sides right,left)")
     return interactions.InteractionSampler(sources["right"].pose_model() or model, sources["left"].pose_model(),
-                                           spec["interactions"], sources)
+                                           spec["interactions"], sources,
+                                           fit_digits=spec["interaction_fit"] == "digits")
 
 
 def _shape_sampler(opts: dict, model) -> shapes.ShapeSampler:
