@@ -51,7 +51,7 @@ def _planning(model, textures, accessories, frames: int) -> dict:
     planner = Planner({**PlanOptions(two_hands=1.0).spec(), "sides": list(sources)}, sources)
     planner.job(0)                                                        # load and compile before timing
     t = time.process_time()
-    jobs = planner.jobs(1, frames + 1)
+    jobs = list(planner.jobs(1, frames + 1))
     cpu = time.process_time() - t
     types: dict = {}
     for job in jobs:
@@ -65,9 +65,9 @@ def run() -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         model, textures, accessories, where = dataset_inputs(tmp)
+        plan = _planning(model, textures, accessories, min(frames, 100))
         one = _run(model, textures, accessories, tmp / "one", frames, 0.0)
         two = _run(model, textures, accessories, tmp / "two", frames, 1.0)
-        plan = _planning(model, textures, accessories, min(frames, 100))
     ratio = (two["images_per_second"] or 0) / max(1e-9, one["images_per_second"] or 0)
     cpu_two = two.get("cpu_ms_per_image") or 0
     return {"two_hand_vs_one_hand_rate": round(ratio, 3), "goal_ratio": GOAL_RATIO, "frames": frames,

@@ -6,8 +6,9 @@ their depth by its exact closest point), how far the left hand moved, and CPU pe
 
 Writes two_hands_sheet.png into the output folder: the first two frames of each type (right hand tan, left blue),
 and two_hands_interlaced.png: the first two interlaced frames seen down the fingers, from above and from the side.
-FRAMES: the TWO_HANDS_FRAMES environment variable (default 4 per type); TWO_HANDS_DIGITS=1 fits the digits too
-(InteractionSampler's fit_digits) and reports their movement (max and mean degrees over the fitted angles).
+FRAMES: the TWO_HANDS_FRAMES environment variable (default 4 per type); the digits are fitted too (the plan's default
+--interaction-fit digits: InteractionSampler's fit_digits), their movement reported (max and mean degrees over the
+fitted angles); TWO_HANDS_DIGITS=0 measures the rigid fit.
 CPU is process time of one sampler call (the one-hand draws a plan makes besides, ~1.3 ms, left out), after a
 warm-up draw (numba's first compilations).
 """
@@ -30,7 +31,7 @@ def run(out) -> dict:
     from darthand.model.mirror import mirror_model
 
     frames = int(os.environ.get("TWO_HANDS_FRAMES", "4"))
-    digits = os.environ.get("TWO_HANDS_DIGITS", "0") == "1"
+    digits = os.environ.get("TWO_HANDS_DIGITS", "1") == "1"
     right, where = bench_model()
     left = mirror_model(right)
     dart = poses.GridSlerp(right, poses.load_reference("gestures", right))
