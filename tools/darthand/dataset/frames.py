@@ -145,10 +145,7 @@ def dataset_labels(frame, job: dict, digest: str, source, background: dict | Non
     labels["render"] = render
     labels["gesture"] = labels.get("gesture") or job.get("gesture")
     model = source.pose_model()
-    hand = frame.subject.hand_vertices
-    wrist = (getattr(model, "meta", None) or {}).get("wrist") or {}
-    labels["mesh"] = {"vertices": int(len(hand)), "base_vertices": int(wrist.get("base_vertices", len(hand))),
-                      "faces": "the model's faces (build/model/<side>.npz)", "frame": "camera", "units": "m"}
+    labels["mesh"] = mesh_record(model, frame.subject.hand_vertices)
     labels["files"] = {**labels.get("files", {}), "vertices": "../" + names["vertices"],
                        **{kind: "../" + names[kind] for kind in maps}}
     if maps:

@@ -27,7 +27,7 @@ from darthand.render.subject import Subject, Surface
 
 def is_group(scene: Scene) -> bool:
     """Whether a scene is drawn as a group of bodies: several bodies, or one given a placement."""
-    return len(scene.bodies) > 1 or any(getattr(b, "placement", None) is not None for b in scene.bodies)
+    return len(scene.bodies) > 1 or any(b.placement is not None for b in scene.bodies)
 
 
 def posed_hand(source, body: HandBody, *, keypoint_order: str, arm: float) -> Subject:
