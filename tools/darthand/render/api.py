@@ -23,7 +23,7 @@ from darthand.fileio import write_json
 from darthand.jit import kernel
 from darthand.render import aa, truth
 from darthand.render.assets import HandAssets, default_catalogues
-from darthand.render.bodies import is_group, pose_group
+from darthand.render.bodies import body_pose, is_group, pose_group
 from darthand.render.camera import Camera, load_camera
 from darthand.render.environment import ENVIRONMENT_BACKGROUND, backdrop_blur, background_view, frame_environment
 from darthand.render.film import Film, develop_frame
@@ -32,7 +32,6 @@ from darthand.render.image import compose, encode_mask8, load_background, write_
 from darthand.render.indirect import VertexLight
 from darthand.render.labels import frame_labels, group_labels
 from darthand.render.lights import Lighting, load_lighting, world_lights
-from darthand.render.poses import resolve_pose
 from darthand.render.scene import Scene as TraceScene, scene_for
 from darthand.render.scenes import Scene
 from darthand.render.shade import ShadingOptions
@@ -130,15 +129,12 @@ class Renderer:
         if is_group(scene):
             return self._render_group(scene, background, options)
         hand = scene.single_hand()
-        pose = hand.pose_value()
-        model = self.source.pose_model()
-        if isinstance(pose, str) and hand.pose_index is not None and model is not None:
-            pose = resolve_pose(model, pose, int(hand.pose_index))[0]
         if background is None and isinstance(scene.background, str):
             background = scene.background
-        return self.render(pose, texture=hand.texture, skin_tone_offset=float(hand.skin_tone_offset),
-                           accessory=hand.accessory, camera=scene.camera or "three_quarter", lights=scene.lights,
-                           background=background, betas=hand.betas, **options)
+        return self.render(body_pose(self.source, hand), texture=hand.texture,
+                           skin_tone_offset=float(hand.skin_tone_offset), accessory=hand.accessory,
+                           camera=scene.camera or "three_quarter", lights=scene.lights, background=background,
+                           betas=hand.betas, **options)
 
     def _render_group(self, scene: Scene, background, options: dict) -> Frame:
         """render_scene of a scene of several hands (render/bodies.py), with `render`'s options."""

@@ -34,14 +34,20 @@ def posed_hand(source, body: HandBody, *, keypoint_order: str, arm: float) -> Su
     """The hand of `body` posed by its side's `source` (a render/source.FrameSource), in the source's own frame."""
     if arm and source.kind != "model":
         raise InputError(f"arm: a {source.kind} source has no forearm rig to extend (use a model .npz)")
+    shape: dict = {} if body.betas is None else {"betas": body.betas}
+    shape.update({"arm": arm} if arm else {})
+    return source.subject(body_pose(source, body), texture=body.texture, skin_tone_offset=float(body.skin_tone_offset),
+                          accessory=body.accessory, keypoint_order=keypoint_order, **shape)
+
+
+def body_pose(source, body: HandBody):
+    """The pose `source` takes for `body`: a pose file's pose number pose_index resolved to its (48,) numbers (a
+    model source), else the body's pose as given."""
     pose = body.pose_value()
     model = source.pose_model()
     if isinstance(pose, str) and body.pose_index is not None and model is not None:
         pose = resolve_pose(model, pose, int(body.pose_index))[0]
-    shape: dict = {} if body.betas is None else {"betas": body.betas}
-    shape.update({"arm": arm} if arm else {})
-    return source.subject(pose, texture=body.texture, skin_tone_offset=float(body.skin_tone_offset),
-                          accessory=body.accessory, keypoint_order=keypoint_order, **shape)
+    return pose
 
 
 def placed(subject: Subject, placement: np.ndarray) -> Subject:
