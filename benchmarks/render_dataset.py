@@ -21,6 +21,17 @@ from pathlib import Path
 GOAL_IMAGES_PER_SECOND = 25.0
 
 
+def progress_printer(label: str):
+    """A render_dataset progress callback printing `label`, frames done and seconds to stderr every 30 s."""
+    last = [-60.0]
+
+    def progress(done: int, total: int, seconds: float) -> None:
+        if seconds - last[0] >= 30 or done == total:
+            last[0] = seconds
+            print(f"[bench] {label} {done}/{total} frames, {seconds:.0f} s", file=sys.stderr, flush=True)
+    return progress
+
+
 def dataset_inputs(tmp: Path) -> tuple:
     """(model, texture catalogue, accessories folder, where from): the build's whole catalogue, else one texture
     and one accessory built in `tmp`."""
@@ -57,14 +68,10 @@ def run(frames: int | None = None) -> dict:
         tmp = Path(tmp)
         model, textures, accessories, where = dataset_inputs(tmp)
 
-        def progress(done: int, total: int, seconds: float, last=[-60.0]) -> None:  # noqa: B006 (a static: the last report)
-            if seconds - last[0] >= 30 or done == total:
-                last[0] = seconds
-                print(f"[bench] render_dataset {done}/{total} frames, {seconds:.0f} s", file=sys.stderr, flush=True)
-
         t0 = time.perf_counter()
         doc = render_dataset(DatasetOptions(str(model), str(tmp / "out"), count=frames, textures=str(textures),
-                                            accessories=str(accessories), resume=False, progress=progress))
+                                            accessories=str(accessories), resume=False,
+                                            progress=progress_printer("render_dataset")))
         wall = time.perf_counter() - t0
         disk = sum(p.stat().st_size for p in (tmp / "out").rglob("*") if p.is_file())
     t = doc["timings"]

@@ -21,7 +21,6 @@ DARTHAND_BENCH_RAY_FRAMES (default 1000) and DARTHAND_BENCH_RAY_ROUNDS (default 
 from __future__ import annotations
 
 import os
-import sys
 import tempfile
 import threading
 import time
@@ -108,13 +107,10 @@ def _render(model, textures, accessories, plan, frames, out, cluster, nodes) -> 
     from darthand.dataset.options import ClusterOptions, DatasetOptions
     from darthand.dataset.plan import PlanOptions
 
-    label = "local" if cluster is None else f"ray ({cluster.get('files', 'auto')})"
+    from benchmarks.render_dataset import progress_printer
 
-    def progress(done: int, total: int, seconds: float, last=[-60.0]) -> None:  # noqa: B006 (a static: the last report)
-        if seconds - last[0] >= 30 or done == total:
-            last[0] = seconds
-            print(f"[bench] render_dataset_ray {label}: {done}/{total} frames, {seconds:.0f} s", file=sys.stderr,
-                  flush=True)
+    label = "local" if cluster is None else f"ray ({cluster.get('files', 'auto')})"
+    progress = progress_printer(f"render_dataset_ray {label}:")
 
     with CpuMeter(nodes if cluster is not None else None) as cpu:
         doc = render_dataset(DatasetOptions(

@@ -12,12 +12,11 @@ image). DARTHAND_BENCH_TWO_HAND_FRAMES sets the frames per run (default 300).
 from __future__ import annotations
 
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.render_dataset import dataset_inputs
+from benchmarks.render_dataset import dataset_inputs, progress_printer
 
 GOAL_RATIO = 0.5
 
@@ -27,14 +26,9 @@ def _run(model, textures, accessories, out: Path, frames: int, two_hands: float)
     from darthand.dataset.options import DatasetOptions
     from darthand.dataset.plan import PlanOptions
 
-    def progress(done: int, total: int, seconds: float, last=[-60.0]) -> None:  # noqa: B006 (a static: the last report)
-        if seconds - last[0] >= 30 or done == total:
-            last[0] = seconds
-            print(f"[bench] two_hand_dataset ({two_hands:g}) {done}/{total}, {seconds:.0f} s", file=sys.stderr,
-                  flush=True)
-
     doc = render_dataset(DatasetOptions(str(model), str(out), count=frames, textures=str(textures),
-                                        accessories=str(accessories), resume=False, progress=progress,
+                                        accessories=str(accessories), resume=False,
+                                        progress=progress_printer(f"two_hand_dataset ({two_hands:g})"),
                                         plan=PlanOptions(two_hands=two_hands)))
     t = doc["timings"]
     return {k: t.get(k) for k in ("images_per_second", "overall_images_per_second", "ms_per_image",

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import tempfile
-import time
 from pathlib import Path
 
 REPEATS = 3
@@ -19,13 +18,10 @@ REPEATS = 3
 
 def _time_export(dataset: Path, frames: int) -> dict:
     """{ms_per_frame, annotation_bytes_per_frame, image_bytes_per_frame}: the best of REPEATS exports."""
+    from benchmarks.writer_coco import best_seconds
     from darthand.dataset.interhand import write_interhand
 
-    best = float("inf")
-    for _ in range(REPEATS):
-        t0 = time.perf_counter()
-        out = write_interhand(dataset, dataset / "interhand")
-        best = min(best, time.perf_counter() - t0)
+    best, out = best_seconds(lambda: write_interhand(dataset, dataset / "interhand"), REPEATS)
     notes = sum(p.stat().st_size for p in (out / "annotations").rglob("*.json"))
     images = sum(p.stat().st_size for p in (out / "images").rglob("*.jpg"))
     return {"ms_per_frame": round(1000 * best / frames, 3), "annotation_bytes_per_frame": round(notes / frames),

@@ -265,6 +265,7 @@ class Planner:
         u = np.random.default_rng([self.seed, FRAME_STREAM, i]).random(UNIFORMS)
         side = self.sides[_choose(u[SIDE], len(self.sides))]
         pose, pose_record = self.poses.sample(self.seed, i)
+        sampled = pose                                       # the right hand's pose (a two-hand frame's too)
         gesture = pose if isinstance(pose, str) else pose_record["reference"].get("name") \
             if pose_record["mode"] == "jitter" else None
         if not isinstance(pose, str):
@@ -302,14 +303,14 @@ class Planner:
         if self.pairs is not None:
             u2 = np.random.default_rng([self.seed, TWO_HANDS_STREAM, i]).random(2)
             if u2[0] < self.two_hands:
-                return self._two_hand_job(job, u2[1])
+                return self._two_hand_job(job, u2[1], sampled)
         return job
 
-    def _two_hand_job(self, job: dict, u: float) -> dict:
-        """A one-hand job made the frame's two-hand job: the contract's `bodies` form and its interaction record."""
+    def _two_hand_job(self, job: dict, u: float, pose) -> dict:
+        """A one-hand job made the frame's two-hand job (pose: the frame's sampled right-hand pose): the `bodies` form
+        and its interaction record."""
         assert self.pairs is not None
         i = job["index"]
-        pose, _ = self.poses.sample(self.seed, i)
         pair = self.pairs.sample(self.seed, i, u, np.asarray(pose, np.float64), job.get("betas"), job["accessory"],
                                  job["side"])
         bodies = []
