@@ -286,22 +286,6 @@ def level_of_detail(levels: list[np.ndarray], angle_deg: np.ndarray) -> np.ndarr
     return np.clip(np.log2(np.maximum(angle_deg, finest) / finest), 0, len(levels) - 1)
 
 
-def lookup_blurred(levels: list[np.ndarray], d: np.ndarray, angle_deg: np.ndarray | float) -> np.ndarray:
-    """(N, 3) float64 radiance of the map along lookup directions d (N, 3), blurred over about `angle_deg` (N,) or
-    a scalar: trilinear between the mip levels whose texels span the angle."""
-    lod = level_of_detail(levels, np.broadcast_to(np.asarray(angle_deg, np.float64), (len(d),)))
-    lo = np.floor(lod).astype(np.int64)
-    out = np.zeros((len(d), 3))
-    for k in np.unique(lo):
-        at = np.flatnonzero(lo == k)
-        frac = (lod[at] - k)[:, None]
-        value = bilinear(levels[k], d[at])
-        if k + 1 < len(levels) and frac.any():
-            value = value * (1 - frac) + bilinear(levels[k + 1], d[at]) * frac
-        out[at] = value
-    return out
-
-
 @dataclass(frozen=True)
 class PackedLevels:
     """Mip levels (H_l, 2 H_l, 3) packed for one compiled lookup: texels (T, 3) float32, every level's rows one
@@ -322,9 +306,10 @@ def pack_levels(levels: list[np.ndarray]) -> PackedLevels:
 
 def lookup_blurred_many(packed: PackedLevels, d: np.ndarray, angle_deg: np.ndarray, scale=(1.0, 1.0, 1.0),
                         dtype=np.float64) -> np.ndarray:
-    """(K, 3, N) `dtype`: lookup_blurred of the packed levels along directions d (N, 3) at each row of blur angles
-    angle_deg (K, N) degrees, times a colour scale (3,) (in float64, then rounded to dtype), in one compiled pass (a
-    direction's map coordinates found once for its K angles)."""
+    """(K, 3, N) `dtype`: the map blurred (trilinear between the mip levels whose texels span the angle) from the packed
+    levels along directions d (N, 3) at each row of blur angles angle_deg (K, N) degrees, times a colour scale
+    (3,) (in float64, then rounded to dtype), in one compiled pass (a direction's map coordinates found once for
+    its K angles)."""
     d = np.ascontiguousarray(d, np.float64)
     angles = np.broadcast_to(np.asarray(angle_deg, np.float64), (len(angle_deg), len(d)))
     finest = 360.0 / (2 * float(packed.heights[0]))
@@ -337,7 +322,7 @@ def lookup_blurred_many(packed: PackedLevels, d: np.ndarray, angle_deg: np.ndarr
 
 @kernel(error_model="numpy")
 def _blurred_kernel(texels, offsets, heights, d, lods, scale, out):
-    """out[k, :, i] = scale (3,) x the lookup_blurred value of direction d[i] (N, 3) float64 at fractional mip level
+    """out[k, :, i] = scale (3,) x the blurred value of direction d[i] (N, 3) float64 at fractional mip level
     lods[k, i] (K, N) float64 in [0, L - 1] over packed levels (texels (T, 3) float32, offsets, heights (L,) int64;
     level l is heights[l] x 2 heights[l]): bilinear in its two levels (as _lookup_kernel) and linear between them,
     in float64, rounded once to out's dtype."""
