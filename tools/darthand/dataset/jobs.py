@@ -15,7 +15,7 @@ from darthand.fileio import atomic_path, read_json
 from darthand.model.preview import VIEWS
 from darthand.render.lights import load_lighting
 from darthand.render.poses import resolve_pose
-from darthand.render.scenes import BODIES, HAND_FIELDS, HandBody, rigid_error
+from darthand.render.scenes import BODIES, BODY_KINDS, HAND_FIELDS, HandBody, ObjectBody, rigid_error
 from darthand.schemas import check_schema
 
 JOBS_SCHEMA = "dataset_jobs.schema.json"
@@ -98,8 +98,14 @@ def check_jobs(doc, source: str = "jobs") -> list[dict]:
 
 
 def job_hands(job: dict) -> list[dict]:
-    """The hand fields of a job: its `bodies` items (a two-hand job), or the job itself (a one-hand job)."""
-    return list(job[BODIES]) if BODIES in job else [job]
+    """The hand fields of a job: its `bodies` items of kind 'hand' (a two-hand or object job), or the job itself (a
+    one-hand job)."""
+    return [b for b in job[BODIES] if b.get("kind") == HandBody.kind] if BODIES in job else [job]
+
+
+def job_objects(job: dict) -> list[dict]:
+    """The `bodies` items of kind 'object' of a job (none for a one-hand job)."""
+    return [b for b in job.get(BODIES) or () if b.get("kind") == ObjectBody.kind]
 
 
 def job_sides(job: dict, default: str) -> list[str]:
@@ -116,9 +122,9 @@ def _check_bodies(job: dict, where: str) -> None:
     for b, item in enumerate(job[BODIES]):
         if not isinstance(item, dict):
             continue
-        if item.get("kind") != HandBody.kind:
+        if item.get("kind") not in BODY_KINDS:
             raise InputError(f"{where}.bodies.{b}.kind' {item.get('kind')!r} is not a body kind (known: "
-                             f"{HandBody.kind})")
+                             f"{', '.join(BODY_KINDS)})")
         if item.get("placement") is not None:
             why = rigid_error(item["placement"])
             if why:

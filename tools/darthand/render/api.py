@@ -32,6 +32,7 @@ from darthand.render.image import compose, encode_mask8, load_background, write_
 from darthand.render.indirect import VertexLight
 from darthand.render.labels import frame_labels, group_labels
 from darthand.render.lights import Lighting, load_lighting, world_lights
+from darthand.render.objects import ObjectLibrary
 from darthand.render.scene import Scene as TraceScene, scene_for
 from darthand.render.scenes import Scene
 from darthand.render.shade import ShadingOptions
@@ -73,10 +74,13 @@ class Frame:
 
 class Renderer:
     """Renders frames of one source (assets.HandAssets or usd_source.UsdPackage), keeping what does not change.
-    sources: {side: source} of the other hands a scene may hold (render_scene; `source` is its side's)."""
+    sources: {side: source} of the other hands a scene may hold (render_scene; `source` is its side's). objects: the
+    object catalogue a scene's held objects come from (render/objects.ObjectLibrary, or a catalogue path; None:
+    none)."""
 
-    def __init__(self, source, threads: int | None = None, sources: dict | None = None):
+    def __init__(self, source, threads: int | None = None, sources: dict | None = None, objects=None):
         self.source = source
+        self.objects = objects if objects is None or isinstance(objects, ObjectLibrary) else ObjectLibrary.load(objects)
         self.sources = {**(sources or {}), source.side: source}
         self.threads = default_threads() if threads is None else max(1, int(threads))
         self._scene: TraceScene | None = None
@@ -145,7 +149,7 @@ class Renderer:
             timings: dict = {}
             t = time.perf_counter()
             subject, cam = pose_group(scene, self.sources, self.source.side, self._dresser, geometry,
-                                      camera=scene.camera or "three_quarter", **framing)
+                                      camera=scene.camera or "three_quarter", objects=self.objects, **framing)
             timings["pose"] = _lap(t)
             self._scene = trace_scene = scene_for(subject, self._scene)
             prepared = (subject, trace_scene, cam, self._lighting(scene.lights), timings)

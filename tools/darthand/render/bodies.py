@@ -1,5 +1,7 @@
 """A frame of several hands: each body of a scene posed by its side's source, moved by its placement into the
 scene's world, dressed, and joined into one Subject (its `members`) that the renderer draws as it draws one hand.
+An object body (a held object) is drawn by render/objects.py at its placement (the Subject's `objects`, their
+surfaces after the hands').
 
 A body's placement P (4, 4 rigid) maps its model frame to the world: posed vertices, normals, joints and keypoints
 are moved by it, a rigid accessory's transform G becomes P G (its local mesh, and so its ray-tracing structure,
@@ -21,6 +23,7 @@ from darthand.model.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from darthand.render.camera import Camera, load_camera
 from darthand.render.dress import Dresser, GeometryOptions
 from darthand.render.poses import resolve_pose
+from darthand.render.objects import ObjectLibrary
 from darthand.render.scenes import HandBody, Scene
 from darthand.render.subject import Subject, Surface
 
@@ -82,33 +85,50 @@ def model_pose(subject: Subject) -> np.ndarray:
     return pose
 
 
-def group_subject(members: tuple) -> Subject:
-    """One Subject drawing all `members` (placed subjects): their surfaces in order, framed on all of them, labelled
-    on their labelled surfaces when any is subdivided, with the first member's one-hand fields."""
+def group_subject(members: tuple, objects: tuple = ()) -> Subject:
+    """One Subject drawing all `members` (placed subjects) and `objects` (render/objects.HeldObject): their surfaces
+    in order, framed on all of them, labelled on their labelled surfaces when any is subdivided, with the first
+    member's one-hand fields."""
     first = members[0]
     labelled = None
     if any(m.labelled is not None for m in members):
-        labelled = group_subject(tuple(m.labelled or m for m in members))
+        labelled = group_subject(tuple(m.labelled or m for m in members), objects)
     info = {"source": first.info.get("source"),
             **({"geometry": first.info["geometry"]} if first.info.get("geometry") else {})}
-    return Subject(tuple(s for m in members for s in m.surfaces), first.joints, first.keypoints, first.side,
-                   first.pose, first.keypoint_order, info, first.hand_vertices,
-                   np.concatenate([m.framing_points() for m in members]), labelled, tuple(members))
+    framing = [m.framing_points() for m in members] + [s.vertices for o in objects for s in o.surfaces]
+    return Subject(tuple(s for m in members for s in m.surfaces) + tuple(s for o in objects for s in o.surfaces),
+                   first.joints, first.keypoints, first.side, first.pose, first.keypoint_order, info,
+                   first.hand_vertices, np.concatenate(framing), labelled, tuple(members), tuple(objects))
 
 
 def pose_group(scene: Scene, sources: dict, default_side: str, dresser: Dresser, geometry: GeometryOptions, *,
-               camera, width: int, height: int, keypoint_order: str) -> tuple[Subject, Camera]:
-    """(the group's Subject, its camera) of a scene of hands: each posed by sources[side] (default_side for a body
-    without one), placed, the camera framed on all of them, then each dressed as `geometry` says."""
+               camera, width: int, height: int, keypoint_order: str,
+               objects: ObjectLibrary | None = None) -> tuple[Subject, Camera]:
+    """(the group's Subject, its camera) of a scene of hands and objects: each hand posed by sources[side]
+    (default_side for a body without one), placed, each object drawn from `objects` at its placement, the camera
+    framed on all of them, then each hand dressed as `geometry` says."""
+    held = placed_objects(scene, objects)
     members = []
-    for body in scene.bodies:
+    for body in scene.hands:
         side = body.side or default_side
         if side not in sources:
             raise InputError(f"scene: no source for the {side} hand (sides: {', '.join(sources)})")
         members.append(placed(posed_hand(sources[side], body, keypoint_order=keypoint_order, arm=geometry.arm),
                               body.placement_matrix()))
-    points = np.concatenate([m.framing_points() for m in members])
+    if not members:
+        raise InputError("scene: an object needs a hand to hold it (a scene's bodies hold at least one hand)")
+    points = np.concatenate([m.framing_points() for m in members] + [s.vertices for o in held for s in o.surfaces])
     cam = load_camera(camera, points, width=width, height=height, side=members[0].side)
     if not geometry.is_default:
         members = [dresser.dress(m, cam, geometry) for m in members]
-    return group_subject(tuple(members)), cam
+    return group_subject(tuple(members), held), cam
+
+
+def placed_objects(scene: Scene, objects: ObjectLibrary | None) -> tuple:
+    """The scene's object bodies drawn from the library `objects` at their placements (InputError when the scene
+    holds an object and the renderer was given no object catalogue)."""
+    if not scene.objects:
+        return ()
+    if objects is None:
+        raise InputError(f"scene: object {scene.objects[0].object!r} needs an object catalogue (--objects-catalog)")
+    return tuple(objects.placed(body.object, body.placement_matrix()) for body in scene.objects)

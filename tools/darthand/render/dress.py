@@ -106,8 +106,9 @@ def model_coverage(alpha: np.ndarray, geom: np.ndarray, surfaces: tuple) -> np.n
     """(H, W) float32 the coverage `alpha` (H, W) of the model's surfaces alone (hand, its cut's cap, accessory):
     the pixels whose centre ray hit an arm surface (render/arm.py, `geom` (H, W) the surface index) left out, and
     the background-centred edge pixels kept only beside a pixel of the model. The mask, bbox and coverage then mean
-    what they meant before the arm (`alpha` itself, without an arm)."""
-    arm = [i for i, s in enumerate(surfaces) if s.name in (ARM, ARM_END)]
+    what they meant before the arm (`alpha` itself, without an arm). A held object's pixels (role 'object') are
+    left out likewise: the mask is the hand's (the object's is in the instance map)."""
+    arm = [i for i, s in enumerate(surfaces) if s.name in (ARM, ARM_END) or s.role == "object"]
     if not arm:
         return alpha
     model = (geom >= 0) & ~np.isin(geom, arm)

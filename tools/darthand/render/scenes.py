@@ -1,8 +1,8 @@
 """What one frame shows, as data: the scene model the renderer and the dataset stage share.
 
 A `Scene` is a tuple of bodies (one or two `HandBody`s: a skinned hand with its pose, shape, side, appearance, the
-accessory it wears and its placement), the camera, the lights and the background, plus `record`: what the frame's
-labels carry that nothing in the scene draws (the frame index, the gesture's name, the split, the sampling record).
+accessory it wears and its placement; an `ObjectBody`: a catalogue object and its placement), the camera, the
+lights and the background, plus `record`: what the frame's labels carry that nothing in the scene draws (the frame index, the gesture's name, the split, the sampling record).
 The dataset's jobs (schemas/dataset_jobs.schema.json) are its serialised form: `Scene.from_job(job).to_job() ==
 job` for every job a plan writes, so a frame's digest and files do not depend on which of the two a stage holds. A
 job holds either one hand's fields at its top level or a `bodies` list (one item per body, with its `kind`), never
@@ -83,7 +83,40 @@ class HandBody:
         return {"kind": self.kind, **{k: v for k, v in values.items() if k in self.given}}
 
 
-Body = HandBody            # the union of body kinds, one today
+@dataclass(frozen=True)
+class ObjectBody:
+    """One rigid object of an object catalogue (objects/loader.py), drawn by render/objects.py.
+
+    object: its catalogue id. placement: (4, 4) rigid, row-major, from the object's frame into the world (None:
+    the identity); a held object's is the grasp's, with its hand at the identity.
+    """
+
+    kind: ClassVar[str] = "object"
+
+    object: str
+    placement: tuple | None = None
+    given: frozenset = field(default=frozenset(), compare=False)
+
+    def placement_matrix(self) -> np.ndarray:
+        """(4, 4) float64 the rigid transform from the object's frame into the world (the identity for None)."""
+        return np.eye(4) if self.placement is None else np.asarray(self.placement, np.float64)
+
+    @classmethod
+    def from_item(cls, item: dict) -> "ObjectBody":
+        """The object of one `bodies` item of a job (its 'kind' is 'object')."""
+        placement = item.get("placement")
+        return cls(item["object"], None if placement is None else tuple(tuple(row) for row in placement),
+                   frozenset(k for k in item if k != "kind"))
+
+    def to_item(self) -> dict:
+        """Its `bodies` item: kind first, then the fields it was read from."""
+        values = {"object": self.object,
+                  "placement": None if self.placement is None else [list(row) for row in self.placement]}
+        return {"kind": self.kind, **{k: v for k, v in values.items() if k in self.given}}
+
+
+Body = Union[HandBody, ObjectBody]          # the body kinds
+BODY_KINDS = {HandBody.kind: HandBody, ObjectBody.kind: ObjectBody}
 
 
 def _hand_values(fields: dict) -> dict:
@@ -137,7 +170,11 @@ class Scene:
 
     @property
     def hands(self) -> tuple:
-        return tuple(b for b in self.bodies if b.kind == "hand")
+        return tuple(b for b in self.bodies if b.kind == HandBody.kind)
+
+    @property
+    def objects(self) -> tuple:
+        return tuple(b for b in self.bodies if b.kind == ObjectBody.kind)
 
     def single_hand(self) -> HandBody:
         """The scene's one hand, for code that draws one (the Cycles tier, the studio); InputError for a scene of no
@@ -173,6 +210,7 @@ class Scene:
 
 def _body_of_item(item: dict) -> Body:
     """The body of one `bodies` item, by its kind (InputError for a kind this version does not know)."""
-    if item.get("kind") != HandBody.kind:
-        raise InputError(f"bodies: unknown body kind {item.get('kind')!r} (known: {HandBody.kind})")
-    return HandBody.from_item(item)
+    kind = BODY_KINDS.get(item.get("kind"))  # type: ignore[arg-type]
+    if kind is None:
+        raise InputError(f"bodies: unknown body kind {item.get('kind')!r} (known: {', '.join(BODY_KINDS)})")
+    return kind.from_item(item)

@@ -102,6 +102,7 @@ class Subject:
     (the unsubdivided one, so the labels are the plain frame's; None: this one). members: for a frame of several
     hands (render/bodies.py), each hand's own placed Subject in the scene's bodies order; its surfaces are theirs
     concatenated in that order, and its one-hand fields (joints, keypoints, side, pose) the first's. () for one hand.
+    objects: the held objects of such a frame (render/objects.HeldObject), their surfaces after the members'.
     """
 
     surfaces: tuple
@@ -115,6 +116,7 @@ class Subject:
     framing: np.ndarray | None = None
     labelled: Subject | None = None
     members: tuple = ()
+    objects: tuple = ()
 
     @property
     def hand(self) -> Surface:
