@@ -2,10 +2,10 @@
 
 A `Scene` is a tuple of bodies (one or two `HandBody`s: a skinned hand with its pose, shape, side, appearance, the
 accessory it wears and its placement; an `ObjectBody`: a catalogue object and its placement), the camera, the
-lights and the background, plus `record`: what the frame's labels carry that nothing in the scene draws (the frame index, the gesture's name, the split, the sampling record).
-The dataset's jobs (schemas/dataset_jobs.schema.json) are its serialised form: `Scene.from_job(job).to_job() ==
-job` for every job a plan writes, so a frame's digest and files do not depend on which of the two a stage holds. A
-job holds either one hand's fields at its top level or a `bodies` list (one item per body, with its `kind`), never
+lights and the background, plus `record`: what the frame's labels carry that nothing in the scene draws (the frame
+index, the gesture's name, the split, the sampling record). The dataset's jobs (schemas/dataset_jobs.schema.json)
+are its serialised form: `Scene.from_job(job).to_job() == job` for every job a plan writes, so a frame's digest and
+files do not depend on which of the two a stage holds. A job holds either one hand's fields at its top level or a `bodies` list (one item per body, with its `kind`), never
 both.
 
 Adding a kind of body (a second hand, an object held) adds a dataclass here with its `kind`, its job fields and its
