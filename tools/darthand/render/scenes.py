@@ -5,8 +5,8 @@ accessory it wears and its placement; an `ObjectBody`: a catalogue object and it
 lights and the background, plus `record`: what the frame's labels carry that nothing in the scene draws (the frame
 index, the gesture's name, the split, the sampling record). The dataset's jobs (schemas/dataset_jobs.schema.json)
 are its serialised form: `Scene.from_job(job).to_job() == job` for every job a plan writes, so a frame's digest and
-files do not depend on which of the two a stage holds. A job holds either one hand's fields at its top level or a `bodies` list (one item per body, with its `kind`), never
-both.
+files do not depend on which of the two a stage holds. A job holds either one hand's fields at its top level or a
+`bodies` list (one item per body, with its `kind`), never both.
 
 Adding a kind of body (a second hand, an object held) adds a dataclass here with its `kind`, its job fields and its
 place in `bodies`; code that draws one hand only asks `Scene.single_hand`, which refuses others in one line (the
