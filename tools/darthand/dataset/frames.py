@@ -14,6 +14,12 @@ hand_type and the job's interaction record), meshes/<n>.npy (B, V, 3) (each hand
 
     instances/<n>.png  8-bit: 0 background, 1 + 2b hand b, 2 + 2b hand b's accessory (render/labels.instance_map)
 
+A frame with a held object (a job's `bodies` with an object item, render/objects.py) is such a frame (its object id
+3 in the instance map beside one hand, its labels in labels.objects with the job's grasp record) and writes:
+
+    object_meshes/<n>.npy  (N, 3) float32 the object's closed mesh in the camera frame, metres (the catalogue's
+                     vertex order; its faces are the catalogue's)
+
 <n> is the frame index zero-padded to MIN_DIGITS digits (more when larger), so names depend on nothing else.
 """
 
@@ -30,7 +36,7 @@ import numpy as np
 from darthand.dataset.backgrounds import background_pixels
 from darthand.dataset.environments import match_background
 from darthand.dataset.film import frame_film
-from darthand.dataset.jobs import job_hands
+from darthand.dataset.jobs import job_hands, job_objects
 from darthand.errors import InputError
 from darthand.fileio import atomic_path
 from darthand.model.shape import shaped_vertices
@@ -48,28 +54,37 @@ from darthand.template.anthropometry import hand_sizes
 MIN_DIGITS = 6
 KINDS = ("image", "mask", "labels", "vertices")      # the files of every frame; truth maps add their kinds
 INSTANCES = "instances"
+OBJECT_MESHES = "object_meshes"
 RING_WEAR = 1             # version of how a ring frame wears its ring (accessories/wear.py), in its digest
 
 
-def frame_names(index: int, maps: tuple = (), instances: bool = False) -> dict:
+def frame_names(index: int, maps: tuple = (), instances: bool = False, objects: bool = False) -> dict:
     """Names (relative to the dataset folder) of frame `index`'s files, by kind; maps: the truth maps' kinds the
-    run writes (render/truth.KINDS), each maps/<kind>/<n>.png; instances: a frame of several hands' instance map."""
+    run writes (render/truth.KINDS), each maps/<kind>/<n>.png; instances: a frame of several hands' instance map;
+    objects: a frame with a held object's mesh."""
     n = f"{int(index):0{MIN_DIGITS}d}"
     return {"image": f"images/{n}.png", "mask": f"masks/{n}.png", "labels": f"labels/{n}.json",
             "vertices": f"meshes/{n}.npy", **{kind: f"maps/{kind}/{n}.png" for kind in maps},
-            **({INSTANCES: f"instances/{n}.png"} if instances else {})}
+            **({INSTANCES: f"instances/{n}.png"} if instances else {}),
+            **({OBJECT_MESHES: f"object_meshes/{n}.npy"} if objects else {})}
 
 
-def write_order(maps: tuple = (), instances: bool = False) -> tuple:
+def write_order(maps: tuple = (), instances: bool = False, objects: bool = False) -> tuple:
     """The kinds of a frame's files in the order they are written: the labels last (a frame is whole once its
     labels exist)."""
-    return ("vertices", *maps, *((INSTANCES,) if instances else ()), "image", "mask", "labels")
+    return ("vertices", *maps, *((INSTANCES,) if instances else ()), *((OBJECT_MESHES,) if objects else ()),
+            "image", "mask", "labels")
 
 
 def group_job(job: dict) -> bool:
     """Whether a job's frame is one of several hands (its scene drawn by render/bodies.py: labels per hand, an
     instance map)."""
     return is_group(Scene.from_job(job))
+
+
+def object_job(job: dict) -> bool:
+    """Whether a job's frame holds an object (it writes the object's mesh)."""
+    return bool(job_objects(job))
 
 
 def job_digest(job: dict, settings: dict) -> str:
@@ -171,11 +186,15 @@ def group_dataset_labels(frame, job: dict, digest: str, sources: dict, backgroun
     composed with the camera) and its ring's wear; the job's interaction record; the sampling record per hand."""
     labels = frame.labels
     maps = tuple(frame.maps)
-    names = frame_names(job["index"], maps, instances=True)
+    names = frame_names(job["index"], maps, instances=True, objects=bool(frame.subject.objects))
     labels["render"] = {**labels.get("render", {}), "dataset": {"frame": job["index"], "job_sha256": digest},
                         **({"background": background} if background is not None else {})}
     labels["files"] = {**labels.get("files", {}), **{kind: "../" + names[kind] for kind in
-                                                     ("vertices", INSTANCES, *maps)}}
+                                                     ("vertices", INSTANCES, *maps)},
+                       **({OBJECT_MESHES: "../" + names[OBJECT_MESHES]} if frame.subject.objects else {})}
+    for entry in labels.get("objects", ()):
+        grasp = job.get("grasp") or {}
+        entry["grasp"] = {"type": grasp.get("type"), "id": grasp.get("id")}
     if maps:
         labels["maps"] = truth.describe(maps, {kind: "../" + names[kind] for kind in maps})
     if job.get("interaction") is not None:
@@ -241,7 +260,8 @@ def write_dataset_frame(frame, job: dict, digest: str, out_dir, source, backgrou
 
 def _write_group_frame(frame, job: dict, digest: str, out_dir, sources: dict, background: dict | None) -> dict:
     """write_dataset_frame of a frame of several hands: meshes (B, V, 3), the instance map, then as one hand's."""
-    names = frame_names(job["index"], tuple(frame.maps), instances=True)
+    objects = frame.subject.objects
+    names = frame_names(job["index"], tuple(frame.maps), instances=True, objects=bool(objects))
     labels = group_dataset_labels(frame, job, digest, sources, background)
     counts = {len(m.hand_vertices) for m in frame.subject.members}
     if len(counts) != 1:
@@ -254,8 +274,17 @@ def _write_group_frame(frame, job: dict, digest: str, out_dir, sources: dict, ba
         np.save(f, vertices)
     truth.write_truth_maps(frame.maps, {kind: out / names[kind] for kind in frame.maps})
     write_png(out / names[INSTANCES], instance_map(frame.geom, frame.subject), srgb=False)
+    if objects:
+        write_object_mesh(out / names[OBJECT_MESHES], objects[0], frame.camera)
     write_frame(frame, out_dir, names={k: names[k] for k in ("image", "mask", "labels")})
     return summary(job, labels)
+
+
+def write_object_mesh(path: Path, held, camera) -> None:
+    """object_meshes/<n>.npy: a held object's (render/objects.HeldObject) closed mesh, camera frame, float32."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.save(f, camera.to_camera(held.vertices()).astype(np.float32))
 
 
 def summary(job: dict, labels: dict) -> dict:
@@ -293,7 +322,7 @@ def _group_summary(job: dict, labels: dict) -> dict:
 def existing_frame(out: Path, job: dict, digest: str, maps: tuple = ()) -> dict | None:
     """The summary of a frame already rendered from this job (all its files present, the truth maps' of `maps`
     too, a frame of several hands' instance map, its labels carrying the job's digest), or None."""
-    names = frame_names(job["index"], maps, group_job(job))
+    names = frame_names(job["index"], maps, group_job(job), object_job(job))
     if not all((out / n).is_file() for n in names.values()):
         return None
     try:

@@ -14,6 +14,7 @@ from darthand.errors import InputError
 from darthand.fileio import atomic_path, read_json
 from darthand.model.preview import VIEWS
 from darthand.render.lights import load_lighting
+from darthand.render.object_contacts import object_contacts
 from darthand.render.poses import resolve_pose
 from darthand.render.scenes import BODIES, BODY_KINDS, HAND_FIELDS, HandBody, ObjectBody, rigid_error
 from darthand.schemas import check_schema
@@ -144,10 +145,11 @@ def _check_finite(value, where: str) -> None:
             _check_finite(v, f"{where}.{k}")
 
 
-def validate_jobs(sources: dict, jobs: list[dict], where: str = "jobs") -> None:
+def validate_jobs(sources: dict, jobs: list[dict], where: str = "jobs", objects=None) -> None:
     """InputError (naming the frame and field) for what the sources ({side: source}) cannot render: a side without a
     source, unknown texture, accessory or gesture ids, poses a USD package cannot take, bad camera, lights or
-    background documents. Runs before any rendering."""
+    background documents, an object not in the object catalogue `objects` (render/objects.ObjectLibrary; None: no
+    catalogue) or a hand passing into its object. Runs before any rendering."""
     checked_lights: set = set()
     checked_folders: set = set()
     known = {}
@@ -162,6 +164,8 @@ def validate_jobs(sources: dict, jobs: list[dict], where: str = "jobs") -> None:
         _check_scene(job, at, checked_lights, checked_folders)
         if len(job_hands(job)) == 2:
             _check_hands_apart(job_hands(job), known, default_side, at)
+        for item in job_objects(job):
+            _check_object(item, job_hands(job), objects, known, default_side, at)
 
 
 def _check_hand(job: dict, known: dict, default_side: str, at: str) -> None:
@@ -209,6 +213,31 @@ def _check_hands_apart(hands: list[dict], known: dict, default_side: str, at: st
     if found.max_m > PASS_THROUGH_M:
         raise InputError(f"{at}: the two hands pass through each other ({1000 * found.max_m:.1f} mm deep, "
                          f"{found.crossing_faces} faces crossing): move the left hand's placement")
+
+
+def _check_object(item: dict, hands: list[dict], objects, known: dict, default_side: str, at: str) -> None:
+    """InputError when a job's object is not in the catalogue `objects` (render/objects.ObjectLibrary, None: no
+    catalogue) or a hand, posed by its side's model, passes into it deeper than PASS_THROUGH_M (hands of a USD
+    package are not measured)."""
+    # Imported here: posing hands for the measure loads MeshLab, which only jobs with objects need.
+    from darthand.model.hand_pair import pose_hand
+
+    if objects is None:
+        raise InputError(f"{at}: object {item['object']!r} needs an object catalogue (--objects-catalog)")
+    if item["object"] not in objects.items:
+        raise InputError(f"{at}: object {item['object']!r} is not in the object catalogue")
+    placement = np.eye(4) if item.get("placement") is None else np.asarray(item["placement"], np.float64)
+    for hand in hands:
+        model = known[hand.get("side") or default_side][3]
+        if model is None:
+            continue
+        pose, _ = resolve_pose(model, hand.get("pose"), int(hand.get("pose_index") or 0))
+        P = hand.get("placement")
+        posed = pose_hand(model, pose, hand.get("betas"), None if P is None else np.asarray(P, np.float64))
+        depth = object_contacts(posed.vertices, objects.item(item["object"]), placement).penetration_max_m
+        if depth > PASS_THROUGH_M:
+            raise InputError(f"{at}: the {hand.get('side') or default_side} hand passes into object "
+                             f"{item['object']!r} ({1000 * depth:.1f} mm deep): move the object's placement")
 
 
 def _check_scene(job: dict, at: str, checked_lights: set, checked_folders: set) -> None:

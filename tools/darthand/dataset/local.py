@@ -19,11 +19,12 @@ import time
 from concurrent.futures import Future, ProcessPoolExecutor
 
 from darthand.dataset.frames import frame_error, render_job, write_dataset_frame
-from darthand.dataset.jobs import job_sides
+from darthand.dataset.jobs import job_objects, job_sides
 from darthand.dataset.runner import Runner
 from darthand.errors import InputError
 from darthand.processes import deaf_to_ctrl_c, init_worker
 from darthand.render.api import Renderer
+from darthand.render.objects import ObjectLibrary
 
 # The worker's state: set by _init_worker (spawned processes) or LocalRunner (in-process); renderers opened on use.
 _STATE: dict = {}
@@ -59,6 +60,10 @@ def job_renderer(job: dict, default_side: str):
     renderer = worker_renderer(sides[0])
     for side in sides[1:]:
         renderer.sources.setdefault(side, worker_renderer(side).source)
+    if renderer.objects is None and job_objects(job):
+        if "objects" not in _STATE:
+            _STATE["objects"] = ObjectLibrary.load(_STATE["settings"]["objects"])
+        renderer.objects = _STATE["objects"]
     return renderer
 
 

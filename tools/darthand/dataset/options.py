@@ -69,7 +69,9 @@ class DatasetOptions:
 
     package: a USD package folder or .usda, a model (.npz, .pkl, 'open', 'right'/'left': build/model/<side>.npz);
         textures, accessories: catalogue files or folders (default: the build's beside the model); model: a USD
-        package's model, for its fingertip ids.
+        package's model, for its fingertip ids. objects_catalog: the object catalogue held objects come from
+        (catalog.json or its folder; None: build/objects/catalog.json beside the model's build), read only when a
+        frame holds an object.
     out: the output folder (dataset/run.py's layout).
     The frames: `jobs` (a jobs file or a list of job dicts, schemas/dataset_jobs.schema.json), else frames
         start .. start + count - 1 of `plan`.
@@ -101,6 +103,7 @@ class DatasetOptions:
     textures: str | None = None
     accessories: str | None = None
     model: str | None = None
+    objects_catalog: str | None = None
     size: int = DEFAULT_SIZE
     samples: int = DEFAULT_SAMPLES
     aa_shading: str = "triangle"

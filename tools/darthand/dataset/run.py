@@ -33,6 +33,7 @@ import numpy as np
 
 from darthand.dataset.frames import existing_frame, frame_names, job_digest
 from darthand.dataset.jobs import check_jobs, load_jobs, validate_jobs
+from darthand.dataset.objects import jobs_objects, objects_catalog
 from darthand.dataset.options import MAX_SIZE, DatasetOptions, bounded_int
 from darthand.dataset.runner import Runner, make_runner
 from darthand.errors import InputError
@@ -85,7 +86,7 @@ def render_frames(options: DatasetOptions, sources: dict, specs: dict, planner=N
             jobs = load_jobs(jobs)
         else:
             jobs = check_jobs(list(jobs or []))
-        validate_jobs(sources, jobs)
+        validate_jobs(sources, jobs, objects=jobs_objects(jobs, objects_catalog(o)))
         total = len(jobs)
         shards = [jobs[k:k + shard_size] for k in range(0, total, shard_size)]
     else:
@@ -102,7 +103,8 @@ def render_frames(options: DatasetOptions, sources: dict, specs: dict, planner=N
     _prepare_folders(out, maps)
     settings = {"out_dir": str(out), "size": size, "samples": int(samples), "aa_shading": aa_shading,
                 "shading": shading, "maps": maps, "film": film_setting(o.film),
-                **({"engine": engine} if engine else {}), **({"geometry": geometry} if geometry else {})}
+                **({"engine": engine} if engine else {}), **({"geometry": geometry} if geometry else {}),
+                "objects": objects_catalog(o)}
     stats = RunStats(t_start)
     report = _progress_printer(stats) if o.progress is True else (o.progress or None)
     runner = make_runner(cluster, specs, settings, sources, workers, threads, total)

@@ -15,6 +15,11 @@ several hands (`group_labels`), a hand's own part is among its own surfaces only
 A frame of several hands (render/bodies.py) has the scene's fields at the top level and each hand's in `hands` (in
 the scene's bodies order), with `hand_type` 'interacting' for two hands, per-hand instance ids (INSTANCE_HAND +
 2 b for hand b's skin, INSTANCE_ACCESSORY + 2 b for its accessory: `instance_map`) and contacts (render/contacts.py).
+A frame with held objects (render/objects.py) adds `objects`: each object's id, category, instance id (INSTANCE_HAND
++ 2 B + k for object k of a frame of B hands: 3 beside one hand), pose (object frame -> camera), its bounding box's
+corners (camera frame and pixels), its bbox and visible fraction from the instance map (pixels where it is seen over
+pixels where it is drawn alone), and its contacts with the first hand (render/object_contacts.py). An object
+occludes keypoints as another hand does.
 """
 
 from __future__ import annotations
@@ -26,8 +31,10 @@ from darthand.model.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from darthand.render.arm import ARM, ARM_END
 from darthand.render.camera import Camera
 from darthand.render.contacts import contact_vertices
+from darthand.render.object_contacts import object_contacts
 from darthand.render.scene import Scene
 from darthand.render.subject import Subject
+from darthand.render.trace import pixel_centres
 
 OWN_PART_FACTOR = 2.0
 VISIBILITY_SLACK_M = 0.003
@@ -177,6 +184,8 @@ def group_labels(subject: Subject, camera: Camera, scene: Scene, alpha: np.ndarr
         hands.append(entry)
     labels = {**scene_fields(subject, camera, alpha, files),
               "hand_type": "interacting" if len(members) > 1 else members[0].side, "hands": hands}
+    if subject.objects:
+        labels["objects"] = [object_fields(subject, k, camera, instances) for k in range(len(subject.objects))]
     if extra:
         labels.update(extra)
     return labels
@@ -198,7 +207,60 @@ def instance_map(geom: np.ndarray, subject: Subject) -> np.ndarray:
             surface = subject.surfaces[i]
             kind = INSTANCE_ACCESSORY if surface.role == "accessory" else INSTANCE_HAND
             lookup[i] = 0 if surface.name in (ARM, ARM_END) else kind + 2 * b
+    for k in range(len(subject.objects)):
+        lookup[object_range(subject, k)] = object_instance(subject, k)
     return lookup[np.asarray(geom, np.int64)]
+
+
+def object_instance(subject: Subject, k: int) -> int:
+    """The instance id of held object k: INSTANCE_HAND + 2 B + k for a frame of B hands (3 beside one hand)."""
+    return INSTANCE_HAND + 2 * len(subject.members) + k
+
+
+def object_range(subject: Subject, k: int) -> range:
+    """The indices in subject.surfaces of held object k's surfaces (after all members' surfaces)."""
+    start = sum(len(m.surfaces) for m in subject.members) + sum(len(o.surfaces) for o in subject.objects[:k])
+    return range(start, start + len(subject.objects[k].surfaces))
+
+
+def object_fields(subject: Subject, k: int, camera: Camera, instances: np.ndarray) -> dict:
+    """The labels of held object k (see the module docstring); instances (H, W) the frame's instance map."""
+    held = subject.objects[k]
+    P = held.placement
+    R, t = camera.R @ P[:3, :3], camera.R @ P[:3, 3] + camera.t
+    corners = held.corners()
+    corners_2d, _ = camera.project(corners)
+    instance = object_instance(subject, k)
+    seen = instances == instance
+    drawn = object_pixels_alone(subject, k, camera, corners_2d)
+    hand = subject.members[0].labelled or subject.members[0]
+    found = object_contacts(hand.hand_vertices, held.item, P)
+    return {"id": held.item.id, "category": held.item.category, "instance": instance,
+            "pose": {"R": R.tolist(), "t": t.tolist()},
+            "corners_3d": camera.to_camera(corners).tolist(), "corners_2d": corners_2d.tolist(),
+            "bbox": mask_bbox(seen.astype(np.float32)),
+            "visible_fraction": float(seen.sum() / drawn) if drawn else 0.0,
+            "contacts": {"hand": 0, "hand_vertices": found.hand_vertices.tolist(),
+                         "object_points": found.object_points.tolist()},
+            "penetration_max_mm": round(1000 * found.penetration_max_m, 4)}
+
+
+def object_pixels_alone(subject: Subject, k: int, camera: Camera, corners_2d: np.ndarray) -> int:
+    """How many pixel centres' rays hit held object k with nothing else in the scene (those inside its corners'
+    projected box, clipped to the image; an object reaching behind the camera counts its pixels in the image)."""
+    held = subject.objects[k]
+    if (camera.to_camera(held.corners())[:, 2] <= 0).any():
+        c0, r0, c1, r1 = 0, 0, camera.width, camera.height
+    else:
+        c0, r0 = np.clip(np.floor(corners_2d.min(axis=0)).astype(int), 0, [camera.width, camera.height])
+        c1, r1 = np.clip(np.ceil(corners_2d.max(axis=0)).astype(int), 0, [camera.width, camera.height])
+    if c1 <= c0 or r1 <= r0:
+        return 0
+    uv = pixel_centres(r0, r1, c0, c1)
+    directions = np.ascontiguousarray(camera.directions(uv), np.float32)
+    origins = np.ascontiguousarray(np.broadcast_to(camera.centre, directions.shape), np.float32)
+    alone = Scene(Subject(held.surfaces, subject.joints, subject.keypoints, subject.side, subject.pose))
+    return int((alone.intersect(origins, directions)["primID"] >= 0).sum())
 
 
 def contacts_with(hand: Subject, other: Subject) -> list[int]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -29,7 +30,7 @@ class HeldObject:
     """One placed object of a frame: its catalogue item, placement (4, 4) float64 object frame -> world, and its
     drawn surfaces (one per part, in the world)."""
 
-    item: object
+    item: Any
     placement: np.ndarray
     surfaces: tuple
 
@@ -60,7 +61,7 @@ class ObjectLibrary:
     def load(cls, catalog) -> "ObjectLibrary":
         """The library of an object catalogue (catalog.json or its folder)."""
         # Imported here: the objects stage's loader is needed only by renderers given a catalogue.
-        from darthand.objects.loader import load_object_catalog
+        from darthand.objects.loader import load_object_catalog  # type: ignore[import-not-found]  # until i30-objects merges
 
         path = Path(catalog)
         if not (path / "catalog.json" if path.is_dir() else path).is_file():

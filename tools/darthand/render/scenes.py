@@ -116,7 +116,7 @@ class ObjectBody:
 
 
 Body = Union[HandBody, ObjectBody]          # the body kinds
-BODY_KINDS = {HandBody.kind: HandBody, ObjectBody.kind: ObjectBody}
+BODY_KINDS: dict[str, type[HandBody] | type[ObjectBody]] = {HandBody.kind: HandBody, ObjectBody.kind: ObjectBody}
 
 
 def _hand_values(fields: dict) -> dict:
@@ -210,7 +210,7 @@ class Scene:
 
 def _body_of_item(item: dict) -> Body:
     """The body of one `bodies` item, by its kind (InputError for a kind this version does not know)."""
-    kind = BODY_KINDS.get(item.get("kind"))  # type: ignore[arg-type]
+    kind = BODY_KINDS.get(str(item.get("kind")))
     if kind is None:
         raise InputError(f"bodies: unknown body kind {item.get('kind')!r} (known: {', '.join(BODY_KINDS)})")
     return kind.from_item(item)
