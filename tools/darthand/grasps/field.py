@@ -1,0 +1,96 @@
+"""An object's signed distance field: exact point-to-mesh distances on the object's closed mesh, negative inside.
+
+The nearest point is searched among the faces owning the CANDIDATES surface samples nearest the query point (a
+KD-tree over samples at most SPACING apart on every face, built once per object: a face's centroid alone misleads
+on long thin triangles, a cylinder cap's fan), then found exactly on each candidate (model/proximity's
+closest-point maths). The sign is
+that of the offset against the surface's pseudo-normal at the nearest point: the face normal where that point lies
+inside a face, the area-weighted vertex normals interpolated there when it lies on an edge or a corner (where the
+face normal alone can say "outside" for a point inside a convex corner). The candidate search is exact when some
+candidate holds the nearest point: true for the catalogue's meshes at the distances a hand comes to, measured
+against trimesh's exact `proximity.signed_distance` in tests/grasps/test_field.py.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from darthand.errors import InputError
+from darthand.model.proximity import _closest_barycentric
+from darthand.model.topology import face_normals, vertex_normals
+
+CANDIDATES = 24
+SPACING = 0.004     # m: largest gap between a face's samples
+MAX_SPLIT = 24      # a face is sampled on at most this many steps per edge
+INTERIOR = 1e-6     # barycentric coordinate above which the nearest point lies inside its face
+
+
+class ObjectField:
+    """The signed distance of one object's closed mesh: vertices (N, 3) float64 m, faces (F, 3), object frame."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, name: str = "object"):
+        v = np.asarray(vertices, np.float64)
+        f = np.asarray(faces, np.int64)
+        if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
+            raise InputError(f"{name}: the mesh is not (N, 3) vertices and (F, 3) faces")
+        if not np.isfinite(v).all():
+            raise InputError(f"{name}: the mesh has a non-finite vertex")
+        self.name = name
+        self.vertices, self.faces = v, f
+        self.tris = v[f]
+        self.face_normals = face_normals(v, f)
+        self.vertex_normals = vertex_normals(v, f)
+        samples, self.sample_face = face_samples(self.tris)
+        self.tree = cKDTree(samples)
+        self.k = min(CANDIDATES, len(samples))
+
+    def query(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(signed distance (P,) m, unit gradient (P, 3), nearest surface point (P, 3)) of points (P, 3)."""
+        p = np.asarray(points, np.float64).reshape(-1, 3)
+        _, nearest = self.tree.query(p, k=self.k)
+        cand = self.sample_face[nearest.reshape(len(p), self.k)]
+        bary = _closest_barycentric(self.tris[cand], p[:, None, :])
+        near = np.einsum("pkc,pkcd->pkd", bary, self.tris[cand])
+        dist = np.linalg.norm(near - p[:, None, :], axis=2)
+        best = np.argmin(dist, axis=1)
+        rows = np.arange(len(p))
+        face, b, y, d = cand[rows, best], bary[rows, best], near[rows, best], dist[rows, best]
+        normal = self.pseudo_normals(face, b)
+        offset = p - y
+        sign = np.where(np.einsum("pd,pd->p", offset, normal) < 0, -1.0, 1.0)
+        grad = np.where(d[:, None] > 1e-9, sign[:, None] * offset / np.maximum(d, 1e-12)[:, None], normal)
+        return sign * d, grad, y
+
+    def near(self, points: np.ndarray, reach: float) -> np.ndarray:
+        """(P,) bool: points (P, 3) within about `reach` (m) of the surface (of a sample of it: within reach +
+        SPACING), found without the exact query."""
+        d, _ = self.tree.query(np.asarray(points, np.float64).reshape(-1, 3), k=1, distance_upper_bound=reach + SPACING)
+        return np.isfinite(d)
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """(P,) signed distances (m) of points (P, 3)."""
+        return self.query(points)[0]
+
+    def pseudo_normals(self, face: np.ndarray, bary: np.ndarray) -> np.ndarray:
+        """(P, 3) the direction that signs an offset from the nearest point (faces (P,), barycentrics (P, 3))."""
+        corners = self.vertex_normals[self.faces[face]]
+        smooth = np.einsum("pc,pcd->pd", bary, corners)
+        inside = (bary > INTERIOR).all(axis=1)
+        return np.where(inside[:, None], self.face_normals[face], smooth)
+
+
+def face_samples(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(samples (S, 3), the face of each (S,)): each triangle of tris (F, 3, 3) on a barycentric grid of n steps per
+    edge, n = its longest edge / SPACING (1..MAX_SPLIT)."""
+    edges = np.linalg.norm(tris - np.roll(tris, 1, axis=1), axis=2).max(1)
+    steps = np.clip(np.ceil(edges / SPACING), 1, MAX_SPLIT).astype(int)
+    points, owners = [], []
+    for n in np.unique(steps):
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+        keep = i + j <= n
+        bary = np.stack([i[keep], j[keep], n - i[keep] - j[keep]], 1) / n          # (m, 3)
+        ids = np.flatnonzero(steps == n)
+        points.append(np.einsum("mc,fcd->fmd", bary, tris[ids]).reshape(-1, 3))
+        owners.append(np.repeat(ids, len(bary)))
+    return np.concatenate(points), np.concatenate(owners)

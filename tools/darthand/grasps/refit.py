@@ -1,0 +1,60 @@
+"""A stored grasp refitted to another hand shape, per frame: a few least-squares iterations of the grasp fit
+(grasps/fit.py) from the stored angles and placement, each contact part held by the vertex the stored fit touches
+with, the pre-shape prior now the stored angles."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from darthand.grasps.field import ObjectField
+from darthand.grasps.fit import MAX_CONTACT, MAX_PENETRATION, HandRig, refine
+from darthand.grasps.loader import Grasp
+from darthand.model.anatomy import joint_frames
+from darthand.model.gesture_fit import subtree_mask
+from darthand.model.hand_model import HandModel
+
+REFIT_ROUNDS = 1
+REFIT_NFEV = 4
+
+
+@dataclass(frozen=True)
+class FittedGrasp:
+    """A grasp on one shaped hand: pose (48,) MANO axis-angle on that model, placement (4, 4) object frame -> the
+    hand's model frame, contact vertices (K,) and object points (K, 3, object frame), penetration (m), `ok` (within
+    the catalogue's drop rule: penetration <= 2 mm, contacts <= 5 mm), figures."""
+
+    pose: np.ndarray
+    placement: np.ndarray
+    contact_vertices: np.ndarray
+    contact_points: np.ndarray
+    penetration_max_m: float
+    penetration_p99_m: float
+    ok: bool
+    figures: dict
+
+
+def object_field(item) -> ObjectField:
+    """The distance field of a catalogue object (an ObjectItem: closed mesh, object frame), built once per object."""
+    return ObjectField(item.vertices, item.faces, getattr(item, "id", "object"))
+
+
+def refit_rig(model: HandModel, grasp: Grasp) -> tuple[HandRig, list[str]]:
+    """A rig whose contact parts are the stored grasp's contact vertices, one each, and their names."""
+    names = [f"c{k}" for k in range(len(grasp.contact_vertices))]
+    patches = {n: np.array([v]) for n, v in zip(names, grasp.contact_vertices)}
+    return HandRig(model, joint_frames(model), patches, model.weights @ subtree_mask(model.parents)), names
+
+
+def refit_grasp(model: HandModel, item, grasp: Grasp, field: ObjectField | None = None) -> FittedGrasp:
+    """The stored `grasp` refitted to `model` (the frame's shaped HandModel of the grasp's side) on `item`."""
+    field = object_field(item) if field is None else field
+    rig, names = refit_rig(model, grasp)
+    start = np.linalg.inv(grasp.placement)
+    fit = refine(rig, field, names, grasp.angles, grasp.angles, start, REFIT_ROUNDS, REFIT_NFEV)
+    pen_max = fit.figures["penetration_max_mm"] * 1e-3
+    worst = max((abs(v) for v in fit.figures["contact_mm"].values()), default=0.0) * 1e-3
+    return FittedGrasp(fit.pose, fit.placement, fit.contact_vertices, fit.contact_points, pen_max,
+                       fit.figures["penetration_p99_mm"] * 1e-3,
+                       bool(pen_max <= MAX_PENETRATION and worst <= MAX_CONTACT), fit.figures)
