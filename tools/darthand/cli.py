@@ -643,6 +643,15 @@ def _add_dataset_arguments(p) -> None:
     p.add_argument("--interaction-fit", choices=FITS, default=plan.interaction_fit,
                    help="what the fit that keeps two hands out of each other moves: the left hand and the digits "
                         f"near the other hand, or the left hand only (faster) (default {plan.interaction_fit})")
+    p.add_argument("--objects", type=number(float, 0, 1), default=plan.objects, metavar="SHARE",
+                   help="share of the frames with the hand holding an object of --objects-catalog in one of its "
+                        f"grasps of --grasps-catalog (needs a model; default {plan.objects:g}: none)")
+    p.add_argument("--object-categories", default=None, metavar="NAME,...",
+                   help="object categories to draw from (default: all of the catalogue)")
+    p.add_argument("--objects-catalog", default=None, metavar="CATALOG",
+                   help="object catalogue file or folder (default: build/objects beside the model's build)")
+    p.add_argument("--grasps-catalog", default=None, metavar="CATALOG",
+                   help="grasp catalogue file or folder (default: build/grasps beside the object catalogue's build)")
     p.add_argument("--size", type=number(int, 8, o.MAX_SIZE), default=run.size, metavar="N",
                    help=f"square image size in pixels (default {run.size})")
     _add_antialiasing_options(p, run.samples, run.aa_shading)

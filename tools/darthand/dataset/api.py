@@ -16,6 +16,7 @@ from darthand.dataset import writers
 from darthand.dataset.freihand import check_mano
 from darthand.dataset.jobs import job_sides, load_jobs, write_jobs
 from darthand.dataset.options import DatasetOptions, bounded_int
+from darthand.dataset.object_catalogs import grasps_catalog, objects_catalog
 from darthand.dataset.plan import Planner
 from darthand.dataset.run import render_frames
 from darthand.dataset.sources import SourceSpec, parse_sides, source_specs
@@ -88,7 +89,8 @@ def _open(options: DatasetOptions) -> _Run:
                for side, spec in specs.items()}
     if jobs is not None:
         return _Run(sources, specs, None, list(jobs), origin)
-    planner = Planner({**options.plan.spec(), "sides": list(sides)}, sources)
+    planner = Planner({**options.plan.spec(), "sides": list(sides)}, sources,
+                      {"objects": objects_catalog(options), "grasps": grasps_catalog(options)})
     return _Run(sources, specs, planner, None, {"plan": planner.spec, "start": options.start, "count": options.count})
 
 

@@ -58,10 +58,12 @@ def dataset_options(args) -> DatasetOptions:
         margin_range=args.margin_range, distance_range=args.distance_range, lights=args.lights,
         environments=args.environments, backgrounds=args.backgrounds, split=args.split,
         two_hands=args.two_hands, interactions=args.interactions,
-        interaction_fit=args.interaction_fit)
+        interaction_fit=args.interaction_fit, objects=args.objects,
+        object_categories=_names(args.object_categories))
     return DatasetOptions(
         str(args.package), args.out, count=args.count, start=args.start, jobs=args.jobs, plan=plan,
-        textures=args.textures, accessories=args.accessories, model=args.model, size=args.size,
+        textures=args.textures, accessories=args.accessories, model=args.model,
+        objects_catalog=args.objects_catalog, grasps_catalog=args.grasps_catalog, size=args.size,
         samples=args.samples, aa_shading=args.aa_shading,
         shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin,
                  "skin_specular": args.skin_specular, "skin_detail": args.skin_detail},

@@ -316,7 +316,10 @@ def _group_summary(job: dict, labels: dict) -> dict:
             "accessory_type": None, "coverage": round(float(labels["coverage"]), 5),
             "visible": hands[0]["visible"], "in_image": hands[0]["in_image"], "background": bg.get("used"),
             "skipped_backgrounds": bg.get("skipped", []), "hands": hands,
-            "interaction": (labels.get("interaction") or {}).get("type")}
+            "interaction": (labels.get("interaction") or {}).get("type"),
+            **({"objects": [{"id": o["id"], "category": o["category"], "grasp_type": (o.get("grasp") or {}).get("type"),
+                             "visible_fraction": round(float(o["visible_fraction"]), 4)}
+                            for o in labels["objects"]]} if labels.get("objects") else {})}
 
 
 def existing_frame(out: Path, job: dict, digest: str, maps: tuple = ()) -> dict | None:

@@ -1,30 +1,133 @@
-"""Frames with an object held: where a run's object catalogue is, and the catalogue of a run's jobs.
+"""Frames with an object held: planning one (`ObjectFrames`: which object, which grasp, refitted to the frame's
+hand), and where a run's catalogues are.
 
-The catalogue is read only when a frame holds an object (render/objects.ObjectLibrary), so runs without objects
-neither need it built nor change.
+An object frame is drawn on its own stream: frame i's OBJECT_STREAM uniforms (seed, OBJECT_STREAM, i) decide whether
+it holds an object (uniform 0 under the plan's `objects` share), which object (uniform 1, uniform over the
+catalogue's objects of the categories asked that have a grasp for the frame's side) and which of its grasps
+(uniform 2). A refit that fails the grasp catalogue's bounds (grasps/refit: penetration <= 2 mm, contacts <= 5 mm)
+draws object and grasp again from (seed, RETRY_STREAM, i, attempt); the redraws are counted in the sampling record.
+The catalogues are read only when a plan or a job holds an object, so runs without objects neither need them built
+nor change.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
-from darthand.dataset.jobs import job_objects
+import numpy as np
+
+from darthand.errors import InputError
+from darthand.grasps.loader import Grasp, load_grasp_catalog
+from darthand.grasps.refit import object_field, refit_grasp
 from darthand.render.objects import ObjectLibrary
 
-DEFAULT_CATALOG = Path("build") / "objects" / "catalog.json"
+OBJECT_STREAM = 10
+RETRY_STREAM = 11
+OBJECT_UNIFORMS = 3            # object frame or not, the object, the grasp
+MAX_REDRAWS = 8
 
 
-def objects_catalog(options) -> str:
-    """The object catalogue of a run (dataset/options.DatasetOptions): its objects_catalog, else
-    build/objects/catalog.json beside the model's build (a model .npz in build/model/), else in the working folder."""
-    if options.objects_catalog:
-        return str(options.objects_catalog)
-    package = Path(str(options.package))
-    if package.suffix == ".npz" and package.parent.name == "model":
-        return str(package.resolve().parent.parent / "objects" / "catalog.json")
-    return str(DEFAULT_CATALOG)
+class ObjectDraw(NamedTuple):
+    """An object frame's draw: the hand's pose (48,) on its side's shaped model, the object's id and placement
+    (4, 4) object frame -> the hand's model frame, the grasp, the refit's figures and how many draws failed first."""
+
+    pose: np.ndarray
+    object_id: str
+    category: str
+    placement: np.ndarray
+    grasp: Grasp
+    figures: dict
+    redraws: int
 
 
-def jobs_objects(jobs: list[dict], catalog) -> ObjectLibrary | None:
-    """The object catalogue `catalog` loaded when any of `jobs` holds an object, else None."""
-    return ObjectLibrary.load(catalog) if any(job_objects(job) for job in jobs) else None
+class ObjectFrames:
+    """The object frames of a plan: which object, which of its grasps for the frame's side, refitted to the frame's
+    hand shape (grasps/refit.refit_grasp). objects, grasps: the catalogues' paths; models: {side: HandModel} of
+    the plan's sources; categories: the object categories to draw from (None: all)."""
+
+    def __init__(self, objects, grasps, models: dict, categories=None):
+        library = ObjectLibrary.load(objects)
+        known = sorted({item.category for item in library.items.values()})
+        for category in categories or ():
+            if category not in known:
+                raise InputError(f"object categories: {category!r} is not a category of the catalogue "
+                                 f"({', '.join(known)})")
+        self.items = {k: v for k, v in library.items.items() if not categories or v.category in categories}
+        grasp_file = Path(grasps)
+        if not (grasp_file / "catalog.json" if grasp_file.is_dir() else grasp_file).is_file():
+            raise InputError(f"{grasp_file}: no grasp catalogue there (build it: `make build/grasps/catalog.json`)")
+        self.grasps: dict = {side: {} for side in models}
+        for grasp in load_grasp_catalog(grasps, objects=list(self.items)):
+            if grasp.side in self.grasps:
+                self.grasps[grasp.side].setdefault(grasp.object_id, []).append(grasp)
+        for side, by_object in self.grasps.items():
+            if not by_object:
+                raise InputError(f"objects: the grasp catalogue has no {side} grasp of the objects asked")
+        self.models = models
+        self._fields: dict = {}
+
+    def holds(self, seed: int, index: int, share: float) -> bool:
+        """Whether frame `index` holds an object (object_frame)."""
+        return object_frame(seed, index, share)
+
+    def job(self, job: dict, draw: ObjectDraw) -> dict:
+        """The frame's object job (object_job)."""
+        return object_job(job, draw)
+
+    def describe(self) -> dict:
+        return {"objects": len(self.items), "grasps": {side: sum(map(len, g.values())) for side, g in
+                                                         self.grasps.items()}}
+
+    def draw(self, seed: int, index: int, side: str, betas) -> ObjectDraw | None:
+        """Frame `index`'s object and grasp on `side` refitted to the hand of `betas` (None: the model's shape):
+        uniforms 1, 2 of its OBJECT_STREAM draw pick the object and the grasp; a refit out of the catalogue's
+        bounds is drawn again from RETRY_STREAM, at most MAX_REDRAWS times (None when all fail)."""
+        model = self.models[side] if betas is None else self.models[side].shaped(np.asarray(betas, np.float64))
+        by_object = self.grasps[side]
+        ids = sorted(by_object)
+        for attempt in range(MAX_REDRAWS + 1):
+            stream = [seed, OBJECT_STREAM, index] if attempt == 0 else [seed, RETRY_STREAM, index, attempt]
+            u = np.random.default_rng(stream).random(OBJECT_UNIFORMS)
+            object_id = ids[_choose(u[1], len(ids))]
+            grasp = by_object[object_id][_choose(u[2], len(by_object[object_id]))]
+            item = self.items[object_id]
+            fitted = refit_grasp(model, item, grasp, self._field(item))
+            if fitted.ok:
+                return ObjectDraw(np.asarray(fitted.pose, np.float64), object_id, item.category,
+                                  np.asarray(fitted.placement, np.float64), grasp,
+                                  {"penetration_max_mm": round(1000 * fitted.penetration_max_m, 3),
+                                   "penetration_p99_mm": round(1000 * fitted.penetration_p99_m, 3)}, attempt)
+        return None
+
+    def _field(self, item):
+        """The item's distance field (grasps/refit.object_field), built once."""
+        if item.id not in self._fields:
+            self._fields[item.id] = object_field(item)
+        return self._fields[item.id]
+
+
+def object_frame(seed: int, index: int, share: float) -> bool:
+    """Whether frame `index` holds an object: uniform 0 of its OBJECT_STREAM draw under `share`."""
+    return bool(share) and np.random.default_rng([seed, OBJECT_STREAM, index]).random(OBJECT_UNIFORMS)[0] < share
+
+
+def object_job(job: dict, draw: ObjectDraw) -> dict:
+    """A one-hand job made the frame's object job: the `bodies` form (the hand at the identity with the grasp's pose,
+    the object at its placement) with the grasp record; the sampling record says which object and grasp."""
+    hand = {"kind": "hand", "side": job["side"], "pose": np.round(draw.pose, 9).tolist(), "texture": job["texture"],
+            "skin_tone_offset": job["skin_tone_offset"], "accessory": job["accessory"]}
+    if "betas" in job:
+        hand["betas"] = job["betas"]
+    held = {"kind": "object", "object": draw.object_id, "placement": np.round(draw.placement, 9).tolist()}
+    out = {k: v for k, v in job.items() if k not in ("side", "pose", "texture", "skin_tone_offset", "accessory",
+                                                      "betas")}
+    out["gesture"] = None
+    out["sample"] = {**job["sample"], "object": {"id": draw.object_id, "category": draw.category,
+                                                 "grasp": draw.grasp.type, "redraws": draw.redraws}}
+    return {**out, "bodies": [hand, held], "grasp": {"type": draw.grasp.type, "id": draw.grasp.id,
+                                                     "figures": draw.figures}}
+
+
+def _choose(u: float, n: int) -> int:
+    return min(int(u * n), n - 1)

@@ -71,7 +71,8 @@ class DatasetOptions:
         textures, accessories: catalogue files or folders (default: the build's beside the model); model: a USD
         package's model, for its fingertip ids. objects_catalog: the object catalogue held objects come from
         (catalog.json or its folder; None: build/objects/catalog.json beside the model's build), read only when a
-        frame holds an object.
+        frame holds an object; grasps_catalog: the grasp catalogue a plan's object frames draw from (None:
+        build/grasps/catalog.json beside the object catalogue's build).
     out: the output folder (dataset/run.py's layout).
     The frames: `jobs` (a jobs file or a list of job dicts, schemas/dataset_jobs.schema.json), else frames
         start .. start + count - 1 of `plan`.
@@ -104,6 +105,7 @@ class DatasetOptions:
     accessories: str | None = None
     model: str | None = None
     objects_catalog: str | None = None
+    grasps_catalog: str | None = None
     size: int = DEFAULT_SIZE
     samples: int = DEFAULT_SAMPLES
     aa_shading: str = "triangle"

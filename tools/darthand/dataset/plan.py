@@ -25,7 +25,15 @@ A plan's options are one JSON document (`plan_spec`), recorded in dataset.json a
   identity, the left with its placement; both wearing the frame's shape, texture and tone; the accessory on the hand
   of the frame's side draw) with the `interaction` record. Whether a frame has two hands is drawn on its own stream
   (TWO_HANDS_STREAM), so one-hand frames draw as they would without the option; with `two_hands` 0 the plan document
-  leaves both options out and every job is as before.
+  leaves both options out and every job is as before;
+- an object held: on `objects` of the frames (default none), the frame's hand holding an object of the catalogue
+  (uniform over it, or over `object_categories`) in one of that object's grasps for the frame's side, refitted to
+  the frame's shape (dataset/objects.py: drawn on OBJECT_STREAM, redrawn on RETRY_STREAM), as a job of two `bodies`
+  (the hand at the identity with the grasp's pose, the object at its placement) with the `grasp` record. A frame is
+  a one-hand, a two-hand or an object frame: the object draw comes first (its share of all frames is `objects`),
+  and the two-hand draw is then taken under two_hands / (1 - objects) (its share of all frames stays `two_hands`;
+  the two shares may sum to at most 1). With `objects` 0 the plan document leaves both options out and every job
+  is as before.
 
 Frame i's choices use numpy's Generator seeded with [seed, FRAME_STREAM, i] (a fixed number of uniforms, each with
 a fixed role, so that one option never shifts another's draws); poses, views, shapes and the environment have
@@ -89,7 +97,8 @@ class PlanOptions:
     hand), a folder or an image; split the train/val/test fractions; two_hands the share of frames with two hands
     (0: none, and the plan document leaves it and interactions out); interactions {type: share} (None: equal);
     interaction_fit what the two hands' fit moves: 'digits' (the left hand and the digits near the other hand) or
-    'rigid' (the left hand only)."""
+    'rigid' (the left hand only); objects the share of frames with an object held (0: none, and the plan document
+    leaves it and object_categories out), object_categories the catalogue's categories drawn from (None: all)."""
 
     seed: int = 0
     poses: PoseOptions = field(default_factory=PoseOptions)
@@ -112,6 +121,8 @@ class PlanOptions:
     two_hands: float = 0.0
     interactions: dict | str | None = None
     interaction_fit: str = interaction_shares.FITS[0]
+    objects: float = 0.0
+    object_categories: list | None = None
 
     def spec(self) -> dict:
         """The plan document (plain JSON values: lists for tuples)."""
@@ -129,15 +140,17 @@ def _plain(value):
 
 # Options in the plan document only when two hands are asked for, so that every plan without them is as before.
 TWO_HAND_OPTIONS = ("two_hands", "interactions", "interaction_fit")
-DEFAULTS: dict = {k: v for k, v in _plain(PlanOptions()).items() if k not in TWO_HAND_OPTIONS}
+OBJECT_OPTIONS = ("objects", "object_categories")            # likewise, only when objects are asked for
+DEFAULTS: dict = {k: v for k, v in _plain(PlanOptions()).items() if k not in TWO_HAND_OPTIONS + OBJECT_OPTIONS}
 
 
 def plan_spec(**options) -> dict:
     """DEFAULTS updated with `options` (None leaves a default; 'poses' merges), checked for unknown names."""
     spec = copy.deepcopy(DEFAULTS)
     for key, value in options.items():
-        if key not in spec and key not in TWO_HAND_OPTIONS:
-            raise InputError(f"plan: unknown option {key!r} (known: {', '.join(list(spec) + list(TWO_HAND_OPTIONS))})")
+        if key not in spec and key not in TWO_HAND_OPTIONS + OBJECT_OPTIONS:
+            raise InputError(f"plan: unknown option {key!r} (known: "
+                             f"{', '.join(list(spec) + list(TWO_HAND_OPTIONS + OBJECT_OPTIONS))})")
         if key in ("poses", "shapes"):
             if isinstance(value, str):                  # a shape distribution given by its name
                 value = {"mode": value}
@@ -148,7 +161,24 @@ def plan_spec(**options) -> dict:
                     spec[key][k] = v
         elif value is not None:
             spec[key] = list(value) if isinstance(value, tuple) else value
-    return _two_hand_options(spec)
+    return _object_options(_two_hand_options(spec))
+
+
+def _object_options(spec: dict) -> dict:
+    """The spec with objects checked (a share in 0..1, at most 1 with two_hands) and object_categories a list of
+    names or None; both left out when objects is 0."""
+    share = spec.get("objects", 0.0)
+    if isinstance(share, bool) or not isinstance(share, (int, float)) or not (math.isfinite(share) and 0 <= share <= 1):
+        raise InputError(f"objects: {share!r} is not a share within 0..1")
+    if share + spec.get("two_hands", 0.0) > 1 + 1e-12:
+        raise InputError(f"objects: {share:g} of the frames with objects and {spec['two_hands']:g} with two hands "
+                         "sum to more than all of them")
+    if share == 0:
+        return {k: v for k, v in spec.items() if k not in OBJECT_OPTIONS}
+    categories = spec.get("object_categories")
+    if categories is not None and (isinstance(categories, str) or not all(isinstance(c, str) for c in categories)):
+        raise InputError(f"object categories: {categories!r} is not a list of category names")
+    return {**spec, "objects": float(share), "object_categories": None if categories is None else list(categories)}
 
 
 def _two_hand_options(spec: dict) -> dict:
@@ -201,7 +231,9 @@ def texture_tags(texture_id: str) -> dict:
 class Planner:
     """The jobs of a plan (`plan_spec`) for its sources ({side: opened source}, dataset/sources.py)."""
 
-    def __init__(self, spec: dict, sources: dict):
+    def __init__(self, spec: dict, sources: dict, catalogs: dict | None = None):
+        """catalogs: {'objects': path, 'grasps': path}, the catalogues an object frame draws from (read only when
+        the plan's `objects` share is not 0)."""
         self.spec = spec = plan_spec(**spec)
         self.seed = _non_negative(spec["seed"], "seed")
         self.sides = [s for s in spec["sides"] if s in sources]
@@ -241,6 +273,9 @@ class Planner:
         spec["shapes"] = self.shapes.spec()
         self.two_hands = spec.get("two_hands", 0.0)
         self.pairs = _interaction_sampler(spec, sources, self.model) if self.two_hands else None
+        self.objects = spec.get("objects", 0.0)
+        self.object_frames = _object_frames(spec, sources, catalogs or {}) if self.objects else None
+        self.object_redraws = 0             # refits that failed and were drawn again (this planner's jobs)
 
     def describe(self) -> dict:
         """What the plan draws from (for dataset.json and the report)."""
@@ -300,9 +335,15 @@ class Planner:
                "sample": sample}
         if betas is not None:
             job["betas"] = betas
-        if self.pairs is not None:
+        if self.object_frames is not None and self.object_frames.holds(self.seed, i, self.objects):
+            draw = self.object_frames.draw(self.seed, i, side, betas)
+            if draw is not None:
+                self.object_redraws += draw.redraws
+                return self.object_frames.job(job, draw)
+            job["sample"]["object"] = {"failed": True}            # every redraw failed: a one-hand frame
+        elif self.pairs is not None:
             u2 = np.random.default_rng([self.seed, TWO_HANDS_STREAM, i]).random(2)
-            if u2[0] < self.two_hands:
+            if u2[0] < self.two_hands / (1.0 - self.objects):
                 return self._two_hand_job(job, u2[1], sampled)
         return job
 
@@ -373,6 +414,21 @@ def _interaction_sampler(spec: dict, sources: dict, model):
     return interactions.InteractionSampler(sources["right"].pose_model() or model, sources["left"].pose_model(),
                                            spec["interactions"], sources,
                                            fit_digits=spec["interaction_fit"] == "digits")
+
+
+def _object_frames(spec: dict, sources: dict, catalogs: dict):
+    """The object-frame sampler (dataset/objects.ObjectFrames) on the models of the plan's sides' sources."""
+    # Imported here: the grasp refit (the fit's least squares, the objects' distance fields) loads only for plans
+    # with objects.
+    from darthand.dataset.objects import ObjectFrames
+
+    models = {side: source.pose_model() for side, source in sources.items() if side in spec["sides"]}
+    if any(model is None for model in models.values()):
+        raise InputError("objects: a USD package renders baked gestures; object frames need a model")
+    if not catalogs.get("objects") or not catalogs.get("grasps"):
+        raise InputError("objects: the plan needs the object and grasp catalogues (--objects-catalog, "
+                         "--grasps-catalog)")
+    return ObjectFrames(catalogs["objects"], catalogs["grasps"], models, spec.get("object_categories"))
 
 
 def _shape_sampler(opts: dict, model) -> shapes.ShapeSampler:

@@ -5,7 +5,8 @@
   keypoints not visible);
 - counts per texture category, texture tone, accessory type, side and split; the skin-tone offsets;
 - with two-hand frames: counts per interaction type and hand type, and a sheet of them per type
-  (dataset/report_hands.py, two_hands.png);
+  (dataset/report_hands.py, two_hands.png); with object frames: counts per object category and grasp type
+  (dataset/report_objects.py);
 - the visibility rate of each keypoint and the share of keypoints inside the image;
 - pose coverage: the dataset's finger poses and the plan's reference set in one 2-D t-SNE embedding, as DART's
   figure (dataset/embedding.py; the distance between two poses is the mean rotation angle over the 15 finger joints,
@@ -26,6 +27,7 @@ from darthand.dataset.frames import frame_names
 from darthand.dataset.hands import hand_type, hands_of
 from darthand.dataset.poses import load_reference
 from darthand.dataset.report_hands import two_hand_frames, write_two_hand_sheet
+from darthand.dataset.report_objects import object_counts
 from darthand.dataset.run import rendered_dataset
 from darthand.dataset.sources import SourceSpec
 from darthand.errors import InputError
@@ -95,6 +97,9 @@ def write_report(dataset, out=None, sheet: int = 24) -> Path:
     if by_type:                             # only a dataset with two-hand frames: one-hand reports stay as they were
         figures["two_hands"] = counts
         write_two_hand_sheet(root, by_type, out / "two_hands.png", BONES)
+    objects = object_counts(frames)
+    if objects:                             # only a dataset with object frames
+        figures["objects"] = objects
     write_json(out / "report.json", figures)
     return page
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from darthand.dataset.frames import existing_frame, frame_names, job_digest
 from darthand.dataset.jobs import check_jobs, load_jobs, validate_jobs
-from darthand.dataset.objects import jobs_objects, objects_catalog
+from darthand.dataset.object_catalogs import jobs_objects, objects_catalog
 from darthand.dataset.options import MAX_SIZE, DatasetOptions, bounded_int
 from darthand.dataset.runner import Runner, make_runner
 from darthand.errors import InputError

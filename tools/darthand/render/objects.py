@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.objects.loader import load_object_catalog
 from darthand.render.subject import Material, Surface
 from darthand.render.texture import constant_texture, load_maps
 
@@ -60,9 +61,6 @@ class ObjectLibrary:
     @classmethod
     def load(cls, catalog) -> "ObjectLibrary":
         """The library of an object catalogue (catalog.json or its folder)."""
-        # Imported here: the objects stage's loader is needed only by renderers given a catalogue.
-        from darthand.objects.loader import load_object_catalog  # type: ignore[import-not-found]  # until i30-objects merges
-
         path = Path(catalog)
         if not (path / "catalog.json" if path.is_dir() else path).is_file():
             raise InputError(f"{path}: no object catalogue there (build it: `make build/objects/catalog.json`)")
