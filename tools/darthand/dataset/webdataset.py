@@ -7,7 +7,10 @@ first dot into key and extension); its members:
     <key>.json       the labels (schemas/labels.schema.json)
     <key>.verts.npy  (V, 3) float32 posed vertices, camera frame, metres; (B, V, 3) for a two-hand frame (hands in
                      the labels' `hands` order)
-    <key>.instances.png  a two-hand frame's 8-bit instance mask (0 background, 1 + 2b hand b, 2 + 2b its accessory)
+    <key>.instances.png  a two-hand or object frame's 8-bit instance mask (0 background, 1 + 2b hand b, 2 + 2b its
+                     accessory; 3 the object held beside one hand)
+    <key>.object.npy an object frame's (N, 3) float32 object mesh, camera frame, metres (its labels' objects say
+                     which catalogue object: its faces are the catalogue's)
     <key>.depth.png, <key>.normals.png, <key>.parts.png   the per-pixel truth maps, when the dataset has them
                      (dataset.json 'maps'; encodings in render/truth.py and each sample's labels 'maps')
 
@@ -51,6 +54,9 @@ def write_webdataset(dataset, out=None, samples_per_shard: int = SAMPLES_PER_SHA
                     instances = instances_path(root, names)
                     if instances.is_file():
                         add_member(tar, f"{key}.instances.png", instances.read_bytes())
+                    held = root / "object_meshes" / f"{key}.npy"
+                    if held.is_file():
+                        add_member(tar, f"{key}.object.npy", held.read_bytes())
     return out
 
 

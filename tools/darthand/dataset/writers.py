@@ -13,6 +13,7 @@ from typing import Protocol
 from darthand.dataset.coco import write_coco
 from darthand.dataset.freihand import write_freihand
 from darthand.dataset.hamer import write_hamer
+from darthand.dataset.ho3d import write_ho3d
 from darthand.dataset.interhand import write_interhand
 from darthand.dataset.webdataset import write_webdataset
 
@@ -46,5 +47,9 @@ def _interhand(dataset, out, *, left: str = "mirror", allow_non_mano: bool = Fal
     return write_interhand(dataset, out)
 
 
+def _ho3d(dataset, out, *, left: str = "mirror", allow_non_mano: bool = False) -> Path:
+    return write_ho3d(dataset, out)
+
+
 FORMATS: dict[str, Writer] = {"freihand": _freihand, "webdataset": _webdataset, "hamer": _hamer, "coco": _coco,
-                              "interhand": _interhand}
+                              "interhand": _interhand, "ho3d": _ho3d}
