@@ -101,7 +101,7 @@ HAND = {"kind": "hand", "side": "left"}
 
 @pytest.mark.parametrize("job, expected", [
     ({"pose": "fist", "bodies": [HAND]}, "field 'frames.0' holds both 'bodies' and the one-hand field 'pose'"),
-    ({"bodies": [{"kind": "cup"}]}, "field 'frames.0.bodies.0.kind' 'cup' is not a body kind (known: hand)"),
+    ({"bodies": [{"kind": "cup"}]}, "field 'frames.0.bodies.0.kind' 'cup' is not a body kind (known: hand, object)"),
     ({"bodies": [{**HAND, "placement": [[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}]},
      "field 'frames.0.bodies.0.placement' is not a rigid transform"),
     ({"bodies": [{**HAND, "placement": [[-1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}]},

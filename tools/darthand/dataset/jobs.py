@@ -71,8 +71,8 @@ def write_jobs(path, jobs, plan: dict | None = None) -> int:
 def check_jobs(doc, source: str = "jobs") -> list[dict]:
     """The frames of a jobs document (list or {"frames": [...]}) checked against the schema, with an 'index' each
     (its position when not given); InputError naming the field for a non-finite number, an index over MAX_INDEX or a
-    repeated index; a job with both a `bodies` list and one-hand fields, a body of an unknown kind or a placement
-    that is not a rigid transform."""
+    repeated index; a job with both a `bodies` list and one-hand fields, more than two hands or one object, a body of
+    an unknown kind or a placement that is not a rigid transform."""
     frames = doc.get("frames") if isinstance(doc, dict) else doc
     prefix = "frames." if isinstance(doc, dict) else ""
     for k, job in enumerate(frames if isinstance(frames, list) else []):
@@ -120,6 +120,10 @@ def _check_bodies(job: dict, where: str) -> None:
     both = [k for k in HAND_FIELDS if k in job]
     if both:
         raise InputError(f"{where}' holds both 'bodies' and the one-hand field {both[0]!r} (a job holds one form)")
+    kinds = [item.get("kind") for item in job[BODIES] if isinstance(item, dict)]
+    for kind, most in ((HandBody.kind, 2), (ObjectBody.kind, 1)):
+        if kinds.count(kind) > most:
+            raise InputError(f"{where}.bodies' holds {kinds.count(kind)} bodies of kind {kind!r} (at most {most})")
     for b, item in enumerate(job[BODIES]):
         if not isinstance(item, dict):
             continue
