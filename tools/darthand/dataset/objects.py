@@ -4,7 +4,8 @@ hand), and where a run's catalogues are.
 An object frame is drawn on its own stream: frame i's OBJECT_STREAM uniforms (seed, OBJECT_STREAM, i) decide whether
 it holds an object (uniform 0 under the plan's `objects` share), which object (uniform 1, uniform over the
 catalogue's objects of the categories asked that have a grasp for the frame's side) and which of its grasps
-(uniform 2). A refit that fails the grasp catalogue's bounds (grasps/refit: penetration <= 2 mm, contacts <= 5 mm)
+(uniform 2). A refit that fails the grasp catalogue's bounds (grasps/refit: contacts <= 5 mm) or passes into the object
+deeper than a hand-written job may (dataset/jobs.PASS_THROUGH_M, 1 mm: a planned jobs file renders again as jobs)
 draws object and grasp again from (seed, RETRY_STREAM, i, attempt); the redraws are counted in the sampling record.
 The catalogues are read only when a plan or a job holds an object, so runs without objects neither need them built
 nor change.
@@ -17,6 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from darthand.dataset.jobs import PASS_THROUGH_M
 from darthand.errors import InputError
 from darthand.grasps.loader import Grasp, load_grasp_catalog
 from darthand.grasps.refit import object_field, refit_grasp
@@ -81,8 +83,8 @@ class ObjectFrames:
 
     def draw(self, seed: int, index: int, side: str, betas) -> ObjectDraw | None:
         """Frame `index`'s object and grasp on `side` refitted to the hand of `betas` (None: the model's shape):
-        uniforms 1, 2 of its OBJECT_STREAM draw pick the object and the grasp; a refit out of the catalogue's
-        bounds is drawn again from RETRY_STREAM, at most MAX_REDRAWS times (None when all fail)."""
+        uniforms 1, 2 of its OBJECT_STREAM draw pick the object and the grasp; a refit out of bounds (module
+        docstring) is drawn again from RETRY_STREAM, at most MAX_REDRAWS times (None when all fail)."""
         model = self.models[side] if betas is None else self.models[side].shaped(np.asarray(betas, np.float64))
         by_object = self.grasps[side]
         ids = sorted(by_object)
@@ -93,7 +95,7 @@ class ObjectFrames:
             grasp = by_object[object_id][_choose(u[2], len(by_object[object_id]))]
             item = self.items[object_id]
             fitted = refit_grasp(model, item, grasp, self._field(item))
-            if fitted.ok:
+            if fitted.ok and fitted.penetration_max_m <= PASS_THROUGH_M:
                 return ObjectDraw(np.asarray(fitted.pose, np.float64), object_id, item.category,
                                   np.asarray(fitted.placement, np.float64), grasp,
                                   {"penetration_max_mm": round(1000 * fitted.penetration_max_m, 3),
