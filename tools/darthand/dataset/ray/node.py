@@ -125,8 +125,9 @@ class NodeWorker:
         maps = tuple(self.state["settings"].get("maps") or ())
         for frame in frames:
             two_hands = "hands" in frame          # a frame of several hands' summary: its instance map too
-            names = frame_names(frame["index"], maps, two_hands)
-            for kind in write_order(maps, two_hands):
+            held = bool(frame.get("objects"))     # an object frame's: its object mesh too
+            names = frame_names(frame["index"], maps, two_hands, held)
+            for kind in write_order(maps, two_hands, held):
                 path = self.staging / names[kind]
                 out.append((names[kind], path.read_bytes()))
                 path.unlink()
