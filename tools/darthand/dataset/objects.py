@@ -1,5 +1,5 @@
-"""Frames with an object held: planning one (`ObjectFrames`: which object, which grasp, refitted to the frame's
-hand), and where a run's catalogues are.
+"""Frames with an object held, planned (`ObjectFrames`: which object, which grasp, refitted to the frame's hand; the
+catalogues' paths are dataset/object_catalogs.py's).
 
 An object frame is drawn on its own stream: frame i's OBJECT_STREAM uniforms (seed, OBJECT_STREAM, i) decide whether
 it holds an object (uniform 0 under the plan's `objects` share), which object (uniform 1, uniform over the
