@@ -12,10 +12,10 @@ from scipy.spatial import ConvexHull
 from darthand.errors import DarthandError
 
 
-def revolve(profile: np.ndarray, segments: int = 48, phase: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """The surface swept by `profile` (K, 2) of (radius, z) points, metres, turned about +z. The first and last
-    points lie on the axis (radius 0: the poles that close it); the others have radius > 0. `segments` around (6:
-    a hexagonal pencil), the first at angle `phase` (radians)."""
+def revolve(profile, segments: int = 48, phase: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The surface swept by `profile` ((K, 2) array or list of (radius, z) points, metres) turned about +z. The
+    first and last points lie on the axis (radius 0: the poles that close it); the others have radius > 0.
+    `segments` around (6: a hexagonal pencil), the first at angle `phase` (radians)."""
     profile = np.asarray(profile, float)
     if profile[0, 0] != 0 or profile[-1, 0] != 0 or (profile[1:-1, 0] <= 0).any():
         raise DarthandError("revolve: the profile must start and end on the axis and stay off it between")
