@@ -108,8 +108,8 @@ def tube(path: np.ndarray, radius: float, sides: int = 12) -> tuple[np.ndarray, 
 
 
 def boolean(meshes: list[tuple[np.ndarray, np.ndarray]], op: str = "union") -> tuple[np.ndarray, np.ndarray]:
-    """The union of closed meshes (or, with op 'difference', the first minus the others), through MeshLab's exact
-    boolean; DarthandError if the result is not closed."""
+    """The union of closed meshes (or, with op 'difference', the first minus the others), through MeshLab's
+    boolean (libigl's exact arithmetic); the build's checks refuse a result that is not closed."""
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(np.asarray(meshes[0][0], float), np.asarray(meshes[0][1], np.int32)))
     for v, f in meshes[1:]:
