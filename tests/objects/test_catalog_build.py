@@ -135,8 +135,21 @@ def test_drawn_parts_split_creases_and_face_outward(built):
     assert can.uvs is not None and can.faces_uv is not None and can.base_color_png is not None
 
 
+def test_prints_show_on_their_parts_only(built):
+    items = {i.id: i for i in load_object_catalog(built, ids=["can_01", "card_01", "card_04", "phone_02"])}
+    drawn = {i: {p.name: p for p in item.drawn_parts()} for i, item in items.items()}
+    assert drawn["can_01"]["print"].base_color_png is not None and drawn["can_01"]["lid"].base_color_png is None
+    assert drawn["phone_02"]["screen"].base_color_png is not None and drawn["phone_02"]["case"].uvs is None
+    assert drawn["card_01"]["card"].base_color_png is not None and items["card_04"].base_color_png is None
+    can = drawn["can_01"]["print"]
+    assert can.uvs is not None and can.faces_uv is not None
+    corner_uv = can.uvs[can.faces_uv]
+    assert (corner_uv >= 0).all() and (corner_uv <= 1).all()
+    assert np.ptp(corner_uv[..., 0], axis=1).max() < 0.05          # no face spans the seam of the wrap
+
+
 def test_two_builds_are_byte_equal_and_jobs_change_nothing(tmp_path):
-    ids = ["mug_02", "bottle_03", "pencil_01", "card_04", "hammer_01", "rs_can", "rs_lemon"]
+    ids = ["mug_02", "bottle_03", "can_02", "phone_03", "pencil_01", "card_01", "hammer_01", "rs_can", "rs_lemon"]
     a, b = tmp_path / "a", tmp_path / "b"
     build_objects(cat.load_spec(), a, cat.DEFAULT_SPEC.parent, ids=ids, jobs=1)
     build_objects(cat.load_spec(), b, cat.DEFAULT_SPEC.parent, ids=ids, jobs=2)
