@@ -54,7 +54,7 @@ class Built:
 
 # ---------------------------------------------------------------- the stage
 def build_objects(spec: dict, out_dir: str | Path, spec_dir: str | Path, ids=None, *, jobs: int = 1,
-                  sheet: bool = True, tile: int = 192, source: str = "catalogue spec") -> dict:
+                  sheet: bool = True, tile: int = 224, source: str = "catalogue spec") -> dict:
     """Build the spec's objects (or the `ids` subset) into `out_dir`; return and write catalog.json. An item that
     fails a check is listed in `skipped` with why and the build goes on; InputError when none is usable.
     `spec_dir` is where the spec's relative paths (vendored meshes, textures, licences) start; `jobs` processes
