@@ -117,6 +117,11 @@ build/accessories/catalog.json: build/model/right.npz $(wildcard assets_src/acce
                                 $(call src,accessories)
 	@$(STEP) accessories -- $(DH) accessories build build/model/right.npz --out build/accessories --jobs 2
 
+# The objects a hand holds: generated and imported meshes, checked (no model needed).
+build/objects/catalog.json: $(wildcard assets_src/objects/*.json assets_src/objects/*/*) $(call src,objects) \
+                            | $(STAMP)
+	@$(STEP) objects -- $(DH) objects build --out build/objects
+
 # One USD package and one glTF file per side.
 define side_rules
 build/usd/$(1)/$(1).usda: build/model/$(1).npz build/textures/catalog.json build/accessories/catalog.json \
@@ -148,7 +153,7 @@ build/validate/report.json: $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/
 	    --out $@
 
 ASSETS := build/model/right.npz build/template/gestures.json build/textures/catalog.json \
-          build/accessories/catalog.json \
+          build/accessories/catalog.json build/objects/catalog.json \
           $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb build/gltf/$(s)/$(s).gltf \
                                build/blender/$(s).blend) \
           build/checks/report.json build/validate/report.json

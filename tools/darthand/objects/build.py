@@ -4,7 +4,9 @@ Per object `build/objects/<id>.npz` (written byte-reproducibly: fixed zip dates)
   vertices (N, 3) metres, object frame (origin at the bounding box's centre, +z the object's axis or thin axis)
   faces (F, 3) int32 outward (counter-clockwise seen from outside), the mesh closed
   face_part (F,) int16 index into the entry's parts
-  uvs (T, 2) float32, faces_uv (F, 3) int32   when the object has a base-colour texture (<id>_albedo.png, sRGB)
+  uvs (T, 2) float32, faces_uv (F, 3) int32   when the object has a base-colour texture (<id>_albedo.png, sRGB:
+                                              a vendored item's, or a print: a can's, a label, a card, a screen),
+                                              shown by the parts marked `textured`
 and catalog.json (schemas/object_catalog.schema.json), licences/ (the licence files of vendored items) and
 contact_sheet.png.
 """
@@ -22,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.model.preview import write_png
 from darthand.fileio import file_in, read_bytes, write_bytes, write_json
 from darthand.objects import catalog as cat
 from darthand.objects.checks import check_licence, check_mesh
@@ -51,7 +54,7 @@ class Built:
 
 # ---------------------------------------------------------------- the stage
 def build_objects(spec: dict, out_dir: str | Path, spec_dir: str | Path, ids=None, *, jobs: int = 1,
-                  sheet: bool = True, tile: int = 192, source: str = "catalogue spec") -> dict:
+                  sheet: bool = True, tile: int = 224, source: str = "catalogue spec") -> dict:
     """Build the spec's objects (or the `ids` subset) into `out_dir`; return and write catalog.json. An item that
     fails a check is listed in `skipped` with why and the build goes on; InputError when none is usable.
     `spec_dir` is where the spec's relative paths (vendored meshes, textures, licences) start; `jobs` processes
@@ -103,7 +106,7 @@ def build_one(args) -> tuple[dict, np.ndarray | None]:
     s = built.shape
     image = None
     if tile:
-        png = None if built.texture is None else Path(out_dir) / entry["files"]["base_color"]
+        png = None if entry["files"]["base_color"] is None else Path(out_dir) / entry["files"]["base_color"]
         image = object_tile(s.vertices, s.faces, s.face_part, s.parts, built.uvs, built.faces_uv, png, tile)
     return entry, image
 
@@ -116,7 +119,8 @@ def make_object(spec: dict, item: dict, spec_dir: Path, where: str) -> Built:
     if item["kind"] == "mesh":
         built = _imported(item, spec_dir, where)
     else:
-        built = Built(item, KINDS[item["kind"]](cat.resolve(spec, item)))
+        shape = KINDS[item["kind"]](cat.resolve(spec, item), cat.item_rng(spec["seed"], f"{item['id']}/print"))
+        built = Built(item, shape, shape.uvs, shape.faces_uv)
     s = built.shape
     if len(s.vertices) and np.isfinite(s.vertices).all():
         s.vertices = s.vertices - (s.vertices.min(axis=0) + s.vertices.max(axis=0)) / 2
@@ -132,8 +136,10 @@ def _imported(item: dict, spec_dir: Path, where: str) -> Built:
     texture = file_in(spec_dir, item["texture"], "object texture") if item.get("texture") else None
     licence = file_in(spec_dir, item["licence_file"], "licence file") if item.get("licence_file") else None
     p = part("body", item.get("color", [0.8, 0.8, 0.8]), item.get("roughness", 0.5), item.get("metallic", 0.0))
-    shape = Shape(mesh.vertices, mesh.faces, np.zeros(len(mesh.faces), np.int16), [p])
     textured = texture is not None and mesh.uvs is not None
+    if textured:
+        p["textured"] = True
+    shape = Shape(mesh.vertices, mesh.faces, np.zeros(len(mesh.faces), np.int16), [p])
     return Built(item, shape, mesh.uvs if textured else None, mesh.faces_uv if textured else None,
                  texture if textured else None, licence, mesh.repairs)
 
@@ -146,9 +152,12 @@ def write_object(out_dir: Path, b: Built, grasps: list[str]) -> dict:
     files: dict = {"npz": f"{item['id']}.npz", "base_color": None}
     arrays = {"vertices": np.asarray(s.vertices, np.float64), "faces": np.asarray(s.faces, np.int32),
               "face_part": np.asarray(s.face_part, np.int16)}
-    if b.texture is not None and b.uvs is not None and b.faces_uv is not None:
+    if (b.texture is not None or s.texture is not None) and b.uvs is not None and b.faces_uv is not None:
         files["base_color"] = f"{item['id']}_albedo.png"
-        write_bytes(out_dir / files["base_color"], read_bytes(b.texture, "object texture"))
+        if s.texture is not None:           # a print drawn by the generator
+            write_png(out_dir / files["base_color"], s.texture)
+        elif b.texture is not None:         # a vendored item's image, copied as it is
+            write_bytes(out_dir / files["base_color"], read_bytes(b.texture, "object texture"))
         arrays.update(uvs=np.asarray(b.uvs, np.float32), faces_uv=np.asarray(b.faces_uv, np.int32))
     write_bytes(out_dir / files["npz"], npz_bytes(arrays))
     licence_file = None

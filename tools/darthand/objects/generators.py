@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from darthand.objects import prints
 from darthand.objects import shapes as S
 from darthand.objects.creases import face_normals
 
@@ -16,12 +17,25 @@ from darthand.objects.creases import face_normals
 @dataclass
 class Shape:
     """A generated object: vertices (N, 3) float64 metres, faces (F, 3) int64 outward, face_part (F,) index into
-    parts (dicts: name, base_color linear RGB, roughness, metallic)."""
+    parts (dicts: name, base_color linear RGB, roughness, metallic; `textured` on every part of a textured object).
+    A printed object adds uvs (T, 2), faces_uv (F, 3) and its base-colour image `texture` (H, W, 3) linear RGB,
+    which its textured parts show (their base_color white)."""
 
     vertices: np.ndarray
     faces: np.ndarray
     face_part: np.ndarray
     parts: list[dict]
+    uvs: np.ndarray | None = None
+    faces_uv: np.ndarray | None = None
+    texture: np.ndarray | None = None
+
+
+def printed(shape: Shape, uvs: np.ndarray, faces_uv: np.ndarray, texture: np.ndarray, textured: set[str]) -> Shape:
+    """`shape` with a base-colour texture on the parts named in `textured` (their colour set to white, which
+    multiplies the texture); the others marked untextured."""
+    parts = [{**p, "base_color": [1.0, 1.0, 1.0], "textured": True} if p["name"] in textured
+             else {**p, "textured": False} for p in shape.parts]
+    return Shape(shape.vertices, shape.faces, shape.face_part, parts, uvs, faces_uv, texture)
 
 
 def part(name: str, color, roughness: float, metallic: float = 0.0) -> dict:
@@ -43,7 +57,7 @@ def centroids(mesh) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- drinkware
-def mug(p: dict) -> Shape:
+def mug(p: dict, rng: np.random.Generator) -> Shape:
     """A mug: a surface of revolution with a cavity (wall `wall`, floor `floor`) and a C-shaped handle tube whose
     ends sink into the wall, joined into one closed mesh."""
     R, H, wall, floor, r = p["diameter"] / 2, p["height"], p["wall"], p["floor"], p["handle_radius"]
@@ -58,7 +72,7 @@ def mug(p: dict) -> Shape:
     return one_part(mesh, part("ceramic", p["color"], p["roughness"]))
 
 
-def cup(p: dict) -> Shape:
+def cup(p: dict, rng: np.random.Generator) -> Shape:
     """A handle-less cup or tumbler: a tapered surface of revolution with a cavity."""
     Rb, Rt, H, wall = p["bottom_diameter"] / 2, p["top_diameter"] / 2, p["height"], p["wall"]
     floor = p["floor"]
@@ -68,7 +82,7 @@ def cup(p: dict) -> Shape:
     return one_part(mesh, part("cup", p["color"], p["roughness"]))
 
 
-def bottle(p: dict) -> Shape:
+def bottle(p: dict, rng: np.random.Generator) -> Shape:
     """A bottle: body, rounded shoulder, neck and cap as one surface of revolution; parts body, label, cap."""
     R, H, rn, cap_h = p["diameter"] / 2, p["height"], p["neck_diameter"] / 2, p["cap_height"]
     shoulder_h, neck_h = p["shoulder_height"], p["neck_height"]
@@ -80,33 +94,41 @@ def bottle(p: dict) -> Shape:
     profile = [(0, 0.002), (R - 0.005, 0), (R, 0.005), (R, label0), (R, label1), (R, z_sh), *shoulder,
                (rn, z_sh + shoulder_h), (rn, H - cap_h), (cap_r, H - cap_h), (cap_r, H - 0.001),
                (cap_r - 0.001, H), (0, H)]
-    mesh = S.revolve(profile, 48)
-    c = centroids(mesh)
+    v, f, uvs, faces_uv = S.revolve_uv(profile, 48)
+    c = centroids((v, f))
     radius = np.hypot(c[:, 0], c[:, 1])
-    face_part = np.zeros(len(mesh[1]), np.int16)
+    face_part = np.zeros(len(f), np.int16)
     face_part[(c[:, 2] > label0) & (c[:, 2] < label1) & (radius > 0.97 * R)] = 1
     face_part[c[:, 2] > H - cap_h] = 2
     parts = [part("plastic", p["color"], 0.15), part("label", p["label_color"], 0.5),
              part("cap", p["cap_color"], 0.4)]
-    return Shape(*mesh, face_part, parts)
+    shape = Shape(v, f, face_part, parts)
+    if not p.get("print", 1):
+        return shape
+    image = prints.wrap_print(rng, p["label_color"], label0 / H, label1 / H)
+    return printed(shape, uvs, faces_uv, image, {"label"})
 
 
-def can(p: dict) -> Shape:
+def can(p: dict, rng: np.random.Generator) -> Shape:
     """A drinks can: a printed body between necked-in metal lids (one surface of revolution)."""
     R, H = p["diameter"] / 2, p["height"]
     neck = min(0.006, R * 0.2)
     profile = [(0, 0.004), (R - neck - 0.002, 0.001), (R - neck, 0), (R - 0.002, 0.003), (R, 0.009), (R, H - 0.012),
                (R - neck, H - 0.002), (R - neck, H), (R - neck - 0.001, H), (R - neck - 0.0015, H - 0.003),
                (0, H - 0.003)]
-    mesh = S.revolve(profile, 56)
-    c = centroids(mesh)
+    v, f, uvs, faces_uv = S.revolve_uv(profile, 56)
+    c = centroids((v, f))
     face_part = np.where((c[:, 2] > 0.009) & (c[:, 2] < H - 0.012), 0, 1).astype(np.int16)
     parts = [part("print", p["color"], 0.3, 0.6), part("lid", (0.75, 0.75, 0.77), 0.25, 1.0)]
-    return Shape(*mesh, face_part, parts)
+    shape = Shape(v, f, face_part, parts)
+    if not p.get("print", 1):
+        return shape
+    image = prints.wrap_print(rng, p["color"], 0.009 / H, 1 - 0.012 / H)
+    return printed(shape, uvs, faces_uv, image, {"print"})
 
 
 # ---------------------------------------------------------------- pens
-def pen(p: dict) -> Shape:
+def pen(p: dict, rng: np.random.Generator) -> Shape:
     """A round pen: a conical writing tip, a body, a cap end; parts tip, body, end."""
     r, L = p["diameter"] / 2, p["length"]
     tip = 0.013
@@ -120,7 +142,7 @@ def pen(p: dict) -> Shape:
     return Shape(*mesh, face_part, parts)
 
 
-def pencil(p: dict) -> Shape:
+def pencil(p: dict, rng: np.random.Generator) -> Shape:
     """A hexagonal pencil: graphite point, sharpened wood, painted body, metal ferrule, eraser."""
     r, L = p["diameter"] / 2, p["length"]
     cone, ferrule, eraser = 0.018, 0.012, 0.007
@@ -138,36 +160,44 @@ def pencil(p: dict) -> Shape:
 
 
 # ---------------------------------------------------------------- flat things
-def phone(p: dict) -> Shape:
-    """A phone: a rounded slab (thin along z) with its flat top as the screen."""
+def phone(p: dict, rng: np.random.Generator) -> Shape:
+    """A phone: a rounded slab (thin along z) with its flat top as the screen (showing a home screen unless
+    `print` is 0)."""
     mesh = S.rounded_slab((p["width"], p["length"], p["thickness"]), p["corner_radius"], p["edge_radius"], 10, 4)
     unit, _ = face_normals(*mesh)
-    face_part = (unit[:, 2] > 0.9999).astype(np.int16) * (centroids(mesh)[:, 2] > 0)
+    face_part = ((unit[:, 2] > 0.9999) & (centroids(mesh)[:, 2] > 0)).astype(np.int16)
     parts = [part("case", p["color"], p["roughness"], p["metallic"]), part("screen", (0.01, 0.01, 0.012), 0.05)]
-    return Shape(*mesh, face_part.astype(np.int16), parts)
+    shape = Shape(*mesh, face_part, parts)
+    if not p.get("print", 1):
+        return shape
+    return printed(shape, S.planar_uv(mesh[0]), mesh[1], prints.screen(rng), {"screen"})
 
 
-def card(p: dict) -> Shape:
-    """A card (credit, playing, business): a thin slab with rounded corners and square rims (thin along z)."""
+def card(p: dict, rng: np.random.Generator) -> Shape:
+    """A card (credit, playing, business): a thin slab with rounded corners and square rims (thin along z); a
+    credit card's face printed unless `print` is 0."""
     mesh = S.rounded_slab((p["width"], p["length"], p["thickness"]), p["corner_radius"], 0.0, 8)
-    return one_part(mesh, part("card", p["color"], p["roughness"], p.get("metallic", 0.0)))
+    shape = one_part(mesh, part("card", p["color"], p["roughness"], p.get("metallic", 0.0)))
+    if not p.get("print", 1):
+        return shape
+    return printed(shape, S.planar_uv(mesh[0]), mesh[1], prints.card_face(rng, p["color"]), {"card"})
 
 
-def box(p: dict) -> Shape:
+def box(p: dict, rng: np.random.Generator) -> Shape:
     """A box (carton, matchbox, gift box): a slab with slightly rounded edges."""
     mesh = S.rounded_slab((p["width"], p["depth"], p["height"]), p["edge_radius"], p["edge_radius"], 3, 3)
     return one_part(mesh, part("board", p["color"], p["roughness"]))
 
 
 # ---------------------------------------------------------------- balls and fruit
-def ball(p: dict) -> Shape:
+def ball(p: dict, rng: np.random.Generator) -> Shape:
     """A ball: a sphere of `diameter` (slightly flattened by `flatten` for fruit such as an orange)."""
     R = p["diameter"] / 2
     mesh = S.ellipsoid((R, R, R * (1 - p.get("flatten", 0.0))), 3)
     return one_part(mesh, part("skin", p["color"], p["roughness"]))
 
 
-def apple(p: dict) -> Shape:
+def apple(p: dict, rng: np.random.Generator) -> Shape:
     """An apple: a flattened sphere of revolution with a dimple at the stalk and one at the base."""
     R, d = p["diameter"] / 2, p["dimple"]
     theta = np.linspace(0, np.pi, 33)
@@ -179,7 +209,7 @@ def apple(p: dict) -> Shape:
 
 
 # ---------------------------------------------------------------- tools
-def screwdriver(p: dict) -> Shape:
+def screwdriver(p: dict, rng: np.random.Generator) -> Shape:
     """A screwdriver: a metal shaft with a flattened tip and a bulging handle, one surface of revolution (tip at the
     bottom, +z toward the handle); parts shaft, handle."""
     rs, shaft, rh, handle = p["shaft_diameter"] / 2, p["shaft_length"], p["handle_diameter"] / 2, p["handle_length"]
@@ -192,7 +222,7 @@ def screwdriver(p: dict) -> Shape:
     return Shape(*mesh, face_part, parts)
 
 
-def hammer(p: dict) -> Shape:
+def hammer(p: dict, rng: np.random.Generator) -> Shape:
     """A hammer: an oval handle along z and a head across it at the top; parts handle, head."""
     L, hw, hd = p["length"], p["handle_width"], p["handle_depth"]
     head_len, head_w = p["head_length"], p["head_width"]
@@ -207,7 +237,7 @@ def hammer(p: dict) -> Shape:
     return Shape(*mesh, in_head.astype(np.int16), parts)
 
 
-def wrench(p: dict) -> Shape:
+def wrench(p: dict, rng: np.random.Generator) -> Shape:
     """An open-ended spanner: a flat bar along z (thin along y) with a disc at each end, the top one cut open by
     its jaw (width `jaw`)."""
     L, w, t, D = p["length"], p["width"], p["thickness"], p["head_diameter"]
@@ -221,7 +251,7 @@ def wrench(p: dict) -> Shape:
     return one_part(mesh, part("steel", (0.7, 0.7, 0.72), 0.3, 1.0))
 
 
-def pliers(p: dict) -> Shape:
+def pliers(p: dict, rng: np.random.Generator) -> Shape:
     """Pliers lying in the xz plane (thin along y): a tapered nose above the pivot, two handles spreading below it
     with coated grips; parts metal, grips."""
     L, nose, t = p["length"], p["nose_length"], p["thickness"]

@@ -41,9 +41,10 @@ class DrawnPart:
 class ObjectItem:
     """One catalogue object. vertices (N, 3) float64 metres in the object frame (origin at the bounding box's
     centre, +z the object's axis or thin axis); faces (F, 3) int32, a closed, outward-wound mesh; face_part (F,)
-    int16 index into `parts` (dicts: name, base_color linear RGB, roughness, metallic); size_m the bounding box's
-    extents (metres); grasps: taxonomy names this object suits; uvs (T, 2) float32 + faces_uv (F, 3) int32 when a
-    part is textured by base_color_png (sRGB)."""
+    int16 index into `parts` (dicts: name, base_color linear RGB, roughness, metallic, and `textured` (default
+    true) when the object has a texture); size_m the bounding box's extents (metres); grasps: taxonomy names this
+    object suits; uvs (T, 2) float32 + faces_uv (F, 3) int32 when its textured parts show base_color_png (sRGB,
+    multiplied by the part's base_color)."""
 
     id: str
     category: str
@@ -69,10 +70,12 @@ class ObjectItem:
             if not len(sel):
                 continue
             verts, faces, normals = split_at_creases(self.vertices, self.faces[sel], crease_deg)
-            faces_uv = None if self.faces_uv is None else np.ascontiguousarray(self.faces_uv[sel], np.int32)
+            uvs, faces_uv = None, None
+            if self.uvs is not None and self.faces_uv is not None and part.get("textured", True):
+                uvs, faces_uv = self.uvs.astype(np.float32), np.ascontiguousarray(self.faces_uv[sel], np.int32)
             out.append(DrawnPart(
                 name=str(part["name"]), vertices=verts.astype(np.float32), faces=faces.astype(np.int32),
-                normals=normals.astype(np.float32), uvs=None if self.uvs is None else self.uvs.astype(np.float32),
+                normals=normals.astype(np.float32), uvs=uvs,
                 faces_uv=faces_uv, base_color=tuple(float(c) for c in part["base_color"]),
                 roughness=float(part["roughness"]), metallic=float(part["metallic"]),
                 base_color_png=self.base_color_png if faces_uv is not None else None))

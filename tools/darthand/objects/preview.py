@@ -18,8 +18,8 @@ VIEW = (-0.45, -0.8, -0.55)      # from the front left, above: a card's or phone
 def object_tile(vertices: np.ndarray, faces: np.ndarray, face_part: np.ndarray, parts: list[dict],
                 uvs: np.ndarray | None = None, faces_uv: np.ndarray | None = None, texture: Path | None = None,
                 size: int = 192) -> np.ndarray:
-    """(size, size, 3) linear RGB view of one object (metres, object frame), its parts in their colours, the
-    textured part's base colour multiplied by its texture."""
+    """(size, size, 3) linear RGB view of one object (metres, object frame), its parts in their colours, a
+    textured part's (`textured`, default true when there is a texture) base colour multiplied by the texture."""
     image = None if texture is None else srgb_to_linear(read_image(texture)[..., :3] / 255.0)
     meshes = []
     for k, p in enumerate(parts):
@@ -28,7 +28,7 @@ def object_tile(vertices: np.ndarray, faces: np.ndarray, face_part: np.ndarray, 
             continue
         m = {"vertices": vertices, "faces": faces[sel], "metallic": float(p["metallic"]),
              "color": np.asarray(p["base_color"], float)}
-        if image is not None and faces_uv is not None:
+        if image is not None and faces_uv is not None and p.get("textured", True):
             m.update(uvs=uvs, faces_uv=faces_uv[sel], texture=image * np.asarray(p["base_color"], float))
         meshes.append(m)
     extent = float(np.ptp(vertices, axis=0).max()) * 1.2

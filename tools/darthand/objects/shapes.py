@@ -12,10 +12,18 @@ from scipy.spatial import ConvexHull
 from darthand.errors import DarthandError
 
 
-def revolve(profile: np.ndarray, segments: int = 48, phase: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """The surface swept by `profile` (K, 2) of (radius, z) points, metres, turned about +z. The first and last
-    points lie on the axis (radius 0: the poles that close it); the others have radius > 0. `segments` around (6:
-    a hexagonal pencil), the first at angle `phase` (radians)."""
+def revolve(profile, segments: int = 48, phase: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The surface swept by `profile` ((K, 2) array or list of (radius, z) points, metres) turned about +z. The
+    first and last points lie on the axis (radius 0: the poles that close it); the others have radius > 0.
+    `segments` around (6: a hexagonal pencil), the first at angle `phase` (radians)."""
+    vertices, faces, _, _ = revolve_uv(profile, segments, phase)
+    return vertices, faces
+
+
+def revolve_uv(profile, segments: int = 48,
+               phase: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """`revolve`'s mesh with cylindrical texture coordinates: (vertices, faces, uvs (T, 2), faces_uv (F, 3)); u
+    the angle around +z from `phase` (0..1, its seam split), v the height from the lowest to the highest point."""
     profile = np.asarray(profile, float)
     if profile[0, 0] != 0 or profile[-1, 0] != 0 or (profile[1:-1, 0] <= 0).any():
         raise DarthandError("revolve: the profile must start and end on the axis and stay off it between")
@@ -25,16 +33,39 @@ def revolve(profile: np.ndarray, segments: int = 48, phase: float = 0.0) -> tupl
                          np.repeat(rings[:, 1:], segments, axis=1)], axis=-1).reshape(-1, 3)
     bottom, top = len(ring_xyz), len(ring_xyz) + 1
     vertices = np.vstack([ring_xyz, [[0, 0, profile[0, 1]], [0, 0, profile[-1, 1]]]])
+    faces = _revolve_faces(len(rings), segments, segments, bottom, top, wrap=True)
+    z0, z1 = profile[:, 1].min(), profile[:, 1].max()
+    cols = segments + 1
+    grid = np.stack(np.meshgrid(np.arange(cols) / segments, (rings[:, 1] - z0) / (z1 - z0)), axis=-1).reshape(-1, 2)
+    centre_u = (np.arange(segments) + 0.5) / segments
+    poles = np.vstack([np.column_stack([centre_u, np.full(segments, (profile[0, 1] - z0) / (z1 - z0))]),
+                       np.column_stack([centre_u, np.full(segments, (profile[-1, 1] - z0) / (z1 - z0))])])
+    uvs = np.vstack([grid, poles])
+    faces_uv = _revolve_faces(len(rings), segments, cols, len(grid) + np.arange(segments),
+                              len(grid) + segments + np.arange(segments), wrap=False)
+    if signed_volume(vertices, faces) < 0:
+        faces, faces_uv = faces[:, ::-1], faces_uv[:, ::-1]
+    return vertices, np.ascontiguousarray(faces), uvs, np.ascontiguousarray(faces_uv)
+
+
+def _revolve_faces(n_rings: int, segments: int, stride: int, bottom, top, wrap: bool) -> np.ndarray:
+    """The triangles of a revolved mesh over rings of `stride` points: a fan to the bottom pole(s), two per quad
+    between rings, a fan to the top; `wrap` closes each ring on its first point, else on an extra seam column."""
     j = np.arange(segments)
-    jn = (j + 1) % segments
-    faces = [np.column_stack([np.full(segments, bottom), jn, j])]
-    for r in range(len(rings) - 1):
-        a, b = r * segments + j, r * segments + jn
-        c, d = a + segments, b + segments
-        faces += [np.column_stack([a, b, d]), np.column_stack([a, d, c])]
-    last = (len(rings) - 1) * segments
-    faces.append(np.column_stack([np.full(segments, top), last + j, last + jn]))
-    return outward(vertices, np.vstack(faces))
+    jn = (j + 1) % segments if wrap else j + 1
+    faces = [np.column_stack([np.broadcast_to(bottom, (segments,)), jn, j])]
+    for r in range(n_rings - 1):
+        a, b = r * stride + j, r * stride + jn
+        faces += [np.column_stack([a, b, b + stride]), np.column_stack([a, b + stride, a + stride])]
+    last = (n_rings - 1) * stride
+    faces.append(np.column_stack([np.broadcast_to(top, (segments,)), last + j, last + jn]))
+    return np.vstack(faces).astype(np.int64)
+
+
+def planar_uv(vertices: np.ndarray) -> np.ndarray:
+    """(N, 2) texture coordinates projecting along z onto the bounding box's x (u) and y (v) extents, 0..1."""
+    lo, hi = vertices[:, :2].min(axis=0), vertices[:, :2].max(axis=0)
+    return (vertices[:, :2] - lo) / np.where(hi > lo, hi - lo, 1.0)
 
 
 def rounded_slab(size, corner_r: float, edge_r: float, corner_steps: int = 8,
@@ -108,8 +139,8 @@ def tube(path: np.ndarray, radius: float, sides: int = 12) -> tuple[np.ndarray, 
 
 
 def boolean(meshes: list[tuple[np.ndarray, np.ndarray]], op: str = "union") -> tuple[np.ndarray, np.ndarray]:
-    """The union of closed meshes (or, with op 'difference', the first minus the others), through MeshLab's exact
-    boolean; DarthandError if the result is not closed."""
+    """The union of closed meshes (or, with op 'difference', the first minus the others), through MeshLab's
+    boolean (libigl's exact arithmetic); the build's checks refuse a result that is not closed."""
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(np.asarray(meshes[0][0], float), np.asarray(meshes[0][1], np.int32)))
     for v, f in meshes[1:]:
