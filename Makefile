@@ -117,6 +117,12 @@ build/accessories/catalog.json: build/model/right.npz $(wildcard assets_src/acce
                                 $(call src,accessories)
 	@$(STEP) accessories -- $(DH) accessories build build/model/right.npz --out build/accessories --jobs 2
 
+# Grasps of the taxonomy fitted to every catalogue object, both hands (grasps stage, after the objects stage).
+build/grasps/catalog.json: build/model/right.npz build/model/left.npz build/objects/catalog.json \
+                           assets_src/poses/library/grasps.json $(call src,grasps)
+	@$(STEP) grasps -- $(DH) grasps build build/model/right.npz build/model/left.npz \
+	    --objects build/objects/catalog.json --out build/grasps --jobs 2
+
 # One USD package and one glTF file per side.
 define side_rules
 build/usd/$(1)/$(1).usda: build/model/$(1).npz build/textures/catalog.json build/accessories/catalog.json \
@@ -152,6 +158,11 @@ ASSETS := build/model/right.npz build/template/gestures.json build/textures/cata
           $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb build/gltf/$(s)/$(s).gltf \
                                build/blender/$(s).blend) \
           build/checks/report.json build/validate/report.json
+
+# The grasp stage joins `make assets` with the object catalogue it grasps (the objects stage's loader).
+ifneq ($(wildcard tools/darthand/objects/loader.py),)
+ASSETS += build/grasps/catalog.json
+endif
 
 build/manifest.json: $(ASSETS)
 	@$(DH) manifest --build build

@@ -146,6 +146,7 @@ STEP_TARGETS = {
     "template": "template/gestures.json",
     "textures": "textures/catalog.json",
     "accessories": "accessories/catalog.json",
+    "grasps": "grasps/catalog.json",
     "usd/right": "usd/right/right.usda",
     "usd/left": "usd/left/left.usda",
     "gltf/right.glb": "gltf/right.glb",

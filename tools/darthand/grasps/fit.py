@@ -30,7 +30,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from darthand.grasps.field import ObjectField
+from darthand.grasps.field import SPACING, ObjectField
 from darthand.grasps.parts import contact_patches
 from darthand.model.anatomy import angles_to_axis_angle, joint_frames, limits_radians, palm_normal
 from darthand.model.forward import forward
@@ -97,7 +97,7 @@ class GraspProblem:
     model frame -> object frame) with angles `angles` (16, 3), pulled toward the pre-shape `preshape` (16, 3)."""
 
     def __init__(self, rig: HandRig, field_: ObjectField, contacts, preshape: np.ndarray, angles: np.ndarray,
-                 start: np.ndarray, free_scale: float = PRESHAPE_FREEDOM):
+                 start: np.ndarray, free_scale: float = PRESHAPE_FREEDOM, reuse: bool = False):
         self.rig, self.field, self.contacts = rig, field_, list(contacts)
         self.preshape, self.base, self.start = preshape, angles.reshape(-1).copy(), start
         sigma = freedom(preshape).reshape(-1) * free_scale
@@ -111,6 +111,7 @@ class GraspProblem:
         patch_ids = np.concatenate([rig.patches[p] for p in self.contacts])
         self.centre = (rig.pose(angles).vertices[0][patch_ids] @ start[:3, :3].T + start[:3, 3]).mean(0)
         self.ids = np.arange(rig.model.num_vertices)
+        self.reuse, self.cand = reuse, None
         self._cache: tuple | None = None
 
     def angles(self, y: np.ndarray) -> np.ndarray:
@@ -131,12 +132,15 @@ class GraspProblem:
         return points @ M[:3, :3].T + M[:3, 3]
 
     def select(self, y: np.ndarray) -> None:
-        """Fit only the vertices within REACH of the object (and every contact part's) at y."""
+        """Fit only the vertices within REACH of the object (and every contact part's) at y; with `reuse`, keep
+        their candidate faces for the whole solve (a refit moves a millimetre or two: less than field.SPACING)."""
         v = self.placed(self.rig.pose(self.angles(y)).vertices[0], y)
-        near = self.field.near(v, REACH)
-        for p in self.contacts:
-            near[self.rig.patches[p]] = True
-        self.ids = np.flatnonzero(near)
+        contact = np.zeros(len(v), bool)
+        contact[np.concatenate([self.rig.patches[p] for p in self.contacts])] = True
+        ids = np.flatnonzero(self.field.in_box(v, REACH) | contact)
+        first, cand = self.field.candidates(v[ids])
+        keep = (first < REACH + SPACING) | contact[ids]
+        self.ids, self.cand = ids[keep], cand[keep] if self.reuse else None
         self._cache = None
 
     def evaluate(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -147,7 +151,7 @@ class GraspProblem:
         posed = self.rig.pose(angles)
         M = self.transform(y)
         q = posed.vertices[0][self.ids] @ M[:3, :3].T + M[:3, 3]
-        d, u, _ = self.field.query(q)
+        d, u, _ = self.field.query(q, self.cand)
         omega = turn_axes(self.rig.frames, angles, posed.world_rotations[0], self.rig.model.parents, self.free)
         pivot = posed.joints[0, self.free // 3] @ M[:3, :3].T + M[:3, 3]
         rows = np.hstack([np.cross(q - self.centre - y[3:6], u), u,
@@ -187,7 +191,13 @@ class GraspProblem:
         angles = self.angles(y)
         posed = self.rig.pose(angles)
         M = self.transform(y)
-        d, _, near = self.field.query(posed.vertices[0] @ M[:3, :3].T + M[:3, 3])
+        q = posed.vertices[0] @ M[:3, :3].T + M[:3, 3]
+        d, near = np.full(len(q), np.inf), q.copy()    # outside the object's box: outside it
+        if self.reuse:    # a refit: the vertices within REACH at its start are the ones that can touch
+            d[self.ids], _, near[self.ids] = self.field.query(q[self.ids], self.cand)
+        else:
+            inside = self.field.in_box(q, MAX_CONTACT)
+            d[inside], _, near[inside] = self.field.query(q[inside])
         vertices, points, gaps = [], [], []
         for p in self.contacts:
             ids = self.rig.patches[p]
@@ -261,7 +271,7 @@ def refine(rig: HandRig, field_: ObjectField, contacts, preshape: np.ndarray, an
            start: np.ndarray, rounds: int = 1, nfev: int = 4) -> GraspFit:
     """A few iterations of the same problem from given angles and start (4, 4, hand -> object): a refit."""
     t0 = time.perf_counter()
-    problem = GraspProblem(rig, field_, contacts, preshape, angles, start)
+    problem = GraspProblem(rig, field_, contacts, preshape, angles, start, reuse=True)
     y, evaluations = problem.solve(rounds, nfev)
     return problem.result(y, evaluations, time.perf_counter() - t0)
 
