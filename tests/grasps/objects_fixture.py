@@ -35,3 +35,8 @@ def cylinder(radius: float = 0.033, height: float = 0.12, grasps=("large_diamete
 
 def box(extents=(0.07, 0.14, 0.008), grasps=("prismatic_4_finger",)) -> TestItem:
     return item("phone_test", "phone", trimesh.creation.box(extents), grasps)
+
+
+def crumb() -> TestItem:
+    """A 4 mm ball asked for a whole-hand grasp and for a grasp type the taxonomy does not have: both dropped."""
+    return item("crumb_test", "ball", trimesh.creation.icosphere(2, 0.002), ("power_sphere", "no_such_grasp"))

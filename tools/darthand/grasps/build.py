@@ -59,7 +59,8 @@ def mirrored_start(fit: GraspFit, reflection: np.ndarray) -> np.ndarray:
 class ObjectGrasps:
     """Fits the grasps of one object on both models (rigs built once per process)."""
 
-    def __init__(self, models: dict[str, HandModel], taxonomy: dict[str, GraspType]):
+    def __init__(self, models: dict[str, HandModel], taxonomy: dict[str, GraspType], approaches: int = APPROACHES):
+        self.approaches = approaches
         parts = sorted({p for t in taxonomy.values() for p in t.contacts})
         self.taxonomy = taxonomy
         self.rigs = {side: HandRig.of(m, parts) for side, m in models.items()}
@@ -72,7 +73,8 @@ class ObjectGrasps:
         dropped = [{"object": item.id, "type": n, "side": s, "approach": None, "why": "no such grasp type"}
                    for n in unknown for s in self.rigs]
         fitted: list[dict] = []
-        axis, approaches = approach_directions(getattr(item, "size_m", np.ptp(item.vertices, axis=0)))
+        axis, approaches = approach_directions(getattr(item, "size_m", np.ptp(item.vertices, axis=0)),
+                                                 self.approaches)
         reflection = object_reflection(field)
         for name in known:
             g = self.taxonomy[name]
@@ -104,22 +106,24 @@ _WORKER: dict = {}
 
 
 def _fit_in_worker(args) -> tuple[list[dict], list[dict]]:
-    model_paths, taxonomy_path, item = args
-    key = (tuple(sorted(model_paths.items())), taxonomy_path)
+    model_paths, taxonomy_path, approaches, item = args
+    key = (tuple(sorted(model_paths.items())), taxonomy_path, approaches)
     if key not in _WORKER:
         _WORKER.clear()
         models = {s: load_npz(p) for s, p in model_paths.items()}
-        _WORKER[key] = ObjectGrasps(models, load_taxonomy(taxonomy_path))
+        _WORKER[key] = ObjectGrasps(models, load_taxonomy(taxonomy_path), approaches)
     return _WORKER[key].fit_object(item)
 
 
 def build_grasps(items, model_paths: dict[str, str], out, taxonomy_path=None, jobs: int = 1,
-                 sheet: bool = True) -> dict:
+                 sheet: bool = True, approaches: int = APPROACHES) -> dict:
     """Fit every object's grasps on the models of `model_paths` ({'right': npz, 'left': npz}) into `out`
-    (catalog.json, grasps.npz, contact sheets); returns the catalogue document."""
+    (catalog.json, grasps.npz, contact sheets), `approaches` per object and type; returns the catalogue
+    document."""
     t0 = time.perf_counter()
     out = make_folder(out)
-    work = [(dict(model_paths), None if taxonomy_path is None else str(taxonomy_path), item) for item in items]
+    taxonomy = None if taxonomy_path is None else str(taxonomy_path)
+    work = [(dict(model_paths), taxonomy, approaches, item) for item in items]
     if jobs > 1 and len(work) > 1:
         with ProcessPoolExecutor(max_workers=min(jobs, len(work))) as pool:
             results = list(pool.map(_fit_in_worker, work))
