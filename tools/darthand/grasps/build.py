@@ -166,7 +166,7 @@ def write_arrays(path: Path, fits: list[GraspFit]) -> None:
     for i, f in enumerate(fits):
         cv[i, :len(f.contact_vertices)] = f.contact_vertices
         cp[i, :len(f.contact_points)] = f.contact_points
-    arrays = {"angles": np.array([f.angles for f in fits]).reshape(-1, 16, 3),
+    arrays: dict = {"angles": np.array([f.angles for f in fits]).reshape(-1, 16, 3),
               "pose": np.array([f.pose for f in fits]).reshape(-1, 48),
               "placement": np.array([f.placement for f in fits]).reshape(-1, 4, 4),
               "contact_vertices": cv, "contact_points": cp}

@@ -82,7 +82,7 @@ class ObjectField:
         """(P, 3) the direction that signs an offset from the nearest point (faces (P,), barycentrics (P, 3))."""
         corners = self.vertex_normals[self.faces[face]]
         smooth = np.einsum("pc,pcd->pd", bary, corners)
-        inside = (bary > INTERIOR).all(axis=1)
+        inside = np.all(bary > INTERIOR, axis=1)
         return np.where(inside[:, None], self.face_normals[face], smooth)
 
 

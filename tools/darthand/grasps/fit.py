@@ -111,7 +111,8 @@ class GraspProblem:
         patch_ids = np.concatenate([rig.patches[p] for p in self.contacts])
         self.centre = (rig.pose(angles).vertices[0][patch_ids] @ start[:3, :3].T + start[:3, 3]).mean(0)
         self.ids = np.arange(rig.model.num_vertices)
-        self.reuse, self.cand = reuse, None
+        self.reuse = reuse
+        self.cand: np.ndarray | None = None
         self._cache: tuple | None = None
 
     def angles(self, y: np.ndarray) -> np.ndarray:
@@ -163,7 +164,7 @@ class GraspProblem:
         for p in self.contacts:
             at = np.array([where[v] for v in self.rig.patches[p]])
             best = at[np.argmin(d[at])]
-            res.append([(d[best] - GAP) / CONTACT_SCALE])
+            res.append(np.array([(d[best] - GAP) / CONTACT_SCALE]))
             jac.append(rows[best][None] / CONTACT_SCALE)
         k = len(self.free)
         res.append((self.base[self.free] + y[6:] - self.preshape.reshape(-1)[self.free]) / self.sigma)
