@@ -117,6 +117,11 @@ build/accessories/catalog.json: build/model/right.npz $(wildcard assets_src/acce
                                 $(call src,accessories)
 	@$(STEP) accessories -- $(DH) accessories build build/model/right.npz --out build/accessories --jobs 2
 
+# The objects a hand holds: generated and imported meshes, checked (no model needed).
+build/objects/catalog.json: $(wildcard assets_src/objects/*.json assets_src/objects/*/*) $(call src,objects) \
+                            | $(STAMP)
+	@$(STEP) objects -- $(DH) objects build --out build/objects
+
 # Grasps of the taxonomy fitted to every catalogue object, both hands (grasps stage, after the objects stage).
 build/grasps/catalog.json: build/model/right.npz build/model/left.npz build/objects/catalog.json \
                            assets_src/poses/library/grasps.json $(call src,grasps)
@@ -154,15 +159,12 @@ build/validate/report.json: $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/
 	    --out $@
 
 ASSETS := build/model/right.npz build/template/gestures.json build/textures/catalog.json \
-          build/accessories/catalog.json \
+          build/accessories/catalog.json build/objects/catalog.json \
           $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb build/gltf/$(s)/$(s).gltf \
                                build/blender/$(s).blend) \
           build/checks/report.json build/validate/report.json
 
-# The grasp stage joins `make assets` with the object catalogue it grasps (the objects stage's loader).
-ifneq ($(wildcard tools/darthand/objects/loader.py),)
-ASSETS += build/grasps/catalog.json
-endif
+ASSETS += build/grasps/catalog.json     # after the objects stage's catalogue, which it grasps
 
 build/manifest.json: $(ASSETS)
 	@$(DH) manifest --build build

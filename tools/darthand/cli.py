@@ -75,6 +75,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     # -- stage command groups are added here (one function per stage, below), with the names they add --
     groups = [(("model",), _add_model_commands), (("template",), _add_template_commands),
               (("textures",), _add_textures_commands), (("accessories",), _add_accessories_commands),
+              (("objects",), _add_objects_commands),
               (("grasps",), _add_grasps_commands),
               (("export",), _add_export_commands), (("render", "render-checks"), _add_render_commands),
               (("render-dataset", "dataset", "eval"), _add_dataset_commands), (("validate",), _add_validate_command),
@@ -356,6 +357,22 @@ def _add_accessories_commands(sub) -> None:
     p.add_argument("--limit", type=float, default=3.0, help="largest |beta| drawn (default 3)")
     p.add_argument("--no-compare", action="store_true", help="skip the sweep without refitting")
     p.set_defaults(run=commands.shapes)
+
+
+# ---------------------------------------------------------------- objects
+def _add_objects_commands(sub) -> None:
+    from darthand.objects import commands
+
+    g = _group(sub, "objects", "the catalogue of objects a hand holds (mugs, bottles, phones, pens, boxes, balls, "
+                               "tools, cards)")
+    p = g.add_parser("build", help="generate, import and check the object catalogue")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (build/objects)")
+    p.add_argument("--spec", default=None, metavar="CATALOG.json",
+                   help="catalogue spec (default assets_src/objects/catalog.json)")
+    p.add_argument("--ids", nargs="+", default=None, metavar="ID", help="build only these object ids")
+    p.add_argument("--jobs", type=number(int, 1, 64), default=1, metavar="N", help="worker processes (default 1)")
+    p.add_argument("--no-sheet", action="store_true", help="skip the contact sheet")
+    p.set_defaults(run=commands.build)
 
 
 # ---------------------------------------------------------------- grasps

@@ -49,7 +49,7 @@ def file_entries(build: Path, manifest_path: Path, previous: dict) -> list[dict]
 
 
 def catalogue_checks(build: Path) -> dict:
-    """The figures the texture and accessory catalogues record about themselves."""
+    """The figures the texture, accessory and object catalogues record about themselves."""
     checks = {}
     textures = build / "textures" / "catalog.json"
     if textures.is_file():
@@ -63,6 +63,10 @@ def catalogue_checks(build: Path) -> dict:
                       "max_penetration_mm": {k: a["max_penetration_mm"][k] for k in ("rest", "gestures", "poses")},
                       "max_axis_drift_mm": a.get("max_axis_drift_mm")}
             for a in cat["accessories"]}
+    objects = build / "objects" / "catalog.json"
+    if objects.is_file():
+        cat = _read(objects)
+        checks["objects"] = {"objects": len(cat["objects"]), "skipped": [s["id"] for s in cat["skipped"]]}
     return checks
 
 
@@ -146,6 +150,7 @@ STEP_TARGETS = {
     "template": "template/gestures.json",
     "textures": "textures/catalog.json",
     "accessories": "accessories/catalog.json",
+    "objects": "objects/catalog.json",
     "grasps": "grasps/catalog.json",
     "usd/right": "usd/right/right.usda",
     "usd/left": "usd/left/left.usda",
