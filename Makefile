@@ -164,7 +164,8 @@ ASSETS := build/model/right.npz build/template/gestures.json build/textures/cata
                                build/blender/$(s).blend) \
           build/checks/report.json build/validate/report.json
 
-ASSETS += build/grasps/catalog.json     # after the objects stage's catalogue, which it grasps
+# The grasps come after the objects stage's catalogue, which they grasp.
+ASSETS += build/grasps/catalog.json
 
 build/manifest.json: $(ASSETS)
 	@$(DH) manifest --build build
