@@ -1,11 +1,13 @@
 """The grasp catalogue: per object, per grasp type it suits, per approach direction, a grasp fitted to the right
-model's mean shape, its mirror refitted on the left model, dropped fits listed with why.
+model's mean shape, its mirror image on the left model, dropped fits listed with why.
 
-Approaches: APPROACHES directions around the object's longest axis (the knuckle line laid along it, so a wrap
-closes around a bottle, a pinch along a pen), evenly spaced. The left hand's grasp starts from the right one's
-mirror image: the hand mirrored (x -> -x, the same anatomical angles) and the object mirrored by the reflection of
-its own frame that maps it most nearly onto itself (`object_reflection`); then it is refitted on the left model
-with the left field (a few iterations), so an object that is not mirror-symmetric is still held properly.
+Approaches: APPROACHES directions around the object's axis (`approach_directions`; the knuckle line laid along
+it, so a wrap closes around a bottle, a pinch along a pen), evenly spaced. The left hand's grasp starts from the
+right one's mirror image: the hand mirrored (x -> -x, the same anatomical angles) and the object mirrored by the
+reflection of its own frame that maps it most nearly onto itself (`object_reflection`). Where the object is
+mirror-symmetric (to SYMMETRIC) and the left model is the right one's mirror image, that mirror image is exact and
+kept (its figures the right one's, marked `mirrored`); otherwise it is refitted on the left model with the
+object's field (a few iterations), so an object that is not mirror-symmetric is still held properly.
 """
 
 from __future__ import annotations
@@ -22,30 +24,37 @@ from darthand.grasps.field import ObjectField
 from darthand.grasps.fit import GraspFit, HandRig, fit_grasp, refine
 from darthand.grasps.loader import ARRAYS, FORMAT, FORMAT_VERSION
 from darthand.grasps.taxonomy import GraspType, load_taxonomy, types_for
+from darthand.model.anatomy import angles_to_axis_angle
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
+from darthand.model.mirror import mirror_points
 from darthand.model.npz_io import load_npz
 from darthand.model.self_crossing import SelfCrossing
 
-APPROACHES = 3
+APPROACHES = 2
 LEFT_ROUNDS, LEFT_NFEV = 2, 6
+SYMMETRIC = 1e-5    # m: an object whose reflection maps it onto itself this closely is mirror-symmetric
 REFLECTIONS = (np.diag([-1.0, 1, 1]), np.diag([1.0, -1, 1]), np.diag([1.0, 1, -1]))
 
 
 def approach_directions(size_m, count: int = APPROACHES) -> tuple[np.ndarray, list[np.ndarray]]:
-    """(the object's longest axis (3,), `count` unit approach directions (3,) orthogonal to it), object frame."""
-    axis = np.eye(3)[int(np.argmax(size_m))]
-    e1 = np.eye(3)[(int(np.argmax(size_m)) + 1) % 3]
+    """(the object's axis (3,), `count` unit approach directions (3,) orthogonal to it), object frame. The axis is
+    +z (the catalogue's axis of a bottle, a mug, a pen, a tool) unless z is the object's thinnest extent (a phone,
+    a card: z their thin axis), then the longer of x and y."""
+    k = 2 if np.argmin(size_m) != 2 else int(np.argmax(np.asarray(size_m)[:2]))
+    axis = np.eye(3)[k]
+    e1 = np.eye(3)[(k + 1) % 3]
     e2 = np.cross(axis, e1)
     angles = 2 * np.pi * np.arange(count) / count
     return axis, [np.cos(a) * e1 + np.sin(a) * e2 for a in angles]
 
 
-def object_reflection(field: ObjectField) -> np.ndarray:
-    """(3, 3) the reflection of the object frame (one axis negated) mapping the object most nearly onto itself
-    (smallest largest |distance| of its reflected vertices)."""
-    errors = [np.abs(field.distance(field.vertices @ S)).max() for S in REFLECTIONS]
-    return REFLECTIONS[int(np.argmin(errors))]
+def object_reflection(field: ObjectField) -> tuple[np.ndarray, float]:
+    """((3, 3) the reflection of the object frame (one axis negated) mapping the object most nearly onto itself,
+    its error: the largest |distance| (m) of the reflected vertices to the object)."""
+    errors = [float(np.abs(field.distance(field.vertices @ S)).max()) for S in REFLECTIONS]
+    best = int(np.argmin(errors))
+    return REFLECTIONS[best], errors[best]
 
 
 def mirrored_start(fit: GraspFit, reflection: np.ndarray) -> np.ndarray:
@@ -65,6 +74,7 @@ class ObjectGrasps:
         self.taxonomy = taxonomy
         self.rigs = {side: HandRig.of(m, parts) for side, m in models.items()}
         self.crossing = {side: SelfCrossing(m) for side, m in models.items()}
+        self.mirrored_models = "left" in models and mirror_images(models["right"], models["left"])
 
     def fit_object(self, item) -> tuple[list[dict], list[dict]]:
         """(fitted records, dropped records) of one object; a record holds its GraspFit under 'fit'."""
@@ -75,17 +85,29 @@ class ObjectGrasps:
         fitted: list[dict] = []
         axis, approaches = approach_directions(getattr(item, "size_m", np.ptp(item.vertices, axis=0)),
                                                  self.approaches)
-        reflection = object_reflection(field)
+        reflection, error = object_reflection(field)
+        symmetric = self.mirrored_models and error < SYMMETRIC
         for name in known:
             g = self.taxonomy[name]
             for k, approach in enumerate(approaches):
                 right = fit_grasp(self.rigs["right"], field, g.contacts, g.angles, approach, axis)
                 self.record(item.id, g, k, "right", right, fitted, dropped)
                 if "left" in self.rigs:
-                    left = refine(self.rigs["left"], field, g.contacts, g.angles, right.angles,
-                                  mirrored_start(right, reflection), LEFT_ROUNDS, LEFT_NFEV)
-                    self.record(item.id, g, k, "left", left, fitted, dropped)
+                    self.record(item.id, g, k, "left", self.left_fit(field, g, right, reflection, symmetric),
+                                fitted, dropped)
         return fitted, dropped
+
+    def left_fit(self, field: ObjectField, g: GraspType, right: GraspFit, reflection: np.ndarray,
+                 symmetric: bool) -> GraspFit:
+        """The left hand's grasp: the right one's mirror image, refitted unless the object and the models are
+        mirror images of themselves and of each other (then the mirror image is exact: same figures)."""
+        if symmetric:
+            placement = np.linalg.inv(mirrored_start(right, reflection))
+            pose = angles_to_axis_angle(self.rigs["left"].model, right.angles, self.rigs["left"].frames).ravel()
+            return GraspFit(right.angles, pose, placement, right.contact_vertices,
+                            right.contact_points @ reflection.T, {**right.figures, "mirrored": True}, right.dropped)
+        return refine(self.rigs["left"], field, g.contacts, g.angles, right.angles, mirrored_start(right, reflection),
+                      LEFT_ROUNDS, LEFT_NFEV)
 
     def record(self, object_id: str, g: GraspType, k: int, side: str, fit: GraspFit, fitted: list, dropped: list):
         why = fit.dropped or self.digits_crossing(side, fit)
@@ -100,6 +122,13 @@ class ObjectGrasps:
         v = forward(self.rigs[side].model, fit.pose[None]).vertices[0]
         pair = self.crossing[side].crossing(np.asarray(v, np.float64))
         return f"digits cross ({pair})" if pair else None
+
+
+def mirror_images(right: HandModel, left: HandModel) -> bool:
+    """Whether the left model is the right one's mirror image (model/mirror: x -> -x, every shape the same)."""
+    return (right.num_vertices == left.num_vertices and right.num_betas == left.num_betas
+            and np.allclose(mirror_points(right.v_template), left.v_template, atol=1e-7)
+            and np.allclose(right.shapedirs * np.array([-1.0, 1, 1])[None, :, None], left.shapedirs, atol=1e-7))
 
 
 _WORKER: dict = {}

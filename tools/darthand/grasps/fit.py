@@ -49,6 +49,7 @@ SHIFT_SIGMA = 0.03          # m
 MAX_TURN = np.deg2rad(60.0)
 MAX_SHIFT = 0.08            # m
 REACH = 0.02                # m: vertices farther than this from the object are left out of a solve
+RESEARCH = 0.001            # m: a vertex that moved this far has its candidate faces searched again
 OPEN = 0.35                 # the start opens the pre-shape to this fraction of its angles
 BACKOFF_STEP = 0.002        # m
 ROUNDS = 3                  # solves, each with the vertices near the object re-selected
@@ -112,7 +113,8 @@ class GraspProblem:
         self.centre = (rig.pose(angles).vertices[0][patch_ids] @ start[:3, :3].T + start[:3, 3]).mean(0)
         self.ids = np.arange(rig.model.num_vertices)
         self.reuse = reuse
-        self.cand: np.ndarray | None = None
+        self.cand: np.ndarray | None = None          # candidate faces (n, k) of the fitted vertices ...
+        self.cand_at = np.zeros((0, 3))              # ... found where they were then (n, 3)
         self._cache: tuple | None = None
 
     def angles(self, y: np.ndarray) -> np.ndarray:
@@ -133,16 +135,28 @@ class GraspProblem:
         return points @ M[:3, :3].T + M[:3, 3]
 
     def select(self, y: np.ndarray) -> None:
-        """Fit only the vertices within REACH of the object (and every contact part's) at y; with `reuse`, keep
-        their candidate faces for the whole solve (a refit moves a millimetre or two: less than field.SPACING)."""
+        """Fit only the vertices within REACH of the object (and every contact part's) at y, keeping their
+        candidate faces (field.candidates); with `reuse` (a refit: it moves a millimetre or two, less than
+        field.SPACING) for the whole solve, else until a vertex moves RESEARCH away from where they were found."""
         v = self.placed(self.rig.pose(self.angles(y)).vertices[0], y)
         contact = np.zeros(len(v), bool)
         contact[np.concatenate([self.rig.patches[p] for p in self.contacts])] = True
         ids = np.flatnonzero(self.field.in_box(v, REACH) | contact)
         first, cand = self.field.candidates(v[ids])
         keep = (first < REACH + SPACING) | contact[ids]
-        self.ids, self.cand = ids[keep], cand[keep] if self.reuse else None
+        self.ids, self.cand, self.cand_at = ids[keep], cand[keep], v[ids[keep]]
         self._cache = None
+
+    def candidate_faces(self, q: np.ndarray) -> np.ndarray:
+        """(n, k) candidate faces of the fitted vertices at q (n, 3): those kept, searched again for the vertices
+        that moved more than RESEARCH since (never with `reuse`)."""
+        assert self.cand is not None
+        if not self.reuse:
+            moved = np.linalg.norm(q - self.cand_at, axis=1) > RESEARCH
+            if moved.any():
+                self.cand[moved] = self.field.candidates(q[moved])[1]
+                self.cand_at[moved] = q[moved]
+        return self.cand
 
     def evaluate(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(residuals, Jacobian) at y, cached for the last y."""
@@ -152,7 +166,7 @@ class GraspProblem:
         posed = self.rig.pose(angles)
         M = self.transform(y)
         q = posed.vertices[0][self.ids] @ M[:3, :3].T + M[:3, 3]
-        d, u, _ = self.field.query(q, self.cand)
+        d, u, _ = self.field.query(q, self.candidate_faces(q))
         omega = turn_axes(self.rig.frames, angles, posed.world_rotations[0], self.rig.model.parents, self.free)
         pivot = posed.joints[0, self.free // 3] @ M[:3, :3].T + M[:3, 3]
         rows = np.hstack([np.cross(q - self.centre - y[3:6], u), u,
@@ -175,8 +189,10 @@ class GraspProblem:
         self._cache = (y.copy(), *out)
         return out
 
-    def solve(self, rounds: int = ROUNDS, nfev: int = MAX_NFEV) -> tuple[np.ndarray, int]:
-        """(variables y, evaluations) after `rounds` solves, the vertices near the object re-selected before each."""
+    def solve(self, rounds: int | None = None, nfev: int | None = None) -> tuple[np.ndarray, int]:
+        """(variables y, evaluations) after `rounds` solves (ROUNDS) of at most `nfev` evaluations (MAX_NFEV),
+        the vertices near the object re-selected before each."""
+        rounds, nfev = ROUNDS if rounds is None else rounds, MAX_NFEV if nfev is None else nfev
         y, evaluations = np.zeros(6 + len(self.free)), 0
         scale = np.concatenate([[0.05] * 3, [0.005] * 3, np.full(len(self.free), 0.1)])
         for _ in range(rounds):
@@ -239,10 +255,13 @@ def start_transform(rig: HandRig, field_: ObjectField, contacts, opened: np.ndar
     T[:3, 3] = -R @ centre
     placed = v @ R.T + T[:3, 3]
     for _ in range(int(0.2 / BACKOFF_STEP)):
-        if field_.distance(placed).min() >= CLEARANCE:
+        near = field_.in_box(placed, CLEARANCE)
+        deepest = -field_.distance(placed[near]).min(initial=np.inf) + CLEARANCE
+        if deepest <= 0:
             break
-        T[:3, 3] += BACKOFF_STEP * approach
-        placed += BACKOFF_STEP * approach
+        step = max(BACKOFF_STEP, 0.5 * deepest)   # at least half the deepest way out: a few steps, not hundreds
+        T[:3, 3] += step * approach
+        placed += step * approach
     return T
 
 
