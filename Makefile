@@ -122,6 +122,12 @@ build/objects/catalog.json: $(wildcard assets_src/objects/*.json assets_src/obje
                             | $(STAMP)
 	@$(STEP) objects -- $(DH) objects build --out build/objects
 
+# Grasps of the taxonomy fitted to every catalogue object, both hands (grasps stage, after the objects stage).
+build/grasps/catalog.json: build/model/right.npz build/model/left.npz build/objects/catalog.json \
+                           assets_src/poses/library/grasps.json $(call src,grasps)
+	@$(STEP) grasps -- $(DH) grasps build build/model/right.npz build/model/left.npz \
+	    --objects build/objects/catalog.json --out build/grasps --jobs 2
+
 # One USD package and one glTF file per side.
 define side_rules
 build/usd/$(1)/$(1).usda: build/model/$(1).npz build/textures/catalog.json build/accessories/catalog.json \
@@ -157,6 +163,9 @@ ASSETS := build/model/right.npz build/template/gestures.json build/textures/cata
           $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb build/gltf/$(s)/$(s).gltf \
                                build/blender/$(s).blend) \
           build/checks/report.json build/validate/report.json
+
+# The grasps come after the objects stage's catalogue, which they grasp.
+ASSETS += build/grasps/catalog.json
 
 build/manifest.json: $(ASSETS)
 	@$(DH) manifest --build build

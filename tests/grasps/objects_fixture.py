@@ -35,3 +35,15 @@ def cylinder(radius: float = 0.033, height: float = 0.12, grasps=("large_diamete
 
 def box(extents=(0.07, 0.14, 0.008), grasps=("prismatic_4_finger",)) -> TestItem:
     return item("phone_test", "phone", trimesh.creation.box(extents), grasps)
+
+
+def crumb() -> TestItem:
+    """A 4 mm ball asked for a whole-hand grasp and for a grasp type the taxonomy does not have: both dropped."""
+    return item("crumb_test", "ball", trimesh.creation.icosphere(2, 0.002), ("power_sphere", "no_such_grasp"))
+
+
+def lump(size: float = 0.07) -> TestItem:
+    """A convex lump with no mirror symmetry (the hull of seeded random points): its left grasps are refitted."""
+    points = np.random.default_rng(5).normal(size=(40, 3)) * np.array([1.0, 0.9, 0.85])
+    hull = trimesh.convex.convex_hull(points * size / np.ptp(points, axis=0).max())
+    return item("lump_test", "ball", hull, ("precision_sphere", "tripod"))

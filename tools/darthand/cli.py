@@ -76,6 +76,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     groups = [(("model",), _add_model_commands), (("template",), _add_template_commands),
               (("textures",), _add_textures_commands), (("accessories",), _add_accessories_commands),
               (("objects",), _add_objects_commands),
+              (("grasps",), _add_grasps_commands),
               (("export",), _add_export_commands), (("render", "render-checks"), _add_render_commands),
               (("render-dataset", "dataset", "eval"), _add_dataset_commands), (("validate",), _add_validate_command),
               (("manifest", "verify"), _add_manifest_command), (("studio",), _add_studio_command)]
@@ -371,6 +372,22 @@ def _add_objects_commands(sub) -> None:
     p.add_argument("--ids", nargs="+", default=None, metavar="ID", help="build only these object ids")
     p.add_argument("--jobs", type=number(int, 1, 64), default=1, metavar="N", help="worker processes (default 1)")
     p.add_argument("--no-sheet", action="store_true", help="skip the contact sheet")
+    p.set_defaults(run=commands.build)
+
+
+# ---------------------------------------------------------------- grasps
+def _add_grasps_commands(sub) -> None:
+    from darthand.grasps import commands
+
+    g = _group(sub, "grasps", "grasps of the taxonomy fitted to each catalogue object, for both hands")
+    p = g.add_parser("build", help="fit the grasp catalogue: per object, grasp type and approach, on both models")
+    p.add_argument("right", metavar="RIGHT", help="the right model .npz (build/model/right.npz)")
+    p.add_argument("left", metavar="LEFT", help="the left model .npz (build/model/left.npz)")
+    p.add_argument("--objects", required=True, metavar="CATALOG", help="object catalogue (build/objects/catalog.json)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (build/grasps)")
+    p.add_argument("--ids", nargs="+", default=None, metavar="ID", help="grasp only these objects")
+    p.add_argument("--jobs", type=number(int, 1, 256), default=1, metavar="N", help="worker processes (default 1)")
+    p.add_argument("--no-sheet", action="store_true", help="skip the contact sheets")
     p.set_defaults(run=commands.build)
 
 

@@ -151,6 +151,7 @@ STEP_TARGETS = {
     "textures": "textures/catalog.json",
     "accessories": "accessories/catalog.json",
     "objects": "objects/catalog.json",
+    "grasps": "grasps/catalog.json",
     "usd/right": "usd/right/right.usda",
     "usd/left": "usd/left/left.usda",
     "gltf/right.glb": "gltf/right.glb",

@@ -1,11 +1,13 @@
 """The grasp catalogue: per object, per grasp type it suits, per approach direction, a grasp fitted to the right
-model's mean shape, its mirror refitted on the left model, dropped fits listed with why.
+model's mean shape, its mirror image on the left model, dropped fits listed with why.
 
-Approaches: APPROACHES directions around the object's longest axis (the knuckle line laid along it, so a wrap
-closes around a bottle, a pinch along a pen), evenly spaced. The left hand's grasp starts from the right one's
-mirror image: the hand mirrored (x -> -x, the same anatomical angles) and the object mirrored by the reflection of
-its own frame that maps it most nearly onto itself (`object_reflection`); then it is refitted on the left model
-with the left field (a few iterations), so an object that is not mirror-symmetric is still held properly.
+Approaches: APPROACHES directions around the object's axis (`approach_directions`; the knuckle line laid along
+it, so a wrap closes around a bottle, a pinch along a pen), evenly spaced. The left hand's grasp starts from the
+right one's mirror image: the hand mirrored (x -> -x, the same anatomical angles) and the object mirrored by the
+reflection of its own frame that maps it most nearly onto itself (`object_reflection`). Where the object is
+mirror-symmetric (to SYMMETRIC) and the left model is the right one's mirror image, that mirror image is exact and
+kept (its figures the right one's, marked `mirrored`); otherwise it is refitted on the left model with the
+object's field (a few iterations), so an object that is not mirror-symmetric is still held properly.
 """
 
 from __future__ import annotations
@@ -22,30 +24,37 @@ from darthand.grasps.field import ObjectField
 from darthand.grasps.fit import GraspFit, HandRig, fit_grasp, refine
 from darthand.grasps.loader import ARRAYS, FORMAT, FORMAT_VERSION
 from darthand.grasps.taxonomy import GraspType, load_taxonomy, types_for
+from darthand.model.anatomy import angles_to_axis_angle
 from darthand.model.forward import forward
 from darthand.model.hand_model import HandModel
+from darthand.model.mirror import mirror_points
 from darthand.model.npz_io import load_npz
 from darthand.model.self_crossing import SelfCrossing
 
-APPROACHES = 3
+APPROACHES = 2
 LEFT_ROUNDS, LEFT_NFEV = 2, 6
+SYMMETRIC = 1e-5    # m: an object whose reflection maps it onto itself this closely is mirror-symmetric
 REFLECTIONS = (np.diag([-1.0, 1, 1]), np.diag([1.0, -1, 1]), np.diag([1.0, 1, -1]))
 
 
 def approach_directions(size_m, count: int = APPROACHES) -> tuple[np.ndarray, list[np.ndarray]]:
-    """(the object's longest axis (3,), `count` unit approach directions (3,) orthogonal to it), object frame."""
-    axis = np.eye(3)[int(np.argmax(size_m))]
-    e1 = np.eye(3)[(int(np.argmax(size_m)) + 1) % 3]
+    """(the object's axis (3,), `count` unit approach directions (3,) orthogonal to it), object frame. The axis is
+    +z (the catalogue's axis of a bottle, a mug, a pen, a tool) unless z is the object's thinnest extent (a phone,
+    a card: z their thin axis), then the longer of x and y."""
+    k = 2 if np.argmin(size_m) != 2 else int(np.argmax(np.asarray(size_m)[:2]))
+    axis = np.eye(3)[k]
+    e1 = np.eye(3)[(k + 1) % 3]
     e2 = np.cross(axis, e1)
     angles = 2 * np.pi * np.arange(count) / count
     return axis, [np.cos(a) * e1 + np.sin(a) * e2 for a in angles]
 
 
-def object_reflection(field: ObjectField) -> np.ndarray:
-    """(3, 3) the reflection of the object frame (one axis negated) mapping the object most nearly onto itself
-    (smallest largest |distance| of its reflected vertices)."""
-    errors = [np.abs(field.distance(field.vertices @ S)).max() for S in REFLECTIONS]
-    return REFLECTIONS[int(np.argmin(errors))]
+def object_reflection(field: ObjectField) -> tuple[np.ndarray, float]:
+    """((3, 3) the reflection of the object frame (one axis negated) mapping the object most nearly onto itself,
+    its error: the largest |distance| (m) of the reflected vertices to the object)."""
+    errors = [float(np.abs(field.distance(field.vertices @ S)).max()) for S in REFLECTIONS]
+    best = int(np.argmin(errors))
+    return REFLECTIONS[best], errors[best]
 
 
 def mirrored_start(fit: GraspFit, reflection: np.ndarray) -> np.ndarray:
@@ -59,11 +68,13 @@ def mirrored_start(fit: GraspFit, reflection: np.ndarray) -> np.ndarray:
 class ObjectGrasps:
     """Fits the grasps of one object on both models (rigs built once per process)."""
 
-    def __init__(self, models: dict[str, HandModel], taxonomy: dict[str, GraspType]):
+    def __init__(self, models: dict[str, HandModel], taxonomy: dict[str, GraspType], approaches: int = APPROACHES):
+        self.approaches = approaches
         parts = sorted({p for t in taxonomy.values() for p in t.contacts})
         self.taxonomy = taxonomy
         self.rigs = {side: HandRig.of(m, parts) for side, m in models.items()}
         self.crossing = {side: SelfCrossing(m) for side, m in models.items()}
+        self.mirrored_models = "left" in models and mirror_images(models["right"], models["left"])
 
     def fit_object(self, item) -> tuple[list[dict], list[dict]]:
         """(fitted records, dropped records) of one object; a record holds its GraspFit under 'fit'."""
@@ -72,18 +83,31 @@ class ObjectGrasps:
         dropped = [{"object": item.id, "type": n, "side": s, "approach": None, "why": "no such grasp type"}
                    for n in unknown for s in self.rigs]
         fitted: list[dict] = []
-        axis, approaches = approach_directions(getattr(item, "size_m", np.ptp(item.vertices, axis=0)))
-        reflection = object_reflection(field)
+        axis, approaches = approach_directions(getattr(item, "size_m", np.ptp(item.vertices, axis=0)),
+                                                 self.approaches)
+        reflection, error = object_reflection(field)
+        symmetric = self.mirrored_models and error < SYMMETRIC
         for name in known:
             g = self.taxonomy[name]
             for k, approach in enumerate(approaches):
                 right = fit_grasp(self.rigs["right"], field, g.contacts, g.angles, approach, axis)
                 self.record(item.id, g, k, "right", right, fitted, dropped)
                 if "left" in self.rigs:
-                    left = refine(self.rigs["left"], field, g.contacts, g.angles, right.angles,
-                                  mirrored_start(right, reflection), LEFT_ROUNDS, LEFT_NFEV)
-                    self.record(item.id, g, k, "left", left, fitted, dropped)
+                    self.record(item.id, g, k, "left", self.left_fit(field, g, right, reflection, symmetric),
+                                fitted, dropped)
         return fitted, dropped
+
+    def left_fit(self, field: ObjectField, g: GraspType, right: GraspFit, reflection: np.ndarray,
+                 symmetric: bool) -> GraspFit:
+        """The left hand's grasp: the right one's mirror image, refitted unless the object and the models are
+        mirror images of themselves and of each other (then the mirror image is exact: same figures)."""
+        if symmetric:
+            placement = np.linalg.inv(mirrored_start(right, reflection))
+            pose = angles_to_axis_angle(self.rigs["left"].model, right.angles, self.rigs["left"].frames).ravel()
+            return GraspFit(right.angles, pose, placement, right.contact_vertices,
+                            right.contact_points @ reflection.T, {**right.figures, "mirrored": True}, right.dropped)
+        return refine(self.rigs["left"], field, g.contacts, g.angles, right.angles, mirrored_start(right, reflection),
+                      LEFT_ROUNDS, LEFT_NFEV)
 
     def record(self, object_id: str, g: GraspType, k: int, side: str, fit: GraspFit, fitted: list, dropped: list):
         why = fit.dropped or self.digits_crossing(side, fit)
@@ -100,26 +124,35 @@ class ObjectGrasps:
         return f"digits cross ({pair})" if pair else None
 
 
+def mirror_images(right: HandModel, left: HandModel) -> bool:
+    """Whether the left model is the right one's mirror image (model/mirror: x -> -x, every shape the same)."""
+    return (right.num_vertices == left.num_vertices and right.num_betas == left.num_betas
+            and np.allclose(mirror_points(right.v_template), left.v_template, atol=1e-7)
+            and np.allclose(right.shapedirs * np.array([-1.0, 1, 1])[None, :, None], left.shapedirs, atol=1e-7))
+
+
 _WORKER: dict = {}
 
 
 def _fit_in_worker(args) -> tuple[list[dict], list[dict]]:
-    model_paths, taxonomy_path, item = args
-    key = (tuple(sorted(model_paths.items())), taxonomy_path)
+    model_paths, taxonomy_path, approaches, item = args
+    key = (tuple(sorted(model_paths.items())), taxonomy_path, approaches)
     if key not in _WORKER:
         _WORKER.clear()
         models = {s: load_npz(p) for s, p in model_paths.items()}
-        _WORKER[key] = ObjectGrasps(models, load_taxonomy(taxonomy_path))
+        _WORKER[key] = ObjectGrasps(models, load_taxonomy(taxonomy_path), approaches)
     return _WORKER[key].fit_object(item)
 
 
 def build_grasps(items, model_paths: dict[str, str], out, taxonomy_path=None, jobs: int = 1,
-                 sheet: bool = True) -> dict:
+                 sheet: bool = True, approaches: int = APPROACHES) -> dict:
     """Fit every object's grasps on the models of `model_paths` ({'right': npz, 'left': npz}) into `out`
-    (catalog.json, grasps.npz, contact sheets); returns the catalogue document."""
+    (catalog.json, grasps.npz, contact sheets), `approaches` per object and type; returns the catalogue
+    document."""
     t0 = time.perf_counter()
     out = make_folder(out)
-    work = [(dict(model_paths), None if taxonomy_path is None else str(taxonomy_path), item) for item in items]
+    taxonomy = None if taxonomy_path is None else str(taxonomy_path)
+    work = [(dict(model_paths), taxonomy, approaches, item) for item in items]
     if jobs > 1 and len(work) > 1:
         with ProcessPoolExecutor(max_workers=min(jobs, len(work))) as pool:
             results = list(pool.map(_fit_in_worker, work))
@@ -162,7 +195,7 @@ def write_arrays(path: Path, fits: list[GraspFit]) -> None:
     for i, f in enumerate(fits):
         cv[i, :len(f.contact_vertices)] = f.contact_vertices
         cp[i, :len(f.contact_points)] = f.contact_points
-    arrays = {"angles": np.array([f.angles for f in fits]).reshape(-1, 16, 3),
+    arrays: dict = {"angles": np.array([f.angles for f in fits]).reshape(-1, 16, 3),
               "pose": np.array([f.pose for f in fits]).reshape(-1, 48),
               "placement": np.array([f.placement for f in fits]).reshape(-1, 4, 4),
               "contact_vertices": cv, "contact_points": cp}

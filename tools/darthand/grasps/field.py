@@ -2,8 +2,8 @@
 
 The nearest point is searched among the faces owning the CANDIDATES surface samples nearest the query point (a
 KD-tree over samples at most SPACING apart on every face, built once per object: a face's centroid alone misleads
-on long thin triangles, a cylinder cap's fan), then found exactly on each candidate (model/proximity's
-closest-point maths). The sign is
+on long thin triangles, a cylinder cap's fan), then found exactly on each candidate (model/pair_kernels'
+compiled closest-point loop). The sign is
 that of the offset against the surface's pseudo-normal at the nearest point: the face normal where that point lies
 inside a face, the area-weighted vertex normals interpolated there when it lies on an edge or a corner (where the
 face normal alone can say "outside" for a point inside a convex corner). The candidate search is exact when some
@@ -17,10 +17,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from darthand.errors import InputError
-from darthand.model.proximity import _closest_barycentric
+from darthand.model.pair_kernels import nearest_on_candidates
 from darthand.model.topology import face_normals, vertex_normals
 
-CANDIDATES = 24
+CANDIDATES = 12
 SPACING = 0.004     # m: largest gap between a face's samples
 MAX_SPLIT = 24      # a face is sampled on at most this many steps per edge
 INTERIOR = 1e-6     # barycentric coordinate above which the nearest point lies inside its face
@@ -44,29 +44,35 @@ class ObjectField:
         samples, self.sample_face = face_samples(self.tris)
         self.tree = cKDTree(samples)
         self.k = min(CANDIDATES, len(samples))
+        self.box = (v.min(0), v.max(0))
 
-    def query(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(signed distance (P,) m, unit gradient (P, 3), nearest surface point (P, 3)) of points (P, 3)."""
+    def candidates(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(distance to the nearest surface sample (P,) m, candidate faces (P, k)) of points (P, 3)."""
         p = np.asarray(points, np.float64).reshape(-1, 3)
-        _, nearest = self.tree.query(p, k=self.k)
-        cand = self.sample_face[nearest.reshape(len(p), self.k)]
-        bary = _closest_barycentric(self.tris[cand], p[:, None, :])
-        near = np.einsum("pkc,pkcd->pkd", bary, self.tris[cand])
-        dist = np.linalg.norm(near - p[:, None, :], axis=2)
-        best = np.argmin(dist, axis=1)
-        rows = np.arange(len(p))
-        face, b, y, d = cand[rows, best], bary[rows, best], near[rows, best], dist[rows, best]
+        dist, nearest = self.tree.query(p, k=self.k)
+        dist, nearest = dist.reshape(len(p), self.k), nearest.reshape(len(p), self.k)
+        return dist[:, 0], self.sample_face[nearest]
+
+    def query(self, points: np.ndarray, cand: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(signed distance (P,) m, unit gradient (P, 3), nearest surface point (P, 3)) of points (P, 3); `cand`
+        (P, k): candidate faces found earlier (`candidates`) for points near these, to skip the search."""
+        p = np.asarray(points, np.float64).reshape(-1, 3)
+        if cand is None:
+            cand = self.candidates(p)[1]
+        best, b, d = nearest_on_candidates(self.tris, cand, p)
+        face = cand[np.arange(len(p)), best]
+        y = np.einsum("pc,pcd->pd", b, self.tris[face])
         normal = self.pseudo_normals(face, b)
         offset = p - y
         sign = np.where(np.einsum("pd,pd->p", offset, normal) < 0, -1.0, 1.0)
         grad = np.where(d[:, None] > 1e-9, sign[:, None] * offset / np.maximum(d, 1e-12)[:, None], normal)
         return sign * d, grad, y
 
-    def near(self, points: np.ndarray, reach: float) -> np.ndarray:
-        """(P,) bool: points (P, 3) within about `reach` (m) of the surface (of a sample of it: within reach +
-        SPACING), found without the exact query."""
-        d, _ = self.tree.query(np.asarray(points, np.float64).reshape(-1, 3), k=1, distance_upper_bound=reach + SPACING)
-        return np.isfinite(d)
+    def in_box(self, points: np.ndarray, margin: float) -> np.ndarray:
+        """(P,) bool: points (P, 3) inside the object's bounding box grown by `margin` (m); a point outside it is
+        farther than `margin` from the object, and outside it."""
+        p = np.asarray(points).reshape(-1, 3)
+        return ((p >= self.box[0] - margin) & (p <= self.box[1] + margin)).all(axis=1)
 
     def distance(self, points: np.ndarray) -> np.ndarray:
         """(P,) signed distances (m) of points (P, 3)."""
@@ -76,7 +82,7 @@ class ObjectField:
         """(P, 3) the direction that signs an offset from the nearest point (faces (P,), barycentrics (P, 3))."""
         corners = self.vertex_normals[self.faces[face]]
         smooth = np.einsum("pc,pcd->pd", bary, corners)
-        inside = (bary > INTERIOR).all(axis=1)
+        inside = np.all(bary > INTERIOR, axis=1)
         return np.where(inside[:, None], self.face_normals[face], smooth)
 
 

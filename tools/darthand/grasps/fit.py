@@ -30,7 +30,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from darthand.grasps.field import ObjectField
+from darthand.grasps.field import SPACING, ObjectField
 from darthand.grasps.parts import contact_patches
 from darthand.model.anatomy import angles_to_axis_angle, joint_frames, limits_radians, palm_normal
 from darthand.model.forward import forward
@@ -49,6 +49,7 @@ SHIFT_SIGMA = 0.03          # m
 MAX_TURN = np.deg2rad(60.0)
 MAX_SHIFT = 0.08            # m
 REACH = 0.02                # m: vertices farther than this from the object are left out of a solve
+RESEARCH = 0.001            # m: a vertex that moved this far has its candidate faces searched again
 OPEN = 0.35                 # the start opens the pre-shape to this fraction of its angles
 BACKOFF_STEP = 0.002        # m
 ROUNDS = 3                  # solves, each with the vertices near the object re-selected
@@ -97,7 +98,7 @@ class GraspProblem:
     model frame -> object frame) with angles `angles` (16, 3), pulled toward the pre-shape `preshape` (16, 3)."""
 
     def __init__(self, rig: HandRig, field_: ObjectField, contacts, preshape: np.ndarray, angles: np.ndarray,
-                 start: np.ndarray, free_scale: float = PRESHAPE_FREEDOM):
+                 start: np.ndarray, free_scale: float = PRESHAPE_FREEDOM, reuse: bool = False):
         self.rig, self.field, self.contacts = rig, field_, list(contacts)
         self.preshape, self.base, self.start = preshape, angles.reshape(-1).copy(), start
         sigma = freedom(preshape).reshape(-1) * free_scale
@@ -111,6 +112,9 @@ class GraspProblem:
         patch_ids = np.concatenate([rig.patches[p] for p in self.contacts])
         self.centre = (rig.pose(angles).vertices[0][patch_ids] @ start[:3, :3].T + start[:3, 3]).mean(0)
         self.ids = np.arange(rig.model.num_vertices)
+        self.reuse = reuse
+        self.cand: np.ndarray | None = None          # candidate faces (n, k) of the fitted vertices ...
+        self.cand_at = np.zeros((0, 3))              # ... found where they were then (n, 3)
         self._cache: tuple | None = None
 
     def angles(self, y: np.ndarray) -> np.ndarray:
@@ -131,13 +135,28 @@ class GraspProblem:
         return points @ M[:3, :3].T + M[:3, 3]
 
     def select(self, y: np.ndarray) -> None:
-        """Fit only the vertices within REACH of the object (and every contact part's) at y."""
+        """Fit only the vertices within REACH of the object (and every contact part's) at y, keeping their
+        candidate faces (field.candidates); with `reuse` (a refit: it moves a millimetre or two, less than
+        field.SPACING) for the whole solve, else until a vertex moves RESEARCH away from where they were found."""
         v = self.placed(self.rig.pose(self.angles(y)).vertices[0], y)
-        near = self.field.near(v, REACH)
-        for p in self.contacts:
-            near[self.rig.patches[p]] = True
-        self.ids = np.flatnonzero(near)
+        contact = np.zeros(len(v), bool)
+        contact[np.concatenate([self.rig.patches[p] for p in self.contacts])] = True
+        ids = np.flatnonzero(self.field.in_box(v, REACH) | contact)
+        first, cand = self.field.candidates(v[ids])
+        keep = (first < REACH + SPACING) | contact[ids]
+        self.ids, self.cand, self.cand_at = ids[keep], cand[keep], v[ids[keep]]
         self._cache = None
+
+    def candidate_faces(self, q: np.ndarray) -> np.ndarray:
+        """(n, k) candidate faces of the fitted vertices at q (n, 3): those kept, searched again for the vertices
+        that moved more than RESEARCH since (never with `reuse`)."""
+        assert self.cand is not None
+        if not self.reuse:
+            moved = np.linalg.norm(q - self.cand_at, axis=1) > RESEARCH
+            if moved.any():
+                self.cand[moved] = self.field.candidates(q[moved])[1]
+                self.cand_at[moved] = q[moved]
+        return self.cand
 
     def evaluate(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(residuals, Jacobian) at y, cached for the last y."""
@@ -147,7 +166,7 @@ class GraspProblem:
         posed = self.rig.pose(angles)
         M = self.transform(y)
         q = posed.vertices[0][self.ids] @ M[:3, :3].T + M[:3, 3]
-        d, u, _ = self.field.query(q)
+        d, u, _ = self.field.query(q, self.candidate_faces(q))
         omega = turn_axes(self.rig.frames, angles, posed.world_rotations[0], self.rig.model.parents, self.free)
         pivot = posed.joints[0, self.free // 3] @ M[:3, :3].T + M[:3, 3]
         rows = np.hstack([np.cross(q - self.centre - y[3:6], u), u,
@@ -159,7 +178,7 @@ class GraspProblem:
         for p in self.contacts:
             at = np.array([where[v] for v in self.rig.patches[p]])
             best = at[np.argmin(d[at])]
-            res.append([(d[best] - GAP) / CONTACT_SCALE])
+            res.append(np.array([(d[best] - GAP) / CONTACT_SCALE]))
             jac.append(rows[best][None] / CONTACT_SCALE)
         k = len(self.free)
         res.append((self.base[self.free] + y[6:] - self.preshape.reshape(-1)[self.free]) / self.sigma)
@@ -170,8 +189,10 @@ class GraspProblem:
         self._cache = (y.copy(), *out)
         return out
 
-    def solve(self, rounds: int = ROUNDS, nfev: int = MAX_NFEV) -> tuple[np.ndarray, int]:
-        """(variables y, evaluations) after `rounds` solves, the vertices near the object re-selected before each."""
+    def solve(self, rounds: int | None = None, nfev: int | None = None) -> tuple[np.ndarray, int]:
+        """(variables y, evaluations) after `rounds` solves (ROUNDS) of at most `nfev` evaluations (MAX_NFEV),
+        the vertices near the object re-selected before each."""
+        rounds, nfev = ROUNDS if rounds is None else rounds, MAX_NFEV if nfev is None else nfev
         y, evaluations = np.zeros(6 + len(self.free)), 0
         scale = np.concatenate([[0.05] * 3, [0.005] * 3, np.full(len(self.free), 0.1)])
         for _ in range(rounds):
@@ -187,7 +208,13 @@ class GraspProblem:
         angles = self.angles(y)
         posed = self.rig.pose(angles)
         M = self.transform(y)
-        d, _, near = self.field.query(posed.vertices[0] @ M[:3, :3].T + M[:3, 3])
+        q = posed.vertices[0] @ M[:3, :3].T + M[:3, 3]
+        d, near = np.full(len(q), np.inf), q.copy()    # outside the object's box: outside it
+        if self.reuse:    # a refit: the vertices within REACH at its start are the ones that can touch
+            d[self.ids], _, near[self.ids] = self.field.query(q[self.ids], self.cand)
+        else:
+            inside = self.field.in_box(q, MAX_CONTACT)
+            d[inside], _, near[inside] = self.field.query(q[inside])
         vertices, points, gaps = [], [], []
         for p in self.contacts:
             ids = self.rig.patches[p]
@@ -228,10 +255,13 @@ def start_transform(rig: HandRig, field_: ObjectField, contacts, opened: np.ndar
     T[:3, 3] = -R @ centre
     placed = v @ R.T + T[:3, 3]
     for _ in range(int(0.2 / BACKOFF_STEP)):
-        if field_.distance(placed).min() >= CLEARANCE:
+        near = field_.in_box(placed, CLEARANCE)
+        deepest = -field_.distance(placed[near]).min(initial=np.inf) + CLEARANCE
+        if deepest <= 0:
             break
-        T[:3, 3] += BACKOFF_STEP * approach
-        placed += BACKOFF_STEP * approach
+        step = max(BACKOFF_STEP, 0.5 * deepest)   # at least half the deepest way out: a few steps, not hundreds
+        T[:3, 3] += step * approach
+        placed += step * approach
     return T
 
 
@@ -261,7 +291,7 @@ def refine(rig: HandRig, field_: ObjectField, contacts, preshape: np.ndarray, an
            start: np.ndarray, rounds: int = 1, nfev: int = 4) -> GraspFit:
     """A few iterations of the same problem from given angles and start (4, 4, hand -> object): a refit."""
     t0 = time.perf_counter()
-    problem = GraspProblem(rig, field_, contacts, preshape, angles, start)
+    problem = GraspProblem(rig, field_, contacts, preshape, angles, start, reuse=True)
     y, evaluations = problem.solve(rounds, nfev)
     return problem.result(y, evaluations, time.perf_counter() - t0)
 

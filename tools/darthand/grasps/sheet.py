@@ -54,7 +54,9 @@ def pick(fitted: list[dict], object_ids: set) -> list[dict]:
     first left one."""
     rows = [r for r in fitted if r["object"] in object_ids]
     right = [r for r in rows if r["side"] == "right"]
-    seen, first, rest = set(), [], []
+    seen: set = set()
+    first: list[dict] = []
+    rest: list[dict] = []
     for r in right:
         key = (r["object"], r["type"])
         (rest if key in seen else first).append(r)
