@@ -97,10 +97,17 @@ def contact_vertices(vertices: np.ndarray, other_vertices: np.ndarray, other_fac
 
 def surface_distance(points: np.ndarray, mesh) -> np.ndarray:
     """(N,) each point's (N, 3) exact distance to the nearest triangle of `mesh` (Clusters, or triangles (F, 3, 3))."""
+    return nearest_surface_points(points, mesh)[1]
+
+
+def nearest_surface_points(points: np.ndarray, mesh) -> tuple[np.ndarray, np.ndarray]:
+    """((N, 3) the nearest point of `mesh` (Clusters, or triangles (F, 3, 3)) to each point (N, 3), (N,) its exact
+    distance)."""
     c = mesh if isinstance(mesh, Clusters) else clusters(mesh)
-    out = np.empty(len(points))
-    _distance_kernel(np.ascontiguousarray(points, np.float64), c.triangles, c.starts, c.centre, c.radius, out)
-    return out
+    out, nearest = np.empty(len(points)), np.empty((len(points), 3))
+    _distance_kernel(np.ascontiguousarray(points, np.float64), c.triangles, c.starts, c.centre, c.radius, out,
+                     nearest)
+    return nearest, out
 
 
 def winding_number(points: np.ndarray, mesh) -> np.ndarray:
@@ -117,14 +124,15 @@ def winding_number(points: np.ndarray, mesh) -> np.ndarray:
 
 
 @kernel
-def _distance_kernel(points, triangles, starts, centre, radius, out):
-    """out[i] = the distance of points[i] to the nearest triangle: per triangle (a, b, c) the closest point by
-    Ericson's regions (a corner, an edge, or the interior from barycentric v, w), in scalars (no temporaries); a
-    cluster k (triangles starts[k]:starts[k + 1]) whose sphere (centre, radius) lies farther than the best so far is
-    skipped."""
+def _distance_kernel(points, triangles, starts, centre, radius, out, nearest):
+    """out[i] = the distance of points[i] to the nearest triangle, nearest[i] that triangle's closest point: per
+    triangle (a, b, c) the closest point by Ericson's regions (a corner, an edge, or the interior from barycentric
+    v, w), in scalars (no temporaries); a cluster k (triangles starts[k]:starts[k + 1]) whose sphere (centre, radius)
+    lies farther than the best so far is skipped."""
     for i in range(points.shape[0]):
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
         best = np.inf
+        qx, qy, qz = px, py, pz
         for k in range(centre.shape[0]):
             gap = np.sqrt((centre[k, 0] - px) ** 2 + (centre[k, 1] - py) ** 2 + (centre[k, 2] - pz) ** 2) - radius[k]
             if gap > 0 and gap * gap > best:
@@ -162,7 +170,9 @@ def _distance_kernel(points, triangles, starts, centre, radius, out):
                 d = dx * dx + dy * dy + dz * dz
                 if d < best:
                     best = d
+                    qx, qy, qz = px - dx, py - dy, pz - dz
         out[i] = np.sqrt(best)
+        nearest[i, 0], nearest[i, 1], nearest[i, 2] = qx, qy, qz
 
 
 @kernel

@@ -232,7 +232,7 @@ def object_fields(subject: Subject, k: int, camera: Camera, instances: np.ndarra
     corners_2d, _ = camera.project(corners)
     instance = object_instance(subject, k)
     seen = instances == instance
-    drawn = object_pixels_alone(subject, k, camera, corners_2d)
+    drawn = object_pixels_alone(subject, k, camera, corners_2d, seen)
     hand = subject.members[0].labelled or subject.members[0]
     found = object_contacts(hand.hand_vertices, held.item, P)
     return {"id": held.item.id, "category": held.item.category, "instance": instance,
@@ -245,9 +245,10 @@ def object_fields(subject: Subject, k: int, camera: Camera, instances: np.ndarra
             "penetration_max_mm": round(1000 * found.penetration_max_m, 4)}
 
 
-def object_pixels_alone(subject: Subject, k: int, camera: Camera, corners_2d: np.ndarray) -> int:
+def object_pixels_alone(subject: Subject, k: int, camera: Camera, corners_2d: np.ndarray, seen: np.ndarray) -> int:
     """How many pixel centres' rays hit held object k with nothing else in the scene (those inside its corners'
-    projected box, clipped to the image; an object reaching behind the camera counts its pixels in the image)."""
+    projected box, clipped to the image; an object reaching behind the camera counts its pixels in the image).
+    seen (H, W): the pixels where it is seen (their rays hit it: only the others are traced)."""
     held = subject.objects[k]
     if (camera.to_camera(held.corners())[:, 2] <= 0).any():
         c0, r0, c1, r1 = 0, 0, camera.width, camera.height
@@ -256,11 +257,12 @@ def object_pixels_alone(subject: Subject, k: int, camera: Camera, corners_2d: np
         c1, r1 = np.clip(np.ceil(corners_2d.max(axis=0)).astype(int), 0, [camera.width, camera.height])
     if c1 <= c0 or r1 <= r0:
         return 0
-    uv = pixel_centres(r0, r1, c0, c1)
+    hidden = ~seen[r0:r1, c0:c1].reshape(-1)
+    uv = pixel_centres(r0, r1, c0, c1)[hidden]
     directions = np.ascontiguousarray(camera.directions(uv), np.float32)
     origins = np.ascontiguousarray(np.broadcast_to(camera.centre, directions.shape), np.float32)
     alone = Scene(Subject(held.surfaces, subject.joints, subject.keypoints, subject.side, subject.pose))
-    return int((alone.intersect(origins, directions)["primID"] >= 0).sum())
+    return int(seen.sum()) + int(alone.occluded(origins, directions, np.inf).sum())
 
 
 def contacts_with(hand: Subject, other: Subject) -> list[int]:
