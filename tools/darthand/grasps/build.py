@@ -163,7 +163,7 @@ def build_grasps(items, model_paths: dict[str, str], out, taxonomy_path=None, jo
     doc = catalog_document(fitted, dropped, model_paths, time.perf_counter() - t0)
     write_arrays(out / ARRAYS, [r["fit"] for r in fitted])
     if sheet and fitted:
-        from darthand.grasps.sheet import contact_sheets   # matplotlib: only when sheets are drawn
+        from darthand.grasps.sheet import contact_sheets   # trimesh's ray casting: only when sheets are drawn
         doc["contact_sheets"] = contact_sheets(items, fitted, model_paths, out)
     write_json(out / "catalog.json", doc)
     return doc
