@@ -47,16 +47,17 @@ def run() -> dict:
         save_npz(model, paths["right"])
         save_npz(mirror_model(model), paths["left"])
         t0, c0 = time.perf_counter(), time.process_time()
-        doc = build_grasps(items, paths, Path(tmp) / "grasps", sheet=False)
+        timing: dict = {}
+        doc = build_grasps(items, paths, Path(tmp) / "grasps", sheet=False, timing=timing)
         build_s, build_cpu = time.perf_counter() - t0, time.process_time() - c0
         grasps = load_grasp_catalog(Path(tmp) / "grasps")
     right = [g for g in doc["grasps"] if g["side"] == "right"]
     per_type: dict = {}
-    for g in right:
-        per_type.setdefault(g["type"], []).append(g["figures"]["seconds"])
     per_object: dict = {}
-    for g in right:
-        per_object.setdefault(g["object"], []).append(g["figures"]["seconds"])
+    for object_id, type_, side, seconds in timing["fits"]:
+        if side == "right":
+            per_type.setdefault(type_, []).append(seconds)
+            per_object.setdefault(object_id, []).append(seconds)
     pens = np.array([g["figures"]["penetration_max_mm"] for g in doc["grasps"]])
     gaps = np.array([abs(v) for g in doc["grasps"] for v in g["figures"]["contact_mm"].values()])
     return {"model": model_name, "objects": [it.id for it in items],

@@ -145,10 +145,11 @@ def _fit_in_worker(args) -> tuple[list[dict], list[dict]]:
 
 
 def build_grasps(items, model_paths: dict[str, str], out, taxonomy_path=None, jobs: int = 1,
-                 sheet: bool = True, approaches: int = APPROACHES) -> dict:
+                 sheet: bool = True, approaches: int = APPROACHES, timing: dict | None = None) -> dict:
     """Fit every object's grasps on the models of `model_paths` ({'right': npz, 'left': npz}) into `out`
     (catalog.json, grasps.npz, contact sheets), `approaches` per object and type; returns the catalogue
-    document."""
+    document. The catalogue holds no times (it is the same on every run); `timing`, when given, receives them:
+    'fits' [(object, type, side, seconds)] of the kept grasps and 'build_s'."""
     t0 = time.perf_counter()
     out = make_folder(out)
     taxonomy = None if taxonomy_path is None else str(taxonomy_path)
@@ -160,16 +161,22 @@ def build_grasps(items, model_paths: dict[str, str], out, taxonomy_path=None, jo
         results = [_fit_in_worker(w) for w in work]
     fitted = [r for f, _ in results for r in f]
     dropped = [r for _, d in results for r in d]
-    doc = catalog_document(fitted, dropped, model_paths, time.perf_counter() - t0)
+    if timing is not None:
+        timing["fits"] = [(r["object"], r["type"], r["side"], r["figures"].pop("seconds")) for r in fitted]
+    for r in fitted:
+        r["figures"].pop("seconds", None)
+    doc = catalog_document(fitted, dropped, model_paths)
     write_arrays(out / ARRAYS, [r["fit"] for r in fitted])
     if sheet and fitted:
         from darthand.grasps.sheet import contact_sheets   # trimesh's ray casting: only when sheets are drawn
         doc["contact_sheets"] = contact_sheets(items, fitted, model_paths, out)
     write_json(out / "catalog.json", doc)
+    if timing is not None:
+        timing["build_s"] = time.perf_counter() - t0
     return doc
 
 
-def catalog_document(fitted: list[dict], dropped: list[dict], model_paths: dict, seconds: float) -> dict:
+def catalog_document(fitted: list[dict], dropped: list[dict], model_paths: dict) -> dict:
     """The catalogue's JSON document (grasps without their arrays; `row` indexes grasps.npz)."""
     grasps = [{k: v for k, v in r.items() if k != "fit"} | {"row": i} for i, r in enumerate(fitted)]
     pens = [r["figures"]["penetration_max_mm"] for r in fitted]
@@ -181,8 +188,7 @@ def catalog_document(fitted: list[dict], dropped: list[dict], model_paths: dict,
             "figures": {"penetration_max_mm": max(pens, default=0.0),
                         "penetration_p99_mm": float(np.percentile(pens, 99)) if pens else 0.0,
                         "contact_max_mm": max(gaps, default=0.0),
-                        "contact_median_mm": float(np.median(gaps)) if gaps else 0.0,
-                        "build_seconds": round(seconds, 2)},
+                        "contact_median_mm": float(np.median(gaps)) if gaps else 0.0},
             "grasps": grasps, "dropped": dropped, "contact_sheets": {}}
 
 
