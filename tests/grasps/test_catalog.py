@@ -132,3 +132,17 @@ def test_refit_refuses_another_side_or_mesh_in_one_line(built):
     other_mesh = dataclasses.replace(g, contact_vertices=g.contact_vertices + models["right"].num_vertices)
     with pytest.raises(InputError, match="built on another model"):
         refit_grasp(models["right"], items[g.object_id], other_mesh)
+
+
+def test_catalogue_is_the_same_bytes_on_every_build(tmp_path):
+    paths = {}
+    for side in ("right", "left"):
+        paths[side] = str(tmp_path / f"{side}.npz")
+        save_npz(open_hand(side), paths[side])
+    docs = []
+    for k in range(2):
+        build_grasps([sphere(grasps=("tripod",))], paths, tmp_path / f"run{k}", approaches=1, sheet=False)
+        docs.append(((tmp_path / f"run{k}" / "catalog.json").read_bytes(),
+                     dict(np.load(tmp_path / f"run{k}" / "grasps.npz"))))
+    assert docs[0][0] == docs[1][0]
+    assert all(np.array_equal(docs[0][1][k], docs[1][1][k]) for k in docs[0][1])
