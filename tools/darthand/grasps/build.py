@@ -91,10 +91,13 @@ class ObjectGrasps:
             g = self.taxonomy[name]
             for k, approach in enumerate(approaches):
                 right = fit_grasp(self.rigs["right"], field, g.contacts, g.angles, approach, axis)
-                self.record(item.id, g, k, "right", right, fitted, dropped)
+                why = right.dropped or self.digits_crossing("right", right)
+                self.record(item.id, g, k, "right", right, why, fitted, dropped)
                 if "left" in self.rigs:
-                    self.record(item.id, g, k, "left", self.left_fit(field, g, right, reflection, symmetric),
-                                fitted, dropped)
+                    left = self.left_fit(field, g, right, reflection, symmetric)
+                    if not symmetric:            # an exact mirror image is dropped where its original is
+                        why = left.dropped or self.digits_crossing("left", left)
+                    self.record(item.id, g, k, "left", left, why, fitted, dropped)
         return fitted, dropped
 
     def left_fit(self, field: ObjectField, g: GraspType, right: GraspFit, reflection: np.ndarray,
@@ -109,8 +112,10 @@ class ObjectGrasps:
         return refine(self.rigs["left"], field, g.contacts, g.angles, right.angles, mirrored_start(right, reflection),
                       LEFT_ROUNDS, LEFT_NFEV)
 
-    def record(self, object_id: str, g: GraspType, k: int, side: str, fit: GraspFit, fitted: list, dropped: list):
-        why = fit.dropped or self.digits_crossing(side, fit)
+    @staticmethod
+    def record(object_id: str, g: GraspType, k: int, side: str, fit: GraspFit, why: str | None, fitted: list,
+               dropped: list) -> None:
+        """Add the fit to `fitted`, or to `dropped` with why."""
         head = {"object": object_id, "type": g.name, "side": side, "approach": k}
         if why:
             dropped.append({**head, "why": why})
