@@ -3,9 +3,12 @@ checked by independent tools: penetration and contacts by exact brute-force sign
 truth.py), no digit through another by MeshLab's face intersections, joint limits, the schema, the loader's round
 trip, left grasps the mirror image of right ones, dropped fits counted with why, refit to other shapes."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
+from darthand.errors import InputError
 from darthand.fileio import read_json
 from darthand.grasps.build import build_grasps, object_reflection
 from darthand.grasps.field import ObjectField
@@ -119,3 +122,27 @@ def test_refit_to_other_shapes_keeps_the_grasp(built):
         d = near_truth(item, v)
         assert fitted.ok, (g.id, fitted.figures)
         assert -d.min() <= 2e-3 and np.abs(d[fitted.contact_vertices]).max() <= 5e-3, g.id
+
+
+def test_refit_refuses_another_side_or_mesh_in_one_line(built):
+    _, folder, items, models = built
+    g = load_grasp_catalog(folder, side="right")[0]
+    with pytest.raises(InputError, match="built for a right hand"):
+        refit_grasp(models["left"], items[g.object_id], g)
+    other_mesh = dataclasses.replace(g, contact_vertices=g.contact_vertices + models["right"].num_vertices)
+    with pytest.raises(InputError, match="built on another model"):
+        refit_grasp(models["right"], items[g.object_id], other_mesh)
+
+
+def test_catalogue_is_the_same_bytes_on_every_build(tmp_path):
+    paths = {}
+    for side in ("right", "left"):
+        paths[side] = str(tmp_path / f"{side}.npz")
+        save_npz(open_hand(side), paths[side])
+    docs = []
+    for k in range(2):
+        build_grasps([sphere(grasps=("tripod",))], paths, tmp_path / f"run{k}", approaches=1, sheet=False)
+        docs.append(((tmp_path / f"run{k}" / "catalog.json").read_bytes(),
+                     dict(np.load(tmp_path / f"run{k}" / "grasps.npz"))))
+    assert docs[0][0] == docs[1][0]
+    assert all(np.array_equal(docs[0][1][k], docs[1][1][k]) for k in docs[0][1])

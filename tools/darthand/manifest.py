@@ -49,7 +49,7 @@ def file_entries(build: Path, manifest_path: Path, previous: dict) -> list[dict]
 
 
 def catalogue_checks(build: Path) -> dict:
-    """The figures the texture, accessory and object catalogues record about themselves."""
+    """The figures the texture, accessory, object and grasp catalogues record about themselves."""
     checks = {}
     textures = build / "textures" / "catalog.json"
     if textures.is_file():
@@ -67,6 +67,10 @@ def catalogue_checks(build: Path) -> dict:
     if objects.is_file():
         cat = _read(objects)
         checks["objects"] = {"objects": len(cat["objects"]), "skipped": [s["id"] for s in cat["skipped"]]}
+    grasps = build / "grasps" / "catalog.json"
+    if grasps.is_file():
+        cat = _read(grasps)
+        checks["grasps"] = {**cat["counts"], **{k: v for k, v in cat["figures"].items() if k.endswith("_mm")}}
     return checks
 
 

@@ -91,10 +91,13 @@ class ObjectGrasps:
             g = self.taxonomy[name]
             for k, approach in enumerate(approaches):
                 right = fit_grasp(self.rigs["right"], field, g.contacts, g.angles, approach, axis)
-                self.record(item.id, g, k, "right", right, fitted, dropped)
+                why = right.dropped or self.digits_crossing("right", right)
+                self.record(item.id, g, k, "right", right, why, fitted, dropped)
                 if "left" in self.rigs:
-                    self.record(item.id, g, k, "left", self.left_fit(field, g, right, reflection, symmetric),
-                                fitted, dropped)
+                    left = self.left_fit(field, g, right, reflection, symmetric)
+                    if not symmetric:            # an exact mirror image is dropped where its original is
+                        why = left.dropped or self.digits_crossing("left", left)
+                    self.record(item.id, g, k, "left", left, why, fitted, dropped)
         return fitted, dropped
 
     def left_fit(self, field: ObjectField, g: GraspType, right: GraspFit, reflection: np.ndarray,
@@ -109,8 +112,10 @@ class ObjectGrasps:
         return refine(self.rigs["left"], field, g.contacts, g.angles, right.angles, mirrored_start(right, reflection),
                       LEFT_ROUNDS, LEFT_NFEV)
 
-    def record(self, object_id: str, g: GraspType, k: int, side: str, fit: GraspFit, fitted: list, dropped: list):
-        why = fit.dropped or self.digits_crossing(side, fit)
+    @staticmethod
+    def record(object_id: str, g: GraspType, k: int, side: str, fit: GraspFit, why: str | None, fitted: list,
+               dropped: list) -> None:
+        """Add the fit to `fitted`, or to `dropped` with why."""
         head = {"object": object_id, "type": g.name, "side": side, "approach": k}
         if why:
             dropped.append({**head, "why": why})
@@ -145,10 +150,11 @@ def _fit_in_worker(args) -> tuple[list[dict], list[dict]]:
 
 
 def build_grasps(items, model_paths: dict[str, str], out, taxonomy_path=None, jobs: int = 1,
-                 sheet: bool = True, approaches: int = APPROACHES) -> dict:
+                 sheet: bool = True, approaches: int = APPROACHES, timing: dict | None = None) -> dict:
     """Fit every object's grasps on the models of `model_paths` ({'right': npz, 'left': npz}) into `out`
     (catalog.json, grasps.npz, contact sheets), `approaches` per object and type; returns the catalogue
-    document."""
+    document. The catalogue holds no times (it is the same on every run); `timing`, when given, receives them:
+    'fits' [(object, type, side, seconds)] of the kept grasps and 'build_s'."""
     t0 = time.perf_counter()
     out = make_folder(out)
     taxonomy = None if taxonomy_path is None else str(taxonomy_path)
@@ -160,16 +166,22 @@ def build_grasps(items, model_paths: dict[str, str], out, taxonomy_path=None, jo
         results = [_fit_in_worker(w) for w in work]
     fitted = [r for f, _ in results for r in f]
     dropped = [r for _, d in results for r in d]
-    doc = catalog_document(fitted, dropped, model_paths, time.perf_counter() - t0)
+    if timing is not None:
+        timing["fits"] = [(r["object"], r["type"], r["side"], r["figures"].pop("seconds")) for r in fitted]
+    for r in fitted:
+        r["figures"].pop("seconds", None)
+    doc = catalog_document(fitted, dropped, model_paths)
     write_arrays(out / ARRAYS, [r["fit"] for r in fitted])
     if sheet and fitted:
-        from darthand.grasps.sheet import contact_sheets   # matplotlib: only when sheets are drawn
+        from darthand.grasps.sheet import contact_sheets   # trimesh's ray casting: only when sheets are drawn
         doc["contact_sheets"] = contact_sheets(items, fitted, model_paths, out)
     write_json(out / "catalog.json", doc)
+    if timing is not None:
+        timing["build_s"] = time.perf_counter() - t0
     return doc
 
 
-def catalog_document(fitted: list[dict], dropped: list[dict], model_paths: dict, seconds: float) -> dict:
+def catalog_document(fitted: list[dict], dropped: list[dict], model_paths: dict) -> dict:
     """The catalogue's JSON document (grasps without their arrays; `row` indexes grasps.npz)."""
     grasps = [{k: v for k, v in r.items() if k != "fit"} | {"row": i} for i, r in enumerate(fitted)]
     pens = [r["figures"]["penetration_max_mm"] for r in fitted]
@@ -181,8 +193,7 @@ def catalog_document(fitted: list[dict], dropped: list[dict], model_paths: dict,
             "figures": {"penetration_max_mm": max(pens, default=0.0),
                         "penetration_p99_mm": float(np.percentile(pens, 99)) if pens else 0.0,
                         "contact_max_mm": max(gaps, default=0.0),
-                        "contact_median_mm": float(np.median(gaps)) if gaps else 0.0,
-                        "build_seconds": round(seconds, 2)},
+                        "contact_median_mm": float(np.median(gaps)) if gaps else 0.0},
             "grasps": grasps, "dropped": dropped, "contact_sheets": {}}
 
 

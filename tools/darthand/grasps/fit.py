@@ -98,7 +98,7 @@ class GraspProblem:
     model frame -> object frame) with angles `angles` (16, 3), pulled toward the pre-shape `preshape` (16, 3)."""
 
     def __init__(self, rig: HandRig, field_: ObjectField, contacts, preshape: np.ndarray, angles: np.ndarray,
-                 start: np.ndarray, free_scale: float = PRESHAPE_FREEDOM, reuse: bool = False):
+                 start: np.ndarray, free_scale: float = PRESHAPE_FREEDOM):
         self.rig, self.field, self.contacts = rig, field_, list(contacts)
         self.preshape, self.base, self.start = preshape, angles.reshape(-1).copy(), start
         sigma = freedom(preshape).reshape(-1) * free_scale
@@ -112,7 +112,6 @@ class GraspProblem:
         patch_ids = np.concatenate([rig.patches[p] for p in self.contacts])
         self.centre = (rig.pose(angles).vertices[0][patch_ids] @ start[:3, :3].T + start[:3, 3]).mean(0)
         self.ids = np.arange(rig.model.num_vertices)
-        self.reuse = reuse
         self.cand: np.ndarray | None = None          # candidate faces (n, k) of the fitted vertices ...
         self.cand_at = np.zeros((0, 3))              # ... found where they were then (n, 3)
         self._cache: tuple | None = None
@@ -136,8 +135,7 @@ class GraspProblem:
 
     def select(self, y: np.ndarray) -> None:
         """Fit only the vertices within REACH of the object (and every contact part's) at y, keeping their
-        candidate faces (field.candidates); with `reuse` (a refit: it moves a millimetre or two, less than
-        field.SPACING) for the whole solve, else until a vertex moves RESEARCH away from where they were found."""
+        candidate faces (field.candidates) until a vertex moves RESEARCH away from where they were found."""
         v = self.placed(self.rig.pose(self.angles(y)).vertices[0], y)
         contact = np.zeros(len(v), bool)
         contact[np.concatenate([self.rig.patches[p] for p in self.contacts])] = True
@@ -149,13 +147,12 @@ class GraspProblem:
 
     def candidate_faces(self, q: np.ndarray) -> np.ndarray:
         """(n, k) candidate faces of the fitted vertices at q (n, 3): those kept, searched again for the vertices
-        that moved more than RESEARCH since (never with `reuse`)."""
+        that moved more than RESEARCH since."""
         assert self.cand is not None
-        if not self.reuse:
-            moved = np.linalg.norm(q - self.cand_at, axis=1) > RESEARCH
-            if moved.any():
-                self.cand[moved] = self.field.candidates(q[moved])[1]
-                self.cand_at[moved] = q[moved]
+        moved = np.linalg.norm(q - self.cand_at, axis=1) > RESEARCH
+        if moved.any():
+            self.cand[moved] = self.field.candidates(q[moved])[1]
+            self.cand_at[moved] = q[moved]
         return self.cand
 
     def evaluate(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -210,11 +207,8 @@ class GraspProblem:
         M = self.transform(y)
         q = posed.vertices[0] @ M[:3, :3].T + M[:3, 3]
         d, near = np.full(len(q), np.inf), q.copy()    # outside the object's box: outside it
-        if self.reuse:    # a refit: the vertices within REACH at its start are the ones that can touch
-            d[self.ids], _, near[self.ids] = self.field.query(q[self.ids], self.cand)
-        else:
-            inside = self.field.in_box(q, MAX_CONTACT)
-            d[inside], _, near[inside] = self.field.query(q[inside])
+        inside = self.field.in_box(q, MAX_CONTACT)
+        d[inside], _, near[inside] = self.field.query(q[inside])
         vertices, points, gaps = [], [], []
         for p in self.contacts:
             ids = self.rig.patches[p]
@@ -291,7 +285,7 @@ def refine(rig: HandRig, field_: ObjectField, contacts, preshape: np.ndarray, an
            start: np.ndarray, rounds: int = 1, nfev: int = 4) -> GraspFit:
     """A few iterations of the same problem from given angles and start (4, 4, hand -> object): a refit."""
     t0 = time.perf_counter()
-    problem = GraspProblem(rig, field_, contacts, preshape, angles, start, reuse=True)
+    problem = GraspProblem(rig, field_, contacts, preshape, angles, start)
     y, evaluations = problem.solve(rounds, nfev)
     return problem.result(y, evaluations, time.perf_counter() - t0)
 

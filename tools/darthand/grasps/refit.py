@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from darthand.errors import InputError
 from darthand.grasps.field import ObjectField
 from darthand.grasps.fit import MAX_CONTACT, MAX_PENETRATION, HandRig, refine
 from darthand.grasps.loader import Grasp
@@ -49,6 +50,7 @@ def refit_rig(model: HandModel, grasp: Grasp) -> tuple[HandRig, list[str]]:
 
 def refit_grasp(model: HandModel, item, grasp: Grasp, field: ObjectField | None = None) -> FittedGrasp:
     """The stored `grasp` refitted to `model` (the frame's shaped HandModel of the grasp's side) on `item`."""
+    check_fits(model, grasp)
     field = object_field(item) if field is None else field
     rig, names = refit_rig(model, grasp)
     start = np.linalg.inv(grasp.placement)
@@ -58,3 +60,12 @@ def refit_grasp(model: HandModel, item, grasp: Grasp, field: ObjectField | None 
     return FittedGrasp(fit.pose, fit.placement, fit.contact_vertices, fit.contact_points, pen_max,
                        fit.figures["penetration_p99_mm"] * 1e-3,
                        bool(pen_max <= MAX_PENETRATION and worst <= MAX_CONTACT), fit.figures)
+
+
+def check_fits(model: HandModel, grasp: Grasp) -> None:
+    """InputError in one line when the grasp was not built for this model's side or mesh."""
+    if model.side != grasp.side:
+        raise InputError(f"grasp {grasp.id}: built for a {grasp.side} hand, refitted to a {model.side} one")
+    if len(grasp.contact_vertices) and int(grasp.contact_vertices.max()) >= model.num_vertices:
+        raise InputError(f"grasp {grasp.id}: its contact vertices index a mesh larger than this model's "
+                         f"{model.num_vertices} vertices (built on another model)")

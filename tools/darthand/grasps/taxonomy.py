@@ -13,8 +13,9 @@ from darthand.errors import InputError
 from darthand.fileio import read_json
 from darthand.model.anatomy import AXES, LIMITS
 from darthand.model.layout import JOINT_NAMES, NUM_JOINTS
+from darthand.model.poses import POSES_DIR
 
-GRASPS_FILE = Path(__file__).resolve().parents[3] / "assets_src" / "poses" / "library" / "grasps.json"
+GRASPS_FILE = POSES_DIR / "library" / "grasps.json"
 KINDS = ("power", "intermediate", "precision")
 OPPOSITIONS = ("palm", "pad", "side")
 
