@@ -78,3 +78,18 @@ def test_render_dataset_takes_reference_library_and_labels_name_the_pose(package
         assert labels["gesture"] in names
     dataset = json.loads((out / "dataset.json").read_text())
     assert dataset["plan"]["reference"]["source"] == "library:counting"
+
+
+def test_the_report_shows_the_library_beside_another_reference_set(small_dataset, tmp_path):
+    """A dataset planned on the gestures: the report measures the library's poses against it too."""
+    out, _ = small_dataset
+    assert main(["dataset", "report", str(out), "--out", str(tmp_path), "--sheet", "4"]) == 0
+    figures = json.loads((tmp_path / "report.json").read_text())
+    lib = figures["library_coverage"]
+    assert figures["reference"] == "gestures"
+    assert lib["reference_poses"] == len(library_poses()) and lib["dataset_poses"] == 16
+    assert len(lib["reference_to_dataset_deg"]) == lib["reference_poses"]
+    # the gestures are part of the library: their distances are the gesture coverage's
+    gestures = [k for k, p in enumerate(library_poses()) if p.group == "gestures"]
+    np.testing.assert_allclose(sorted(np.asarray(lib["reference_to_dataset_deg"])[gestures]),
+                               sorted(figures["pose_coverage"]["reference_to_dataset_deg"]), atol=1e-2)

@@ -33,7 +33,7 @@ TOGETHER = {"index": 5, "middle": 1, "ring": -3, "pinky": -8}   # the rest pose'
 T_FIST = (-39, 16, 47, 22, 59)      # across the curled middle finger (fist.json)
 T_POINT = (-41, 17, 40, 19, 58)     # over the curled middle finger (point.json)
 T_RING = (-1, 19, 16, 29, 75)       # over the curled ring finger (peace.json)
-T_SIDE = (0, 22, 5, 0, 0)           # straight, against the side of the index (ASL A)
+T_SIDE = (0, 18, 6, -1, 3)           # straight, against the side of the index (ASL A)
 T_ACROSS = (-35, 28, 40, 25, 25)    # folded across the palm under straight fingers (ASL B, 4)
 T_OUT = (0, -25, -10, 0, 0)         # abducted, straight (ASL L, Y)
 T_UP = (-20, -30, -20, -10, -20)    # up and away from the fist (thumbs up)
@@ -103,7 +103,9 @@ def alphabet() -> list[dict]:
                                             pinky=(55, 70, 40, 0)), (-15, 10, 30, 25, 25)),
              contacts=[("thumb", "middle")]),
         pose("asl_e", ["curled", "thumb_across"], "E: the fingertips bent down to rest above the thumb, which is "
-             "folded across the palm.", hand(every((45, 100, 80, 0)), (-35, 28, 50, 45, 40))),
+             "folded across the palm.", hand({"index": (40, 90, 77, 0), "middle": (43, 100, 80, 0),
+                                                 "ring": (41, 93, 77, 0), "pinky": (37, 84, 72, 0)},
+                                                (-29, 22, 56, 37, 39))),
         pose("asl_f", ["ok", "ring_with_thumb"], "F: index and thumb tips touch in a ring, the other three fingers "
              "straight and spread.", hand(fingers(index=(45, 60, 35, 0), middle=(0, 0, 0, -4), ring=(0, 0, 0, 6),
                                                   pinky=(0, 0, 0, 15)), T_OK), contacts=[("thumb", "index")]),
@@ -119,16 +121,16 @@ def alphabet() -> list[dict]:
              "from here): as I.", hand(fingers(pinky=(0, 0, 0, 8)), T_FIST, spread={"pinky": 0}),
              contacts=[("thumb", "middle")]),
         pose("asl_k", ["two_fingers", "thumb_between"], "K: index up and middle forward in a V, the thumb between "
-             "them at the middle finger.", hand(fingers(index=(0, 0, 0, -8), middle=(45, 5, 0, 4)),
-                                                (-25, 22, 30, 15, 0)), contacts=[("thumb", "middle")]),
+             "them at the middle finger.", hand(fingers(index=(0, 0, 0, -8), middle=(54, 5, 0, 4)),
+                                                (-28, 29, 22, 23, 0)), contacts=[("thumb", "middle")]),
         pose("asl_l", ["index", "thumb_out"], "L: index straight up and thumb straight out: an L.",
              hand(fingers(index=EXT), T_OUT)),
         pose("asl_m", ["folded", "thumb_under"], "M: index, middle and ring folded over the thumb tucked under "
-             "them.", hand(fingers(index=(70, 85, 40, 0), middle=(70, 85, 40, 0), ring=(70, 85, 40, 0),
-                                   pinky=(75, 95, 70, 0)), T_UNDER)),
+             "them.", hand(fingers(index=(64, 80, 38, 0), middle=(56, 91, 55, 0), ring=(70, 85, 40, 0),
+                                   pinky=(57, 75, 59, 0)), (-35, 13, 59, 42, 19))),
         pose("asl_n", ["folded", "thumb_under"], "N: index and middle folded over the thumb tucked under them.",
-             hand(fingers(index=(70, 85, 40, 0), middle=(70, 85, 40, 0), ring=(80, 95, 70, 0),
-                          pinky=(80, 95, 70, 0)), (-35, 25, 45, 30, 15))),
+             hand(fingers(index=(64, 80, 39, 0), middle=(70, 86, 40, 0), ring=(69, 81, 65, 0),
+                          pinky=(60, 75, 55, 0)), (-36, 20, 45, 27, 15))),
         pose("asl_o", ["round", "ring_with_thumb"], "O: every fingertip meets the thumb tip in a round O.",
              hand(every((40, 55, 35, 0)), (-10, 5, 20, 28, 25), spread={"index": 2, "ring": -1, "pinky": -3}),
              contacts=[("thumb", "index"), ("thumb", "middle")]),
@@ -146,15 +148,15 @@ def alphabet() -> list[dict]:
         pose("asl_s", ["fist", "thumb_across"], "S: a fist, the thumb across the front of the fingers.",
              hand(fingers(), T_FIST), contacts=[("thumb", "middle")]),
         pose("asl_t", ["fist", "thumb_under"], "T: a fist, the thumb tip between index and middle under the "
-             "index.", hand(fingers(index=(70, 95, 45, 0)), (-30, 30, 35, 25, 5))),
+             "index.", hand(fingers(index=(59, 86, 42, 0)), (-30, 20, 31, 22, 5))),
         pose("asl_u", ["two_fingers", "together"], "U: index and middle straight up and together, the thumb over "
              "the ring finger.", hand(fingers(index=EXT, middle=EXT), T_RING, spread={"index": 3, "middle": -3}),
              contacts=[("thumb", "ring")]),
         pose("asl_v", ["two_fingers", "spread"], "V: index and middle straight and apart, the thumb over the ring "
              "finger.", hand(fingers(index=EXT, middle=EXT), T_RING, spread=v_spread), contacts=[("thumb", "ring")]),
         pose("asl_w", ["three_fingers", "spread"], "W: index, middle and ring straight and apart, the thumb on the "
-             "curled little finger.", hand(fingers(index=EXT, middle=EXT, ring=EXT, pinky=(70, 90, 60, 0)),
-                                           (-30, 18, 45, 35, 40), spread={"index": -12, "ring": 8}),
+             "curled little finger.", hand(fingers(index=EXT, middle=EXT, ring=EXT, pinky=(59, 76, 53, 0)),
+                                           (-16, 30, 52, 45, 40), spread={"index": -12, "ring": 8}),
              contacts=[("thumb", "pinky")]),
         pose("asl_x", ["hook", "index"], "X: the index hooked, the other fingers in a fist, the thumb over the "
              "middle.", hand(fingers(index=HOOK), T_POINT), contacts=[("thumb", "middle")]),
@@ -185,7 +187,7 @@ def counting() -> list[dict]:
          hand(every(EXT), T_ACROSS, spread=FAN), []),
         ("5", "five: every finger and the thumb spread.", hand(every(EXT), (0, -25, -15, 0, 0), spread=FAN), []),
         ("6", "six: the thumb tip on the little finger's tip, the other three up and apart.",
-         hand(fingers(index=EXT, middle=EXT, ring=EXT, pinky=(55, 60, 35, 8)), (-30, 10, 40, 35, 30),
+         hand(fingers(index=EXT, middle=EXT, ring=EXT, pinky=(55, 60, 35, 3)), (-12, 25, 54, 49, 30),
               spread={"index": -12, "ring": 8}), [("thumb", "pinky")]),
         ("7", "seven: the thumb tip on the ring finger's tip, the others up.",
          hand(fingers(index=EXT, middle=EXT, ring=(55, 60, 35, 0), pinky=(0, 0, 0, 15)), (-25, 10, 35, 30, 25),
@@ -288,8 +290,8 @@ def everyday() -> list[dict]:
              [("thumb", "middle")]),
         pose("fist_loose", ["fist", "relaxed"], "A loose fist: fingers curled but not pressed, the thumb on the "
              "index.", hand({f: scaled(CURL[f], 0.75) for f in FINGERS}, (-30, 15, 30, 15, 30))),
-        pose("fist_thumb_in", ["fist"], "A fist with the thumb tucked inside the fingers.",
-             hand(fingers(index=(75, 90, 60, 0)), (-40, 30, 55, 40, 30))),
+        pose("fist_thumb_over_index", ["fist"], "A fist with the thumb pressed over the curled index.",
+             hand(fingers(), (-23, 20, 30, 19, 35)), [("thumb", "index")]),
         pose("claw_open", ["claw", "open"], "A claw: fingers spread, hooked at the middle and end joints.",
              hand(every((15, 75, 60, 0)), (0, -10, 10, 20, 40), spread=FAN)),
         pose("claw_tight", ["claw"], "A tight claw: knuckles straight, fingers hooked hard.",
@@ -301,7 +303,8 @@ def everyday() -> list[dict]:
                                                        spread={"index": 3, "middle": -3})),
         pose("crossed_fingers", ["crossed", "luck"], "Fingers crossed: middle over index (as far as the rig's "
              "spread and twist limits let them cross), thumb over the ring.",
-             hand(fingers(index=(10, 5, 0, 15), middle=(5, 5, 0, -15)), T_RING, twist={"index": 10, "middle": -10}),
+             hand(fingers(index=(10, 5, 0, 14), middle=(5, 5, 0, -14)), (-1, 20, 16, 31, 75),
+                  twist={"index": 10, "middle": -10}),
              [("thumb", "ring"), ("index", "middle")]),
         pose("vulcan_salute", ["salute", "spread"], "Vulcan salute: index and middle together, ring and little "
              "together, a gap between middle and ring; the thumb out.",
@@ -316,7 +319,7 @@ def everyday() -> list[dict]:
                                           spread={"index": 4, "middle": 1, "ring": -2, "pinky": -6}),
              [("thumb", "index"), ("thumb", "middle")]),
         pose("finger_heart", ["heart"], "Finger heart: the thumb tip crossed over the bent index.",
-             hand(fingers(index=(50, 60, 25, 0), middle=(75, 90, 60, 0)), (-20, 15, 25, 20, 10)),
+             hand(fingers(index=(50, 60, 25, 0), middle=(75, 90, 60, 0)), (-20, 8, 25, 12, 10)),
              [("thumb", "index")]),
         pose("half_heart", ["heart", "curved"], "One hand's half of a heart: the fingers curved together, the "
              "thumb pointing down.", hand(every((45, 60, 25, 0)), (0, -10, -5, 0, 10),
@@ -331,8 +334,8 @@ def everyday() -> list[dict]:
         pose("rps_rock", ["rock_paper_scissors", "fist"], "Rock: a fist.", hand(fingers(), T_FIST),
              [("thumb", "middle")]),
         pose("middle_up_fold", ["count", "three_fingers"], "Middle three fingers up (a Scout's salute), thumb on "
-             "the little finger.", hand(fingers(index=EXT, middle=EXT, ring=EXT, pinky=(70, 90, 60, 0)),
-                                        (-30, 18, 45, 35, 40), spread={"index": 2, "ring": -2}),
+             "the little finger.", hand(fingers(index=EXT, middle=EXT, ring=EXT, pinky=(59, 76, 53, 0)),
+                                        (-16, 30, 52, 45, 40), spread={"index": 2, "ring": -2}),
              [("thumb", "pinky")]),
         pose("thumb_index_rub", ["money", "pinch"], "Thumb pad sliding on the index's side (the 'tiny amount').",
              hand(fingers(index=(35, 40, 20, 0), middle=(55, 70, 50, 0)), (-10, 20, 15, 10, 5)),
@@ -436,7 +439,7 @@ def grips() -> list[dict]:
                                                  ring=(55, 60, 35, 0), pinky=(60, 65, 35, 0)),
                                          (-15, 12, 20, 15, 5))),
         pose("grip_key", ["lateral", "pinch"], "Turning an unseen key: the thumb pad on the side of the curled "
-             "index.", hand(fingers(index=(55, 60, 30, 0)), (-10, 25, 15, 10, 10)), [("thumb", "index")]),
+             "index.", hand(fingers(index=(55, 60, 30, 0)), (-5, 12, 5, 5, 15)), [("thumb", "index")]),
         pose("grip_card", ["lateral", "precision"], "Holding an unseen card flat between thumb and the fingers' "
              "side.", hand(every((30, 20, 5, 0)), (-5, 25, 10, 5, 0), spread={"index": 2, "pinky": -2})),
         pose("grip_sphere", ["sphere", "power"], "Around an unseen ball: fingers spread and curved.",
