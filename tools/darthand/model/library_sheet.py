@@ -12,8 +12,8 @@ from darthand.model.hand_model import HandModel
 from darthand.model.library_fit import ModelLibrary
 from darthand.model.preview import contact_sheet, render_mesh, write_png
 
-# Fingers up, seen from the palm a little from the thumb's side: a signer's view of a right hand.
-SHEET_VIEW = (0.15, -0.85, 0.5)
+# Fingers up, seen from the palm, a little from the wrist: how a signer's right hand faces the person reading it.
+SHEET_VIEW = (0.0, -1.0, 0.15)
 
 
 def library_sheets(model: HandModel, library: ModelLibrary, out_dir: str | Path, size: int = 200,
