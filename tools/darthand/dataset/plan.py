@@ -65,9 +65,10 @@ UNIFORMS = BACKGROUND + backgrounds.UNIFORMS
 @dataclass
 class PoseOptions:
     """How poses are drawn (dataset/poses.py): mode 'auto' (dart for a model, the baked gestures for a USD package),
-    'dart', 'jitter' or 'gestures'; reference 'gestures', a pose file or FreiHAND's training_mano.json; gestures: the
-    library restricted to these names; levels, draws, steps: DART's grid and slerp; jitter_deg: std of the jitter
-    (degrees); max_reference_mb: the largest reference file read."""
+    'dart', 'jitter' or 'gestures'; reference 'gestures', 'library' (the pose library; 'library:TAG,...' a tagged
+    part of it), a pose file or FreiHAND's training_mano.json; gestures: the reference restricted to these names;
+    levels, draws, steps: DART's grid and slerp; jitter_deg: std of the jitter (degrees); max_reference_mb: the
+    largest reference file read."""
 
     mode: str = "auto"
     reference: str = "gestures"

@@ -39,5 +39,6 @@ def pose_image(model: HandModel, pose: np.ndarray, size: int, view) -> np.ndarra
 
 def label(name: str, tags: tuple[str, ...], group: str) -> str:
     """The pose's name and its first tag that are not its group's."""
-    extra = [t for t in tags if t not in (group, "asl", "gesture", "rest", "grip", "counting", "empty_handed")]
+    extra = [t for t in tags if t not in (group, "asl", "gesture", "rest", "grip", "counting", "empty_handed")
+             and not t.startswith(("letter_", "number_"))]
     return f"{name} {extra[0]}" if extra else name
