@@ -144,3 +144,13 @@ def test_a_fit_record_is_read_for_its_model_and_its_mirror_only(tmp_path):
     write_fit(tmp_path / "other.json", other)
     with pytest.raises(InputError, match="fitted to another model"):
         model_library(right, fit=tmp_path / "other.json", poses=poses)
+
+
+def test_every_group_file_follows_its_schema():
+    from darthand.schemas import check_schema
+
+    for path in group_files():
+        check_schema(json.loads(path.read_text()), "pose_library.schema.json", str(path))
+    with pytest.raises(InputError):
+        check_schema({"group": "g", "licence": "CC0-1.0", "poses": [{"name": "a", "joints": {"index4": {}}}]},
+                     "pose_library.schema.json", "bad.json")
