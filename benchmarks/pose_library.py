@@ -4,8 +4,8 @@ changed and by how much (degrees), and how many cross themselves before and afte
 Headline: `right.fit_seconds` (every library pose on the right model, one process: what `make assets`' pose-library
 step costs). The left model is the right one's mirror, so `make assets` fits the right side only and the left reads
 that fit; `left` fits the first LEFT_POSES poses on the mirrored model to show the cost per side is the same and that
-the two fits agree (largest difference in degrees). Writes the fitted library's contact sheets (library_<group>.png)
-into the output folder.
+the two fits agree (largest difference in degrees). Writes the fit record and the fitted library's contact sheets
+(library_<group>.png) into <out>/pose_library/.
 """
 
 from __future__ import annotations
@@ -30,15 +30,16 @@ def run(out) -> dict:
     model = ensure_face_labels(model)
     poses = library_poses()
     right = fit_library(model, poses)
-    write_fit(out / "pose_library_right.json", right)
+    folder = out / "pose_library"       # not <out>/*.json: those are the benchmarks' results
+    write_fit(folder / "fit_right.json", right)
     left_model = mirror_model(model)
     left = fit_library(left_model, poses[:LEFT_POSES])
     authored = _authored(model, poses)
-    fitted = model_library(model, fit=out / "pose_library_right.json", poses=poses)
+    fitted = model_library(model, fit=folder / "fit_right.json", poses=poses)
     crossing = SelfCrossing(model)
     before = crossing.crossing_poses(authored)
     after = crossing.crossing_poses(fitted.poses)
-    library_sheets(model, fitted, out)
+    library_sheets(model, fitted, folder)
     return {"model": where, "poses": len(poses), "right": _side(right), "left": _side(left),
             "left_vs_right_max_deg": _agreement(left, right),
             "crossing_poses": {"authored": sum(c is not None for c in before),
