@@ -36,7 +36,7 @@ def test_every_group_file_is_cc0_and_read_back_angle_by_angle():
                 for axis, deg in values.items():
                     want[JOINT_NAMES.index(joint), AXES.index(axis)] = deg * np.pi / 180
             got = poses[entry["name"]]
-            assert got.group == doc["group"] and list(got.tags) == entry["tags"]
+            assert got.group == doc["group"] and list(got.tags) == entry.get("tags", [])
             np.testing.assert_allclose(got.angles, want, atol=1e-12)
 
 
