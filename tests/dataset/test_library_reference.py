@@ -19,6 +19,14 @@ from darthand.model.pose_library import library_poses, select_tags
 from darthand.model.rotations import axis_angle_to_quaternion
 
 
+@pytest.fixture(autouse=True)
+def no_checkout_fit(monkeypatch, tmp_path):
+    """The library as authored: a checkout's build/poses/right.json (make assets) is not read by these tests."""
+    import darthand.model.library_fit as library_fit
+
+    monkeypatch.setattr(library_fit, "DEFAULT_FIT_DIR", tmp_path / "no-fit")
+
+
 def test_the_default_reference_is_one_line_from_the_library():
     """Both values the default can take plan frames; the default itself is the one line the lead flips."""
     assert PoseOptions().reference in ("gestures", "library")
