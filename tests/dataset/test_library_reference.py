@@ -19,14 +19,6 @@ from darthand.model.pose_library import library_poses, select_tags
 from darthand.model.rotations import axis_angle_to_quaternion
 
 
-@pytest.fixture(autouse=True)
-def no_checkout_fit(monkeypatch, tmp_path):
-    """The library as authored: a checkout's build/poses/right.json (make assets) is not read by these tests."""
-    import darthand.model.library_fit as library_fit
-
-    monkeypatch.setattr(library_fit, "DEFAULT_FIT_DIR", tmp_path / "no-fit")
-
-
 def test_the_default_reference_is_one_line_from_the_library():
     """Both values the default can take plan frames; the default itself is the one line the lead flips."""
     assert PoseOptions().reference in ("gestures", "library")
@@ -101,3 +93,27 @@ def test_the_report_shows_the_library_beside_another_reference_set(small_dataset
     gestures = [k for k, p in enumerate(library_poses()) if p.group == "gestures"]
     np.testing.assert_allclose(sorted(np.asarray(lib["reference_to_dataset_deg"])[gestures]),
                                sorted(figures["pose_coverage"]["reference_to_dataset_deg"]), atol=1e-2)
+
+
+def test_the_plan_reads_the_fit_beside_the_model_file(hand, tmp_path):
+    """A package whose model has a library fit beside it (build/poses/right.json for build/model/right.npz, as
+    make assets writes it) draws the fitted poses (the package of the tests above has none: the authored ones)."""
+    from darthand.dataset.sources import source_specs
+    from darthand.model.anatomy import angles_to_axis_angle
+    from darthand.model.gestures import joints_to_angles
+    from darthand.model.library_fit import FIT_FORMAT, model_digest, write_fit
+    from darthand.model.npz_io import save_npz
+
+    save_npz(hand, tmp_path / "model" / "right.npz")
+    alphabet = select_tags(library_poses(), ["alphabet"])
+    bent = {"index1": {"bend": 33.0}, "thumb1": {"spread": 5.0}}
+    write_fit(tmp_path / "poses" / "right.json", {
+        "format": FIT_FORMAT, "version": 1, "model": {"side": "right", "digest": model_digest(hand)},
+        "poses": {p.name: {"joints": bent} for p in alphabet}})
+    specs = source_specs(str(tmp_path / "model" / "right.npz"), ("right",))
+    opened = {side: spec.open() for side, spec in specs.items()}
+    planner = Planner({"seed": 1, "poses": {"mode": "gestures", "reference": "library:alphabet"}}, opened)
+    want = angles_to_axis_angle(hand, joints_to_angles(bent)).reshape(-1)[3:]
+    for job in planner.jobs(0, 3):
+        assert job["gesture"] in {p.name for p in alphabet}
+        np.testing.assert_allclose(np.asarray(job["pose"])[3:], want, atol=1e-6)

@@ -12,7 +12,7 @@ import pytest
 from darthand.errors import InputError
 from darthand.model.anatomy import LIMITS, angles_to_axis_angle, within_limits
 from darthand.model.layout import JOINT_NAMES
-from darthand.model.library_fit import FIT_FORMAT, model_digest, model_library, write_fit
+from darthand.model.library_fit import FIT_FORMAT, fit_beside, model_digest, model_library, write_fit
 from darthand.model.load import open_hand
 from darthand.model.mirror import mirror_model, mirror_pose
 from darthand.model.pose_library import LIBRARY_DIR, library_poses, select_tags
@@ -109,19 +109,30 @@ def test_a_name_in_two_files_is_refused_naming_both(tmp_path):
         library_poses(tmp_path, gestures=True)
 
 
-def test_the_library_on_a_model_without_a_fit_is_the_authored_angles(tmp_path, monkeypatch):
-    import darthand.model.library_fit as library_fit
-
-    monkeypatch.setattr(library_fit, "DEFAULT_FIT_DIR", tmp_path)     # no checkout's build/poses/right.json
+def test_the_library_on_a_model_without_a_fit_is_the_authored_angles(tmp_path):
     model = open_hand("right")
     poses = library_poses()[:20]
     lib = model_library(model, poses=poses)
     assert not lib.fitted and lib.names == tuple(p.name for p in poses)
     want = angles_to_axis_angle(model, np.stack([p.angles for p in poses])).reshape(len(poses), 48)
     np.testing.assert_allclose(lib.poses, want, atol=1e-12)
-    write_fit(tmp_path / "right.json", {"format": FIT_FORMAT, "version": 1, "poses": {},
-                                         "model": {"side": "right", "digest": "another model"}})
-    assert not model_library(model, poses=poses).fitted          # a default fit of another model is passed over
+
+
+def test_the_fit_beside_a_model_file_is_used_when_it_is_that_models(tmp_path):
+    """make assets writes build/poses/right.json beside build/model/<side>.npz: read for that model (and its
+    mirror), passed over for another."""
+    model = open_hand("right")
+    poses = library_poses()[:2]
+    bent = {p.name: {"joints": {"index1": {"bend": 33.0}}} for p in poses}
+    beside = tmp_path / "model" / "left.npz"
+    assert fit_beside(beside) == tmp_path / "poses" / "right.json"
+    write_fit(tmp_path / "poses" / "right.json", {"format": FIT_FORMAT, "version": 1, "poses": bent,
+                                                   "model": {"side": "right", "digest": "another model"}})
+    assert not model_library(model, poses=poses, beside=beside).fitted
+    write_fit(tmp_path / "poses" / "right.json", {"format": FIT_FORMAT, "version": 1, "poses": bent,
+                                                   "model": {"side": "right", "digest": model_digest(model)}})
+    assert model_library(model, poses=poses, beside=beside).fitted
+    assert model_library(mirror_model(model), poses=poses, beside=beside).fitted
 
 
 def test_a_fit_record_is_read_for_its_model_and_its_mirror_only(tmp_path):

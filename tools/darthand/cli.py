@@ -230,7 +230,8 @@ def _add_model_commands(sub) -> None:
     p.add_argument("model", metavar="MODEL", help=model_help)
     p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for library_<group>.png")
     p.add_argument("--fit", default=None, metavar="FIT.json",
-                   help="a fit record of this model (default build/poses/right.json when it is this model's)")
+                   help="a fit record of this model (default: ../poses/right.json beside MODEL, as make assets "
+                        "writes it, when it is this model's; else the authored angles)")
     p.set_defaults(run=commands.library_sheet)
 
 

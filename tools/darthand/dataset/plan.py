@@ -356,7 +356,7 @@ def _pose_sampler(opts: dict, model, first):
                 raise InputError(f"poses: {name!r} is not a gesture of the package ({', '.join(known)})")
         return poses.GestureNames(names)
     reference = poses.load_reference(opts["reference"], model, float(opts["max_reference_mb"]),
-                                     gestures=opts["gestures"])
+                                     gestures=opts["gestures"], model_path=first.describe().get("source"))
     if mode in ("auto", "dart"):
         return poses.GridSlerp(model, reference, levels=opts["levels"], draws=opts["draws"], steps=opts["steps"])
     return poses.GestureJitter(model, reference, 0.0 if mode == "gestures" else opts["jitter_deg"])

@@ -89,13 +89,15 @@ def reference_from_poses(poses: np.ndarray, source: str, names=None) -> Referenc
     return ReferenceSet(quats, source, None if names is None else tuple(names))
 
 
-def load_reference(spec, model, max_mb: float = DEFAULT_MAX_REFERENCE_MB, gestures=None) -> ReferenceSet:
+def load_reference(spec, model, max_mb: float = DEFAULT_MAX_REFERENCE_MB, gestures=None,
+                   model_path=None) -> ReferenceSet:
     """The reference set named by `spec`: 'gestures' (or None) for the gesture library on `model` (right hand;
-    `gestures`: some of its names), 'library' or 'library:TAG[,TAG]' for the pose library (`library_reference`),
-    or a path to a darthand pose file or a FreiHAND training_mano.json. `max_mb`:
-    the largest file read (InputError naming the budget and how to raise it otherwise)."""
+    `gestures`: some of its names), 'library' or 'library:TAG[,TAG]' for the pose library (`library_reference`;
+    model_path: the model's file, beside which `make assets` writes the library's fit), or a path to a darthand
+    pose file or a FreiHAND training_mano.json. `max_mb`: the largest file read (InputError naming the budget and
+    how to raise it otherwise)."""
     if isinstance(spec, str) and (spec == LIBRARY or spec.startswith(LIBRARY + ":")):
-        return library_reference(spec, model, gestures)
+        return library_reference(spec, model, gestures, model_path)
     if spec in (None, "gestures"):
         known = model_gestures(model)                      # the model's own (fitted) gestures
         for name in gestures or ():
@@ -116,10 +118,10 @@ def load_reference(spec, model, max_mb: float = DEFAULT_MAX_REFERENCE_MB, gestur
     return reference_from_poses(pose_file_vectors_any_betas(model, path), f"file:{path.name}")
 
 
-def library_reference(spec: str, model, names=None) -> ReferenceSet:
-    """The pose library on `model` (its fitted poses when a fit of it is found: model/library_fit) as a reference
-    set: 'library', or 'library:TAG[,TAG]' for the poses carrying any of the tags (or in any of those groups);
-    `names`: only these poses."""
+def library_reference(spec: str, model, names=None, model_path=None) -> ReferenceSet:
+    """The pose library on `model` (its fitted poses when a fit of it is found beside `model_path`, the model's
+    file: model/library_fit) as a reference set: 'library', or 'library:TAG[,TAG]' for the poses carrying any of
+    the tags (or in any of those groups); `names`: only these poses."""
     tags = [t for t in spec.partition(":")[2].split(",") if t]
     if spec != LIBRARY and not tags:
         raise InputError(f"reference poses: {spec!r} names no tag (library:TAG[,TAG], e.g. library:alphabet)")
@@ -131,7 +133,7 @@ def library_reference(spec: str, model, names=None) -> ReferenceSet:
             if name not in known:
                 raise InputError(f"poses: {name!r} is not a pose of {spec}")
         chosen = [p for p in chosen if p.name in set(names)]
-    lib = model_library(model, poses=chosen)
+    lib = model_library(model, poses=chosen, beside=model_path)
     return reference_from_poses(lib.poses, spec, lib.names)
 
 

@@ -154,7 +154,8 @@ def _reference(doc: dict, spec: str | None = None) -> tuple[np.ndarray, str]:
             raise InputError("a USD package has no model to pose the reference set with")
         if model.side != "right":
             model = mirror_model(model)
-        ref = load_reference(spec, model, float((plan.get("poses") or {}).get("max_reference_mb", 256)))
+        ref = load_reference(spec, model, float((plan.get("poses") or {}).get("max_reference_mb", 256)),
+                             model_path=source.describe().get("source"))
     except (InputError, AttributeError, KeyError) as e:
         return np.zeros((0, 15, 4)), f"none ({e})"
     quats = ref.quats.astype(np.float64)

@@ -152,7 +152,7 @@ def library_sheet(args) -> int:
     from darthand.model.library_sheet import library_sheets
 
     model = load_model(args.model)
-    library = model_library(model, fit=args.fit)
+    library = model_library(model, fit=args.fit, beside=args.model)
     for path in library_sheets(model, library, args.out_dir):
         print(path)
     return 0

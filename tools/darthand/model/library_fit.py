@@ -7,9 +7,10 @@ beside the model's (the model build, and everything after it, does not wait for 
 right one's mirror and anatomical angles are mirror-symmetric, so that one fit serves both sides (`model_digest`).
 
 `model_library(model)` is the library on a model: the fitted angles when a fit of this very model is found (the
-record names the model's geometry digest; by default build/poses/right.json of the checkout), else the authored
-angles, as a model without a gesture record gets the authored gestures. DART's sampler draws its poses for the
-right-handed twin of each source (dataset/poses), so the right fit is the one datasets use.
+record names the model's geometry digest; found beside the model file, build/poses/right.json for
+build/model/<side>.npz, or named), else the authored angles, as a model without a gesture record gets the authored
+gestures. DART's sampler draws its poses for the right-handed twin of each source (dataset/poses), so the right fit
+is the one datasets use.
 """
 
 from __future__ import annotations
@@ -30,11 +31,10 @@ from darthand.model.gestures import angles_to_joints, joints_to_angles
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import NUM_JOINTS
 from darthand.model.pose_library import LibraryPose, library_poses
-from darthand.model.poses import REPO_ROOT
 
 FIT_FORMAT = "darthand-fitted-pose-library"
 FIT_VERSION = 1
-DEFAULT_FIT_DIR = REPO_ROOT / "build" / "poses"
+FIT_FOLDER = "poses"            # build/poses/right.json beside build/model/right.npz
 
 
 @dataclass(frozen=True, eq=False)
@@ -121,38 +121,50 @@ def read_fit(path: str | Path) -> dict:
 # ------------------------------------------------------------------------------------------------ read back
 
 
-def model_library(model: HandModel, fit: str | Path | None = None,
-                  poses: list[LibraryPose] | None = None) -> ModelLibrary:
-    """The library (default: all of it) on `model`: its fitted angles from `fit` (a fit record's path; default
-    build/poses/right.json when it exists and was fitted to this model or its mirror), else the authored angles.
-    An explicit `fit` of another model, or one missing a pose, is an InputError."""
+def model_library(model: HandModel, fit: str | Path | None = None, poses: list[LibraryPose] | None = None,
+                  beside: str | Path | None = None) -> ModelLibrary:
+    """The library (default: all of it) on `model`: its fitted angles from `fit` (a fit record's path: InputError
+    when it is another model's or misses a pose), else from the fit `make assets` writes beside the model file
+    `beside` (build/poses/right.json for build/model/<side>.npz; used when it is this model's or its mirror's),
+    else the authored angles."""
     poses = library_poses() if poses is None else poses
-    record = _fit_record(model, fit)
+    path, record = _fit_record(model, fit, beside)
     angles = np.stack([p.angles for p in poses]) if poses else np.zeros((0, NUM_JOINTS, 3))
     if record is not None:
         fitted = record["poses"]
         missing = [p.name for p in poses if p.name not in fitted]
         if missing:
-            raise InputError(f"{fit or DEFAULT_FIT_DIR / 'right.json'}: no fit of pose {missing[0]!r} "
-                             "(refit the library: `darthand model fit-library`)")
+            raise InputError(f"{path}: no fit of pose {missing[0]!r} (refit the library: `darthand model "
+                             "fit-library`)")
         angles = np.stack([joints_to_angles(fitted[p.name]["joints"]) for p in poses])
     out = angles_to_axis_angle(model, angles, joint_frames(model)).reshape(len(poses), 3 * NUM_JOINTS)
     return ModelLibrary(tuple(p.name for p in poses), tuple(p.group for p in poses), tuple(p.tags for p in poses),
                         angles, out, record is not None)
 
 
-def _fit_record(model: HandModel, fit: str | Path | None) -> dict | None:
-    """The fit record to use on `model`: `fit`'s (InputError when it is another model's), or the default file's
-    when it is this model's, or None."""
-    path = Path(fit) if fit is not None else DEFAULT_FIT_DIR / "right.json"
-    if not path.is_file():
-        if fit is not None:
-            raise InputError(f"{path}: no such fitted pose library")
+def fit_beside(model_path: str | Path | None) -> Path | None:
+    """Where `make assets` writes the fit of the model file `model_path`: <its folder>/../poses/right.json
+    (build/model/right.npz -> build/poses/right.json), None for no path."""
+    if model_path is None:
         return None
-    record = read_fit(path)
-    if record.get("model", {}).get("digest") == model_digest(model):
-        return record
+    return Path(str(model_path)).parent.parent / FIT_FOLDER / "right.json"
+
+
+def _fit_record(model: HandModel, fit: str | Path | None,
+                beside: str | Path | None) -> tuple[Path | None, dict | None]:
+    """(path, record) of the fit to use on `model`: `fit`'s (InputError when it is missing or another model's),
+    or the one beside the model file when it is this model's, or (None, None)."""
     if fit is not None:
-        raise InputError(f"{path}: fitted to another model (digest {record.get('model', {}).get('digest')}, this "
-                         f"model's {model_digest(model)})")
-    return None
+        path = Path(fit)
+        if not path.is_file():
+            raise InputError(f"{path}: no such fitted pose library")
+        record = read_fit(path)
+        if record.get("model", {}).get("digest") != model_digest(model):
+            raise InputError(f"{path}: fitted to another model (digest {record.get('model', {}).get('digest')}, "
+                             f"this model's {model_digest(model)})")
+        return path, record
+    found = fit_beside(beside)
+    if found is None or not found.is_file():
+        return None, None
+    record = read_fit(found)
+    return (found, record) if record.get("model", {}).get("digest") == model_digest(model) else (None, None)
