@@ -96,6 +96,14 @@ build/model/right.npz build/model/left.npz &: build/model/source.txt $(SOURCE_DE
 build/template/gestures.json build/template/gestures.png &: build/model/right.npz $(POSES) $(call src,template)
 	@$(STEP) gestures -- $(DH) template gestures build/model/right.npz --out-dir build/template
 
+# The pose library fitted to the model (model/library_fit) and drawn on it, a sheet per group: a step of its own that
+# nothing else in ASSETS waits for, so its ~150 single-threaded fits (about 2.3 min of CPU) overlap the textures and
+# packages; one fit serves both sides (the left model is the right one's mirror, the angles mirror-symmetric).
+LIBRARY := $(wildcard assets_src/poses/library/*.json)
+build/poses/right.json: build/model/right.npz $(POSES) $(LIBRARY) $(call src,model) $(STAMP)
+	@$(STEP) pose-library -- $(DH) model fit-library build/model/right.npz --out $@
+	@$(STEP) pose-library-sheets -- $(DH) model library-sheet build/model/right.npz --fit $@ --out-dir build/poses
+
 # The shape space: extreme shapes at rest and through every gesture (fitted to each shape, as `model build` fits them
 # to the hand it builds), hand sizes against ANSUR II (`make shapes`: about 2.5 min of CPU for the 21 gesture fits,
 # so not part of `make assets`).
@@ -158,7 +166,7 @@ build/validate/report.json: $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/
 	@$(STEP) validate -- $(DH) validate $(foreach s,$(SIDES),build/usd/$(s) build/gltf/$(s).glb build/gltf/$(s)) \
 	    --out $@
 
-ASSETS := build/model/right.npz build/template/gestures.json build/textures/catalog.json \
+ASSETS := build/model/right.npz build/template/gestures.json build/poses/right.json build/textures/catalog.json \
           build/accessories/catalog.json build/objects/catalog.json \
           $(foreach s,$(SIDES),build/usd/$(s)/$(s).usda build/gltf/$(s).glb build/gltf/$(s)/$(s).gltf \
                                build/blender/$(s).blend) \

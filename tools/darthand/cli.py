@@ -222,6 +222,20 @@ def _add_model_commands(sub) -> None:
                    "or commas, missing trailing ones 0 (e.g. '1.5 -0.5'; default the mean shape)")
     p.set_defaults(run=commands.build)
 
+    p = g.add_parser("fit-library", help="fit the pose library (assets_src/poses/library) to a model: the fit "
+                                          "record datasets read (build/poses/right.json)")
+    p.add_argument("model", metavar="MODEL", help=model_help)
+    p.add_argument("--out", required=True, metavar="OUT.json", help="the fit record")
+    p.set_defaults(run=commands.fit_library)
+
+    p = g.add_parser("library-sheet", help="draw the pose library on a model: a contact sheet per group")
+    p.add_argument("model", metavar="MODEL", help=model_help)
+    p.add_argument("--out-dir", required=True, metavar="DIR", help="folder for library_<group>.png")
+    p.add_argument("--fit", default=None, metavar="FIT.json",
+                   help="a fit record of this model (default: ../poses/right.json beside MODEL, as make assets "
+                        "writes it, when it is this model's; else the authored angles)")
+    p.set_defaults(run=commands.library_sheet)
+
 
 # ---------------------------------------------------------------- template
 def _add_template_commands(sub) -> None:
@@ -574,9 +588,11 @@ def _add_dataset_arguments(p) -> None:
                         "different of --reference-draws reference poses; jitter: reference poses perturbed by "
                         "--pose-jitter; gestures: reference poses as they are (auto: dart for a model, the baked "
                         "gestures for a USD package)")
-    p.add_argument("--poses", default=d.reference, metavar="gestures|POSES.json|training_mano.json",
-                   help="the reference poses: the gesture library (default), a pose file (schemas/pose.schema.json) "
-                        "or FreiHAND's training_mano.json")
+    p.add_argument("--poses", "--reference", dest="poses", default=d.reference,
+                   metavar="gestures|library[:TAG,...]|POSES.json|training_mano.json",
+                   help="the reference poses: the 12 gestures, the pose library (library:TAG,... its poses with "
+                        "those tags, e.g. library:alphabet), a pose file (schemas/pose.schema.json) or FreiHAND's "
+                        f"training_mano.json (default {d.reference})")
     p.add_argument("--gestures", default=None, metavar="NAMES",
                    help="comma-separated gesture names: the gesture library restricted to them")
     p.add_argument("--grid-levels", type=number(int, 2, 16), default=d.levels, metavar="L",

@@ -73,9 +73,10 @@ UNIFORMS = BACKGROUND + backgrounds.UNIFORMS
 @dataclass
 class PoseOptions:
     """How poses are drawn (dataset/poses.py): mode 'auto' (dart for a model, the baked gestures for a USD package),
-    'dart', 'jitter' or 'gestures'; reference 'gestures', a pose file or FreiHAND's training_mano.json; gestures: the
-    library restricted to these names; levels, draws, steps: DART's grid and slerp; jitter_deg: std of the jitter
-    (degrees); max_reference_mb: the largest reference file read."""
+    'dart', 'jitter' or 'gestures'; reference 'gestures', 'library' (the pose library; 'library:TAG,...' a tagged
+    part of it), a pose file or FreiHAND's training_mano.json; gestures: the reference restricted to these names;
+    levels, draws, steps: DART's grid and slerp; jitter_deg: std of the jitter (degrees); max_reference_mb: the
+    largest reference file read."""
 
     mode: str = "auto"
     reference: str = "gestures"
@@ -396,7 +397,7 @@ def _pose_sampler(opts: dict, model, first):
                 raise InputError(f"poses: {name!r} is not a gesture of the package ({', '.join(known)})")
         return poses.GestureNames(names)
     reference = poses.load_reference(opts["reference"], model, float(opts["max_reference_mb"]),
-                                     gestures=opts["gestures"])
+                                     gestures=opts["gestures"], model_path=first.describe().get("source"))
     if mode in ("auto", "dart"):
         return poses.GridSlerp(model, reference, levels=opts["levels"], draws=opts["draws"], steps=opts["steps"])
     return poses.GestureJitter(model, reference, 0.0 if mode == "gestures" else opts["jitter_deg"])

@@ -11,7 +11,8 @@ are permuted across the fingers. Then `draws` poses (DART: 2,000) are drawn from
 differs most from the base (largest sum over the 15 finger joints of the rotation angle between the two) is kept;
 the group's frames walk from the base (t = 0) to that reference pose (t = 1) along per-joint quaternion slerps.
 
-Reference sets (`ReferenceSet`): the gesture library (default), a darthand pose file (schemas/pose.schema.json),
+Reference sets (`ReferenceSet`): the gesture library (default), the pose library ('library', or a tagged subset
+'library:alphabet'), a darthand pose file (schemas/pose.schema.json),
 or FreiHAND's `training_mano.json` read directly (rows of 61 numbers: 48 pose values with MANO's mean hand not
 included, i.e. flat_hand_mean false, 10 betas, 2 root position in the image, 1 scale; only the 45 finger values are
 used). Files are read within a budget (`max_bytes`), since a JSON number costs ~30 bytes of memory once parsed.
@@ -33,6 +34,8 @@ from darthand.fileio import read_json
 from darthand.model.anatomy import angles_to_axis_angle, axis_angle_to_angles, joint_frames, limits_radians
 from darthand.model.gestures import model_gestures
 from darthand.model.layout import FINGER_JOINTS, FINGERS, NUM_JOINTS
+from darthand.model.library_fit import model_library
+from darthand.model.pose_library import library_poses, select_tags
 from darthand.model.poses import load_pose_file
 from darthand.model.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle, slerp
 
@@ -44,6 +47,7 @@ DEFAULT_STEPS = 8              # DART's slerp steps
 DEFAULT_JITTER_DEG = 5.0
 DEFAULT_MAX_REFERENCE_MB = 256
 FREIHAND_ROW = 61
+LIBRARY = "library"            # the reference spec of the pose library (model/pose_library), 'library:TAG,...'
 # The axes each digit's grid varies, per joint of the digit (root to tip): hinges bend only, MCPs also spread, the
 # thumb's CMC also twists (opposition).
 GRID_AXES = {"finger": (("spread", "bend"), ("bend",), ("bend",)),
@@ -85,10 +89,15 @@ def reference_from_poses(poses: np.ndarray, source: str, names=None) -> Referenc
     return ReferenceSet(quats, source, None if names is None else tuple(names))
 
 
-def load_reference(spec, model, max_mb: float = DEFAULT_MAX_REFERENCE_MB, gestures=None) -> ReferenceSet:
+def load_reference(spec, model, max_mb: float = DEFAULT_MAX_REFERENCE_MB, gestures=None,
+                   model_path=None) -> ReferenceSet:
     """The reference set named by `spec`: 'gestures' (or None) for the gesture library on `model` (right hand;
-    `gestures`: some of its names), or a path to a darthand pose file or a FreiHAND training_mano.json. `max_mb`:
-    the largest file read (InputError naming the budget and how to raise it otherwise)."""
+    `gestures`: some of its names), 'library' or 'library:TAG[,TAG]' for the pose library (`library_reference`;
+    model_path: the model's file, beside which `make assets` writes the library's fit), or a path to a darthand
+    pose file or a FreiHAND training_mano.json. `max_mb`: the largest file read (InputError naming the budget and
+    how to raise it otherwise)."""
+    if isinstance(spec, str) and (spec == LIBRARY or spec.startswith(LIBRARY + ":")):
+        return library_reference(spec, model, gestures, model_path)
     if spec in (None, "gestures"):
         known = model_gestures(model)                      # the model's own (fitted) gestures
         for name in gestures or ():
@@ -107,6 +116,25 @@ def load_reference(spec, model, max_mb: float = DEFAULT_MAX_REFERENCE_MB, gestur
     if isinstance(doc, list):
         return reference_from_poses(freihand_poses(doc, model, str(path)), f"freihand:{path.name}")
     return reference_from_poses(pose_file_vectors_any_betas(model, path), f"file:{path.name}")
+
+
+def library_reference(spec: str, model, names=None, model_path=None) -> ReferenceSet:
+    """The pose library on `model` (its fitted poses when a fit of it is found beside `model_path`, the model's
+    file: model/library_fit) as a reference set: 'library', or 'library:TAG[,TAG]' for the poses carrying any of
+    the tags (or in any of those groups); `names`: only these poses."""
+    tags = [t for t in spec.partition(":")[2].split(",") if t]
+    if spec != LIBRARY and not tags:
+        raise InputError(f"reference poses: {spec!r} names no tag (library:TAG[,TAG], e.g. library:alphabet)")
+    chosen = library_poses()
+    chosen = select_tags(chosen, tags) if tags else chosen
+    if names:
+        known = {p.name for p in chosen}
+        for name in names:
+            if name not in known:
+                raise InputError(f"poses: {name!r} is not a pose of {spec}")
+        chosen = [p for p in chosen if p.name in set(names)]
+    lib = model_library(model, poses=chosen, beside=model_path)
+    return reference_from_poses(lib.poses, spec, lib.names)
 
 
 def pose_file_vectors_any_betas(model, path) -> np.ndarray:

@@ -11,7 +11,9 @@
 - pose coverage: the dataset's finger poses and the plan's reference set in one 2-D t-SNE embedding, as DART's
   figure (dataset/embedding.py; the distance between two poses is the mean rotation angle over the 15 finger joints,
   both sets embedded together, up to EMBED_DATASET + EMBED_REFERENCE poses evenly spread), and how far each
-  reference pose is from its nearest dataset pose (the same distance).
+  reference pose is from its nearest dataset pose (the same distance). When the reference set is not the pose
+  library (model/pose_library: the gestures, a pose file, FreiHAND's poses), the library is drawn and measured
+  beside it (`library_coverage` in report.json), so the figure always shows the dataset against the library.
 
 Poses are read from up to MAX_POSES frames' labels (evenly spread), so a report of a large dataset stays quick.
 """
@@ -25,7 +27,7 @@ import numpy as np
 from darthand.dataset.embedding import PERPLEXITY, tsne
 from darthand.dataset.frames import frame_names
 from darthand.dataset.hands import hand_type, hands_of
-from darthand.dataset.poses import load_reference
+from darthand.dataset.poses import LIBRARY, load_reference
 from darthand.dataset.report_hands import two_hand_frames, write_two_hand_sheet
 from darthand.dataset.report_objects import object_counts
 from darthand.dataset.run import rendered_dataset
@@ -59,12 +61,15 @@ def write_report(dataset, out=None, sheet: int = 24) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     figures = dataset_figures(frames)
     poses, reference, ref_name = pose_sets(root, doc, frames)
-    embedding = pose_embedding(poses, reference)
+    library, lib_name = library_set(doc, ref_name)
+    embedding = pose_embedding(poses, reference, library)
     figures["pose_coverage"] = coverage_figures(poses, reference)
-    (n, _), (m, _) = embedding["poses"]
+    (n, _), (m, _) = embedding["poses"][:2]
     figures["pose_coverage"]["embedding"] = {"method": "t-SNE", "perplexity": PERPLEXITY, "distance":
                                              "mean finger-joint angle", "dataset_poses": n, "reference_poses": m}
     figures["reference"] = ref_name
+    figures["library_coverage"] = coverage_figures(poses, library) if len(library) else \
+        {"same_as": "pose_coverage" if lib_name == ref_name else None, "library": lib_name}
 
     shown = min(sheet, len(frames))
     sheet_height = 5.6 * -(-shown // min(8, shown)) / min(8, shown)     # in units of the rows below: the full width
@@ -88,8 +93,8 @@ def write_report(dataset, out=None, sheet: int = 24) -> Path:
     ax = fig.add_subplot(grid[3, 2:])
     ax.axis("off")
     ax.text(0, 1, _summary_text(doc, figures), va="top", family="monospace", fontsize=11)
-    _embedding(fig.add_subplot(grid[4, :2]), embedding, ref_name)
-    _nearest(fig.add_subplot(grid[4, 2:]), figures["pose_coverage"])
+    _embedding(fig.add_subplot(grid[4, :2]), embedding, ref_name, lib_name)
+    _nearest(fig.add_subplot(grid[4, 2:]), figures["pose_coverage"], figures["library_coverage"])
     page = out / "report.png"
     fig.savefig(page, bbox_inches="tight")
     plt.close(fig)
@@ -135,9 +140,18 @@ def pose_sets(root: Path, doc: dict, frames: list[dict]) -> tuple[np.ndarray, np
     return quats, reference, name
 
 
-def _reference(doc: dict) -> tuple[np.ndarray, str]:
+def library_set(doc: dict, ref_name: str) -> tuple[np.ndarray, str]:
+    """The pose library's (m, 15, 4) finger quaternions on the dataset's model, up to MAX_REFERENCE, and its name;
+    (0, 15, 4) when the plan's reference set is the library already (or a tagged part of it: the figure then
+    shows that part) or the library cannot be posed."""
+    if ref_name.startswith(LIBRARY):
+        return np.zeros((0, 15, 4)), ref_name
+    return _reference(doc, LIBRARY)
+
+
+def _reference(doc: dict, spec: str | None = None) -> tuple[np.ndarray, str]:
     plan = (doc.get("jobs") or {}).get("plan") or {}
-    spec = (plan.get("poses") or {}).get("reference", "gestures")
+    spec = spec or (plan.get("poses") or {}).get("reference", "gestures")
     try:
         source = SourceSpec(doc["package"]).open()
         model = source.pose_model()
@@ -145,7 +159,8 @@ def _reference(doc: dict) -> tuple[np.ndarray, str]:
             raise InputError("a USD package has no model to pose the reference set with")
         if model.side != "right":
             model = mirror_model(model)
-        ref = load_reference(spec, model, float((plan.get("poses") or {}).get("max_reference_mb", 256)))
+        ref = load_reference(spec, model, float((plan.get("poses") or {}).get("max_reference_mb", 256)),
+                             model_path=source.describe().get("source"))
     except (InputError, AttributeError, KeyError) as e:
         return np.zeros((0, 15, 4)), f"none ({e})"
     quats = ref.quats.astype(np.float64)
@@ -167,18 +182,22 @@ def pose_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def pose_embedding(poses: np.ndarray, reference: np.ndarray) -> dict:
-    """2-D t-SNE coordinates of (an evenly spread subsample of) both sets, embedded together: {"dataset" (n, 2),
-    "reference" (m, 2), "poses": [n of len(poses), m of len(reference)]}. Starts from both sets' first two
+def pose_embedding(poses: np.ndarray, reference: np.ndarray, library: np.ndarray | None = None) -> dict:
+    """2-D t-SNE coordinates of (an evenly spread subsample of) the sets, embedded together: {"dataset" (n, 2),
+    "reference" (m, 2), "library" (l, 2), "poses": [n of len(poses), m of len(reference), l of len(library)]}.
+    library: the pose library when it is not the reference set (default none). Starts from the sets' first two
     principal components of the sign-fixed quaternions (deterministic)."""
+    library = np.zeros((0, 15, 4)) if library is None else library
     data, ref = poses[spread_index(len(poses), EMBED_DATASET)], reference[spread_index(len(reference), EMBED_REFERENCE)]
-    both = np.concatenate([data, ref])
+    lib = library[spread_index(len(library), EMBED_REFERENCE)]
+    both = np.concatenate([data, ref, lib])
     features = _features(both)
     features = features - features.mean(0)
     axes = np.linalg.svd(features, full_matrices=False)[2][:2] if len(both) > 1 else np.eye(2, features.shape[1])
     y = tsne(pose_distances(both, both), features @ axes.T)
-    return {"dataset": y[:len(data)], "reference": y[len(data):],
-            "poses": [[len(data), len(poses)], [len(ref), len(reference)]]}
+    n, m = len(data), len(data) + len(ref)
+    return {"dataset": y[:n], "reference": y[n:m], "library": y[m:],
+            "poses": [[len(data), len(poses)], [len(ref), len(reference)], [len(lib), len(library)]]}
 
 
 def spread_index(n: int, most: int) -> np.ndarray:
@@ -256,13 +275,16 @@ def _visibility(ax, figures: dict) -> None:
                  f"{figures['in_image_rate']:.1%} inside the image)")
 
 
-def _embedding(ax, embedding: dict, ref_name: str) -> None:
-    ref, data = embedding["reference"], embedding["dataset"]
+def _embedding(ax, embedding: dict, ref_name: str, lib_name: str) -> None:
+    ref, data, lib = embedding["reference"], embedding["dataset"], embedding["library"]
     ax.scatter(data[:, 0], data[:, 1], s=5, c="#d62728", alpha=0.6, label="dataset")
+    if len(lib):                                         # the library, when the reference set is something else
+        ax.scatter(lib[:, 0], lib[:, 1], s=22, marker="+", c="#1f77b4", linewidths=0.9,
+                   label=f"pose library ({len(lib)} poses)")
     if len(ref):                                         # on top: a few reference poses among many dataset ones
         ax.scatter(ref[:, 0], ref[:, 1], s=28, marker="D", c="#1f1f1f", edgecolors="white", linewidths=0.6,
                    label=f"reference set ({ref_name})")
-    (n, total), (m, ref_total) = embedding["poses"]
+    (n, total), (m, ref_total) = embedding["poses"][:2]
     ax.set_xticks([])
     ax.set_yticks([])
     ax.legend(loc="best", fontsize=9)
@@ -270,15 +292,25 @@ def _embedding(ax, embedding: dict, ref_name: str) -> None:
                  + (f", {m} of {ref_total} reference)" if ref_total else ")"))
 
 
-def _nearest(ax, cov: dict) -> None:
-    d = cov.get("reference_to_dataset_deg")
-    if d:
-        ax.hist(d, bins=30, color="#2ca02c")
-        ax.set_title(f"reference pose to nearest dataset pose: median {cov['median_deg']:.1f} deg, "
-                     f"{cov['within_10deg']:.0%} within 10 deg")
-        ax.set_xlabel("mean rotation angle over the 15 finger joints (degrees)")
-    else:
+def _nearest(ax, cov: dict, library: dict) -> None:
+    """Histograms of each reference pose's (and each library pose's, when the library is not the reference set)
+    distance to its nearest dataset pose."""
+    d, lib = cov.get("reference_to_dataset_deg"), library.get("reference_to_dataset_deg")
+    if not d and not lib:
         ax.axis("off")
+        return
+    title = []
+    if d:
+        ax.hist(d, bins=30, color="#2ca02c", alpha=0.8 if lib else 1.0, label="reference set")
+        title.append(f"reference pose to nearest dataset pose: median {cov['median_deg']:.1f} deg, "
+                     f"{cov['within_10deg']:.0%} within 10 deg")
+    if lib:
+        ax.hist(lib, bins=30, color="#1f77b4", alpha=0.6, label="pose library")
+        ax.legend(loc="best", fontsize=9)
+        title.append(f"library pose to nearest dataset pose: median {library['median_deg']:.1f} deg, "
+                     f"{library['within_10deg']:.0%} within 10 deg")
+    ax.set_title("\n".join(title))
+    ax.set_xlabel("mean rotation angle over the 15 finger joints (degrees)")
 
 
 def _summary_text(doc: dict, figures: dict) -> str:

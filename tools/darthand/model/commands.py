@@ -130,3 +130,29 @@ def parse_betas(text: str | None) -> np.ndarray | None:
         except ValueError:
             raise InputError(f"--betas: {item!r} is not a number") from None
     return np.asarray(values)
+
+
+def fit_library(args) -> int:
+    """`model fit-library`: the pose library fitted to a model, written as a fit record (model/library_fit)."""
+    from darthand.model.library_fit import fit_library as fit, write_fit   # the fit loads MeshLab
+
+    model = load_model(args.model)
+    record = fit(model)
+    write_fit(args.out, record)
+    status = [p["status"] for p in record["poses"].values()]
+    fits = ", ".join(f"{status.count(s)} {s}" for s in ("kept", "fitted", "unresolved") if s in status)
+    print(f"{args.out}: {len(status)} library poses fitted to {model.meta.get('source', args.model)} in "
+          f"{record['seconds']:.0f} s ({fits})")
+    return 0
+
+
+def library_sheet(args) -> int:
+    """`model library-sheet`: the pose library drawn on a model, one contact sheet per group."""
+    from darthand.model.library_fit import model_library
+    from darthand.model.library_sheet import library_sheets
+
+    model = load_model(args.model)
+    library = model_library(model, fit=args.fit, beside=args.model)
+    for path in library_sheets(model, library, args.out_dir):
+        print(path)
+    return 0
