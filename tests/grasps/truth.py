@@ -22,7 +22,10 @@ def winding_numbers(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray)
 
 
 def signed_distances(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(P,) exact signed distance (m, negative inside) of points (P, 3) to the closed mesh."""
+    """(P,) exact signed distance (m, negative inside) of points (P, 3) to the closed mesh (its zero-area faces,
+    which bound nothing, left out)."""
+    tris = vertices[faces]
+    faces = faces[np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1) > 1e-14]
     tris = vertices[faces]
     d = np.empty(len(points))
     for i, p in enumerate(points):

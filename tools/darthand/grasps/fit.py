@@ -30,7 +30,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from darthand.grasps.field import SPACING, ObjectField
+from darthand.grasps.field import SPACING, ObjectField, merged
 from darthand.grasps.parts import contact_patches
 from darthand.model.anatomy import angles_to_axis_angle, joint_frames, limits_radians, palm_normal
 from darthand.model.forward import forward
@@ -140,7 +140,7 @@ class GraspProblem:
         contact = np.zeros(len(v), bool)
         contact[np.concatenate([self.rig.patches[p] for p in self.contacts])] = True
         ids = np.flatnonzero(self.field.in_box(v, REACH) | contact)
-        first, cand = self.field.candidates(v[ids])
+        first, cand = self.field.candidates(v[ids], exact=False)
         keep = (first < REACH + SPACING) | contact[ids]
         self.ids, self.cand, self.cand_at = ids[keep], cand[keep], v[ids[keep]]
         self._cache = None
@@ -149,9 +149,10 @@ class GraspProblem:
         """(n, k) candidate faces of the fitted vertices at q (n, 3): those kept, searched again for the vertices
         that moved more than RESEARCH since."""
         assert self.cand is not None
-        moved = np.linalg.norm(q - self.cand_at, axis=1) > RESEARCH
-        if moved.any():
-            self.cand[moved] = self.field.candidates(q[moved])[1]
+        moved = np.flatnonzero(np.linalg.norm(q - self.cand_at, axis=1) > RESEARCH)
+        if len(moved):
+            fresh = self.field.candidates(q[moved], exact=False)[1]
+            self.cand = merged(self.cand, moved, fresh)
             self.cand_at[moved] = q[moved]
         return self.cand
 
