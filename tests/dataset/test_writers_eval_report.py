@@ -16,6 +16,7 @@ from darthand.dataset import metrics
 from darthand.dataset.evaluate import evaluate_files, write_predictions
 from darthand.errors import InputError
 from darthand.model.forward import forward
+from darthand.model.pose_library import library_poses
 
 
 def freihand_sets(folder):
@@ -246,9 +247,10 @@ def test_report_page_and_figures(small_dataset, tmp_path):
     assert figures["frames"] == 16 and figures["counts"]["side"] == doc["summary"]["counts"]["side"]
     assert figures["visibility_rate"] == pytest.approx(doc["summary"]["visibility_rate"], abs=1e-4)
     cov = figures["pose_coverage"]
-    assert cov["reference_poses"] == 12 and cov["dataset_poses"] == 16 and 0 <= cov["median_deg"] < 90
+    library = len(library_poses())                   # the default reference set: the whole pose library
+    assert cov["reference_poses"] == library and cov["dataset_poses"] == 16 and 0 <= cov["median_deg"] < 90
     assert cov["embedding"] == {"method": "t-SNE", "perplexity": 30.0, "distance": "mean finger-joint angle",
-                                "dataset_poses": 16, "reference_poses": 12}
+                                "dataset_poses": 16, "reference_poses": library}
     from darthand.dataset.report import coverage_figures
 
     q = Rotation.random(30, random_state=1).as_quat()[:, [3, 0, 1, 2]].reshape(2, 15, 4)

@@ -79,7 +79,7 @@ class PoseOptions:
     largest reference file read."""
 
     mode: str = "auto"
-    reference: str = "gestures"
+    reference: str = "library"
     gestures: list | None = None
     levels: int = poses.DEFAULT_LEVELS
     draws: int = poses.DEFAULT_DRAWS
