@@ -38,6 +38,7 @@ LINKED = (".venv", ".venv-blender", "node_modules")
 STAMPED = {"pyproject.toml": ".venv/.installed-stamp", "package.json": "node_modules/.installed-stamp",
            "package-lock.json": "node_modules/.installed-stamp", "Makefile": ".venv-blender/.installed-stamp"}
 RES = 64
+GRASP_OBJECTS = "mug_01 tennis_ball_01"    # the grasps stage on two objects (all 58: about 4 CPU minutes)
 
 pytestmark = pytest.mark.skipif(shutil.which("make") is None or not (REPO / ".venv" / "bin" / "darthand").exists(),
                                 reason="needs GNU make and the project's .venv (made by `make test`)")
@@ -116,7 +117,7 @@ def test_a_failed_step_from_a_mano_pickle_fails_every_time(tree):
 
     crossing_gesture(build / "model" / "right.npz")
     for _ in range(2):
-        run = make(tree, "assets", MANO=pkl, RES=RES)
+        run = make(tree, "assets", MANO=pkl, RES=RES, GRASP_OBJECTS=GRASP_OBJECTS)
         assert run.returncode != 0
         assert "gesture 'ok': " in run.stdout and "faces where digits intersect (thumb-index" in run.stdout
         assert not (build / "template" / "gestures.json").exists()
@@ -132,7 +133,7 @@ def test_make_assets_from_a_mano_pickle(tree):
     clean, render checks; and `make assets` failing on every run while a check in the manifest fails."""
     tree, pkl = tree
     build = tree / "build"
-    run = make(tree, "assets", MANO=pkl, RES=RES)
+    run = make(tree, "assets", MANO=pkl, RES=RES, GRASP_OBJECTS=GRASP_OBJECTS)
     assert run.returncode == 0, run.stdout + run.stderr
     manifest = json.loads((build / "manifest.json").read_text())
     schema = json.loads((REPO / "schemas" / "manifest.schema.json").read_text())
@@ -141,7 +142,8 @@ def test_make_assets_from_a_mano_pickle(tree):
     assert (manifest["model"]["vertices"], manifest["model"]["faces"]) == (842, 1666)
     assert manifest["failed_checks"] == []
     steps = set(manifest["steps_seconds"])
-    assert {"model", "gestures", "textures", "accessories", "checks", "validate"} <= steps
+    assert {"model", "gestures", "textures", "accessories", "checks", "validate", "objects", "grasps",
+            "pose-library"} <= steps
     kinds = ("usd", "gltf", "gltf-variants", "blend")
     assert {f"{kind}-{side}" for kind in kinds for side in ("right", "left")} <= steps
 
@@ -178,10 +180,10 @@ def test_make_assets_from_a_mano_pickle(tree):
     checks.write_text(json.dumps(doc))
     record_manifest(tree)
     for _ in range(2):
-        run = make(tree, "assets", MANO=pkl, RES=RES)
+        run = make(tree, "assets", MANO=pkl, RES=RES, GRASP_OBJECTS=GRASP_OBJECTS)
         assert run.returncode != 0 and "render: checks failed (right: coverage)" in run.stdout
     checks.write_text(passing)
     record_manifest(tree)
-    run = make(tree, "assets", MANO=pkl, RES=RES)
+    run = make(tree, "assets", MANO=pkl, RES=RES, GRASP_OBJECTS=GRASP_OBJECTS)
     assert run.returncode == 0, run.stdout + run.stderr
     assert "] ..." not in run.stderr       # nothing was rebuilt: the checks report is an input of the manifest only

@@ -156,6 +156,7 @@ STEP_TARGETS = {
     "accessories": "accessories/catalog.json",
     "objects": "objects/catalog.json",
     "grasps": "grasps/catalog.json",
+    "poses": "poses/right.json",
     "usd/right": "usd/right/right.usda",
     "usd/left": "usd/left/left.usda",
     "gltf/right.glb": "gltf/right.glb",
