@@ -203,16 +203,11 @@ def _check_hands_apart(hands: list[dict], known: dict, default_side: str, at: st
     PASS_THROUGH_M (model/hand_pair: vertices inside the other hand; MeshLab's crossing faces counted in the
     message). Hands of a USD package (no model to pose) are not measured."""
     # Imported here: the pair geometry loads MeshLab, which only jobs files of two hands need.
-    from darthand.model.hand_pair import penetration, pose_hand
+    from darthand.model.hand_pair import penetration
 
-    posed = []
-    for hand in hands:
-        model = known[hand.get("side") or default_side][3]
-        if model is None:
-            return
-        pose, _ = resolve_pose(model, hand.get("pose"), int(hand.get("pose_index") or 0))
-        placement = hand.get("placement")
-        posed.append(pose_hand(model, pose, hand.get("betas"), None if placement is None else np.asarray(placement)))
+    posed = [_posed_hand(hand, known, default_side) for hand in hands]
+    if any(p is None for p in posed):
+        return
     found = penetration(*posed)
     if found.max_m > PASS_THROUGH_M:
         raise InputError(f"{at}: the two hands pass through each other ({1000 * found.max_m:.1f} mm deep, "
@@ -223,25 +218,33 @@ def _check_object(item: dict, hands: list[dict], objects, known: dict, default_s
     """InputError when a job's object is not in the catalogue `objects` (render/objects.ObjectLibrary, None: no
     catalogue) or a hand, posed by its side's model, passes into it deeper than PASS_THROUGH_M (hands of a USD
     package are not measured)."""
-    # Imported here: posing hands for the measure loads MeshLab, which only jobs with objects need.
-    from darthand.model.hand_pair import pose_hand
-
     if objects is None:
         raise InputError(f"{at}: object {item['object']!r} needs an object catalogue (--objects-catalog)")
     if item["object"] not in objects.items:
         raise InputError(f"{at}: object {item['object']!r} is not in the object catalogue")
     placement = np.eye(4) if item.get("placement") is None else np.asarray(item["placement"], np.float64)
     for hand in hands:
-        model = known[hand.get("side") or default_side][3]
-        if model is None:
+        posed = _posed_hand(hand, known, default_side)
+        if posed is None:
             continue
-        pose, _ = resolve_pose(model, hand.get("pose"), int(hand.get("pose_index") or 0))
-        P = hand.get("placement")
-        posed = pose_hand(model, pose, hand.get("betas"), None if P is None else np.asarray(P, np.float64))
         depth = object_contacts(posed.vertices, objects.item(item["object"]), placement).penetration_max_m
         if depth > PASS_THROUGH_M:
             raise InputError(f"{at}: the {hand.get('side') or default_side} hand passes into object "
                              f"{item['object']!r} ({1000 * depth:.1f} mm deep): move the object's placement")
+
+
+def _posed_hand(hand: dict, known: dict, default_side: str):
+    """A job's hand item posed by its side's model and placed (model/hand_pair.PosedHand), None for a hand of a USD
+    package (no model to pose)."""
+    # Imported here: the pair geometry loads MeshLab, which only jobs of several bodies need.
+    from darthand.model.hand_pair import pose_hand
+
+    model = known[hand.get("side") or default_side][3]
+    if model is None:
+        return None
+    pose, _ = resolve_pose(model, hand.get("pose"), int(hand.get("pose_index") or 0))
+    placement = hand.get("placement")
+    return pose_hand(model, pose, hand.get("betas"), None if placement is None else np.asarray(placement, np.float64))
 
 
 def _check_scene(job: dict, at: str, checked_lights: set, checked_folders: set) -> None:
