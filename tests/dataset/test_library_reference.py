@@ -1,10 +1,11 @@
 """The pose library as DART's reference set: `--reference library` (and `library:TAG`) plans frames whose poses
-walk toward, or jitter about, library poses named in the jobs and labels; the default stays the 12 gestures until
-the lead flips it (one line: PoseOptions.reference)."""
+walk toward, or jitter about, library poses named in the jobs and labels; it is the default reference set
+(PoseOptions.reference), the 12 gestures one value away."""
 
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -81,10 +82,15 @@ def test_render_dataset_takes_reference_library_and_labels_name_the_pose(package
 
 
 def test_the_report_shows_the_library_beside_another_reference_set(small_dataset, tmp_path):
-    """A dataset planned on the gestures: the report measures the library's poses against it too."""
-    out, _ = small_dataset
-    assert main(["dataset", "report", str(out), "--out", str(tmp_path), "--sheet", "4"]) == 0
-    figures = json.loads((tmp_path / "report.json").read_text())
+    """A dataset whose plan names the gestures as its reference: the report measures the library's poses against it
+    too (the report reads the reference set from dataset.json's plan, so the fixture's copy says 'gestures')."""
+    out = tmp_path / "dataset"
+    shutil.copytree(small_dataset[0], out)
+    doc = json.loads((out / "dataset.json").read_text())
+    doc["jobs"]["plan"]["poses"]["reference"] = "gestures"
+    (out / "dataset.json").write_text(json.dumps(doc))
+    assert main(["dataset", "report", str(out), "--out", str(tmp_path / "report"), "--sheet", "4"]) == 0
+    figures = json.loads((tmp_path / "report" / "report.json").read_text())
     lib = figures["library_coverage"]
     assert figures["reference"] == "gestures"
     assert lib["reference_poses"] == len(library_poses()) and lib["dataset_poses"] == 16

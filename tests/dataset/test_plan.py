@@ -139,7 +139,9 @@ def test_bad_plan_options_are_one_line_errors(sources):
                               ({"accessory_share": 2}, "outside 0..1"),
                               ({"textures": ["nope_00"]}, "'nope_00' is not one of"),
                               ({"poses": {"mode": "wave"}}, "not auto, dart, jitter or gestures"),
-                              ({"poses": {"gestures": ["wave"]}}, "'wave' is not a gesture"),
+                              ({"poses": {"reference": "gestures", "gestures": ["wave"]}},
+                               "'wave' is not a gesture"),
+                              ({"poses": {"gestures": ["wave"]}}, "'wave' is not a pose of the pose library"),
                               ({"backgrounds": "/nonexistent"}, "neither 'builtin'"),
                               ({"views": ["top"]}, "views: 'top'")]:
         with pytest.raises(InputError, match=expected):

@@ -178,7 +178,8 @@ def test_shading_options_reach_the_frames_and_their_resume_digest(package, tmp_p
     (["--formats", "yolo"], "--formats: 'yolo' is not one of freihand, webdataset, hamer, coco"),
     (["--texture-ids", "light_moles_00,light_nope_00"], "textures: 'light_nope_00' is not one of"),
     (["--accessory-ids", "watch_99"], "accessories: 'watch_99'"),
-    (["--gestures", "wave", "--pose-mode", "jitter"], "'wave' is not a gesture"),
+    (["--gestures", "wave", "--pose-mode", "jitter"], "'wave' is not a pose of the pose library"),
+    (["--gestures", "wave", "--pose-mode", "jitter", "--reference", "gestures"], "'wave' is not a gesture"),
     (["--views", "top"], "views: 'top'"),
     (["--backgrounds", "/nonexistent/folder"], "neither 'builtin'"),
 ])

@@ -131,7 +131,8 @@ def library_reference(spec: str, model, names=None, model_path=None) -> Referenc
         known = {p.name for p in chosen}
         for name in names:
             if name not in known:
-                raise InputError(f"poses: {name!r} is not a pose of {spec}")
+                raise InputError(f"poses: {name!r} is not a pose of the pose library ({spec}; its names: "
+                                 "assets_src/poses/library)")
         chosen = [p for p in chosen if p.name in set(names)]
     lib = model_library(model, poses=chosen, beside=model_path)
     return reference_from_poses(lib.poses, spec, lib.names)
