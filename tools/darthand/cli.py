@@ -941,6 +941,10 @@ def _add_studio_command(sub) -> None:
     p.add_argument("--environments", metavar="DIR", default=None,
                    help="a folder of equirectangular environment maps (.exr, .hdr) the page offers besides the "
                         "built-in set")
+    p.add_argument("--objects-catalog", metavar="CATALOG", default=None,
+                   help="object catalogue the hand may hold (default: BUILD/objects when built; none: no objects)")
+    p.add_argument("--grasps-catalog", metavar="CATALOG", default=None,
+                   help="grasp catalogue of those objects (default: grasps/ beside the object catalogue's folder)")
     p.add_argument("--verbose", action="store_true", help="log every request")
     p.set_defaults(run=commands.studio)
 

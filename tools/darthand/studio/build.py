@@ -23,6 +23,7 @@ from darthand.errors import InputError
 from darthand.model.preview import VIEWS
 from darthand.render.api import open_source
 from darthand.studio.environments import EnvironmentSet
+from darthand.studio.objects import StudioObjects, find_catalogs
 from darthand.studio.request_error import RequestError
 
 SIDES = ("right", "left")
@@ -50,9 +51,10 @@ class SideAssets:
 
 class StudioBuild:
     """A build folder opened for the studio: its sides (SideAssets), optional background images, the environment
-    maps (the built-in set and an optional folder's)."""
+    maps (the built-in set and an optional folder's), the held objects and their grasps (studio/objects.py: the
+    build's objects/ and grasps/, or the catalogues named; None when there are none)."""
 
-    def __init__(self, root, backgrounds=None, environments=None):
+    def __init__(self, root, backgrounds=None, environments=None, objects=None, grasps=None):
         self.root = Path(root).resolve()
         if not self.root.is_dir():
             raise InputError(f"{root}: not a build folder (run `make assets`)")
@@ -65,6 +67,9 @@ class StudioBuild:
             self.background_folder = Path(backgrounds).resolve()
             self.background_files = list_images(self.background_folder, max_files=10_000)
         self.environments = EnvironmentSet(environments)
+        catalogs = find_catalogs(self.root, objects, grasps)
+        self.objects = None if catalogs is None else StudioObjects(
+            *catalogs, {name: side.model for name, side in self.sides.items()})
 
     @property
     def out_dir(self) -> Path:
@@ -106,7 +111,7 @@ class StudioBuild:
 
     def catalogue(self) -> dict:
         """What the page lists: sides, textures (id, tone, category) and accessories (id, type) of the first side,
-        gestures per side, light palette, named views, backgrounds."""
+        gestures per side, light palette, named views, backgrounds, whether held objects are offered."""
         first = next(iter(self.sides.values()))
         return {
             "sides": list(self.sides),
@@ -116,6 +121,7 @@ class StudioBuild:
             "palette": [{"name": n, "kelvin": PALETTE_K[n], "rgb": PALETTE[n]} for n in PALETTE],
             "views": list(VIEWS),
             "backgrounds": {"builtin": BUILTIN_COUNT, "images": self.background_files},
+            "objects": self.objects is not None,
         }
 
 

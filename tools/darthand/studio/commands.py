@@ -19,7 +19,8 @@ def studio(args) -> int:
     if args.host not in ("127.0.0.1", "localhost", "::1") and not args.allow_remote:
         raise InputError(f"--host {args.host}: the studio listens on this machine only unless --allow-remote is "
                          "given (it serves the build folder to anyone who can reach the address)")
-    build = StudioBuild(args.build, backgrounds=args.backgrounds, environments=args.environments)
+    build = StudioBuild(args.build, backgrounds=args.backgrounds, environments=args.environments,
+                        objects=args.objects_catalog, grasps=args.grasps_catalog)
     server = make_server(Studio(build), args.host, args.port or 0)
     server.RequestHandlerClass.quiet = not args.verbose  # type: ignore[attr-defined]  # StudioHandler.quiet
     host, port = server.server_address[:2]

@@ -67,7 +67,16 @@ def check_scene(build: StudioBuild, scene) -> dict:
         raise RequestError(400, "scene: field 'background' is the environment, but the lights have none")
     if scene.get("film") is not None:
         _checked(lambda: Film.from_json(scene["film"], "scene: film"))
+    if "object" in scene:
+        held_objects(build).grasp(side.side, scene["object"]["id"], scene["object"]["grasp"])
     return scene
+
+
+def held_objects(build: StudioBuild):
+    """The build's studio/objects.StudioObjects (RequestError 404 when the studio has no object catalogue)."""
+    if build.objects is None:
+        raise RequestError(404, "scene: field 'object': the studio has no object catalogue (--objects-catalog)")
+    return build.objects
 
 
 def _checked(check) -> None:
@@ -93,7 +102,21 @@ def scene_job(build: StudioBuild, scene: dict, index: int = 0) -> dict:
            "accessory": scene.get("accessory", "none"), "camera": scene.get("camera") or "three_quarter",
            "lights": _job_lights(build, scene.get("lights")),
            "background": _job_background(build, scene.get("background"))}
-    return {k: v for k, v in job.items() if v is not None}
+    job = {k: v for k, v in job.items() if v is not None}
+    return job if "object" not in scene else object_job(build, scene, job)
+
+
+def object_job(build: StudioBuild, scene: dict, job: dict) -> dict:
+    """A one-hand job holding the scene's object, as a dataset's object frame is (dataset/objects.object_job): the
+    `bodies` form (the hand at the identity, the object at the grasp's refitted placement) with the grasp record."""
+    held = held_objects(build)
+    object_id, grasp_id = scene["object"]["id"], scene["object"]["grasp"]
+    fields = ("side", "pose", "texture", "skin_tone_offset", "accessory")
+    hand = {"kind": "hand", **{k: job[k] for k in fields if k in job}}
+    placement = np.round(held.fitted(scene["side"], object_id, grasp_id).placement, 9).tolist()
+    out = {k: v for k, v in job.items() if k not in fields}
+    return {**out, "bodies": [hand, {"kind": "object", "object": object_id, "placement": placement}],
+            "grasp": held.grasp_record(scene["side"], object_id, grasp_id)}
 
 
 def _job_lights(build: StudioBuild, lights):
@@ -134,7 +157,7 @@ def render_scene(build: StudioBuild, scene: dict) -> dict:
     t = time.perf_counter()
     with side.lock:
         if side.renderer is None:
-            side.renderer = Renderer(side.source)
+            side.renderer = Renderer(side.source, objects=None if build.objects is None else build.objects.library)
         try:
             frame, background = render_job(side.renderer, job, settings)
         except InputError as e:
@@ -216,8 +239,10 @@ def scene_export(build: StudioBuild, scene: dict, path_hint: str) -> dict:
     job = scene_job(build, scene)
     size = int(scene["camera"]["width"]) if scene.get("camera") else 512
     model = build.side(scene["side"]).source.source
+    objects = f" --objects-catalog {build.objects.objects_file}" if "object" in scene else ""
     studio: dict = {"size": size, "samples": SAMPLES, "aa_shading": AA_SHADING,
-                    "command": f"darthand render-dataset {model} --jobs {path_hint} --size {size} --arm off --out OUT",
+                    "command": f"darthand render-dataset {model} --jobs {path_hint} --size {size} --arm off{objects} "
+                               "--out OUT",
                     "scene": {k: v for k, v in scene.items() if k != "name"}}
     if scene.get("film") is not None:
         studio["film"] = scene["film"]

@@ -209,6 +209,10 @@ class StudioHandler(BaseHTTPRequestHandler):
             return self._json({"environments": self.studio.build.environments.listing()})
         if len(rest) == 2 and rest[0] == "rig":
             return self._json(self.studio.rig(rest[1]))
+        if rest == ["objects"]:
+            return self._json(sc.held_objects(self.studio.build).listing())
+        if len(rest) == 2 and rest[0] == "object":
+            return self._json(sc.held_objects(self.studio.build).mesh(rest[1]))
         raise RequestError(404, f"no such API call: {self.path[:100]!r}")
 
     def get_gltf(self, rest):
@@ -259,6 +263,11 @@ class StudioHandler(BaseHTTPRequestHandler):
             return self._send(200, body, "image/png", cache=True)
         if len(rest) == 2 and rest[0] == "environment":
             return self._environment(rest[1], cache)
+        if len(rest) == 2 and rest[0] == "object":
+            held = sc.held_objects(build)
+            object_id = held.item(_strip(rest[1], ".png")).id
+            body = media.cached_file(cache / f"object_{object_id}.png", lambda p: held.thumbnail(object_id, p))
+            return self._send(200, body, "image/png", cache=True)
         raise RequestError(404, f"no such media: {self.path[:100]!r}")
 
     def _environment(self, name: str, cache: Path) -> None:
@@ -276,6 +285,8 @@ class StudioHandler(BaseHTTPRequestHandler):
             return self._json(sc.render_scene(build, body))
         if rest == ["camera"]:
             return self._json(view_camera(build, body))
+        if rest == ["grasp"]:
+            return self._json(held_grasp(build, body))
         if rest == ["export", "pose"]:
             scene = sc.check_scene(build, body)
             name = sc.export_name(body, f"pose-{_stamp()}")
@@ -321,6 +332,15 @@ def view_camera(build: StudioBuild, body) -> dict:
     depth = float(cam.to_camera(centre[None])[0, 2])
     target = cam.centre + depth * cam.R[2]
     return {**cam.to_json(), "target": [float(x) for x in target]}
+
+
+def held_grasp(build: StudioBuild, body) -> dict:
+    """{side, object, grasp} -> the grasp refitted to the side's model (studio/objects.StudioObjects.grasp_document:
+    joint angles in degrees, the object's placement in the hand's model frame)."""
+    if not isinstance(body, dict) or not all(isinstance(body.get(k), str) for k in ("side", "object", "grasp")):
+        raise RequestError(400, "grasp: the body must be {side, object, grasp} (strings)")
+    side = build.side(body["side"]).side
+    return sc.held_objects(build).grasp_document(side, body["object"], body["grasp"])
 
 
 # ------------------------------------------------------------------------------------------------ helpers
