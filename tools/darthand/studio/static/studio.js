@@ -15,7 +15,7 @@ const OPENPOSE_BONES = [[0, 1], [1, 2], [2, 3], [3, 4], [0, 5], [5, 6], [6, 7], 
 const FINGER_COLOURS = ["#ff5a5a", "#ffb14a", "#f5e04a", "#5ad65a", "#4aa8ff"];
 
 const state = {
-  side: null, angles: R.zeroAngles(), texture: null, skinTone: 0, accessory: "none",
+  side: null, angles: R.zeroAngles(), texture: null, skinTone: 0, accessory: "none", object: null,
   ambient: { color: [1, 1, 1], intensity: 0.25 }, key: { color: [1, 1, 1], intensity: 0.9, azimuth: -30, elevation: 35 },
   background: { kind: "none" }, renderSize: 512, poseList: [],
   environment: { id: null, rotation: 0, strength: 1, background: false, blur: 0 }, film: null, lastRequest: null,
@@ -28,6 +28,9 @@ let catalogue, environments, renderer, scene, camera, controls, ambient, key, pm
 let hand = null;                     // the shown side: {side, root, meshes, bones, rig, table, morph, variants, ...}
 const hands = {};                    // side -> promise of its loaded hand
 let accessory = null;                // {id, object, skinned}
+let objects = null;                  // the server's /api/objects listing (null: the studio offers no objects)
+let held = null;                     // the object shown: {id, grasp, object (a THREE.Group in the hand's model frame)}
+const objectMeshes = {};             // object id -> promise of its mesh arrays
 let drawRequested = false, inputTime = null;
 const skinTone = { value: 0 };
 const loader = new GLTFLoader();
@@ -105,6 +108,7 @@ async function showSide(side) {
   fillGestures();
   if (state.texture) await selectTexture(state.texture);
   if (state.accessory !== "none") await selectAccessory(state.accessory);
+  if (state.object) await selectObject(state.object.id, state.object.grasp, { keepAngles: true });
   applyPose();
   if (h.unparsed) setStatus(`${h.unparsed} corrective shapes are not per-entry channels: the live view shows them at 0`);
 }
@@ -217,6 +221,90 @@ async function selectAccessory(id) {
   }
   accessory = { id, object: node, skinned, meshes };
   applyPose();
+}
+
+// -------------------------------------------------------------------------------------------------- objects
+
+/** Hold object `id` in grasp `graspId` (its first grasp for the side when not given or not offered): the server
+ * refits the grasp to this side's hand; its joint angles pose the hand (unless keepAngles) and its placement puts the
+ * object in the hand's model frame. "none" (or an object without a grasp for the side) empties the hand. */
+async function selectObject(id, graspId = null, { keepAngles = false } = {}) {
+  const side = state.side;
+  const entry = objects?.objects.find((o) => o.id === id);
+  const grasps = entry?.grasps[side] || [];
+  const grasp = grasps.find((g) => g.id === graspId) || grasps[0];
+  if (held) { held.object.removeFromParent(); held = null; }
+  markSelected("objects", grasp ? id : "none");
+  fillGrasps(grasps, grasp?.id);
+  if (!grasp) {
+    const had = state.object !== null;
+    state.object = null;
+    if (had && !keepAngles) setAngles(R.zeroAngles());
+    requestDraw();
+    return;
+  }
+  state.object = { id, grasp: grasp.id };
+  const [doc, mesh] = await Promise.all([postJSON("/api/grasp", { side, object: id, grasp: grasp.id }), objectMesh(id)]);
+  if (state.object?.grasp !== grasp.id || state.side !== side) return;
+  if (held) held.object.removeFromParent();
+  const object = objectGroup(mesh);
+  const P = doc.placement;
+  object.matrix.set(...P[0], ...P[1], ...P[2], ...P[3]);      // row-major, as THREE.Matrix4.set takes it
+  object.matrixAutoUpdate = false;
+  scene.add(object);
+  held = { id, grasp: grasp.id, object };
+  if (!keepAngles) setAngles(doc.angles_deg);
+  setStatus(`${id}: ${doc.type} grasp${doc.ok ? "" : " (outside the catalogue's bounds)"}, ` +
+    `penetration ${doc.penetration_max_mm.toFixed(2)} mm`);
+  requestDraw();
+}
+
+function objectMesh(id) {
+  if (!objectMeshes[id]) objectMeshes[id] = track(getJSON(`/api/object/${encodeURIComponent(id)}`));
+  return objectMeshes[id];
+}
+
+/** A THREE.Group of the object's drawn parts (object frame, metres), each in its base colour. */
+function objectGroup(mesh) {
+  const group = new THREE.Group();
+  group.userData.darthand = { object: mesh.id };
+  for (const p of mesh.parts) {
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute("position", new THREE.Float32BufferAttribute(p.positions, 3));
+    geometry.setAttribute("normal", new THREE.Float32BufferAttribute(p.normals, 3));
+    geometry.setIndex(p.indices);
+    const material = new THREE.MeshStandardMaterial({ color: new THREE.Color().setRGB(...p.color),
+      roughness: p.roughness, metalness: p.metallic });
+    group.add(new THREE.Mesh(geometry, material));
+  }
+  return group;
+}
+
+function fillGrasps(grasps, selected) {
+  const select = $("obj-grasp");
+  select.replaceChildren(...grasps.map((g) => new Option(`${g.type} (approach ${g.approach})`, g.id)));
+  if (selected) select.value = selected;
+  select.disabled = !grasps.length;
+}
+
+async function buildObjects() {
+  objects = await getJSON("/api/objects");
+  $("object-panel").hidden = false;
+  for (const c of objects.categories) $("obj-category").append(new Option(c, c));
+  const grid = $("objects");
+  const none = figure(null, "none", () => guarded(selectObject("none")));
+  none.classList.add("selected");
+  grid.append(none);
+  for (const o of objects.objects) {
+    const fig = figure(`/media/object/${encodeURIComponent(o.id)}.png`, o.id, () => guarded(selectObject(o.id)));
+    fig.dataset.category = o.category;
+    grid.append(fig);
+  }
+  $("obj-category").addEventListener("change", () => {
+    const c = $("obj-category").value;
+    for (const fig of grid.children) fig.hidden = Boolean(c) && fig.dataset.id !== "none" && fig.dataset.category !== c;
+  });
+  $("obj-grasp").addEventListener("change", (e) => state.object && guarded(selectObject(state.object.id, e.target.value)));
 }
 
 // -------------------------------------------------------------------------------------------------- lights
@@ -410,6 +498,7 @@ function sceneDoc(extra = {}) {
     accessory: state.accessory, camera: cameraDoc(state.renderSize), lights: lightsDoc(), background: backgroundDoc(),
     ...extra };
   if (state.texture) doc.texture = state.texture;
+  if (state.object) doc.object = { ...state.object };
   const film = filmDoc();
   if (film) doc.film = film;
   return doc;
@@ -460,6 +549,7 @@ async function loadScene(doc) {
   state.skinTone = skinTone.value = s.skin_tone_offset ?? 0;
   setRange("skin-tone", state.skinTone);
   await selectAccessory(s.accessory || "none");
+  if (objects) await selectObject(s.object?.id || "none", s.object?.grasp, { keepAngles: true });
   setAngles(s.angles_deg);
   showLights(s.lights);
   showBackground(s.background);
@@ -654,6 +744,7 @@ function livePositions() {
 function buildPanels() {
   buildTextures();
   buildAccessories();
+  if (catalogue.objects) guarded(buildObjects());
   buildLights();
   buildEnvironments();
   buildBackground();
@@ -923,7 +1014,7 @@ function capture() {
 window.studio = {
   state, metrics, measure: false, errors: [], idle, capture, silhouette, livePositions, sceneDoc, cameraDoc,
   manoPose: () => R.axisAngles(R.manoRotations(hand.rig, state.angles)),
-  selectTexture, selectAccessory, setView, renderReference, mirror, undo, redo, selectEnvironment, loadScene,
+  selectTexture, selectAccessory, selectObject, objects: () => objects, setView, renderReference, mirror, undo, redo, selectEnvironment, loadScene,
   environments: () => environments,
 };
 window.studio.ready = start().catch((e) => { setStatus(`could not start: ${e.message}`, true); throw e; });
