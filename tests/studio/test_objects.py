@@ -129,6 +129,22 @@ def test_refitted_grasp_touches_the_sphere_without_passing_into_it(server, build
     assert doc["penetration_max_mm"] <= 2.0 + 1e-9
 
 
+def test_views_frame_the_hand_and_its_object(server):
+    grasp = first_grasp(server)
+    status, doc = call(server, "POST", "/api/grasp", {"side": "right", "object": BALL, "grasp": grasp["id"]})
+    held = {"id": BALL, "grasp": grasp["id"]}
+    for view in ("dorsal", "palmar", "radial", "ulnar", "three_quarter"):
+        status, cam = call(server, "POST", "/api/camera", {"side": "right", "angles_deg": doc["angles_deg"],
+                                                          "view": view, "size": 128, "object": held})
+        assert status == 200, cam
+        K, R, t = (np.asarray(cam[k]) for k in ("K", "R", "t"))
+        centre = np.asarray(doc["placement"])[:3, 3]
+        rim = centre + SPHERE_RADIUS * np.vstack([np.eye(3), -np.eye(3)])        # the ball's extreme points
+        x = rim @ R.T + t
+        uv = (x @ K.T)[:, :2] / x[:, 2:]
+        assert (x[:, 2] > 0).all() and (uv >= 0).all() and (uv <= 128).all(), (view, uv)
+
+
 def test_no_catalogues_hide_objects_and_named_ones_must_exist(tmp_path, build):
     from darthand.studio.objects import find_catalogs
 
@@ -197,7 +213,16 @@ def test_the_page_picks_an_object_and_a_grasp(build):
                                "angles: window.studio.state.angles, scene: window.studio.sceneDoc()}))"},
         {"do": "screenshot", "path": "/tmp/studio-object-page.png"},                                      # 4
         {"do": "screenshot", "selector": "#view", "path": "/tmp/studio-object-view.png"},
-        {"do": "click", "selector": "#objects figure[data-id='none']"},                                  # 6
+        {"do": "eval", "expr": "(() => { const s = document.getElementById('obj-grasp'); s.value = s.options[1].value; "
+                               "s.dispatchEvent(new Event('change')); return s.value; })()"},    # 6
+        {"do": "eval", "expr": "window.studio.idle().then(() => ({object: window.studio.state.object, "
+                               "angles: window.studio.state.angles}))"},
+        {"do": "eval", "expr": "window.studio.state.renderSize = 128"},                            # 8
+        {"do": "click", "selector": "#render"},
+        {"do": "eval", "expr": "(({mask, image, size, job}) => ({mask, image, size, job,"
+                               " live: window.studio.silhouette(size)}))(window.studio.state.lastRender)"},   # 10
+        {"do": "screenshot", "path": "/tmp/studio-object-render.png"},
+        {"do": "click", "selector": "#objects figure[data-id='none']"},                                  # 12
         {"do": "eval", "expr": "({object: window.studio.state.object, angles: window.studio.state.angles, "
                                "errors: window.studio.errors})"},
     ]
@@ -207,6 +232,19 @@ def test_the_page_picks_an_object_and_a_grasp(build):
     held = report["results"][3]
     assert held["object"]["id"] == BALL and held["scene"]["object"] == held["object"]
     assert np.abs(np.asarray(held["angles"])).max() > 5                     # the grasp's pose, not the flat hand
-    empty = report["results"][7]
+    other = report["results"][7]
+    assert other["object"] == {"id": BALL, "grasp": report["results"][6]} != held["object"]
+    assert np.abs(np.asarray(other["angles"]) - np.asarray(held["angles"])).max() > 1   # another grasp's pose
+    rendered = report["results"][10]
+    assert [b["kind"] for b in rendered["job"]["bodies"]] == ["hand", "object"]
+    size = rendered["size"]
+    hand = _png(rendered["mask"])
+    hand = (hand[..., 0] if hand.ndim == 3 else hand) > 127               # the hand's mask: the object is not in it
+    drawn = _png(rendered["image"])[..., 3] > 127                           # the image's alpha: hand and object
+    live = np.frombuffer(base64.b64decode(rendered["live"]), np.uint8).reshape(size, size).astype(bool)
+    iou = (drawn & live).sum() / (drawn | live).sum()
+    assert iou >= 0.97, f"the render's alpha and the live view's silhouette (hand and object): IoU {iou:.4f}"
+    assert (drawn & ~hand).sum() > 0.02 * drawn.sum() and (hand & ~drawn).sum() <= 0.005 * hand.sum()
+    empty = report["results"][13]
     assert empty["object"] is None and np.abs(np.asarray(empty["angles"])).max() == 0
     assert not report["console"] and not report["page_errors"] and not report["failed_requests"], report

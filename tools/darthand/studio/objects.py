@@ -137,6 +137,12 @@ class StudioObjects:
                 "angles_deg": np.round(angles, 6).tolist(), "placement": np.round(fit.placement, 9).tolist(),
                 "ok": fit.ok, "penetration_max_mm": round(1000 * fit.penetration_max_m, 3)}
 
+    def placed_vertices(self, side: str, held: dict) -> np.ndarray:
+        """(N, 3) the held object's vertices ({id, grasp}) in the hand's model frame (metres), at the refitted
+        grasp's placement."""
+        P = self.fitted(side, held["id"], held["grasp"]).placement
+        return self.item(held["id"]).vertices @ P[:3, :3].T + P[:3, 3]
+
     def grasp_record(self, side: str, object_id: str, grasp_id: str) -> dict:
         """The job's grasp record (dataset/objects.object_job's): type, id and the refit's figures."""
         fit = self.fitted(side, object_id, grasp_id)

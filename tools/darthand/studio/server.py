@@ -23,6 +23,8 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
+import numpy as np
+
 from darthand.dataset.backgrounds import BUILTIN_COUNT
 from darthand.errors import InputError
 from darthand.fileio import write_bytes
@@ -313,8 +315,9 @@ POST_ROUTES = {"api": StudioHandler.post_api}
 
 
 def view_camera(build: StudioBuild, body) -> dict:
-    """A named view framed on the posed hand (render/camera.py, as a job's view camera is): {side, angles_deg,
-    view, size, accessory?} -> the camera's K, R, t, width, height and the point it frames."""
+    """A named view framed on the posed hand and the object it holds (render/camera.py, as a job's view camera is
+    framed on its bodies): {side, angles_deg, view, size, accessory?, object?} -> the camera's K, R, t, width,
+    height and the point it frames."""
     if not isinstance(body, dict):
         raise RequestError(400, "camera: the body must be an object")
     view, size = body.get("view"), body.get("size", 512)
@@ -322,11 +325,13 @@ def view_camera(build: StudioBuild, body) -> dict:
         raise RequestError(404, f"camera: view {view!r} is not one of {', '.join(VIEWS)}")
     if not isinstance(size, int) or isinstance(size, bool) or not 32 <= size <= 1024:
         raise RequestError(400, "camera: field 'size' must be an integer in 32..1024")
-    scene = check_scene(build, {k: body[k] for k in ("side", "angles_deg", "accessory") if k in body})
+    scene = check_scene(build, {k: body[k] for k in ("side", "angles_deg", "accessory", "object") if k in body})
     side = build.side(scene["side"])
     with side.lock:
         subject = side.source.subject(scene_pose(build, scene), accessory=scene.get("accessory"))
     points = subject.all_vertices()
+    if "object" in scene:
+        points = np.concatenate([points, sc.held_objects(build).placed_vertices(side.side, scene["object"])])
     cam = load_camera(view, points, width=size, height=size, side=side.side)
     centre = 0.5 * (points.min(0) + points.max(0))
     depth = float(cam.to_camera(centre[None])[0, 2])

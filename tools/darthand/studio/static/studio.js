@@ -457,7 +457,7 @@ function backgroundDoc() {
 
 async function setView(view) {
   const doc = await postJSON("/api/camera", { side: state.side, angles_deg: state.angles, view, size: state.renderSize,
-    ...(state.accessory !== "none" ? { accessory: state.accessory } : {}) });
+    ...(state.accessory !== "none" ? { accessory: state.accessory } : {}), ...(state.object ? { object: state.object } : {}) });
   setCamera(doc);
 }
 
