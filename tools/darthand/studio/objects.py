@@ -93,13 +93,28 @@ class StudioObjects:
 
     def mesh(self, object_id: str) -> dict:
         """The object's drawn parts as plain arrays for the live view: per part its name, flat positions and normals
-        (metres, object frame), triangle indices, linear base colour, roughness and metallic."""
+        (metres, object frame), triangle indices, linear base colour, roughness and metallic; a textured part
+        (its base colour times the object's albedo, `albedo` true) is given per triangle corner with its uvs, since
+        its uv triangles index their own array."""
         parts = []
         for p in self.item(object_id).drawn_parts():
-            parts.append({"name": p.name, "positions": _flat(p.vertices), "normals": _flat(p.normals),
-                          "indices": p.faces.reshape(-1).tolist(), "color": list(p.base_color),
-                          "roughness": p.roughness, "metallic": p.metallic})
+            doc = {"name": p.name, "color": list(p.base_color), "roughness": p.roughness, "metallic": p.metallic,
+                   "albedo": p.base_color_png is not None}
+            if doc["albedo"]:
+                corners = p.faces.reshape(-1)
+                doc.update(positions=_flat(p.vertices[corners]), normals=_flat(p.normals[corners]),
+                           uvs=_flat(p.uvs[p.faces_uv.reshape(-1)]), indices=list(range(len(corners))))
+            else:
+                doc.update(positions=_flat(p.vertices), normals=_flat(p.normals), indices=p.faces.reshape(-1).tolist())
+            parts.append(doc)
         return {"id": object_id, "parts": parts}
+
+    def albedo(self, object_id: str) -> Path:
+        """The object's albedo image (sRGB PNG; RequestError 404 when it has none)."""
+        path = self.item(object_id).base_color_png
+        if path is None or not Path(path).is_file():
+            raise RequestError(404, f"object {object_id!r} has no albedo image")
+        return Path(path)
 
     def thumbnail(self, object_id: str, path: Path) -> None:
         """Write the THUMB_SIZE sRGB PNG of the object alone (the contact sheet's drawing)."""

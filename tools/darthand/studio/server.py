@@ -270,6 +270,8 @@ class StudioHandler(BaseHTTPRequestHandler):
             object_id = held.item(_strip(rest[1], ".png")).id
             body = media.cached_file(cache / f"object_{object_id}.png", lambda p: held.thumbnail(object_id, p))
             return self._send(200, body, "image/png", cache=True)
+        if len(rest) == 3 and rest[0] == "object" and rest[2] == "albedo.png":
+            return self._file(sc.held_objects(build).albedo(rest[1]), cache=True)
         raise RequestError(404, f"no such media: {self.path[:100]!r}")
 
     def _environment(self, name: str, cache: Path) -> None:

@@ -275,9 +275,21 @@ function objectGroup(mesh) {
     geometry.setIndex(p.indices);
     const material = new THREE.MeshStandardMaterial({ color: new THREE.Color().setRGB(...p.color),
       roughness: p.roughness, metalness: p.metallic });
+    if (p.albedo) {
+      // uvs in the renderer's convention (render/texture.py: v = 0 at the image's bottom row), as a TextureLoader
+      // texture's default flipY reads them
+      geometry.setAttribute("uv", new THREE.Float32BufferAttribute(p.uvs, 2));
+      material.map = objectAlbedo(mesh.id);
+    }
     group.add(new THREE.Mesh(geometry, material));
   }
   return group;
+}
+
+function objectAlbedo(id) {
+  const texture = new THREE.TextureLoader().load(`/media/object/${encodeURIComponent(id)}/albedo.png`, requestDraw);
+  texture.colorSpace = THREE.SRGBColorSpace;
+  return texture;
 }
 
 function fillGrasps(grasps, selected) {
