@@ -129,6 +129,19 @@ def test_refitted_grasp_touches_the_sphere_without_passing_into_it(server, build
     assert doc["penetration_max_mm"] <= 2.0 + 1e-9
 
 
+def test_an_export_with_the_hand_through_its_object_is_refused(server):
+    """The page's fingers bent 40 degrees further than the grasp's close through the ball: the export is refused as
+    render-dataset --jobs would refuse the file (dataset/jobs.validate_jobs), in one line."""
+    grasp = first_grasp(server)
+    status, doc = call(server, "POST", "/api/grasp", {"side": "right", "object": BALL, "grasp": grasp["id"]})
+    angles = np.asarray(doc["angles_deg"])
+    angles[1:13, 2] += 40.0                                      # index, middle, pinky, ring: bend
+    scene = {"side": "right", "angles_deg": angles.tolist(), "object": {"id": BALL, "grasp": grasp["id"]},
+             "name": "through"}
+    status, reply = call(server, "POST", "/api/export/scene", scene)
+    assert status == 422 and "passes into object 'ball_01'" in reply["error"] and "\n" not in reply["error"]
+
+
 def test_views_frame_the_hand_and_its_object(server):
     grasp = first_grasp(server)
     status, doc = call(server, "POST", "/api/grasp", {"side": "right", "object": BALL, "grasp": grasp["id"]})

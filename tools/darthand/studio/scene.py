@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from darthand.dataset.frames import render_job
-from darthand.dataset.jobs import check_jobs
+from darthand.dataset.jobs import check_jobs, validate_jobs
 from darthand.dataset.options import DEFAULT_SAMPLES, PHOTO_SHADING
 from darthand.errors import InputError
 from darthand.fileio import write_json
@@ -235,8 +235,16 @@ def write_export(build: StudioBuild, kind: str, name: str, doc) -> Path:
 
 
 def scene_export(build: StudioBuild, scene: dict, path_hint: str) -> dict:
-    """The one-frame jobs file of a scene, with how to render it."""
+    """The one-frame jobs file of a scene, with how to render it. A scene holding an object passes
+    render-dataset's own checks first (dataset/jobs.validate_jobs: no hand into its object deeper than 1 mm), so
+    the file renders in batch; RequestError 422 naming the depth otherwise."""
     job = scene_job(build, scene)
+    if "object" in scene:
+        try:
+            validate_jobs({scene["side"]: build.side(scene["side"]).source}, [job], "scene export",
+                          objects=held_objects(build).library)
+        except InputError as e:
+            raise RequestError(422, str(e)) from None
     size = int(scene["camera"]["width"]) if scene.get("camera") else 512
     model = build.side(scene["side"]).source.source
     objects = f" --objects-catalog {build.objects.objects_file}" if "object" in scene else ""

@@ -108,7 +108,7 @@ async function showSide(side) {
   fillGestures();
   if (state.texture) await selectTexture(state.texture);
   if (state.accessory !== "none") await selectAccessory(state.accessory);
-  if (state.object) await selectObject(state.object.id, state.object.grasp, { keepAngles: true });
+  if (state.object) await selectObject(state.object.id, state.object.grasp);     // the grasp refitted to this side
   applyPose();
   if (h.unparsed) setStatus(`${h.unparsed} corrective shapes are not per-entry channels: the live view shows them at 0`);
 }
