@@ -234,10 +234,14 @@ def test_the_page_picks_an_object_and_a_grasp(build):
         {"do": "click", "selector": "#render"},
         {"do": "eval", "expr": "(({mask, image, size, job}) => ({mask, image, size, job,"
                                " live: window.studio.silhouette(size)}))(window.studio.state.lastRender)"},   # 10
-        {"do": "screenshot", "path": "/tmp/studio-object-render.png"},
+        {"do": "eval", "expr": "(window.heldScene = window.studio.sceneDoc(), true)"},
         {"do": "click", "selector": "#objects figure[data-id='none']"},                                  # 12
         {"do": "eval", "expr": "({object: window.studio.state.object, angles: window.studio.state.angles, "
                                "errors: window.studio.errors})"},
+        {"do": "eval", "expr": "window.studio.loadScene(window.heldScene).then(() => window.studio.idle())"
+                               ".then(() => ({object: window.studio.state.object, angles: window.studio.state.angles,"
+                               " shown: document.querySelector('#objects figure.selected').dataset.id}))"},  # 14
+        {"do": "screenshot", "path": "/tmp/studio-object-render.png"},
     ]
     with StudioProcess(build) as studio:
         report = drive(studio.url, steps)
@@ -260,4 +264,7 @@ def test_the_page_picks_an_object_and_a_grasp(build):
     assert (drawn & ~hand).sum() > 0.02 * drawn.sum() and (hand & ~drawn).sum() <= 0.005 * hand.sum()
     empty = report["results"][13]
     assert empty["object"] is None and np.abs(np.asarray(empty["angles"])).max() == 0
+    loaded = report["results"][14]                                  # a saved scene brings its object and grasp back
+    assert loaded["object"] == other["object"] and loaded["shown"] == BALL
+    assert np.allclose(loaded["angles"], other["angles"])
     assert not report["console"] and not report["page_errors"] and not report["failed_requests"], report
