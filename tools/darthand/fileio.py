@@ -173,6 +173,27 @@ def read_bytes(path: str | os.PathLike, what: str = "file", max_bytes: int | Non
         return f.read()
 
 
+def read_npz(path: str | os.PathLike, what: str, required: tuple = ()) -> dict:
+    """{name: array} of an .npz file (no pickles); InputError '<path>: unreadable <what> (...)' when it is missing, not
+    a regular file or not a readable archive, and '<path>: field '<name>' is missing' for an absent `required` one."""
+    # Imported here: every command imports fileio, and numpy stays out of `darthand --help`'s start-up.
+    import zipfile
+
+    import numpy as np
+
+    try:
+        with open_regular(path, what) as f, np.load(f, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except InputError as e:
+        raise InputError(f"{path}: unreadable {what} ({str(e).split(': ', 1)[-1]})") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        raise InputError(f"{path}: unreadable {what} ({e})") from None
+    for key in required:
+        if key not in arrays:
+            raise InputError(f"{path}: field '{key}' is missing")
+    return arrays
+
+
 def read_json(path: str | os.PathLike, what: str = "JSON file", max_bytes: int | None = None):
     """The parsed JSON of `path`; InputError naming the file (and `what` it should be) when it is missing, not a
     regular file, too large for the memory budget, not UTF-8 text or not valid JSON (see `parse_json`)."""

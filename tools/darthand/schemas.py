@@ -51,3 +51,12 @@ def read_catalog(path, what: str, schema: str) -> tuple[Path, dict]:
     data = read_json(path, f"{what} catalogue (build it with the {what} stage)")
     check_schema(data, schema, str(path))
     return path, data
+
+
+def check_unique_ids(items: list, source: str, field: str = "items") -> None:
+    """InputError '<source>: field '<field>.<i>.id' repeats id ...' for the first item whose 'id' an earlier one has."""
+    seen: set = set()
+    for i, item in enumerate(items):
+        if item["id"] in seen:
+            raise InputError(f"{source}: field '{field}.{i}.id' repeats id {item['id']!r}")
+        seen.add(item["id"])

@@ -14,7 +14,7 @@ import numpy as np
 
 from darthand.errors import InputError
 from darthand.fileio import read_json
-from darthand.schemas import check_schema
+from darthand.schemas import check_schema, check_unique_ids
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_SPEC = REPO_ROOT / "assets_src" / "accessories" / "catalog.json"
@@ -32,11 +32,7 @@ def load_spec(path: str | Path = DEFAULT_SPEC) -> dict:
 def check_spec(spec: dict, source: str = "catalogue") -> None:
     """Schema errors and duplicate ids raise InputError('<source>: field <path> ...')."""
     check_schema(spec, "accessory_catalog_spec.schema.json", source)
-    seen = set()
-    for i, item in enumerate(spec["items"]):
-        if item["id"] in seen:
-            raise InputError(f"{source}: field 'items.{i}.id' repeats id {item['id']!r}")
-        seen.add(item["id"])
+    check_unique_ids(spec["items"], source)
 
 
 def entries(spec: dict, ids=None, types=None) -> list[dict]:

@@ -6,14 +6,13 @@ is read; other stages import from here.
 from __future__ import annotations
 
 import dataclasses
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from darthand.errors import InputError
-from darthand.fileio import file_in, open_regular
+from darthand.fileio import file_in, read_npz
 from darthand.model.layout import NUM_JOINTS, NUM_POSE_FEATURES
 from darthand.model.mirror import mirror_points, mirror_posedirs
 from darthand.schemas import read_catalog
@@ -132,16 +131,7 @@ def mirror_accessory(acc: Accessory) -> Accessory:
 def _entry_accessory(path: Path, entry: dict) -> Accessory:
     files = entry["files"]
     mesh_path = file_in(path.parent, files["npz"], "accessory mesh", must_exist=False)
-    try:
-        with open_regular(mesh_path, "accessory mesh") as f, np.load(f, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-    except InputError as e:
-        raise InputError(f"{mesh_path}: unreadable accessory mesh ({str(e).split(': ', 1)[-1]})") from None
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
-        raise InputError(f"{mesh_path}: unreadable accessory mesh ({e})") from None
-    for key in ("vertices", "faces"):
-        if key not in arrays:
-            raise InputError(f"{mesh_path}: field '{key}' is missing")
+    arrays = read_npz(mesh_path, "accessory mesh", ("vertices", "faces"))
 
     def opt(key, dtype):
         return np.asarray(arrays[key], dtype) if key in arrays else None

@@ -16,7 +16,7 @@ import numpy as np
 
 from darthand.errors import InputError
 from darthand.fileio import read_json
-from darthand.schemas import check_schema
+from darthand.schemas import check_schema, check_unique_ids
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_SPEC = REPO_ROOT / "assets_src" / "objects" / "catalog.json"
@@ -37,11 +37,7 @@ def load_spec(path: str | Path = DEFAULT_SPEC) -> dict:
 def check_spec(spec: dict, source: str = "catalogue spec") -> None:
     """Schema errors and repeated ids raise InputError('<source>: field <path> ...')."""
     check_schema(spec, "object_catalog_spec.schema.json", source)
-    seen: set[str] = set()
-    for i, item in enumerate(spec["items"]):
-        if item["id"] in seen:
-            raise InputError(f"{source}: field 'items.{i}.id' repeats id {item['id']!r}")
-        seen.add(item["id"])
+    check_unique_ids(spec["items"], source)
 
 
 def select(spec: dict, ids=None) -> list[dict]:

@@ -4,14 +4,13 @@ the renderer use them. The objects stage owns how its catalogue is read; other s
 
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from darthand.errors import InputError
-from darthand.fileio import file_in, open_regular
+from darthand.fileio import file_in, read_npz
 from darthand.objects.creases import split_at_creases
 from darthand.schemas import read_catalog
 
@@ -107,7 +106,7 @@ def object_ids(path: str | Path) -> list[str]:
 def _entry_item(path: Path, entry: dict) -> ObjectItem:
     files = entry["files"]
     mesh_path = file_in(path.parent, files["npz"], "object mesh", must_exist=False)
-    arrays = _read_npz(mesh_path)
+    arrays = read_npz(mesh_path, "object mesh", ("vertices", "faces", "face_part"))
     png = files.get("base_color")
     item = ObjectItem(
         id=entry["id"], category=entry["category"], name=entry["name"], source=entry["source"],
@@ -120,20 +119,6 @@ def _entry_item(path: Path, entry: dict) -> ObjectItem:
         base_color_png=None if png is None else file_in(path.parent, png, "object texture", must_exist=False))
     check_item(item, str(mesh_path))
     return item
-
-
-def _read_npz(mesh_path: Path) -> dict:
-    try:
-        with open_regular(mesh_path, "object mesh") as f, np.load(f, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-    except InputError as e:
-        raise InputError(f"{mesh_path}: unreadable object mesh ({str(e).split(': ', 1)[-1]})") from None
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
-        raise InputError(f"{mesh_path}: unreadable object mesh ({e})") from None
-    for key in ("vertices", "faces", "face_part"):
-        if key not in arrays:
-            raise InputError(f"{mesh_path}: field '{key}' is missing")
-    return arrays
 
 
 def check_item(item: ObjectItem, source: str) -> None:
