@@ -672,7 +672,8 @@ def _add_dataset_arguments(p) -> None:
                         f"model and both sides; default {plan.two_hands:g}: none)")
     p.add_argument("--interactions", default=None, metavar="TYPE=SHARE,...",
                    help="shares of the two-hand interaction types, summing to 1: apart, touching, clasped, "
-                        "interlaced, holding, overlapping, mirrored (default: equal shares)")
+                        "interlaced, holding, overlapping, mirrored (default: equal shares); held and handover "
+                        "(both hands on one object of --objects-catalog in grasps of --grasps-catalog) by name only")
     p.add_argument("--interaction-fit", choices=FITS, default=plan.interaction_fit,
                    help="what the fit that keeps two hands out of each other moves: the left hand and the digits "
                         f"near the other hand, or the left hand only (faster) (default {plan.interaction_fit})")

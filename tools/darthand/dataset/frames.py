@@ -193,8 +193,10 @@ def group_dataset_labels(frame, job: dict, digest: str, sources: dict, backgroun
                                                      ("vertices", INSTANCES, *maps)},
                        **({OBJECT_MESHES: "../" + names[OBJECT_MESHES]} if frame.subject.objects else {})}
     for entry in labels.get("objects", ()):
-        grasp = job.get("grasp") or {}
+        grasp = job.get("grasp") or (job.get("grasps") or [{}])[0]
         entry["grasp"] = {"type": grasp.get("type"), "id": grasp.get("id")}
+        if job.get("grasps"):                        # two hands on the object (held, handover): one per hand
+            entry["grasps"] = job["grasps"]
     if maps:
         labels["maps"] = truth.describe(maps, {kind: "../" + names[kind] for kind in maps})
     if job.get("interaction") is not None:

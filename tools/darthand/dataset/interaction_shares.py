@@ -8,6 +8,9 @@ import math
 from darthand.errors import InputError
 
 TYPES = ("apart", "touching", "clasped", "interlaced", "holding", "overlapping", "mirrored")
+# Two hands and one object (dataset/object_pairs.py): asked for by name only, never in the equal default shares,
+# and in a plan's shares only when named (so plans without them keep their documents and draws).
+OBJECT_TYPES = ("held", "handover")
 # What the two-hand fit moves (model/hand_pair.resolve): the left hand rigidly, or that and the digits near the other.
 FITS = ("digits", "rigid")
 
@@ -31,13 +34,14 @@ def parse_shares(text) -> dict:
 
 
 def check_shares(shares: dict) -> dict:
-    """{type: share} checked: known types, shares within [0, 1] summing to 1 (types left out get 0)."""
+    """{type: share} checked: known types, shares within [0, 1] summing to 1 (TYPES left out get 0; OBJECT_TYPES are
+    kept only when named)."""
     if not isinstance(shares, dict) or not shares:
         raise InputError("interactions: give shares per type, e.g. apart=0.5,clasped=0.5")
     out = {t: 0.0 for t in TYPES}
     for name, value in shares.items():
-        if name not in TYPES:
-            raise InputError(f"interactions: {name!r} is not an interaction type ({', '.join(TYPES)})")
+        if name not in TYPES + OBJECT_TYPES:
+            raise InputError(f"interactions: {name!r} is not an interaction type ({', '.join(TYPES + OBJECT_TYPES)})")
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
                 math.isfinite(value) and 0 <= value <= 1):
             raise InputError(f"interactions: share {value!r} of {name!r} is outside 0..1")
@@ -51,8 +55,13 @@ def check_shares(shares: dict) -> dict:
 def choose_type(u: float, shares: dict) -> str:
     """The type whose cumulative share interval holds the uniform u."""
     edge = 0.0
-    for name in TYPES:
-        edge += shares[name]
+    for name in TYPES + OBJECT_TYPES:
+        edge += shares.get(name, 0.0)
         if u < edge:
             return name
-    return next(t for t in reversed(TYPES) if shares[t] > 0)
+    return next(t for t in reversed(TYPES + OBJECT_TYPES) if shares.get(t, 0.0) > 0)
+
+
+def object_share(shares: dict) -> float:
+    """The share of the types with an object (OBJECT_TYPES) among checked `shares`."""
+    return sum(shares.get(t, 0.0) for t in OBJECT_TYPES)

@@ -15,7 +15,10 @@ type draws (issue 29's contract). Types:
   even fanned to the joint limits, are 3-13 mm for a 16-18 mm finger; the pinky is too short to flank the ring);
 - holding: the left hand in a C grip around the right's wrist, its palm on the back of the wrist;
 - overlapping: the left hand over the back of the right (1-4 cm above), both DART poses: one in front of the other;
-- mirrored: the mirror-image DART pose side by side (thumbs toward each other, 1-5 cm apart).
+- mirrored: the mirror-image DART pose side by side (thumbs toward each other, 1-5 cm apart);
+- held, handover: both hands on one object of the catalogue, each in a grasp of it (dataset/object_pairs.py, which
+  draws them on its own stream and redraws there); asked for by name only. A held or handover frame that cannot be
+  drawn falls back as the others do.
 
 The touching, clasped and interlaced pre-shapes are one draw of finger angles for both hands (the left's the right's
 mirror image) when the left model is the right's mirror image, as a build's are: a mirrored hand self-crosses exactly
@@ -34,11 +37,12 @@ apart along a line: it resolves by construction), so a frame is never emitted pe
 
 from __future__ import annotations
 
+import time
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from darthand.dataset.interaction_shares import choose_type, parse_shares
+from darthand.dataset.interaction_shares import OBJECT_TYPES, choose_type, parse_shares
 from darthand.errors import InputError
 from darthand.model import hand_pair
 from darthand.model.anatomy import angles_to_axis_angle, joint_frames, limits_radians, rest_joints
@@ -74,8 +78,15 @@ MIRROR_Z = np.diag([-1.0, 1.0, -1.0])   # -> lying beside the right, palm down, 
 class InteractionSampler:
     """Two-hand draws on a right model and a left model (each the model its side's source poses)."""
 
-    def __init__(self, right, left, shares: dict, sources: dict | None = None, fit_digits: bool = False):
+    def __init__(self, right, left, shares: dict, sources: dict | None = None, fit_digits: bool = False,
+                 objects=None):
+        """objects: the draws of the types with an object (dataset/object_pairs.ObjectPairs), needed when the
+        shares give those types a share."""
         self.right, self.left, self.shares = right, left, parse_shares(shares)
+        self.objects = objects
+        if objects is None and any(self.shares.get(t, 0.0) for t in OBJECT_TYPES):
+            raise InputError("interactions held/handover: give the object and grasp catalogues (--objects-catalog, "
+                             "--grasps-catalog)")
         self.fit_digits = fit_digits
         self.sources = sources or {}     # {side: FrameSource}: the posed accessories of the hands that wear one
         self.frames = {"right": joint_frames(right), "left": joint_frames(left)}
@@ -92,7 +103,11 @@ class InteractionSampler:
         dart_pose: the plan's pose of the frame (right-handed, (48,)); betas: both hands' shape (or None); accessory:
         the catalogue id the `wearer` side's hand wears ('none': none), part of that hand in the penetration fit."""
         asked = choose_type(u, self.shares)
-        draws = [(asked, k) for k in range(ATTEMPTS)] + [(FALLBACK, ATTEMPTS)]
+        if asked in OBJECT_TYPES:
+            held = self.with_object(asked, seed, index, betas)
+            if held is not None:
+                return held
+        draws = [(asked, k) for k in range(ATTEMPTS) if asked not in OBJECT_TYPES] + [(FALLBACK, ATTEMPTS)]
         for kind, k in draws:
             rng = np.random.default_rng([int(seed), INTERACTION_STREAM, int(index), k])
             out = self.draw(kind, rng, np.asarray(dart_pose, np.float64), betas, (accessory, wearer))
@@ -105,6 +120,24 @@ class InteractionSampler:
                 return {"type": kind, "right_pose": out["right_pose"], "left_pose": out["left_pose"],
                         "placement": out["placement"], "record": record, "resolution": out["resolution"]}
         raise InputError(f"frame {index}: two hands could not be placed apart")  # 'apart' resolves by construction
+
+    def with_object(self, kind: str, seed: int, index: int, betas) -> dict | None:
+        """A held or handover frame (sample's dict with 'object': {'id', 'category', 'placement' (4, 4)} and
+        'grasps': a record per hand; 'resolution' None), or None when every attempt failed."""
+        assert self.objects is not None
+        start = time.process_time()
+        draw, failed = self.objects.sample(kind, seed, index, betas)
+        if draw is None:
+            return None
+        record = {"type": kind, "contact_parts": [["hand", "object"]] * 2, "attempts": failed + 1,
+                  "object": {"id": draw.object_id, "category": draw.category},
+                  "resolved": {**draw.figures, "cpu_s": round(time.process_time() - start, 4)}}
+        if draw.receiver is not None:
+            record["receiver"] = draw.receiver
+        return {"type": kind, "right_pose": draw.right_pose, "left_pose": draw.left_pose,
+                "placement": draw.placement, "record": record, "resolution": None,
+                "object": {"id": draw.object_id, "category": draw.category, "placement": draw.object_placement},
+                "grasps": draw.grasps}
 
     # ------------------------------------------------------------------------------------------------ one draw
     def draw(self, kind: str, rng: np.random.Generator, dart_pose: np.ndarray, betas,

@@ -25,7 +25,9 @@ A plan's options are one JSON document (`plan_spec`), recorded in dataset.json a
   identity, the left with its placement; both wearing the frame's shape, texture and tone; the accessory on the hand
   of the frame's side draw) with the `interaction` record. Whether a frame has two hands is drawn on its own stream
   (TWO_HANDS_STREAM), so one-hand frames draw as they would without the option; with `two_hands` 0 the plan document
-  leaves both options out and every job is as before;
+  leaves both options out and every job is as before. The types `held` and `handover` (asked for by name) put both
+  hands on one object of the catalogues (dataset/object_pairs.py): the job's bodies add the object at its placement
+  and the `grasps` record (one per hand);
 - an object held: on `objects` of the frames (default none), the frame's hand holding an object of the catalogue
   (uniform over it, or over `object_categories`) in one of that object's grasps for the frame's side, refitted to
   the frame's shape (dataset/objects.py: drawn on OBJECT_STREAM, redrawn on RETRY_STREAM), as a job of two `bodies`
@@ -273,7 +275,7 @@ class Planner:
         self.shapes = _shape_sampler(spec["shapes"], self.model)
         spec["shapes"] = self.shapes.spec()
         self.two_hands = spec.get("two_hands", 0.0)
-        self.pairs = _interaction_sampler(spec, sources, self.model) if self.two_hands else None
+        self.pairs = _interaction_sampler(spec, sources, self.model, catalogs or {}) if self.two_hands else None
         self.objects = spec.get("objects", 0.0)
         self.object_frames = _object_frames(spec, sources, catalogs or {}) if self.objects else None
         self.object_redraws = 0             # refits that failed and were drawn again (this planner's jobs)
@@ -369,6 +371,11 @@ class Planner:
                                                           "accessory", "betas")}
         if pair["type"] not in ("apart", "overlapping", "mirrored"):
             out["gesture"] = None                       # a type's pre-shape, not the sampled pose
+        if "object" in pair:                            # held, handover: the object both hands are on
+            held = pair["object"]
+            bodies.append({"kind": "object", "object": held["id"],
+                           "placement": np.round(held["placement"], 9).tolist()})
+            out["grasps"] = pair["grasps"]
         return {**out, "bodies": bodies, "interaction": pair["record"]}
 
     def _lights(self, u, side: str):
@@ -403,8 +410,9 @@ def _pose_sampler(opts: dict, model, first):
     return poses.GestureJitter(model, reference, 0.0 if mode == "gestures" else opts["jitter_deg"])
 
 
-def _interaction_sampler(spec: dict, sources: dict, model):
-    """The two-hand sampler (dataset/interactions.InteractionSampler) on the models both sides' sources pose."""
+def _interaction_sampler(spec: dict, sources: dict, model, catalogs: dict):
+    """The two-hand sampler (dataset/interactions.InteractionSampler) on the models both sides' sources pose, with
+    the draws of two hands on an object (dataset/object_pairs.py) when the shares ask for them."""
     # Imported here: the pair geometry (MeshLab, the fit) loads only for plans with two hands.
     from darthand.dataset import interactions
 
@@ -412,9 +420,17 @@ def _interaction_sampler(spec: dict, sources: dict, model):
         raise InputError("two hands: a USD package renders baked gestures; two-hand frames need a model")
     if set(sources) != {"right", "left"}:
         raise InputError("two hands: the plan needs both sides' sources (--sides right,left)")
-    return interactions.InteractionSampler(sources["right"].pose_model() or model, sources["left"].pose_model(),
-                                           spec["interactions"], sources,
-                                           fit_digits=spec["interaction_fit"] == "digits")
+    right, left = sources["right"].pose_model() or model, sources["left"].pose_model()
+    held = None
+    if interaction_shares.object_share(spec["interactions"]):
+        from darthand.dataset.object_pairs import ObjectPairs      # as interactions: only plans that ask load it
+
+        if not catalogs.get("objects") or not catalogs.get("grasps"):
+            raise InputError("interactions held/handover: the plan needs the object and grasp catalogues "
+                             "(--objects-catalog, --grasps-catalog)")
+        held = ObjectPairs(catalogs["objects"], catalogs["grasps"], right, left, spec.get("object_categories"))
+    return interactions.InteractionSampler(right, left, spec["interactions"], sources,
+                                           fit_digits=spec["interaction_fit"] == "digits", objects=held)
 
 
 def _object_frames(spec: dict, sources: dict, catalogs: dict):

@@ -18,8 +18,9 @@ the scene's bodies order), with `hand_type` 'interacting' for two hands, per-han
 A frame with held objects (render/objects.py) adds `objects`: each object's id, category, instance id (INSTANCE_HAND
 + 2 B + k for object k of a frame of B hands: 3 beside one hand), pose (object frame -> camera), its bounding box's
 corners (camera frame and pixels), its bbox and visible fraction from the instance map (pixels where it is seen over
-pixels where it is drawn alone), and its contacts with the first hand (render/object_contacts.py). An object
-occludes keypoints as another hand does.
+pixels where it is drawn alone), its contacts with the first hand (render/object_contacts.py) and, in a frame of
+two hands, each hand's (`hand_contacts`; penetration_max_mm the deepest over the hands). An object occludes
+keypoints as another hand does.
 """
 
 from __future__ import annotations
@@ -233,16 +234,23 @@ def object_fields(subject: Subject, k: int, camera: Camera, instances: np.ndarra
     instance = object_instance(subject, k)
     seen = instances == instance
     drawn = object_pixels_alone(subject, k, camera, corners_2d, seen)
-    hand = subject.members[0].labelled or subject.members[0]
-    found = object_contacts(hand.hand_vertices, held.item, P)
-    return {"id": held.item.id, "category": held.item.category, "instance": instance,
-            "pose": {"R": R.tolist(), "t": t.tolist()},
-            "corners_3d": camera.to_camera(corners).tolist(), "corners_2d": corners_2d.tolist(),
-            "bbox": mask_bbox(seen.astype(np.float32)),
-            "visible_fraction": float(seen.sum() / drawn) if drawn else 0.0,
-            "contacts": {"hand": 0, "hand_vertices": found.hand_vertices.tolist(),
-                         "object_points": found.object_points.tolist()},
-            "penetration_max_mm": round(1000 * found.penetration_max_m, 4)}
+    found = [object_contacts((m.labelled or m).hand_vertices, held.item, P) for m in subject.members]
+    out = {"id": held.item.id, "category": held.item.category, "instance": instance,
+           "pose": {"R": R.tolist(), "t": t.tolist()},
+           "corners_3d": camera.to_camera(corners).tolist(), "corners_2d": corners_2d.tolist(),
+           "bbox": mask_bbox(seen.astype(np.float32)),
+           "visible_fraction": float(seen.sum() / drawn) if drawn else 0.0,
+           "contacts": contacts_record(0, found[0]),
+           "penetration_max_mm": round(1000 * max(f.penetration_max_m for f in found), 4)}
+    if len(found) > 1:
+        out["hand_contacts"] = [{**contacts_record(b, f), "penetration_max_mm": round(1000 * f.penetration_max_m, 4)}
+                                for b, f in enumerate(found)]
+    return out
+
+
+def contacts_record(hand: int, found) -> dict:
+    """The labels' record of hand `hand`'s contacts with an object (render/object_contacts.ObjectContacts)."""
+    return {"hand": hand, "hand_vertices": found.hand_vertices.tolist(), "object_points": found.object_points.tolist()}
 
 
 def object_pixels_alone(subject: Subject, k: int, camera: Camera, corners_2d: np.ndarray, seen: np.ndarray) -> int:
