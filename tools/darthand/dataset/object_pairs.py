@@ -14,8 +14,9 @@ at the right grasp's placement P_R and the left hand at P_R inv(P_L).
 Which grasp pairs suit an object is decided once per object when the sampler is built (`PairTable`): an object
 whose longest side is under MIN_EXTENT_M does not take two hands; a (right, left) pair of its catalogue grasps,
 posed on the catalogue's own models in the object frame, is compatible when the hands do not pass into each other
-(a quick test on the nearest vertices and their normals, `hands_apart`: the exact measure is the frame's) and the forearms (FOREARM_M from each wrist along its hand's +X) keep
-FOREARM_CLEAR_M apart (crossed arms do not read as one person's). A frame draws an object uniformly among those with
+(a quick test on the nearest vertices and their normals, `hands_apart`: the exact measure is the frame's) and the
+forearms (FOREARM_M from each wrist along its hand's +X) keep FOREARM_CLEAR_M apart (crossed arms do not read as
+one person's). A frame draws an object uniformly among those with
 a compatible pair, then a pair uniformly; the refitted hands are measured again on the frame's shapes (each hand
 into the object by the refit's penetration, the receiver's by render/object_contacts, hand into hand as above),
 and a draw that fails is redrawn from [seed, PAIR_STREAM, i, attempt].
