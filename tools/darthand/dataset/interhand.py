@@ -26,7 +26,8 @@ frame's hand type and interaction type ('interacting_clasped', 'interacting_held
 held and handover types) has no place in InterHand2.6M's layout: its frames are written with their hands only (the
 image shows the object; the object's mesh and pose stay in the native labels).
 Followed: facebookresearch/InterHand2.6M's data/InterHand2.6M/dataset.py (file names, the COCO reader, world2cam,
-cam2pixel, joint_valid (42), root indices 20 and 41) and tool/MANO_world_to_camera/convert.py (MANO parameters in the world frame, metres; world coordinates mm).
+cam2pixel, joint_valid (42), root indices 20 and 41) and tool/MANO_world_to_camera/convert.py (MANO parameters in
+the world frame, metres; world coordinates mm).
 Its dataset.py reads annotations/<subset>/ ('all', 'human_annot', 'machine_annot'): point its annot_subset at the
 split's folder, or link annotations/all to it.
 
