@@ -37,7 +37,6 @@ apart along a line: it resolves by construction), so a frame is never emitted pe
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -125,13 +124,12 @@ class InteractionSampler:
         """A held or handover frame (sample's dict with 'object': {'id', 'category', 'placement' (4, 4)} and
         'grasps': a record per hand; 'resolution' None), or None when every attempt failed."""
         assert self.objects is not None
-        start = time.process_time()
         draw, failed = self.objects.sample(kind, seed, index, betas)
         if draw is None:
             return None
         record = {"type": kind, "contact_parts": [["hand", "object"]] * 2, "attempts": failed + 1,
                   "object": {"id": draw.object_id, "category": draw.category},
-                  "resolved": {**draw.figures, "cpu_s": round(time.process_time() - start, 4)}}
+                  "resolved": draw.figures}
         if draw.receiver is not None:
             record["receiver"] = draw.receiver
         return {"type": kind, "right_pose": draw.right_pose, "left_pose": draw.left_pose,
