@@ -28,7 +28,8 @@ def _catalogs() -> tuple[str, str]:
     return objects, grasps
 
 
-def _run(model, textures, accessories, out: Path, frames: int, objects: float) -> dict:
+def _run(model, textures, accessories, out: Path, frames: int, objects: float, **plan) -> dict:
+    """The timings of a `frames`-frame run with `objects` of them holding an object (plan: more PlanOptions)."""
     from darthand.dataset.api import render_dataset
     from darthand.dataset.options import DatasetOptions
     from darthand.dataset.plan import PlanOptions
@@ -37,7 +38,7 @@ def _run(model, textures, accessories, out: Path, frames: int, objects: float) -
     doc = render_dataset(DatasetOptions(str(model), str(out), count=frames, textures=str(textures),
                                         accessories=str(accessories), objects_catalog=catalog, grasps_catalog=grasps,
                                         resume=False, progress=progress_printer(f"object_dataset ({objects:g})"),
-                                        plan=PlanOptions(objects=objects)))
+                                        plan=PlanOptions(objects=objects, **plan)))
     t = doc["timings"]
     return {k: t.get(k) for k in ("images_per_second", "overall_images_per_second", "ms_per_image",
                                   "cpu_ms_per_image", "steps_ms")}
