@@ -139,7 +139,7 @@ class ObjectPairs:
         object_id = self.ids[_choose(u[0], len(self.ids))]
         pair = self.table.pairs[object_id][_choose(u[1], len(self.table.pairs[object_id]))]
         item = self.frames.items[object_id]
-        field = self.frames._field(item)
+        field = self.frames.field(item)
         grasps = [self.frames.grasps[s][object_id][k] for s, k in zip(SIDES, pair)]
         fits = [refit_grasp(models[s], item, g, field) for s, g in zip(SIDES, grasps)]
         if not all(f.ok and f.penetration_max_m <= PASS_THROUGH_M for f in fits):
@@ -168,13 +168,20 @@ class ObjectPairs:
         figures = {"hand_hand_max_mm": round(1000 * pair_depth.max_m, 3),
                    "hand_hand_crossing_faces": int(pair_depth.crossing_faces),
                    "hand_object_max_mm": [round(1000 * d, 3) for d in depth]}
-        records = [{"hand": b, "side": s, "type": g.type, "id": g.id,
-                    "role": "held" if receiver is None else ("receiver" if s == receiver else "giver"),
-                    "figures": {"penetration_max_mm": round(1000 * d, 3),
-                                "penetration_p99_mm": round(1000 * f.penetration_p99_m, 3)}}
-                   for b, (s, g, f, d) in enumerate(zip(SIDES, grasps, fits, depth))]
+        records = [grasp_record(b, s, g, f, d, receiver) for b, (s, g, f, d) in enumerate(zip(SIDES, grasps, fits,
+                                                                                            depth))]
         return PairDraw(poses[0], poses[1], object_placement @ to_object[1], object_placement, object_id,
                         item.category, records, figures, receiver)
+
+
+def grasp_record(hand: int, side: str, grasp, fit, depth: float, receiver: str | None) -> dict:
+    """A hand's grasp record: its index and side, the grasp's type and id, its role ('held', 'giver', 'receiver'),
+    its deepest vertex in the object (mm) and, for a hand on it, the refit's p99."""
+    role = "held" if receiver is None else ("receiver" if side == receiver else "giver")
+    figures = {"penetration_max_mm": round(1000 * depth, 3)}
+    if role != "receiver":
+        figures["penetration_p99_mm"] = round(1000 * fit.penetration_p99_m, 3)
+    return {"hand": hand, "side": side, "type": grasp.type, "id": grasp.id, "role": role, "figures": figures}
 
 
 def grasp_hand(model, grasp) -> hand_pair.PosedHand:

@@ -94,7 +94,7 @@ class ObjectFrames:
             object_id = ids[_choose(u[1], len(ids))]
             grasp = by_object[object_id][_choose(u[2], len(by_object[object_id]))]
             item = self.items[object_id]
-            fitted = refit_grasp(model, item, grasp, self._field(item))
+            fitted = refit_grasp(model, item, grasp, self.field(item))
             if fitted.ok and fitted.penetration_max_m <= PASS_THROUGH_M:
                 return ObjectDraw(np.asarray(fitted.pose, np.float64), object_id, item.category,
                                   np.asarray(fitted.placement, np.float64), grasp,
@@ -102,7 +102,7 @@ class ObjectFrames:
                                    "penetration_p99_mm": round(1000 * fitted.penetration_p99_m, 3)}, attempt)
         return None
 
-    def _field(self, item):
+    def field(self, item):
         """The item's distance field (grasps/refit.object_field), built once."""
         if item.id not in self._fields:
             self._fields[item.id] = object_field(item)
