@@ -7,7 +7,9 @@ of each type (the main process's share), redraws and fallbacks per type, penetra
 jobs (hand into object by render/object_contacts' exact distances and winding numbers, hand into hand by
 model/hand_pair's depths and MeshLab's crossing faces: max and p99 over frames), the images per second of both runs
 and their ratio, and a contact sheet of the first 16 rendered frames of each type (object_pairs_sheet.jpg in the
-output folder). DARTHAND_BENCH_PAIR_FRAMES sets the frames per run and planned (default 100).
+output folder). DARTHAND_BENCH_PAIR_FRAMES sets the frames per run and planned (default 100). `table_or_not`
+(DARTHAND_BENCH_PAIR_DRAWS draws, default 40) weighs the pair table against drawing any pair and rejecting: the
+share of draws that pass and the CPU per frame drawn, each way.
 """
 
 from __future__ import annotations
@@ -83,6 +85,34 @@ def _penetration(jobs: list, sources: dict) -> dict:
     return {"hand_object_mm": figures(object_mm), "hand_hand_mm": figures(hand_mm), "frames_crossing": crossing}
 
 
+def table_or_not(draws: int) -> dict:
+    """Per type, with the pair table and without it (any right/left pair of an object of MIN_EXTENT_M or more):
+    draws that pass the frame's checks, CPU ms a draw and per frame drawn; and the table's set-up CPU."""
+    from darthand.dataset import object_pairs as op
+    from darthand.model.load import load_model
+
+    model = dataset_inputs(Path(tempfile.gettempdir()))[0]
+    right, left = load_model(str(model)), load_model(str(Path(model).with_name("left.npz")))
+    pairs = op.ObjectPairs(*_catalogs(), right, left)
+    frames, table = pairs.frames, pairs.table.pairs
+    grasps = frames.grasps
+    everything = {i: [(a, b) for a in range(len(grasps["right"][i])) for b in range(len(grasps["left"][i]))]
+                  for i in sorted(frames.items) if i in grasps["right"] and i in grasps["left"]
+                  and np.ptp(frames.items[i].vertices, axis=0).max() >= op.MIN_EXTENT_M}
+    models = {s: frames.models[s] for s in op.SIDES}
+    out: dict = {"table": pairs.table.describe()}
+    for name, chosen in (("table", table), ("no_table", everything)):
+        pairs.table.pairs, pairs.ids = chosen, sorted(chosen)
+        for kind in TYPES:
+            t, ok = time.process_time(), 0
+            for i in range(draws):
+                ok += pairs.draw(kind, np.random.default_rng([7, i]).random(op.PAIR_UNIFORMS), models) is not None
+            cpu = time.process_time() - t
+            out[f"{name}_{kind}"] = {"pass": ok, "draws": draws, "cpu_ms_a_draw": round(1000 * cpu / draws),
+                                     "cpu_ms_a_frame": round(1000 * cpu / max(ok, 1))}
+    return out
+
+
 def _count(values) -> dict:
     out: dict = {}
     for v in values:
@@ -122,6 +152,7 @@ def contact_sheet(dataset: Path, path: Path) -> dict:
 
 def run(out: Path) -> dict:
     frames = int(os.environ.get("DARTHAND_BENCH_PAIR_FRAMES", 100))
+    table = table_or_not(int(os.environ.get("DARTHAND_BENCH_PAIR_DRAWS", 40)))
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         model, textures, accessories, where = dataset_inputs(tmp)
@@ -134,7 +165,8 @@ def run(out: Path) -> dict:
     ratio = (pairs["images_per_second"] or 0) / max(1e-9, one["images_per_second"] or 0)
     return {"pair_vs_one_hand_object_rate": round(ratio, 3), "frames": frames, "inputs": where,
             "catalogs": list(_catalogs()), "one_hand_objects": one, "two_hands_one_object": pairs,
-            "planning": plan, "sheet": {"file": "object_pairs_sheet.jpg", "frames_per_type": shown}}
+            "planning": plan, "table_or_not": table,
+            "sheet": {"file": "object_pairs_sheet.jpg", "frames_per_type": shown}}
 
 
 def summary(result: dict) -> str:
@@ -148,4 +180,6 @@ def summary(result: dict) -> str:
                      f"{p['fallbacks']} fallbacks; penetration hand-object {p['hand_object_mm']} mm, hand-hand "
                      f"{p['hand_hand_mm']} mm, {p['frames_crossing']} frames with crossing faces; categories "
                      f"{p['categories']}.")
+    if "table_or_not" in result:
+        lines.append(f"- pair table against drawing any pair and rejecting: {result['table_or_not']}")
     return "\n".join(lines)
