@@ -8,6 +8,7 @@ model, and a planned jobs file rendering the same."""
 
 from __future__ import annotations
 
+import io
 import json
 import sys
 from pathlib import Path
@@ -22,6 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "grasps"))
 from object_catalog import SPHERE_RADIUS, toy_items, write_catalog  # noqa: E402
 from truth import winding_numbers  # noqa: E402
 
+from darthand.cli import main  # noqa: E402
 from darthand.dataset import object_pairs  # noqa: E402
 from darthand.dataset.interaction_shares import TYPES, parse_shares  # noqa: E402
 from darthand.dataset.jobs import check_jobs, validate_jobs, write_jobs  # noqa: E402
@@ -136,6 +138,26 @@ def test_both_hands_on_a_sphere_by_its_closed_form(hand, catalogues, tmp_path, k
     assert drawn >= 2
 
 
+def test_missing_catalogues_are_refused_in_one_line(sources, tmp_path, capsys):
+    package = sources[1]["right"].package
+    args = ["render-dataset", str(package), "--out", str(tmp_path / "out"), "--count", "2", "--two-hands", "1",
+            "--interactions", "held=0.5,handover=0.5"]
+    assert main(args + ["--objects-catalog", str(tmp_path / "none")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"darthand: error: {tmp_path / 'none'}: no object catalogue there (build it: " \
+                  "`make build/objects/catalog.json`)"
+
+
+@pytest.mark.slow
+def test_object_categories_restrict_the_objects_of_both_hands(sources, catalogues):
+    spec = {"seed": 2, "two_hands": 1.0, "interactions": {"held": 1.0}, "object_categories": ["box"]}
+    assert plan_spec(**spec)["object_categories"] == ["box"]
+    assert "object_categories" not in plan_spec(two_hands=1.0, object_categories=["box"])   # as before: no objects
+    planner = Planner(spec, sources[0], {"objects": catalogues[0], "grasps": catalogues[1]})
+    jobs = [planner.job(i) for i in range(3)]
+    assert {j["bodies"][2]["object"] for j in jobs if j["interaction"]["type"] == "held"} == {"box_01"}
+
+
 @pytest.mark.slow
 def test_no_suitable_pair_is_refused_in_one_line(sources, catalogues, monkeypatch):
     monkeypatch.setattr(object_pairs, "MIN_EXTENT_M", 1.0)
@@ -208,6 +230,24 @@ def test_a_planned_jobs_file_renders_the_same(sources, catalogues, rendered, tmp
         for kind in ("instances", "object_meshes"):
             for first in (root / kind).glob(path.stem + ".*"):
                 assert (tmp_path / "again" / kind / first.name).read_bytes() == first.read_bytes()
+
+
+@pytest.mark.slow
+def test_writers_of_two_hands_on_one_object(rendered, tmp_path, capsys):
+    import webdataset as wds
+
+    root, _ = rendered
+    frames = sorted(p.stem for p in (root / "labels").glob("*.json"))
+    assert main(["dataset", "export", str(root), "--format", "interhand", "--out", str(tmp_path / "ih")]) == 0
+    assert main(["dataset", "export", str(root), "--format", "webdataset", "--out", str(tmp_path / "wds")]) == 0
+    samples = {s["__key__"]: s for s in wds.WebDataset(sorted(str(p) for p in (tmp_path / "wds").glob("*.tar")),
+                                                        shardshuffle=False)}
+    for key in frames:
+        assert np.array_equal(np.load(io.BytesIO(samples[key]["object.npy"])),
+                              np.load(root / "object_meshes" / f"{key}.npy"))
+    capsys.readouterr()
+    assert main(["dataset", "export", str(root), "--format", "ho3d", "--out", str(tmp_path / "ho3d")]) == 2
+    assert "no frame of a right hand holding an object" in capsys.readouterr().err    # two hands: left out
 
 
 # ------------------------------------------------------------------------------------------------ helpers

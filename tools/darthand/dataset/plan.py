@@ -101,7 +101,8 @@ class PlanOptions:
     (0: none, and the plan document leaves it and interactions out); interactions {type: share} (None: equal);
     interaction_fit what the two hands' fit moves: 'digits' (the left hand and the digits near the other hand) or
     'rigid' (the left hand only); objects the share of frames with an object held (0: none, and the plan document
-    leaves it and object_categories out), object_categories the catalogue's categories drawn from (None: all)."""
+    leaves it and object_categories out), object_categories the catalogue's categories drawn from (None: all; also
+    by the held and handover interactions)."""
 
     seed: int = 0
     poses: PoseOptions = field(default_factory=PoseOptions)
@@ -169,19 +170,28 @@ def plan_spec(**options) -> dict:
 
 def _object_options(spec: dict) -> dict:
     """The spec with objects checked (a share in 0..1, at most 1 with two_hands) and object_categories a list of
-    names or None; both left out when objects is 0."""
+    names or None; both left out when objects is 0 (object_categories kept for two-hand frames on an object, the
+    held and handover interactions, when those are asked for)."""
     share = spec.get("objects", 0.0)
     if isinstance(share, bool) or not isinstance(share, (int, float)) or not (math.isfinite(share) and 0 <= share <= 1):
         raise InputError(f"objects: {share!r} is not a share within 0..1")
     if share + spec.get("two_hands", 0.0) > 1 + 1e-12:
         raise InputError(f"objects: {share:g} of the frames with objects and {spec['two_hands']:g} with two hands "
                          "sum to more than all of them")
-    if share == 0:
-        return {k: v for k, v in spec.items() if k not in OBJECT_OPTIONS}
     categories = spec.get("object_categories")
+    if share == 0:
+        out = {k: v for k, v in spec.items() if k not in OBJECT_OPTIONS}
+        if categories is not None and interaction_shares.object_share(spec.get("interactions") or {}):
+            out["object_categories"] = _categories(categories)
+        return out
+    return {**spec, "objects": float(share), "object_categories": _categories(categories)}
+
+
+def _categories(categories):
+    """object_categories checked: a list of names, or None."""
     if categories is not None and (isinstance(categories, str) or not all(isinstance(c, str) for c in categories)):
         raise InputError(f"object categories: {categories!r} is not a list of category names")
-    return {**spec, "objects": float(share), "object_categories": None if categories is None else list(categories)}
+    return None if categories is None else list(categories)
 
 
 def _two_hand_options(spec: dict) -> dict:
