@@ -159,6 +159,17 @@ def test_object_categories_restrict_the_objects_of_both_hands(sources, catalogue
 
 
 @pytest.mark.slow
+def test_a_frame_whose_draws_all_fail_falls_back_apart(sources, catalogues, monkeypatch):
+    monkeypatch.setattr(object_pairs.ObjectPairs, "draw", lambda self, kind, u, models: None)
+    planner = Planner({"seed": 1, "two_hands": 1.0, "interactions": {"held": 1.0}}, sources[0],
+                      {"objects": catalogues[0], "grasps": catalogues[1]})
+    job = planner.job(0)
+    assert job["interaction"]["type"] == "apart" and job["interaction"]["redrawn_from"] == "held"
+    assert job["interaction"]["attempts"] == object_pairs.ATTEMPTS + 1
+    assert [b["kind"] for b in job["bodies"]] == ["hand", "hand"] and "grasps" not in job
+
+
+@pytest.mark.slow
 def test_no_suitable_pair_is_refused_in_one_line(sources, catalogues, monkeypatch):
     monkeypatch.setattr(object_pairs, "MIN_EXTENT_M", 1.0)
     with pytest.raises(InputError, match=r"^held/handover: no object of the catalogue takes two hands"):

@@ -106,9 +106,10 @@ class InteractionSampler:
             held = self.with_object(asked, seed, index, betas)
             if held is not None:
                 return held
-        draws = [(asked, k) for k in range(ATTEMPTS) if asked not in OBJECT_TYPES] + [(FALLBACK, ATTEMPTS)]
+        tried = self.objects.attempts if asked in OBJECT_TYPES and self.objects is not None else ATTEMPTS
+        draws = [(asked, k) for k in range(ATTEMPTS) if asked not in OBJECT_TYPES] + [(FALLBACK, tried)]
         for kind, k in draws:
-            rng = np.random.default_rng([int(seed), INTERACTION_STREAM, int(index), k])
+            rng = np.random.default_rng([int(seed), INTERACTION_STREAM, int(index), min(k, ATTEMPTS)])
             out = self.draw(kind, rng, np.asarray(dart_pose, np.float64), betas, (accessory, wearer))
             kind = "apart" if kind == FALLBACK else kind
             if out is not None and out["resolution"].resolved:

@@ -119,6 +119,7 @@ class ObjectPairs:
         self.frames = ObjectFrames(objects, grasps, {"right": right, "left": left}, categories)
         self.table = PairTable(self.frames)
         self.ids = sorted(self.table.pairs)
+        self.attempts = ATTEMPTS
 
     def describe(self) -> dict:
         return {**self.frames.describe(), "pairs": self.table.describe()}
