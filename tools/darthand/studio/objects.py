@@ -19,7 +19,9 @@ from darthand.errors import InputError
 from darthand.fileio import read_json
 from darthand.grasps.loader import Grasp, catalog_file, load_grasp_catalog
 from darthand.grasps.refit import FittedGrasp, object_field, refit_grasp
-from darthand.model.anatomy import axis_angle_to_angles
+from darthand.model.anatomy import axis_angle_to_angles, rest_joints
+from darthand.model.hand_model import HandModel
+from darthand.model.rotations import axis_angle_to_matrix
 from darthand.objects.preview import object_tile
 from darthand.render.image import write_png
 from darthand.render.objects import ObjectLibrary
@@ -143,19 +145,28 @@ class StudioObjects:
 
     def grasp_document(self, side: str, object_id: str, grasp_id: str) -> dict:
         """What the page poses with: the refitted grasp's joint angles (16 x 3 degrees, model/anatomy.py), its
-        placement (4 x 4, object frame -> the hand's model frame, metres), type, whether it is within the
-        catalogue's bounds and its penetration (mm)."""
+        placement (4 x 4, object frame -> the hand's model frame, metres) at those angles, the root joint's rest
+        centre the object turns about with the wrist (`pivot`, metres: held_placement), type, whether it is within
+        the catalogue's bounds and its penetration (mm)."""
         fit = self.fitted(side, object_id, grasp_id)
         model = self.models[side]
         angles = np.rad2deg(axis_angle_to_angles(model, np.asarray(fit.pose, np.float64).reshape(16, 3)))
         return {"side": side, "object": object_id, "grasp": grasp_id, "type": self.grasps[side][grasp_id].type,
                 "angles_deg": np.round(angles, 6).tolist(), "placement": np.round(fit.placement, 9).tolist(),
+                "pivot": np.round(rest_joints(model)[0], 9).tolist(),
                 "ok": fit.ok, "penetration_max_mm": round(1000 * fit.penetration_max_m, 3)}
 
-    def placed_vertices(self, side: str, held: dict) -> np.ndarray:
-        """(N, 3) the held object's vertices ({id, grasp}) in the hand's model frame (metres), at the refitted
-        grasp's placement."""
-        P = self.fitted(side, held["id"], held["grasp"]).placement
+    def held_placement(self, side: str, held: dict, pose: np.ndarray) -> np.ndarray:
+        """(4, 4) object frame -> the hand's model frame of the held object ({id, grasp}) when the hand takes `pose`
+        (48,) MANO axis-angle: the refitted grasp's placement carried by the root joint's rotation from the grasp's
+        pose to `pose` about the root joint's rest centre, as the hand itself turns (wrist edits keep the grip)."""
+        fit = self.fitted(side, held["id"], held["grasp"])
+        return root_motion(self.models[side], fit.pose, pose) @ fit.placement
+
+    def placed_vertices(self, side: str, held: dict, pose: np.ndarray) -> np.ndarray:
+        """(N, 3) the held object's vertices ({id, grasp}) in the hand's model frame (metres) for the hand's
+        `pose` (held_placement)."""
+        P = self.held_placement(side, held, pose)
         return self.item(held["id"]).vertices @ P[:3, :3].T + P[:3, 3]
 
     def grasp_record(self, side: str, object_id: str, grasp_id: str) -> dict:
@@ -164,6 +175,17 @@ class StudioObjects:
         return {"type": self.grasps[side][grasp_id].type, "id": grasp_id,
                 "figures": {"penetration_max_mm": round(1000 * fit.penetration_max_m, 3),
                             "penetration_p99_mm": round(1000 * fit.penetration_p99_m, 3)}}
+
+
+def root_motion(model: HandModel, from_pose: np.ndarray, to_pose: np.ndarray) -> np.ndarray:
+    """(4, 4) the rigid motion of the hand's model frame that takes the root joint's rotation of `from_pose` to that
+    of `to_pose` (48,) about the root joint's rest centre (metres): T(c) R_to R_from^T T(-c)."""
+    R = axis_angle_to_matrix(np.stack([np.asarray(from_pose, np.float64)[:3], np.asarray(to_pose, np.float64)[:3]]))
+    c = rest_joints(model)[0]
+    motion = np.eye(4)
+    motion[:3, :3] = R[1] @ R[0].T
+    motion[:3, 3] = c - motion[:3, :3] @ c
+    return motion
 
 
 def _approaches(grasps_file: Path) -> dict:

@@ -108,12 +108,13 @@ def scene_job(build: StudioBuild, scene: dict, index: int = 0) -> dict:
 
 def object_job(build: StudioBuild, scene: dict, job: dict) -> dict:
     """A one-hand job holding the scene's object, as a dataset's object frame is (dataset/objects.object_job): the
-    `bodies` form (the hand at the identity, the object at the grasp's refitted placement) with the grasp record."""
+    `bodies` form (the hand at the identity, the object at the grasp's refitted placement carried by the scene's
+    wrist: StudioObjects.held_placement) with the grasp record."""
     held = held_objects(build)
     object_id, grasp_id = scene["object"]["id"], scene["object"]["grasp"]
     fields = ("side", "pose", "texture", "skin_tone_offset", "accessory")
     hand = {"kind": "hand", **{k: job[k] for k in fields if k in job}}
-    placement = np.round(held.fitted(scene["side"], object_id, grasp_id).placement, 9).tolist()
+    placement = np.round(held.held_placement(scene["side"], scene["object"], np.asarray(job["pose"])), 9).tolist()
     out = {k: v for k, v in job.items() if k not in fields}
     return {**out, "bodies": [hand, {"kind": "object", "object": object_id, "placement": placement}],
             "grasp": held.grasp_record(scene["side"], object_id, grasp_id)}

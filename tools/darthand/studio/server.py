@@ -333,7 +333,8 @@ def view_camera(build: StudioBuild, body) -> dict:
         subject = side.source.subject(scene_pose(build, scene), accessory=scene.get("accessory"))
     points = subject.all_vertices()
     if "object" in scene:
-        points = np.concatenate([points, sc.held_objects(build).placed_vertices(side.side, scene["object"])])
+        points = np.concatenate([points, sc.held_objects(build).placed_vertices(side.side, scene["object"],
+                                                                                scene_pose(build, scene))])
     cam = load_camera(view, points, width=size, height=size, side=side.side)
     centre = 0.5 * (points.min(0) + points.max(0))
     depth = float(cam.to_camera(centre[None])[0, 2])

@@ -121,6 +121,7 @@ function applyPose() {
   hand.rig.joints.forEach((name, i) => hand.bones[name]?.quaternion.fromArray(quats[i]));
   const weights = R.correctiveWeights(hand.rig, hand.table, rotations);
   for (const mesh of morphMeshes()) setMorphWeights(mesh, hand.table, weights);
+  placeHeld();
   requestDraw();
 }
 
@@ -248,15 +249,27 @@ async function selectObject(id, graspId = null, { keepAngles = false } = {}) {
   if (state.object?.grasp !== grasp.id || state.side !== side) return;
   if (held) held.object.removeFromParent();
   const object = objectGroup(mesh);
-  const P = doc.placement;
-  object.matrix.set(...P[0], ...P[1], ...P[2], ...P[3]);      // row-major, as THREE.Matrix4.set takes it
   object.matrixAutoUpdate = false;
   scene.add(object);
-  held = { id, grasp: grasp.id, object };
+  const graspRoot = R.manoRotations(hand.rig, doc.angles_deg)[0];
+  held = { id, grasp: grasp.id, object, placement: doc.placement, pivot: doc.pivot, graspRoot };
   if (!keepAngles) setAngles(doc.angles_deg);
+  placeHeld();
   setStatus(`${id}: ${doc.type} grasp${doc.ok ? "" : " (outside the catalogue's bounds)"}, ` +
     `penetration ${doc.penetration_max_mm.toFixed(2)} mm`);
   requestDraw();
+}
+
+/** Put the held object where the shown hand holds it: the grasp's placement carried by the root joint's rotation
+ * since the grasp, about the root's rest centre (studio/objects.held_placement: the export places it the same). */
+function placeHeld() {
+  if (!held) return;
+  const D = R.mul(R.manoRotations(hand.rig, state.angles)[0], R.transpose(held.graspRoot));
+  const c = held.pivot, P = held.placement;
+  const Dc = D.map((row) => row[0] * c[0] + row[1] * c[1] + row[2] * c[2]);
+  const motion = new THREE.Matrix4().set(...D[0], c[0] - Dc[0], ...D[1], c[1] - Dc[1], ...D[2], c[2] - Dc[2], 0, 0, 0, 1);
+  held.object.matrix.multiplyMatrices(motion, new THREE.Matrix4().set(...P[0], ...P[1], ...P[2], ...P[3]));
+  held.object.matrixWorldNeedsUpdate = true;
 }
 
 function objectMesh(id) {
