@@ -4,6 +4,7 @@
              + sum_i (max(0, CLEARANCE - d_i) / PENETRATION_SCALE)^2             no hand vertex inside the object
              + sum_k ((a_k - a*_k) / sigma_k)^2                                  stay near the pre-shape a*
              + |w / TURN_SIGMA|^2 + |t / SHIFT_SIGMA|^2                          and near the start placement
+             + sum_pairs (max(0, -clearance) / digit_clearance.SCALE)^2          no phalanx into another digit's
     within     the joint limits (model/anatomy) and the rigid bounds
 
 over the hand's rigid placement relative to the object (w a rotation vector about the hand's grasp centre, t a
@@ -17,8 +18,10 @@ about the posed joint J_k with world angular velocity w_k moves an LBS vertex by
 (pair_digits.angle_rows; the correctives' small share left out, the rotation vector's own curvature too: both only
 slow the solve, they do not move its answer).
 
-A fit leaving more than MAX_PENETRATION inside the object or a contact part farther than MAX_CONTACT from it is
-dropped, with why. Digits passing through each other are checked after the fit (model/self_crossing) by the build.
+The digits' clearances are grasps/digit_clearance's phalanx capsules (their Jacobian is derived there; the rigid
+placement does not move them). A fit leaving more than MAX_PENETRATION inside the object or a contact part farther
+than MAX_CONTACT from it is dropped, with why. Digits passing through each other are still checked after the fit by
+the build (MeshLab through model/self_crossing: the independent guard).
 """
 
 from __future__ import annotations
@@ -30,6 +33,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
+from darthand.grasps import digit_clearance
+from darthand.grasps.digit_clearance import Capsules
 from darthand.grasps.field import SPACING, ObjectField, merged
 from darthand.grasps.parts import contact_patches
 from darthand.model.anatomy import angles_to_axis_angle, joint_frames, limits_radians, palm_normal
@@ -60,18 +65,20 @@ MAX_CONTACT = 5e-3          # m: a fit whose contact part ends farther is droppe
 
 @dataclass
 class HandRig:
-    """What a model's fits share, computed once: its joint frames (16, 3, 3), contact patches {part: vertex ids}
-    and skinning share (V, 16, ) of each joint's subtree."""
+    """What a model's fits share, computed once: its joint frames (16, 3, 3), contact patches {part: vertex ids},
+    skinning share (V, 16, ) of each joint's subtree, and its phalanx capsules (None: digits free to cross)."""
 
     model: HandModel
     frames: np.ndarray
     patches: dict
     subtree_share: np.ndarray
+    capsules: Capsules | None = None
 
     @classmethod
-    def of(cls, model: HandModel, parts) -> "HandRig":
+    def of(cls, model: HandModel, parts, clearance: bool = True) -> "HandRig":
         share = model.weights @ subtree_mask(model.parents)
-        return cls(model, joint_frames(model), contact_patches(model, parts), share)
+        capsules = Capsules.of(model) if clearance else None
+        return cls(model, joint_frames(model), contact_patches(model, parts), share, capsules)
 
     def pose(self, angles: np.ndarray):
         """forward's result for angles (16, 3) radians (the root left at the identity)."""
@@ -183,9 +190,25 @@ class GraspProblem:
         jac.append(np.hstack([np.zeros((k, 6)), np.diag(1.0 / self.sigma)]))
         res.append(np.concatenate([y[:3] / TURN_SIGMA, y[3:6] / SHIFT_SIGMA]))
         jac.append(np.hstack([np.diag([1 / TURN_SIGMA] * 3 + [1 / SHIFT_SIGMA] * 3), np.zeros((6, k))]))
+        if self.rig.capsules is not None:
+            r, j = self.digit_terms(posed, omega)
+            res.append(r)
+            jac.append(j)
         out = (np.concatenate([np.ravel(r) for r in res]), np.vstack(jac))
         self._cache = (y.copy(), *out)
         return out
+
+    def digit_terms(self, posed, omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(residuals (P,), Jacobian (P, 6 + k)) of the digits' capsule clearances (hand model frame: the placement
+        moves both digits alike); omega (k, 3) the free angles' world axes in the hand model frame."""
+        caps = self.rig.capsules
+        assert caps is not None
+        clear, u, pa, pb = caps.clearances(posed.transforms[0])
+        rows = caps.rows(u, pa, pb, self.free, omega, posed.joints[0, self.free // 3])
+        hit = clear < 0
+        res = np.where(hit, -clear / digit_clearance.SCALE, 0.0)
+        jac = np.where(hit[:, None], -rows / digit_clearance.SCALE, 0.0)
+        return res, np.hstack([np.zeros((len(res), 6)), jac])
 
     def solve(self, rounds: int | None = None, nfev: int | None = None) -> tuple[np.ndarray, int]:
         """(variables y, evaluations) after `rounds` solves (ROUNDS) of at most `nfev` evaluations (MAX_NFEV),
