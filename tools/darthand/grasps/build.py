@@ -2,7 +2,9 @@
 model's mean shape, its mirror image on the left model, dropped fits listed with why.
 
 Approaches: APPROACHES directions around the object's axis (`approach_directions`; the knuckle line laid along
-it, so a wrap closes around a bottle, a pinch along a pen), evenly spaced. The left hand's grasp starts from the
+it, so a wrap closes around a bottle, a pinch along a pen, or turned from it by the type's `across_deg`), evenly
+spaced. A mug also gets handle grasps (grasps/aims: aims.HANDLE_TYPES closed round its handle's bar from outside),
+numbered after its body's approaches. The left hand's grasp starts from the
 right one's mirror image: the hand mirrored (x -> -x, the same anatomical angles) and the object mirrored by the
 reflection of its own frame that maps it most nearly onto itself (`object_reflection`). Where the object is
 mirror-symmetric (to SYMMETRIC) and the left model is the right one's mirror image, that mirror image is exact and
@@ -20,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from darthand.fileio import atomic_path, make_folder, write_json
+from darthand.grasps.aims import HANDLE_TYPES, Aim, handle_aim, turned
 from darthand.grasps.field import ObjectField
 from darthand.grasps.fit import GraspFit, HandRig, fit_grasp, refine
 from darthand.grasps.loader import ARRAYS, FORMAT, FORMAT_VERSION
@@ -87,17 +90,20 @@ class ObjectGrasps:
                                                  self.approaches)
         reflection, error = object_reflection(field)
         symmetric = self.mirrored_models and error < SYMMETRIC
-        for name in known:
-            g = self.taxonomy[name]
-            for k, approach in enumerate(approaches):
-                right = fit_grasp(self.rigs["right"], field, g.contacts, g.angles, approach, axis)
-                why = right.dropped or self.digits_crossing("right", right)
-                self.record(item.id, g, k, "right", right, why, fitted, dropped)
-                if "left" in self.rigs:
-                    left = self.left_fit(field, g, right, reflection, symmetric)
-                    if not symmetric:            # an exact mirror image is dropped where its original is
-                        why = left.dropped or self.digits_crossing("left", left)
-                    self.record(item.id, g, k, "left", left, why, fitted, dropped)
+        plans = [(self.taxonomy[n], k, Aim(np.zeros(3), a, turned(axis, a, self.taxonomy[n].across_deg)))
+                 for n in known for k, a in enumerate(approaches)]
+        handle = handle_aim(item.vertices, getattr(item, "category", ""))
+        if handle is not None:
+            plans += [(self.taxonomy[n], len(approaches), handle) for n in HANDLE_TYPES if n in self.taxonomy]
+        for g, k, aim in plans:
+            right = fit_grasp(self.rigs["right"], field, g.contacts, g.angles, aim.approach, aim.across, aim.target)
+            why = right.dropped or self.digits_crossing("right", right)
+            self.record(item.id, g, k, "right", right, why, fitted, dropped)
+            if "left" in self.rigs:
+                left = self.left_fit(field, g, right, reflection, symmetric)
+                if not symmetric:            # an exact mirror image is dropped where its original is
+                    why = left.dropped or self.digits_crossing("left", left)
+                self.record(item.id, g, k, "left", left, why, fitted, dropped)
         return fitted, dropped
 
     def left_fit(self, field: ObjectField, g: GraspType, right: GraspFit, reflection: np.ndarray,

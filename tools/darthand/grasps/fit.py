@@ -257,11 +257,11 @@ class GraspProblem:
 
 
 def start_transform(rig: HandRig, field_: ObjectField, contacts, opened: np.ndarray, approach: np.ndarray,
-                    across: np.ndarray) -> np.ndarray:
+                    across: np.ndarray, target: np.ndarray | None = None) -> np.ndarray:
     """(4, 4) hand model frame -> object frame: the opened hand's palm facing the object from `approach` (unit,
     object frame, pointing from the object to the hand), its knuckle line along `across` (unit, orthogonal to the
-    approach), its contact parts' centre at the object's centre, then backed off along the approach until no
-    vertex is inside the object."""
+    approach), its contact parts' centre at `target` (3,) (default the object frame's origin, its centre), then
+    backed off along the approach until no vertex is inside the object."""
     posed = rig.pose(opened)
     v, joints = posed.vertices[0], posed.joints[0]
     centre = np.concatenate([v[rig.patches[p]] for p in contacts]).mean(0)
@@ -270,7 +270,7 @@ def start_transform(rig: HandRig, field_: ObjectField, contacts, opened: np.ndar
     R = frame_between(palm, knuckles, -approach, across)
     T = np.eye(4)
     T[:3, :3] = R
-    T[:3, 3] = -R @ centre
+    T[:3, 3] = -R @ centre + (0.0 if target is None else np.asarray(target))
     placed = v @ R.T + T[:3, 3]
     for _ in range(int(0.2 / BACKOFF_STEP)):
         near = field_.in_box(placed, CLEARANCE)
@@ -295,11 +295,12 @@ def frame_between(a: np.ndarray, b: np.ndarray, a_to: np.ndarray, b_to: np.ndarr
 
 
 def fit_grasp(rig: HandRig, field_: ObjectField, contacts, preshape: np.ndarray, approach: np.ndarray,
-              across: np.ndarray) -> GraspFit:
-    """Close the pre-shape (16, 3) on the object from `approach` (see start_transform) and measure the result."""
+              across: np.ndarray, target: np.ndarray | None = None) -> GraspFit:
+    """Close the pre-shape (16, 3) on the object from `approach` at `target` (see start_transform) and measure the
+    result."""
     t0 = time.perf_counter()
     opened = preshape * OPEN
-    start = start_transform(rig, field_, contacts, opened, approach, across)
+    start = start_transform(rig, field_, contacts, opened, approach, across, target)
     problem = GraspProblem(rig, field_, contacts, preshape, opened, start)
     y, evaluations = problem.solve()
     return problem.result(y, evaluations, time.perf_counter() - t0)
