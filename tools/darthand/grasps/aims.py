@@ -4,7 +4,8 @@ A mug's handle is found from its mesh (the catalogue's mugs are one part: the ha
 axis is +z, the body a surface of revolution, the handle the vertices farther from the body's axis than its radius.
 The body's radius is half the object's narrower horizontal extent; the handle lies at the end of the wider one
 where the mesh is thinner across (a handle's width against the body's diameter). The aim is the handle's outer bar
-(the handle's vertices within BAR of its outermost reach), approached from outside, the knuckle line along the bar.
+(the handle's vertices within BAR of its outermost reach), approached from outside, the knuckle line along the bar,
+held by HANDLE_CONTACTS.
 """
 
 from __future__ import annotations
@@ -13,20 +14,26 @@ from dataclasses import dataclass
 
 import numpy as np
 
-HANDLE_TYPES = ("small_diameter", "medium_wrap")    # closed through a handle: fingers round its bar
+HANDLE_TYPES = ("small_diameter",)   # closed through a handle: fingers round its bar
+# A handle's bar is held between the palm and the curled fingers' middle phalanges, the thumb on it (the distal
+# pads, the types' own contacts, would reach through the handle onto the mug's body).
+HANDLE_CONTACTS = ("palm", "index_middle_palmar", "middle_middle_palmar", "ring_middle_palmar", "thumb_pad")
 MIN_HANDLE = 0.12   # the wider horizontal extent exceeds the narrower by this share: something sticks out
 BAR = 0.012         # m: the handle's outer bar, measured in from its outermost reach
+OUTSET = 0.008      # m: the contacts start this far out of the bar (the fingers round it, not the body)
 BODY_MARGIN = 0.002  # m beyond the body's radius a vertex is the handle's
 
 
 @dataclass(frozen=True)
 class Aim:
     """Where a grasp closes: target (3,) object frame m, the point the contact parts' centre starts at; approach
-    (3,) unit, from the object toward the hand; across (3,) unit, the knuckle line."""
+    (3,) unit, from the object toward the hand; across (3,) unit, the knuckle line; contacts: the parts closed on
+    it (None: the type's own)."""
 
     target: np.ndarray
     approach: np.ndarray
     across: np.ndarray
+    contacts: tuple[str, ...] | None = None
 
 
 def handle_aim(vertices: np.ndarray, category: str) -> Aim | None:
@@ -51,7 +58,7 @@ def handle_aim(vertices: np.ndarray, category: str) -> Aim | None:
     bar = handle[np.linalg.norm(handle[:, :2] - centre, axis=1) > out.max() - BAR]
     outward = np.zeros(3)
     outward[wide] = side
-    return Aim(bar.mean(0), outward, np.array([0.0, 0.0, 1.0]))
+    return Aim(bar.mean(0) + OUTSET * outward, outward, np.array([0.0, 0.0, 1.0]), HANDLE_CONTACTS)
 
 
 def handle_side(v: np.ndarray, wide: int) -> float:

@@ -94,6 +94,14 @@ class Capsules:
 
 
 
+def digit_of(capsules: Capsules, ids: np.ndarray) -> str | None:
+    """The FINGERS name of the first capsule of `ids` (its bone's chain), or None when ids is empty."""
+    if len(ids) == 0:
+        return None
+    bone = int(capsules.bone[int(ids[0])])
+    return next(f for f, chain in FINGER_JOINTS.items() if bone in chain)
+
+
 def skin_radii(model: HandModel, bone: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
     """(C,) median distance (m) from each bone's own vertices (its largest skinning weight) to its segment."""
     owner = np.argmax(model.weights, axis=1)

@@ -19,9 +19,10 @@ about the posed joint J_k with world angular velocity w_k moves an LBS vertex by
 slow the solve, they do not move its answer).
 
 The digits' clearances are grasps/digit_clearance's phalanx capsules (their Jacobian is derived there; the rigid
-placement does not move them). A fit leaving more than MAX_PENETRATION inside the object or a contact part farther
-than MAX_CONTACT from it is dropped, with why. Digits passing through each other are still checked after the fit by
-the build (MeshLab through model/self_crossing: the independent guard).
+placement does not move them). A fit leaving more than MAX_PENETRATION inside the object, a bone's centreline
+inside it (a finger through a thin wall: its skin is never deep), or a contact part farther than MAX_CONTACT from
+it is dropped, with why. Digits passing through each other are still checked after the fit by the build (MeshLab
+through model/self_crossing: the independent guard).
 """
 
 from __future__ import annotations
@@ -61,6 +62,7 @@ ROUNDS = 3                  # solves, each with the vertices near the object re-
 MAX_NFEV = 12
 MAX_PENETRATION = 2e-3      # m: a fit leaving more is dropped
 MAX_CONTACT = 5e-3          # m: a fit whose contact part ends farther is dropped
+BONE_SAMPLES = 6            # points per phalanx's bone tested inside the object
 
 
 @dataclass
@@ -246,7 +248,10 @@ class GraspProblem:
                    "contact_mm": {p: round(g * 1e3, 3) for p, g in zip(self.contacts, gaps)},
                    "iterations": int(evaluations), "seconds": round(seconds, 4)}
         dropped = None
-        if depth.max() > MAX_PENETRATION:
+        through = self.bone_inside(posed, M)
+        if through:
+            dropped = f"{through} through the object (its bone inside)"
+        elif depth.max() > MAX_PENETRATION:
             dropped = f"penetration {depth.max() * 1e3:.1f} mm over {MAX_PENETRATION * 1e3:g} mm"
         elif max(abs(g) for g in gaps) > MAX_CONTACT:
             worst = max(zip(gaps, self.contacts), key=lambda x: abs(x[0]))
@@ -254,6 +259,22 @@ class GraspProblem:
         aa = angles_to_axis_angle(self.rig.model, angles, self.rig.frames).reshape(-1)
         return GraspFit(angles, aa, np.linalg.inv(M), np.array(vertices, np.int64), np.array(points), figures,
                         dropped)
+
+
+    def bone_inside(self, posed, M: np.ndarray) -> str | None:
+        """The first digit (FINGERS name) whose bone centreline (the capsules' segments, BONE_SAMPLES points each)
+        lies inside the object, or None: a finger through a thin wall, which the skin's shallow depth misses."""
+        caps = self.rig.capsules
+        if caps is None:
+            return None
+        start, end = caps.segments(posed.transforms[0])
+        t = np.linspace(0.0, 1.0, BONE_SAMPLES)
+        points = (start[:, None] + t[None, :, None] * (end - start)[:, None]).reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+        near = np.flatnonzero(self.field.in_box(points, 0.0))
+        if len(near) == 0:
+            return None
+        inside = near[self.field.distance(points[near]) < 0]
+        return digit_clearance.digit_of(caps, inside // BONE_SAMPLES)
 
 
 def start_transform(rig: HandRig, field_: ObjectField, contacts, opened: np.ndarray, approach: np.ndarray,
