@@ -14,10 +14,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-HANDLE_TYPES = ("small_diameter",)   # closed through a handle: fingers round its bar
-# A handle's bar is held between the palm and the curled fingers' middle phalanges, the thumb on it (the distal
-# pads, the types' own contacts, would reach through the handle onto the mug's body).
-HANDLE_CONTACTS = ("palm", "index_middle_palmar", "middle_middle_palmar", "ring_middle_palmar", "thumb_pad")
+HANDLE_TYPES = ("medium_wrap",)     # closed through a handle (small_diameter's tighter curl puts a finger through
+                                    # the mug's wall)
+# A handle's bar is held between the palm and the index finger's middle phalanx, through the handle,
+# the thumb on it, their pads resting on the mug's body (a pad held on the surface keeps its fingertip outside the
+# thin wall: a free fingertip curls through it, where the skin's depth never shows).
+HANDLE_HOLD = ("palm", "index_middle_palmar")
+HANDLE_CONTACTS = HANDLE_HOLD + ("thumb_pad", "index_pad", "middle_pad")
 MIN_HANDLE = 0.12   # the wider horizontal extent exceeds the narrower by this share: something sticks out
 BAR = 0.012         # m: the handle's outer bar, measured in from its outermost reach
 OUTSET = 0.008      # m: the contacts start this far out of the bar (the fingers round it, not the body)

@@ -5,6 +5,7 @@
              + sum_k ((a_k - a*_k) / sigma_k)^2                                  stay near the pre-shape a*
              + |w / TURN_SIGMA|^2 + |t / SHIFT_SIGMA|^2                          and near the start placement
              + sum_pairs (max(0, -clearance) / digit_clearance.SCALE)^2          no phalanx into another digit's
+             + sum_b (max(0, BONE_CLEARANCE - d_b) / PENETRATION_SCALE)^2         no finger through a thin wall
     within     the joint limits (model/anatomy) and the rigid bounds
 
 over the hand's rigid placement relative to the object (w a rotation vector about the hand's grasp centre, t a
@@ -19,10 +20,11 @@ about the posed joint J_k with world angular velocity w_k moves an LBS vertex by
 slow the solve, they do not move its answer).
 
 The digits' clearances are grasps/digit_clearance's phalanx capsules (their Jacobian is derived there; the rigid
-placement does not move them). A fit leaving more than MAX_PENETRATION inside the object, a bone's centreline
-inside it (a finger through a thin wall: its skin is never deep), or a contact part farther than MAX_CONTACT from
-it is dropped, with why. Digits passing through each other are still checked after the fit by the build (MeshLab
-through model/self_crossing: the independent guard).
+placement does not move them); d_b is the field at points b along the capsules' bone segments (fixed in their
+bones: the rigid rows, and angle rows with a share of 1 for the bone's joint and its parents). A fit leaving more
+than MAX_PENETRATION inside the object, a bone's centreline inside it (a finger through a thin wall: its skin is
+never deep), or a contact part farther than MAX_CONTACT from it is dropped, with why. Digits passing through each
+other are still checked after the fit by the build (MeshLab through model/self_crossing: the independent guard).
 """
 
 from __future__ import annotations
@@ -62,7 +64,10 @@ ROUNDS = 3                  # solves, each with the vertices near the object re-
 MAX_NFEV = 12
 MAX_PENETRATION = 2e-3      # m: a fit leaving more is dropped
 MAX_CONTACT = 5e-3          # m: a fit whose contact part ends farther is dropped
-BONE_SAMPLES = 6            # points per phalanx's bone tested inside the object
+BONE_SAMPLES = 6            # points per phalanx's bone kept out of the object
+BONE_CLEARANCE = 1e-3       # m: a bone's centreline stays this far out of the object (3 mm: a lateral pinch
+                            # of a card cannot close, the middle finger's bone held off the card's edge)
+BONE_REACH = 0.7            # share of a segment's length sampled from its joint
 
 
 @dataclass
@@ -193,9 +198,9 @@ class GraspProblem:
         res.append(np.concatenate([y[:3] / TURN_SIGMA, y[3:6] / SHIFT_SIGMA]))
         jac.append(np.hstack([np.diag([1 / TURN_SIGMA] * 3 + [1 / SHIFT_SIGMA] * 3), np.zeros((6, k))]))
         if self.rig.capsules is not None:
-            r, j = self.digit_terms(posed, omega)
-            res.append(r)
-            jac.append(j)
+            for r, j in (self.digit_terms(posed, omega), self.bone_terms(posed, M, y, omega @ M[:3, :3].T, pivot)):
+                res.append(r)
+                jac.append(j)
         out = (np.concatenate([np.ravel(r) for r in res]), np.vstack(jac))
         self._cache = (y.copy(), *out)
         return out
@@ -211,6 +216,38 @@ class GraspProblem:
         res = np.where(hit, -clear / digit_clearance.SCALE, 0.0)
         jac = np.where(hit[:, None], -rows / digit_clearance.SCALE, 0.0)
         return res, np.hstack([np.zeros((len(res), 6)), jac])
+
+    def bone_points(self, posed) -> np.ndarray:
+        """(C x BONE_SAMPLES, 3) points along the capsules' bone segments up to BONE_REACH of their length (a distal
+        segment ends at the tip vertex, on the skin), hand model frame."""
+        assert self.rig.capsules is not None
+        start, end = self.rig.capsules.segments(posed.transforms[0])
+        t = np.linspace(0.0, BONE_REACH, BONE_SAMPLES)[None, :, None]
+        return (start[:, None] + t * (end - start)[:, None]).reshape(-1, 3)
+
+    def bone_terms(self, posed, M: np.ndarray, y: np.ndarray, omega: np.ndarray,
+                   pivot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(residuals, Jacobian (n, 6 + k)) keeping the bones' centrelines BONE_CLEARANCE out of the object (a
+        finger would otherwise close through a wall thinner than it, whose depth never shows on the skin); M the
+        placement, omega (k, 3) and pivot (k, 3) the free angles' axes and joints in the object frame."""
+        assert self.rig.capsules is not None
+        q = self.placed_points(self.bone_points(posed), M)
+        res, jac = np.zeros(len(q)), np.zeros((len(q), 6 + len(self.free)))
+        near = np.flatnonzero(self.field.in_box(q, BONE_CLEARANCE))
+        if len(near) == 0:
+            return res, jac
+        d, u, _ = self.field.query(q[near])
+        hit = d < BONE_CLEARANCE
+        at, qh, uh = near[hit], q[near][hit], u[hit]
+        moves = self.rig.capsules.ancestors[at // BONE_SAMPLES][:, self.free // 3].astype(np.float64)
+        rows = np.hstack([np.cross(qh - self.centre - y[3:6], uh), uh, angle_rows(qh, uh, moves, omega, pivot)])
+        res[at] = (BONE_CLEARANCE - d[hit]) / PENETRATION_SCALE
+        jac[at] = -rows / PENETRATION_SCALE
+        return res, jac
+
+    @staticmethod
+    def placed_points(points: np.ndarray, M: np.ndarray) -> np.ndarray:
+        return points @ M[:3, :3].T + M[:3, 3]
 
     def solve(self, rounds: int | None = None, nfev: int | None = None) -> tuple[np.ndarray, int]:
         """(variables y, evaluations) after `rounds` solves (ROUNDS) of at most `nfev` evaluations (MAX_NFEV),
@@ -267,9 +304,7 @@ class GraspProblem:
         caps = self.rig.capsules
         if caps is None:
             return None
-        start, end = caps.segments(posed.transforms[0])
-        t = np.linspace(0.0, 1.0, BONE_SAMPLES)
-        points = (start[:, None] + t[None, :, None] * (end - start)[:, None]).reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+        points = self.placed_points(self.bone_points(posed), M)
         near = np.flatnonzero(self.field.in_box(points, 0.0))
         if len(near) == 0:
             return None
