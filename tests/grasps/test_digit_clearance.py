@@ -115,3 +115,36 @@ def test_problem_jacobian_with_digit_terms_matches_central_differences(model):
         numeric[:, n] = (terms[0] - terms[1]) / (2 * h)
     act = res > 0.5
     assert np.allclose(jac[act], numeric[act], atol=2e-2 * np.abs(numeric[act]).max())
+
+
+def test_bone_terms_jacobian_matches_central_differences(model):
+    g = load_taxonomy()["small_diameter"]
+    rig = HandRig.of(model, g.contacts)
+    rod = cylinder(0.006, 0.3)                           # a rod through the curled fingers' bones
+    problem = GraspProblem(rig, ObjectField(rod.vertices, rod.faces), g.contacts, g.angles, g.angles, np.eye(4))
+    posed = rig.pose(g.angles)
+    bones = problem.bone_points(posed)
+    start = np.eye(4)
+    start[:3, 3] = -bones[len(bones) // 2 + 2] + np.array([0.0, 0.0, 0.001])
+    problem = GraspProblem(rig, problem.field, g.contacts, g.angles, g.angles, start)
+
+    def terms(y):
+        angles = problem.angles(y)
+        posed = rig.pose(angles)
+        M = problem.transform(y)
+        omega = turn_axes(rig.frames, angles, posed.world_rotations[0], model.parents, problem.free)
+        pivot = posed.joints[0, problem.free // 3] @ M[:3, :3].T + M[:3, 3]
+        return problem.bone_terms(posed, M, y, omega @ M[:3, :3].T, pivot)
+
+    y = np.full(6 + len(problem.free), 1e-3)
+    res, jac = terms(y)
+    act = res > 1.0
+    assert act.sum() >= 3
+    h = 1e-7
+    numeric = np.zeros_like(jac)
+    for n in range(len(y)):
+        up, down = y.copy(), y.copy()
+        up[n] += h
+        down[n] -= h
+        numeric[:, n] = (terms(up)[0] - terms(down)[0]) / (2 * h)
+    assert np.allclose(jac[act], numeric[act], atol=2e-2 * np.abs(numeric[act]).max())

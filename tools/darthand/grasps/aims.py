@@ -1,4 +1,5 @@
-"""Where on an object a grasp is aimed: the object's centre by default, a mug's handle for the handle grasps.
+"""Where on an object a grasp is aimed: the object's centre by default, the middle of its part named "handle" where
+it has one (a screwdriver's, a hammer's: `grip_target`), a mug's handle for the handle grasps.
 
 A mug's handle is found from its mesh (the catalogue's mugs are one part: the handle is not named): the object's
 axis is +z, the body a surface of revolution, the handle the vertices farther from the body's axis than its radius.
@@ -62,6 +63,18 @@ def handle_aim(vertices: np.ndarray, category: str) -> Aim | None:
     outward = np.zeros(3)
     outward[wide] = side
     return Aim(bar.mean(0) + OUTSET * outward, outward, np.array([0.0, 0.0, 1.0]), HANDLE_CONTACTS)
+
+
+def grip_target(item) -> np.ndarray:
+    """(3,) object frame m: the middle (bounding box centre) of the item's part named "handle", else the origin
+    (the object's centre). item: an ObjectItem (vertices, faces, face_part, parts); items without parts aim at
+    their centre."""
+    names = [p.get("name") for p in getattr(item, "parts", ())]
+    if "handle" not in names or getattr(item, "face_part", None) is None:
+        return np.zeros(3)
+    faces = np.asarray(item.faces)[np.asarray(item.face_part) == names.index("handle")]
+    v = np.asarray(item.vertices, np.float64)[np.unique(faces)]
+    return 0.5 * (v.min(0) + v.max(0))
 
 
 def handle_side(v: np.ndarray, wide: int) -> float:

@@ -3,13 +3,14 @@ model's mean shape, its mirror image on the left model, dropped fits listed with
 
 Approaches: APPROACHES directions around the object's axis (`approach_directions`; the knuckle line laid along
 it, so a wrap closes around a bottle, a pinch along a pen, or turned from it by the type's `across_deg`), evenly
-spaced. A mug also gets handle grasps (grasps/aims: aims.HANDLE_TYPES closed round its handle's bar from outside),
-numbered after its body's approaches. The left hand's grasp starts from the
-right one's mirror image: the hand mirrored (x -> -x, the same anatomical angles) and the object mirrored by the
-reflection of its own frame that maps it most nearly onto itself (`object_reflection`). Where the object is
-mirror-symmetric (to SYMMETRIC) and the left model is the right one's mirror image, that mirror image is exact and
-kept (its figures the right one's, marked `mirrored`); otherwise it is refitted on the left model with the
-object's field (a few iterations), so an object that is not mirror-symmetric is still held properly.
+spaced, aimed at the object's part named "handle" where it has one (grasps/aims.grip_target). A mug also gets
+handle grasps (grasps/aims: aims.HANDLE_TYPES closed round its handle's bar from outside), numbered after its
+body's approaches. The left hand's grasp starts from the right one's mirror image: the hand mirrored (x -> -x, the
+same anatomical angles) and the object mirrored by the reflection of its own frame that maps it most nearly onto
+itself (`object_reflection`). Where the object is mirror-symmetric (to SYMMETRIC) and the left model is the right
+one's mirror image, that mirror image is exact and kept (its figures the right one's, marked `mirrored`);
+otherwise it is refitted on the left model with the object's field (a few iterations), so an object that is not
+mirror-symmetric is still held properly.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from darthand.fileio import atomic_path, make_folder, write_json
-from darthand.grasps.aims import HANDLE_CONTACTS, HANDLE_TYPES, Aim, handle_aim, turned
+from darthand.grasps.aims import HANDLE_CONTACTS, HANDLE_TYPES, Aim, grip_target, handle_aim, turned
 from darthand.grasps.field import ObjectField
 from darthand.grasps.fit import GraspFit, HandRig, fit_grasp, refine
 from darthand.grasps.loader import ARRAYS, FORMAT, FORMAT_VERSION
@@ -90,7 +91,8 @@ class ObjectGrasps:
                                                  self.approaches)
         reflection, error = object_reflection(field)
         symmetric = self.mirrored_models and error < SYMMETRIC
-        plans = [(self.taxonomy[n], k, Aim(np.zeros(3), a, turned(axis, a, self.taxonomy[n].across_deg)))
+        grip = grip_target(item)
+        plans = [(self.taxonomy[n], k, Aim(grip, a, turned(axis, a, self.taxonomy[n].across_deg)))
                  for n in known for k, a in enumerate(approaches)]
         handle = handle_aim(item.vertices, getattr(item, "category", ""))
         if handle is not None:
