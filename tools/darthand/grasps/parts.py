@@ -47,10 +47,11 @@ def part_vertices(model: HandModel, name: str) -> np.ndarray:
         return _nonempty(np.flatnonzero(ids), name)
     finger, _, kind = name.partition("_")
     if finger in FINGERS and kind.count("_") == 1:
-        return _nonempty(side_vertices(model, finger, *kind.split("_"), normals, owner), name)
+        phalanx, _, side = kind.partition("_")
+        return _nonempty(side_vertices(model, finger, phalanx, side, normals, owner), name)
     if finger not in FINGERS or kind not in ("tip", "pad"):
         raise InputError(f"contact part {name!r}: expected palm, <finger>_tip, <finger>_pad or "
-                         "<finger>_<proximal|middle|distal>_<radial|ulnar>")
+                         "<finger>_<proximal|middle|distal>_<radial|ulnar|palmar>")
     distal = FINGER_JOINTS[finger][2]
     tip = v[model.tip_ids[FINGERS.index(finger)]]
     if kind == "tip":
