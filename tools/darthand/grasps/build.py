@@ -2,12 +2,15 @@
 model's mean shape, its mirror image on the left model, dropped fits listed with why.
 
 Approaches: APPROACHES directions around the object's axis (`approach_directions`; the knuckle line laid along
-it, so a wrap closes around a bottle, a pinch along a pen), evenly spaced. The left hand's grasp starts from the
-right one's mirror image: the hand mirrored (x -> -x, the same anatomical angles) and the object mirrored by the
-reflection of its own frame that maps it most nearly onto itself (`object_reflection`). Where the object is
-mirror-symmetric (to SYMMETRIC) and the left model is the right one's mirror image, that mirror image is exact and
-kept (its figures the right one's, marked `mirrored`); otherwise it is refitted on the left model with the
-object's field (a few iterations), so an object that is not mirror-symmetric is still held properly.
+it, so a wrap closes around a bottle, a pinch along a pen, or turned from it by the type's `across_deg`), evenly
+spaced, aimed at the object's part named "handle" where it has one (grasps/aims.grip_target). A mug also gets
+handle grasps (grasps/aims: aims.HANDLE_TYPES closed round its handle's bar from outside), numbered after its
+body's approaches. The left hand's grasp starts from the right one's mirror image: the hand mirrored (x -> -x, the
+same anatomical angles) and the object mirrored by the reflection of its own frame that maps it most nearly onto
+itself (`object_reflection`). Where the object is mirror-symmetric (to SYMMETRIC) and the left model is the right
+one's mirror image, that mirror image is exact and kept (its figures the right one's, marked `mirrored`);
+otherwise it is refitted on the left model with the object's field (a few iterations), so an object that is not
+mirror-symmetric is still held properly.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from darthand.fileio import atomic_path, make_folder, write_json
+from darthand.grasps.aims import HANDLE_CONTACTS, HANDLE_TYPES, Aim, grip_target, handle_aim, turned
 from darthand.grasps.field import ObjectField
 from darthand.grasps.fit import GraspFit, HandRig, fit_grasp, refine
 from darthand.grasps.loader import ARRAYS, FORMAT, FORMAT_VERSION
@@ -70,7 +74,7 @@ class ObjectGrasps:
 
     def __init__(self, models: dict[str, HandModel], taxonomy: dict[str, GraspType], approaches: int = APPROACHES):
         self.approaches = approaches
-        parts = sorted({p for t in taxonomy.values() for p in t.contacts})
+        parts = sorted({p for t in taxonomy.values() for p in t.contacts} | set(HANDLE_CONTACTS))
         self.taxonomy = taxonomy
         self.rigs = {side: HandRig.of(m, parts) for side, m in models.items()}
         self.crossing = {side: SelfCrossing(m) for side, m in models.items()}
@@ -87,20 +91,25 @@ class ObjectGrasps:
                                                  self.approaches)
         reflection, error = object_reflection(field)
         symmetric = self.mirrored_models and error < SYMMETRIC
-        for name in known:
-            g = self.taxonomy[name]
-            for k, approach in enumerate(approaches):
-                right = fit_grasp(self.rigs["right"], field, g.contacts, g.angles, approach, axis)
-                why = right.dropped or self.digits_crossing("right", right)
-                self.record(item.id, g, k, "right", right, why, fitted, dropped)
-                if "left" in self.rigs:
-                    left = self.left_fit(field, g, right, reflection, symmetric)
-                    if not symmetric:            # an exact mirror image is dropped where its original is
-                        why = left.dropped or self.digits_crossing("left", left)
-                    self.record(item.id, g, k, "left", left, why, fitted, dropped)
+        grip = grip_target(item)
+        plans = [(self.taxonomy[n], k, Aim(grip, a, turned(axis, a, self.taxonomy[n].across_deg)))
+                 for n in known for k, a in enumerate(approaches)]
+        handle = handle_aim(item.vertices, getattr(item, "category", ""))
+        if handle is not None:
+            plans += [(self.taxonomy[n], len(approaches), handle) for n in HANDLE_TYPES if n in self.taxonomy]
+        for g, k, aim in plans:
+            contacts = aim.contacts or g.contacts
+            right = fit_grasp(self.rigs["right"], field, contacts, g.angles, aim.approach, aim.across, aim.target)
+            why = right.dropped or self.digits_crossing("right", right)
+            self.record(item.id, g, k, contacts, "right", right, why, fitted, dropped)
+            if "left" in self.rigs:
+                left = self.left_fit(field, g, contacts, right, reflection, symmetric)
+                if not symmetric:            # an exact mirror image is dropped where its original is
+                    why = left.dropped or self.digits_crossing("left", left)
+                self.record(item.id, g, k, contacts, "left", left, why, fitted, dropped)
         return fitted, dropped
 
-    def left_fit(self, field: ObjectField, g: GraspType, right: GraspFit, reflection: np.ndarray,
+    def left_fit(self, field: ObjectField, g: GraspType, contacts, right: GraspFit, reflection: np.ndarray,
                  symmetric: bool) -> GraspFit:
         """The left hand's grasp: the right one's mirror image, refitted unless the object and the models are
         mirror images of themselves and of each other (then the mirror image is exact: same figures)."""
@@ -109,18 +118,18 @@ class ObjectGrasps:
             pose = angles_to_axis_angle(self.rigs["left"].model, right.angles, self.rigs["left"].frames).ravel()
             return GraspFit(right.angles, pose, placement, right.contact_vertices,
                             right.contact_points @ reflection.T, {**right.figures, "mirrored": True}, right.dropped)
-        return refine(self.rigs["left"], field, g.contacts, g.angles, right.angles, mirrored_start(right, reflection),
+        return refine(self.rigs["left"], field, contacts, g.angles, right.angles, mirrored_start(right, reflection),
                       LEFT_ROUNDS, LEFT_NFEV)
 
     @staticmethod
-    def record(object_id: str, g: GraspType, k: int, side: str, fit: GraspFit, why: str | None, fitted: list,
-               dropped: list) -> None:
-        """Add the fit to `fitted`, or to `dropped` with why."""
+    def record(object_id: str, g: GraspType, k: int, contacts, side: str, fit: GraspFit, why: str | None,
+               fitted: list, dropped: list) -> None:
+        """Add the fit (its contact parts `contacts`) to `fitted`, or to `dropped` with why."""
         head = {"object": object_id, "type": g.name, "side": side, "approach": k}
         if why:
             dropped.append({**head, "why": why})
         else:
-            fitted.append({**head, "id": f"{object_id}/{g.name}/{k}", "contact_parts": list(g.contacts),
+            fitted.append({**head, "id": f"{object_id}/{g.name}/{k}", "contact_parts": list(contacts),
                            "figures": fit.figures, "fit": fit})
 
     def digits_crossing(self, side: str, fit: GraspFit) -> str | None:

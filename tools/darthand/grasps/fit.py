@@ -4,6 +4,8 @@
              + sum_i (max(0, CLEARANCE - d_i) / PENETRATION_SCALE)^2             no hand vertex inside the object
              + sum_k ((a_k - a*_k) / sigma_k)^2                                  stay near the pre-shape a*
              + |w / TURN_SIGMA|^2 + |t / SHIFT_SIGMA|^2                          and near the start placement
+             + sum_pairs (max(0, -clearance) / digit_clearance.SCALE)^2          no phalanx into another digit's
+             + sum_b (max(0, BONE_CLEARANCE - d_b) / PENETRATION_SCALE)^2         no finger through a thin wall
     within     the joint limits (model/anatomy) and the rigid bounds
 
 over the hand's rigid placement relative to the object (w a rotation vector about the hand's grasp centre, t a
@@ -17,8 +19,12 @@ about the posed joint J_k with world angular velocity w_k moves an LBS vertex by
 (pair_digits.angle_rows; the correctives' small share left out, the rotation vector's own curvature too: both only
 slow the solve, they do not move its answer).
 
-A fit leaving more than MAX_PENETRATION inside the object or a contact part farther than MAX_CONTACT from it is
-dropped, with why. Digits passing through each other are checked after the fit (model/self_crossing) by the build.
+The digits' clearances are grasps/digit_clearance's phalanx capsules (their Jacobian is derived there; the rigid
+placement does not move them); d_b is the field at points b along the capsules' bone segments (fixed in their
+bones: the rigid rows, and angle rows with a share of 1 for the bone's joint and its parents). A fit leaving more
+than MAX_PENETRATION inside the object, a bone's centreline inside it (a finger through a thin wall: its skin is
+never deep), or a contact part farther than MAX_CONTACT from it is dropped, with why. Digits passing through each
+other are still checked after the fit by the build (MeshLab through model/self_crossing: the independent guard).
 """
 
 from __future__ import annotations
@@ -30,6 +36,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
+from darthand.grasps import digit_clearance
+from darthand.grasps.digit_clearance import Capsules
 from darthand.grasps.field import SPACING, ObjectField, merged
 from darthand.grasps.parts import contact_patches
 from darthand.model.anatomy import angles_to_axis_angle, joint_frames, limits_radians, palm_normal
@@ -56,22 +64,28 @@ ROUNDS = 3                  # solves, each with the vertices near the object re-
 MAX_NFEV = 12
 MAX_PENETRATION = 2e-3      # m: a fit leaving more is dropped
 MAX_CONTACT = 5e-3          # m: a fit whose contact part ends farther is dropped
+BONE_SAMPLES = 6            # points per phalanx's bone kept out of the object
+BONE_CLEARANCE = 1e-3       # m: a bone's centreline stays this far out of the object (3 mm: a lateral pinch
+                            # of a card cannot close, the middle finger's bone held off the card's edge)
+BONE_REACH = 0.7            # share of a segment's length sampled from its joint
 
 
 @dataclass
 class HandRig:
-    """What a model's fits share, computed once: its joint frames (16, 3, 3), contact patches {part: vertex ids}
-    and skinning share (V, 16, ) of each joint's subtree."""
+    """What a model's fits share, computed once: its joint frames (16, 3, 3), contact patches {part: vertex ids},
+    skinning share (V, 16, ) of each joint's subtree, and its phalanx capsules (None: digits free to cross)."""
 
     model: HandModel
     frames: np.ndarray
     patches: dict
     subtree_share: np.ndarray
+    capsules: Capsules | None = None
 
     @classmethod
-    def of(cls, model: HandModel, parts) -> "HandRig":
+    def of(cls, model: HandModel, parts, clearance: bool = True) -> "HandRig":
         share = model.weights @ subtree_mask(model.parents)
-        return cls(model, joint_frames(model), contact_patches(model, parts), share)
+        capsules = Capsules.of(model) if clearance else None
+        return cls(model, joint_frames(model), contact_patches(model, parts), share, capsules)
 
     def pose(self, angles: np.ndarray):
         """forward's result for angles (16, 3) radians (the root left at the identity)."""
@@ -183,9 +197,57 @@ class GraspProblem:
         jac.append(np.hstack([np.zeros((k, 6)), np.diag(1.0 / self.sigma)]))
         res.append(np.concatenate([y[:3] / TURN_SIGMA, y[3:6] / SHIFT_SIGMA]))
         jac.append(np.hstack([np.diag([1 / TURN_SIGMA] * 3 + [1 / SHIFT_SIGMA] * 3), np.zeros((6, k))]))
+        if self.rig.capsules is not None:
+            for r, j in (self.digit_terms(posed, omega), self.bone_terms(posed, M, y, omega @ M[:3, :3].T, pivot)):
+                res.append(r)
+                jac.append(j)
         out = (np.concatenate([np.ravel(r) for r in res]), np.vstack(jac))
         self._cache = (y.copy(), *out)
         return out
+
+    def digit_terms(self, posed, omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(residuals (P,), Jacobian (P, 6 + k)) of the digits' capsule clearances (hand model frame: the placement
+        moves both digits alike); omega (k, 3) the free angles' world axes in the hand model frame."""
+        caps = self.rig.capsules
+        assert caps is not None
+        clear, u, pa, pb = caps.clearances(posed.transforms[0])
+        rows = caps.rows(u, pa, pb, self.free, omega, posed.joints[0, self.free // 3])
+        hit = clear < 0
+        res = np.where(hit, -clear / digit_clearance.SCALE, 0.0)
+        jac = np.where(hit[:, None], -rows / digit_clearance.SCALE, 0.0)
+        return res, np.hstack([np.zeros((len(res), 6)), jac])
+
+    def bone_points(self, posed) -> np.ndarray:
+        """(C x BONE_SAMPLES, 3) points along the capsules' bone segments up to BONE_REACH of their length (a distal
+        segment ends at the tip vertex, on the skin), hand model frame."""
+        assert self.rig.capsules is not None
+        start, end = self.rig.capsules.segments(posed.transforms[0])
+        t = np.linspace(0.0, BONE_REACH, BONE_SAMPLES)[None, :, None]
+        return (start[:, None] + t * (end - start)[:, None]).reshape(-1, 3)
+
+    def bone_terms(self, posed, M: np.ndarray, y: np.ndarray, omega: np.ndarray,
+                   pivot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(residuals, Jacobian (n, 6 + k)) keeping the bones' centrelines BONE_CLEARANCE out of the object (a
+        finger would otherwise close through a wall thinner than it, whose depth never shows on the skin); M the
+        placement, omega (k, 3) and pivot (k, 3) the free angles' axes and joints in the object frame."""
+        assert self.rig.capsules is not None
+        q = self.placed_points(self.bone_points(posed), M)
+        res, jac = np.zeros(len(q)), np.zeros((len(q), 6 + len(self.free)))
+        near = np.flatnonzero(self.field.in_box(q, BONE_CLEARANCE))
+        if len(near) == 0:
+            return res, jac
+        d, u, _ = self.field.query(q[near])
+        hit = d < BONE_CLEARANCE
+        at, qh, uh = near[hit], q[near][hit], u[hit]
+        moves = self.rig.capsules.ancestors[at // BONE_SAMPLES][:, self.free // 3].astype(np.float64)
+        rows = np.hstack([np.cross(qh - self.centre - y[3:6], uh), uh, angle_rows(qh, uh, moves, omega, pivot)])
+        res[at] = (BONE_CLEARANCE - d[hit]) / PENETRATION_SCALE
+        jac[at] = -rows / PENETRATION_SCALE
+        return res, jac
+
+    @staticmethod
+    def placed_points(points: np.ndarray, M: np.ndarray) -> np.ndarray:
+        return points @ M[:3, :3].T + M[:3, 3]
 
     def solve(self, rounds: int | None = None, nfev: int | None = None) -> tuple[np.ndarray, int]:
         """(variables y, evaluations) after `rounds` solves (ROUNDS) of at most `nfev` evaluations (MAX_NFEV),
@@ -223,7 +285,10 @@ class GraspProblem:
                    "contact_mm": {p: round(g * 1e3, 3) for p, g in zip(self.contacts, gaps)},
                    "iterations": int(evaluations), "seconds": round(seconds, 4)}
         dropped = None
-        if depth.max() > MAX_PENETRATION:
+        through = self.bone_inside(posed, M)
+        if through:
+            dropped = f"{through} through the object (its bone inside)"
+        elif depth.max() > MAX_PENETRATION:
             dropped = f"penetration {depth.max() * 1e3:.1f} mm over {MAX_PENETRATION * 1e3:g} mm"
         elif max(abs(g) for g in gaps) > MAX_CONTACT:
             worst = max(zip(gaps, self.contacts), key=lambda x: abs(x[0]))
@@ -233,12 +298,26 @@ class GraspProblem:
                         dropped)
 
 
+    def bone_inside(self, posed, M: np.ndarray) -> str | None:
+        """The first digit (FINGERS name) whose bone centreline (the capsules' segments, BONE_SAMPLES points each)
+        lies inside the object, or None: a finger through a thin wall, which the skin's shallow depth misses."""
+        caps = self.rig.capsules
+        if caps is None:
+            return None
+        points = self.placed_points(self.bone_points(posed), M)
+        near = np.flatnonzero(self.field.in_box(points, 0.0))
+        if len(near) == 0:
+            return None
+        inside = near[self.field.distance(points[near]) < 0]
+        return digit_clearance.digit_of(caps, inside // BONE_SAMPLES)
+
+
 def start_transform(rig: HandRig, field_: ObjectField, contacts, opened: np.ndarray, approach: np.ndarray,
-                    across: np.ndarray) -> np.ndarray:
+                    across: np.ndarray, target: np.ndarray | None = None) -> np.ndarray:
     """(4, 4) hand model frame -> object frame: the opened hand's palm facing the object from `approach` (unit,
     object frame, pointing from the object to the hand), its knuckle line along `across` (unit, orthogonal to the
-    approach), its contact parts' centre at the object's centre, then backed off along the approach until no
-    vertex is inside the object."""
+    approach), its contact parts' centre at `target` (3,) (default the object frame's origin, its centre), then
+    backed off along the approach until no vertex is inside the object."""
     posed = rig.pose(opened)
     v, joints = posed.vertices[0], posed.joints[0]
     centre = np.concatenate([v[rig.patches[p]] for p in contacts]).mean(0)
@@ -247,7 +326,7 @@ def start_transform(rig: HandRig, field_: ObjectField, contacts, opened: np.ndar
     R = frame_between(palm, knuckles, -approach, across)
     T = np.eye(4)
     T[:3, :3] = R
-    T[:3, 3] = -R @ centre
+    T[:3, 3] = -R @ centre + (0.0 if target is None else np.asarray(target))
     placed = v @ R.T + T[:3, 3]
     for _ in range(int(0.2 / BACKOFF_STEP)):
         near = field_.in_box(placed, CLEARANCE)
@@ -272,11 +351,12 @@ def frame_between(a: np.ndarray, b: np.ndarray, a_to: np.ndarray, b_to: np.ndarr
 
 
 def fit_grasp(rig: HandRig, field_: ObjectField, contacts, preshape: np.ndarray, approach: np.ndarray,
-              across: np.ndarray) -> GraspFit:
-    """Close the pre-shape (16, 3) on the object from `approach` (see start_transform) and measure the result."""
+              across: np.ndarray, target: np.ndarray | None = None) -> GraspFit:
+    """Close the pre-shape (16, 3) on the object from `approach` at `target` (see start_transform) and measure the
+    result."""
     t0 = time.perf_counter()
     opened = preshape * OPEN
-    start = start_transform(rig, field_, contacts, opened, approach, across)
+    start = start_transform(rig, field_, contacts, opened, approach, across, target)
     problem = GraspProblem(rig, field_, contacts, preshape, opened, start)
     y, evaluations = problem.solve()
     return problem.result(y, evaluations, time.perf_counter() - t0)

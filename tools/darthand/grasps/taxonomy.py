@@ -23,7 +23,8 @@ OPPOSITIONS = ("palm", "pad", "side")
 @dataclass(frozen=True)
 class GraspType:
     """One grasp type: name (snake_case of Feix's), feix number (1..33), kind, opposition, contact part names
-    (see grasps/parts.py), the object categories it suits, and its pre-shape `angles` (16, 3) radians."""
+    (see grasps/parts.py), the object categories it suits, its pre-shape `angles` (16, 3) radians, and
+    `across_deg`: its knuckle line's angle to the object's axis, degrees (0: along it, a wrap round a handle)."""
 
     name: str
     feix: int
@@ -32,6 +33,7 @@ class GraspType:
     contacts: tuple[str, ...]
     categories: tuple[str, ...]
     angles: np.ndarray
+    across_deg: float = 0.0
 
 
 def load_taxonomy(path: str | Path | None = None) -> dict[str, GraspType]:
@@ -50,7 +52,8 @@ def load_taxonomy(path: str | Path | None = None) -> dict[str, GraspType]:
             raise InputError(f"{where}: grasp.type or grasp.opposition is not one of {KINDS} / {OPPOSITIONS}")
         out[pose["name"]] = GraspType(pose["name"], int(g["feix"]), g["type"], g["opposition"],
                                       tuple(g["contacts"]), tuple(g["categories"]),
-                                      joints_to_angles(pose.get("joints", {}), where))
+                                      joints_to_angles(pose.get("joints", {}), where),
+                                      float(g.get("across_deg", 0.0)))
     return out
 
 
