@@ -734,7 +734,8 @@ def _add_layout_options(p) -> None:
     p.add_argument("--left", default="mirror", choices=LEFT_MODES,
                    help="freihand: left-hand frames mirrored into right hands (image, mask, K, points and MANO "
                         "parameters; the default: FreiHAND is right-handed) or skipped; hamer: left hands written "
-                        "as left ones (HaMeR's loader mirrors them) or skipped")
+                        "as left ones (HaMeR's loader mirrors them) or skipped; ho3d: left-hand object frames "
+                        "mirrored into right ones (meta 'flipped' true) or skipped")
     p.add_argument("--allow-non-mano", action="store_true",
                    help="freihand: also for a hand that is not a MANO model (the open hand): training_mano.json's "
                         "shape slots are then 0 and MANO posed from its rows is not the rendered hand (README.md in "
