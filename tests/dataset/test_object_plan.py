@@ -62,6 +62,8 @@ def test_object_frames_are_planned_refitted_and_checked(sources, catalogues):
         hand, obj = job["bodies"]
         assert obj["object"] == "ball_01" and hand["side"] == "right" and job["grasp"]["id"].startswith("ball_01/")
         assert job["sample"]["object"]["category"] == "ball"
+        assert job["sample"]["pose"] == {"mode": "grasp", "grasp": job["grasp"]["id"]}   # the pose drawn is the grasp's
+        assert hand["pose"] != plain.job(job["index"])["pose"]
         assert np.asarray(obj["placement"]).shape == (4, 4)
     again = Planner(spec, right, {"objects": catalogues[0], "grasps": catalogues[1]})
     assert [again.job(j["index"]) for j in held[::-1]] == held[::-1]      # frame i depends on (seed, i) only

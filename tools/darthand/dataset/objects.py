@@ -116,7 +116,8 @@ def object_frame(seed: int, index: int, share: float) -> bool:
 
 def object_job(job: dict, draw: ObjectDraw) -> dict:
     """A one-hand job made the frame's object job: the `bodies` form (the hand at the identity with the grasp's pose,
-    the object at its placement) with the grasp record; the sampling record says which object and grasp."""
+    the object at its placement) with the grasp record; the sampling record says which object and grasp, and that
+    the hand's pose is the grasp's ('pose': {'mode': 'grasp', 'grasp': id}, in place of the pose sampler's draw)."""
     hand = {"kind": "hand", "side": job["side"], "pose": np.round(draw.pose, 9).tolist(), "texture": job["texture"],
             "skin_tone_offset": job["skin_tone_offset"], "accessory": job["accessory"]}
     if "betas" in job:
@@ -125,8 +126,10 @@ def object_job(job: dict, draw: ObjectDraw) -> dict:
     out = {k: v for k, v in job.items() if k not in ("side", "pose", "texture", "skin_tone_offset", "accessory",
                                                       "betas")}
     out["gesture"] = None
-    out["sample"] = {**job["sample"], "object": {"id": draw.object_id, "category": draw.category,
-                                                 "grasp": draw.grasp.type, "redraws": draw.redraws}}
+    # The hand's pose is the grasp's: the sampling record says so instead of carrying the pose sampler's unused draw.
+    out["sample"] = {**job["sample"], "pose": {"mode": "grasp", "grasp": draw.grasp.id},
+                     "object": {"id": draw.object_id, "category": draw.category, "grasp": draw.grasp.type,
+                                "redraws": draw.redraws}}
     return {**out, "bodies": [hand, held], "grasp": {"type": draw.grasp.type, "id": draw.grasp.id,
                                                      "figures": draw.figures}}
 
