@@ -156,8 +156,8 @@ _WORKER: dict = {}     # this process's fit state: the model and its part surfac
 def _prepare_worker(model: HandModel, parent: int | None = None) -> None:
     """Build this process's fit state for `model` (in a worker process: also its Ctrl-C and parent handling)."""
     # MeshLab and the proximity queries load only for a fit (the sampler reads fits without them).
-    from darthand.model.intersections import face_parts
-    from darthand.model.proximity import PartSurfaces
+    from darthand.model.intersections import face_parts   # MeshLab: only for a fit
+    from darthand.model.proximity import PartSurfaces     # the fit's distances: only for a fit
 
     if parent is not None:
         init_worker(parent)
