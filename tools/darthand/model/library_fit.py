@@ -138,7 +138,9 @@ def fit_code_digest() -> str:
 def _fit_poses(model: HandModel, poses: list[LibraryPose], jobs: int):
     """(name, entry without its key) of each pose fitted to `model`, in order; in `jobs` processes (spawned, each
     building the model's part surfaces once) when jobs > 1 and there is more than one pose."""
-    if jobs <= 1 or len(poses) <= 1:
+    if not poses:
+        return
+    if jobs <= 1 or len(poses) == 1:
         _prepare_worker(model)
         yield from (_fit_one(p) for p in poses)
         return
