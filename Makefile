@@ -97,11 +97,15 @@ build/template/gestures.json build/template/gestures.png &: build/model/right.np
 	@$(STEP) gestures -- $(DH) template gestures build/model/right.npz --out-dir build/template
 
 # The pose library fitted to the model (model/library_fit) and drawn on it, a sheet per group: a step of its own that
-# nothing else in ASSETS waits for, so its ~150 single-threaded fits (about 2.3 min of CPU) overlap the textures and
-# packages; one fit serves both sides (the left model is the right one's mirror, the angles mirror-symmetric).
+# nothing else in ASSETS waits for, so its 165 fits (about 4 min of CPU, in two processes) overlap the textures and
+# packages; one fit serves both sides (the left model is the right one's mirror, the angles mirror-symmetric). A
+# pose whose fit inputs did not change since the record it replaces keeps its fit (editing model code the fit does
+# not run refits nothing). LIBRARY_POSES="name name ...": fit only these (the whole-pipeline test's economy; a
+# dataset drawing from the library needs all of them).
 LIBRARY := $(wildcard assets_src/poses/library/*.json)
 build/poses/right.json: build/model/right.npz $(POSES) $(LIBRARY) $(call src,model) $(STAMP)
-	@$(STEP) pose-library -- $(DH) model fit-library build/model/right.npz --out $@
+	@$(STEP) pose-library -- $(DH) model fit-library build/model/right.npz --out $@ --jobs 2 \
+	    $(if $(LIBRARY_POSES),--poses $(LIBRARY_POSES))
 	@$(STEP) pose-library-sheets -- $(DH) model library-sheet build/model/right.npz --fit $@ --out-dir build/poses
 
 # The shape space: extreme shapes at rest and through every gesture (fitted to each shape, as `model build` fits them
@@ -203,14 +207,15 @@ usdz: build/usd/right/right.usda
 # ------------------------------------------------------------------ tests and benchmarks
 # Two pytest workers, each with single-threaded BLAS: threaded BLAS in both workers oversubscribes two cores.
 # --dist loadgroup keeps the tests marked xdist_group (the Ray cluster's) on one worker, with one cluster.
+# --durations=25: the slowest tests, in CI's log.
 TEST_ENV := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
 # Lint first: ruff and mypy (settings in pyproject.toml) take seconds, the tests minutes.
 test: lint $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP) chromium
-	@$(TEST_ENV) $(PY) -m pytest -q -m "not slow" -n 2 --dist loadgroup $(PYTEST_ARGS)
+	@$(TEST_ENV) $(PY) -m pytest -q -m "not slow" -n 2 --dist loadgroup --durations=25 $(PYTEST_ARGS)
 
 test-all: lint $(STAMP) $(NODE_STAMP) $(BLENDER_STAMP) chromium
-	@$(TEST_ENV) $(PY) -m pytest -q -n 2 --dist loadgroup $(PYTEST_ARGS)
+	@$(TEST_ENV) $(PY) -m pytest -q -n 2 --dist loadgroup --durations=25 $(PYTEST_ARGS)
 
 # Zero findings: ruff over the package, the tests, the benchmarks and testkit; mypy over the package (about a minute
 # on the first run, a few seconds from its cache, .mypy_cache/).

@@ -88,7 +88,7 @@ def test_ho3d_layout_reads_back_by_its_conventions(object_dataset, hand, tmp_pat
     root, catalog = object_dataset
     out = tmp_path / "ho3d"
     assert main(["dataset", "export", str(root), "--format", "ho3d", "--out", str(out)]) == 0
-    assert (out / "train.txt").read_text() == "DH/000000\n"                 # the left hand and the bare hand out
+    assert (out / "train.txt").read_text() == "DH/000000\nDH/000002\n"      # the bare hand out, the left mirrored
     assert (out / "evaluation.txt").read_text() == "DH/000001\n"
     for folder, frame in (("train", 0), ("evaluation", 1)):
         labels = read_json(root / "labels" / f"{frame:06d}.json", "labels")
@@ -138,3 +138,61 @@ def test_webdataset_carries_the_object(object_dataset, tmp_path):
         assert np.array_equal(mesh, np.load(root / "object_meshes" / f"{key}.npy"))
         assert "instances.png" in seen[key]
     assert "object.npy" not in seen["000003"]
+
+
+def test_ho3d_writes_a_left_hand_mirrored_by_its_conventions(object_dataset, hand, tmp_path):
+    """A left hand's object frame in HO-3D's layout is its mirror image, read by HO-3D's conventions: the written
+    joints projected with camMat onto the labels' 2-D keypoints flipped, MANO's RIGHT model posed with the written
+    parameters into the written joints, the object's corners posed and projected onto the flipped object mask; the
+    images are the frame's flipped. --left skip leaves it out."""
+    root, _ = object_dataset
+    out = tmp_path / "ho3d"
+    assert main(["dataset", "export", str(root), "--format", "ho3d", "--out", str(out)]) == 0
+    labels = read_json(root / "labels" / "000002.json", "labels")
+    hand_labels = labels["hands"][0]
+    assert hand_labels["side"] == "left"
+    width = labels["image_size"][0]
+    meta = pickle.loads((out / "train" / "DH" / "meta" / "000002.pkl").read_bytes())
+    assert meta["flipped"] is True
+    assert "flipped" not in pickle.loads((out / "train" / "DH" / "meta" / "000000.pkl").read_bytes())
+    cam = np.asarray(meta["camMat"], np.float64)
+    uvw = np.asarray(meta["handJoints3D"], np.float64) @ C.T @ cam.T
+    seen = np.asarray(hand_labels["keypoints_2d"]) - 0.5                 # pixel centres at integers
+    flipped = np.column_stack([width - 1 - seen[:, 0], seen[:, 1]])
+    expected = np.empty((21, 2))
+    expected[KEYPOINT_ORDERS[labels["keypoint_order"]]] = flipped
+    assert np.abs(uvw[:, :2] / uvw[:, 2:] - expected).max() < 1e-3
+    # the RIGHT model posed with the written parameters is the written hand
+    posed = forward(hand, meta["handPose"].astype(np.float64), meta["handBeta"].astype(np.float64),
+                    trans=meta["handTrans"].astype(np.float64))
+    assert np.abs(posed.keypoints[0] - meta["handJoints3D"]).max() < 1e-5
+    # ... whose vertices, taken back to the OpenCV frame and mirrored, are the frame's left hand's mesh
+    mesh = np.load(root / "meshes" / "000002.npy").reshape(-1, 3)
+    back = np.asarray(posed.vertices[0]) @ C.T * [-1.0, 1.0, 1.0]
+    assert np.abs(back - mesh[:len(back)]).max() < 1e-5
+    # the object: its corners at rest posed by objRot, objTrans, projected onto the flipped object mask
+    R = np.asarray(axis_angle_to_matrix(meta["objRot"].reshape(3).astype(np.float64))).reshape(3, 3)
+    assert np.linalg.det(R) > 0.999
+    corners = meta["objCorners3DRest"] @ R.T + meta["objTrans"]
+    assert np.abs(corners - meta["objCorners3D"]).max() < 1e-5
+    uvw = corners @ C.T @ cam.T
+    uv = uvw[:, :2] / uvw[:, 2:]
+    seg = read_png(out / "train" / "DH" / "seg" / "000002.png")
+    rows, cols = np.nonzero(seg[..., 1] == 255)
+    assert len(rows) > 20
+    assert cols.min() >= uv[:, 0].min() - 1 and cols.max() <= uv[:, 0].max() + 1
+    assert rows.min() >= uv[:, 1].min() - 1 and rows.max() <= uv[:, 1].max() + 1
+    verts = np.asarray(meta["objVertices3D"], np.float64) @ C.T @ cam.T
+    px = verts[:, :2] / verts[:, 2:]
+    assert abs(np.median(px[:, 0]) - np.median(cols)) < 3 and abs(np.median(px[:, 1]) - np.median(rows)) < 3
+    # the images: the frame's, flipped left-right
+    instances = read_png(root / "instances" / "000002.png")[..., 0][:, ::-1]
+    assert ((seg[..., 1] == 255) == (instances == 3)).all() and ((seg[..., 2] == 255) == (instances == 1)).all()
+    image = read_png(root / "images" / "000002.png")
+    rgb = read_png(out / "train" / "DH" / "rgb" / "000002.png")
+    alpha = image[..., 3:4].astype(np.float64) / 255
+    assert (np.abs(rgb.astype(int) - np.round(image[..., :3] * alpha)[:, ::-1]) <= 1).all()
+
+    skipped = tmp_path / "ho3d_skip"
+    assert main(["dataset", "export", str(root), "--format", "ho3d", "--out", str(skipped), "--left", "skip"]) == 0
+    assert (skipped / "train.txt").read_text() == "DH/000000\n"

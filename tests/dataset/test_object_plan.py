@@ -48,9 +48,9 @@ def catalogues(package, tmp_path_factory):
 def test_object_frames_are_planned_refitted_and_checked(sources, catalogues):
     opened, _ = sources
     right = {"right": opened["right"]}
-    spec = {"seed": 3, "sides": ["right"], "objects": 0.5}
+    spec = {"seed": 3, "sides": ["right"], "objects": 0.5, "accessory_share": 1.0}       # every hand a ring
     planner = Planner(spec, right, {"objects": catalogues[0], "grasps": catalogues[1]})
-    plain = Planner({"seed": 3, "sides": ["right"]}, right)
+    plain = Planner({"seed": 3, "sides": ["right"], "accessory_share": 1.0}, right)
     jobs = list(planner.jobs(0, FRAMES))
     held = [j for j in jobs if "bodies" in j]
     assert 3 <= len(held) <= FRAMES - 3
@@ -58,10 +58,15 @@ def test_object_frames_are_planned_refitted_and_checked(sources, catalogues):
         assert Scene.from_job(job).to_job() == job
         if "bodies" not in job:
             assert job == plain.job(job["index"])             # a frame without an object draws as before
+            assert job["accessory"] == "ring_test"
             continue
         hand, obj = job["bodies"]
         assert obj["object"] == "ball_01" and hand["side"] == "right" and job["grasp"]["id"].startswith("ball_01/")
         assert job["sample"]["object"]["category"] == "ball"
+        assert job["sample"]["pose"] == {"mode": "grasp", "grasp": job["grasp"]["id"]}   # the pose drawn is the grasp's
+        assert hand["accessory"] == "none" and job["sample"]["accessory"] == "none"     # a ring is left off
+        assert job["sample"]["object"]["accessory_left_off"] == "ring"
+        assert hand["pose"] != plain.job(job["index"])["pose"]
         assert np.asarray(obj["placement"]).shape == (4, 4)
     again = Planner(spec, right, {"objects": catalogues[0], "grasps": catalogues[1]})
     assert [again.job(j["index"]) for j in held[::-1]] == held[::-1]      # frame i depends on (seed, i) only

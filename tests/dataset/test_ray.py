@@ -250,14 +250,30 @@ def test_truth_maps_come_back_from_a_node_as_a_local_run_writes_them(package, he
     assert got == _local(args, tmp_path / "local")
 
 
-def test_two_hand_frames_come_back_from_a_node_as_a_local_run_writes_them(package, head, tmp_path):
-    """A two-hand jobs file (tests/dataset/two_hand_jobs.json) through Ray with --ray-files ship: the node opens both
-    sides and returns each frame's instance map with its other files, every byte a local run's."""
-    args = _args(package, "--jobs", str(Path(__file__).with_name("two_hand_jobs.json")))
+def test_two_hand_and_object_frames_come_back_from_a_node_as_a_local_run_writes_them(package, head, tmp_path):
+    """A two-hand jobs file (tests/dataset/two_hand_jobs.json) and a frame of a hand holding an object through Ray
+    with --ray-files ship: the node opens both sides, gets the object catalogue through Ray, and returns each frame's
+    instance map (and the object frame's object mesh) with its other files, every byte a local run's."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "render"))
+    from object_catalog import write_catalog
+
+    doc = json.loads(Path(__file__).with_name("two_hand_jobs.json").read_text())
+    held = {"index": len(doc["frames"]), "split": "train",
+            "bodies": [{"kind": "hand", "side": "right", "pose": "fist"},
+                       {"kind": "object", "object": "bottle_01",      # beside the fist (test_object_frames.py)
+                        "placement": [[1, 0, 0, -0.05], [0, 1, 0, -0.08], [0, 0, 1, 0.05], [0, 0, 0, 1]]}]}
+    jobs = tmp_path / "jobs.json"
+    jobs.write_text(json.dumps({**doc, "frames": doc["frames"] + [held]}))
+    catalog = write_catalog(tmp_path / "objects")
+    args = _args(package, "--jobs", str(jobs), "--objects-catalog", str(catalog))
     done = _cli(head, [*args, "--ray", head.address, "--ray-files", "ship", "--out", str(tmp_path / "ray")])
     assert done.returncode == 0, done.stderr
     got = files_of(tmp_path / "ray")
-    assert sum(name.startswith("instances/") for name in got) == 3
+    assert sum(name.startswith("instances/") for name in got) == 3 + 1          # the two-hand frames', the object's
+    assert f"object_meshes/{held['index']:06d}.npy" in got
+    shipped = {Path(p).name for p in json.loads((tmp_path / "ray" / "dataset.json").read_text())["runner"][
+        "shipped"]["paths"]}
+    assert {"bottle_01.npz", "ball_01.npz"} <= shipped                  # the object catalogue came through Ray
     assert got == _local(args, tmp_path / "local")
 
 

@@ -489,3 +489,57 @@ def test_blender_python_follows_the_environment_variable(monkeypatch, tmp_path):
     fake.write_text("")
     monkeypatch.setenv("DARTHAND_BLENDER_PYTHON", str(fake))
     assert blender_python() == fake
+
+
+def _textured_box(folder: Path):
+    """A box (object_catalog's size) whose one part shows a red and blue checker image through planar UVs."""
+    from dataclasses import replace
+
+    from object_catalog import toy_items
+
+    from darthand.render.image import write_png
+
+    box = next(i for i in toy_items() if i.id == "box_01")
+    checker = np.zeros((32, 32, 3), np.uint8)
+    on = (np.add.outer(np.arange(32) // 8, np.arange(32) // 8) % 2).astype(bool)
+    checker[on], checker[~on] = (230, 30, 30), (30, 30, 230)
+    folder.mkdir(parents=True, exist_ok=True)
+    write_png(folder / "checker.png", checker)
+    v = box.vertices
+    uvs = ((v[:, [0, 2]] - v[:, [0, 2]].min(0)) / np.ptp(v[:, [0, 2]], 0)).astype(np.float32)
+    parts = ({**box.parts[0], "base_color": [1.0, 1.0, 1.0]},)
+    return replace(box, parts=parts, uvs=uvs, faces_uv=box.faces.copy(), base_color_png=folder / "checker.png")
+
+
+@needs_bpy
+def test_an_object_frame_draws_the_object_with_its_texture(hand, texture_files, worker, tmp_path):
+    """A hand holding a textured object up to the camera, 64 x 64 at 4 samples: Cycles' coverage against the fast
+    renderer's hand and object coverage (IoU > 0.97, centroids within 0.5 px), the labels the fast renderer's (but the
+    engine), and the object's pixels show its texture's two colours."""
+    from darthand.render.assets import HandAssets
+    from darthand.render.objects import ObjectLibrary
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    source = HandAssets(hand, {texture_files.id: texture_files}, texture_files.id, {}, "open+wrist")
+    fast = Renderer(source, 1, objects=ObjectLibrary([_textured_box(tmp_path)]))
+    place = np.eye(4)
+    place[:3, 3] = (-0.02, -0.09, 0.0)
+    job = {"bodies": [{"kind": "hand", "pose": "flat"}, {"kind": "object", "object": "box_01",
+                                                        "placement": place.tolist()}], "camera": "palmar"}
+    scene = Scene.from_job(job)
+    frame, image = CyclesRenderer(fast, samples=4, worker=worker).render_scene_image(scene, width=64, height=64)
+    reference = Renderer(source, 1, objects=fast.objects).render_scene(scene, width=64, height=64)
+    drawn = reference.rgba[..., 3].astype(np.float64) / 255          # hand and object (alpha: the hand's mask)
+    iou, shift = mask_agreement(drawn, image.alpha)
+    assert iou > 0.97 and shift < 0.5, (iou, shift)
+    assert {k: v for k, v in frame.labels.items() if k != "render"} == \
+        {k: v for k, v in reference.labels.items() if k != "render"}
+    assert frame.labels["objects"][0]["id"] == "box_01"
+    hand_alone = Renderer(source, 1).render_scene(Scene.from_job({"pose": "flat", "camera": {
+        "K": frame.labels["K"], "R": frame.labels["camera"]["R"], "t": frame.labels["camera"]["t"], "width": 64,
+        "height": 64}}), width=64, height=64)
+    held = (drawn > 0.99) & (image.alpha > 0.99) & (hand_alone.alpha < 0.01)
+    assert held.sum() > 30, held.sum()
+    colour = image.premult[held] / image.alpha[held][:, None]
+    red, blue = colour[:, 0] > 2 * colour[:, 2], colour[:, 2] > 2 * colour[:, 0]
+    assert red.sum() > 5 and blue.sum() > 5, (red.sum(), blue.sum())       # the checker, not one flat colour

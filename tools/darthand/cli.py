@@ -226,6 +226,12 @@ def _add_model_commands(sub) -> None:
                                           "record datasets read (build/poses/right.json)")
     p.add_argument("model", metavar="MODEL", help=model_help)
     p.add_argument("--out", required=True, metavar="OUT.json", help="the fit record")
+    p.add_argument("--jobs", type=number(int, 1, 256), default=1, metavar="N", help="fit in N processes (default 1)")
+    p.add_argument("--poses", nargs="+", default=None, metavar="NAME",
+                   help="fit only these library poses (default all; datasets need all of them)")
+    p.add_argument("--no-reuse", action="store_true",
+                   help="fit every pose again (default: a pose whose fit inputs are unchanged since the record at "
+                        "--out was written keeps its fit)")
     p.set_defaults(run=commands.fit_library)
 
     p = g.add_parser("library-sheet", help="draw the pose library on a model: a contact sheet per group")
@@ -729,7 +735,8 @@ def _add_layout_options(p) -> None:
     p.add_argument("--left", default="mirror", choices=LEFT_MODES,
                    help="freihand: left-hand frames mirrored into right hands (image, mask, K, points and MANO "
                         "parameters; the default: FreiHAND is right-handed) or skipped; hamer: left hands written "
-                        "as left ones (HaMeR's loader mirrors them) or skipped")
+                        "as left ones (HaMeR's loader mirrors them) or skipped; ho3d: left-hand object frames "
+                        "mirrored into right ones (meta 'flipped' true) or skipped")
     p.add_argument("--allow-non-mano", action="store_true",
                    help="freihand: also for a hand that is not a MANO model (the open hand): training_mano.json's "
                         "shape slots are then 0 and MANO posed from its rows is not the rendered hand (README.md in "

@@ -11,8 +11,17 @@ what hand-object training code (HO-3D v2's readers, and the many that follow its
     OUT/train.txt, OUT/evaluation.txt one '<SEQ>/<id>' a line
 
 SEQ is SEQUENCE; id is the frame's zero-padded index. Frames are darthand's train and val splits in train/, its test
-split in evaluation/; frames without an object, two-hand frames and (HO-3D being right-handed, its MANO is
-MANO_RIGHT) left-hand frames are left out and counted.
+split in evaluation/; frames without an object and two-hand frames are left out and counted.
+
+HO-3D is right-handed (its MANO is MANO_RIGHT). A left-hand frame is written mirrored (`left="mirror"`, the
+default; `"skip"` leaves it out and counts it), as left-hand data is commonly given to right-handed code: rgb, seg
+and depth flipped left-right, camMat's principal point mirrored (cx -> W - 1 - cx, pixel centres at integers), every
+3-D point x -> -x in the camera frame, so the hand is the right hand that is the left one's mirror image (MANO_RIGHT
+posed from the written parameters: each joint's axis-angle (x, y, z) -> (x, -y, -z), the global rotation too,
+translation mirrored, betas kept; darthand's left model is its right one mirrored) and the object is its mirror
+image: objRot, objTrans pose the object's rest frame mirrored (objCorners3DRest and objVertices3D are the mirrored
+ones; a catalogue mesh is mirrored, x -> -x in its own frame, before objRot, objTrans place it). Such a frame's meta
+has `flipped` True; an unmirrored frame's has no `flipped` key.
 
 meta/<id>.pkl, HO-3D's conventions: every 3-D quantity in the OpenGL camera frame (x right, y up, z toward the viewer:
 X_gl = COORD_CHANGE @ X_opencv, COORD_CHANGE = diag(1, -1, -1)), metres:
@@ -44,6 +53,7 @@ from darthand.dataset.run import rendered_dataset
 from darthand.errors import InputError
 from darthand.fileio import make_folder, read_json, write_bytes
 from darthand.model.layout import KEYPOINT_ORDERS
+from darthand.model.mirror import mirror_points, mirror_pose
 from darthand.model.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from darthand.render.image import read_png, write_png
 
@@ -53,37 +63,46 @@ COORD_CHANGE = np.diag([1.0, -1.0, -1.0])
 DEPTH_SCALE = 0.00012498664727900177          # HO-3D's metres per depth code
 MANO_VERTICES = 778
 BETAS = 10
+LEFT_MODES = ("mirror", "skip")
+MIRROR = np.diag([-1.0, 1.0, 1.0])             # the camera frame's left-right mirror (either frame: commutes with C)
 
 
-def write_ho3d(dataset, out=None) -> Path:
-    """Write HO-3D's layout of a rendered dataset folder's object frames into `out` (default DATASET/ho3d)."""
+def write_ho3d(dataset, out=None, *, left: str = "mirror") -> Path:
+    """Write HO-3D's layout of a rendered dataset folder's object frames into `out` (default DATASET/ho3d); left:
+    "mirror" writes a left hand's frame mirrored into a right hand's, "skip" leaves it out (module docstring)."""
+    if left not in LEFT_MODES:
+        raise InputError(f"--left: {left!r} is not one of {', '.join(LEFT_MODES)}")
     root = Path(dataset)
     doc, frames = rendered_dataset(root)
     has_depth = "depth" in (doc.get("maps") or ())
     out = Path(out) if out is not None else root / "ho3d"
     lists: dict = {name: [] for name in set(FOLDERS.values())}
-    counts = {"written": 0, "no_object": 0, "two_hands": 0, "left": 0, "no_split": 0}
+    counts = {"written": 0, "mirrored": 0, "no_object": 0, "two_hands": 0, "left": 0, "no_split": 0}
     for frame in frames:
         names = frame_names(frame["index"], tuple(doc.get("maps") or ()), instances=True, objects=True)
         folder = FOLDERS.get(frame["split"])
         labels = read_json(root / names["labels"], "labels") if folder else None
         why = _left_out(labels)
-        if why:
+        flip = why == "left" and left == "mirror"
+        if why and not flip:
             counts[why] += 1
             continue
         assert labels is not None and folder is not None
         frame_id = f"{frame['index']:06d}"
         base = out / folder / SEQUENCE
-        write_frame_files(root, names, labels, base, frame_id, has_depth)
+        write_frame_files(root, names, labels, base, frame_id, has_depth, flip)
+        counts["mirrored"] += flip
         lists[folder].append(f"{SEQUENCE}/{frame_id}")
         counts["written"] += 1
     if not counts["written"]:
-        raise InputError(f"{root}: no frame of a right hand holding an object to write in HO-3D's layout")
+        raise InputError(f"{root}: no frame of a {'right ' if left == 'skip' else ''}hand holding an object to "
+                         "write in HO-3D's layout")
     make_folder(out)
     for folder, rows in lists.items():
         write_bytes(out / f"{folder}.txt", "".join(f"{row}\n" for row in rows).encode())
-    print(f"[dataset] ho3d: {counts['written']} object frames written; left out: " + ", ".join(
-        f"{n} {k.replace('_', ' ')}" for k, n in counts.items() if k != "written" and n))
+    mirrored = f" ({counts['mirrored']} left hands mirrored)" if counts["mirrored"] else ""
+    print(f"[dataset] ho3d: {counts['written']} object frames written{mirrored}; left out: " + ", ".join(
+        f"{n} {k.replace('_', ' ')}" for k, n in counts.items() if k not in ("written", "mirrored") and n))
     return out
 
 
@@ -99,24 +118,78 @@ def _left_out(labels: dict | None) -> str | None:
     return None if hands[0]["side"] == "right" else "left"
 
 
-def write_frame_files(root: Path, names: dict, labels: dict, base: Path, frame_id: str, has_depth: bool) -> None:
-    """One frame's rgb, seg, depth (when there is one) and meta files under `base` (OUT/<folder>/<SEQ>)."""
+def write_frame_files(root: Path, names: dict, labels: dict, base: Path, frame_id: str, has_depth: bool,
+                      flip: bool = False) -> None:
+    """One frame's rgb, seg, depth (when there is one) and meta files under `base` (OUT/<folder>/<SEQ>); flip: the
+    frame mirrored left-right (a left hand written as a right one, module docstring)."""
+    if flip:
+        labels = mirrored_labels(labels)
     rgba = read_png(root / names["image"])
     alpha = rgba[..., 3:4].astype(np.float64) / 255
     rgb = np.round(rgba[..., :3] * alpha).astype(np.uint8)
-    _write(base / "rgb" / f"{frame_id}.png", rgb)
+    _write(base / "rgb" / f"{frame_id}.png", rgb[:, ::-1] if flip else rgb)
     instances = read_png(root / names["instances"])[..., 0]
+    instances = instances[:, ::-1] if flip else instances
     seg = np.zeros(instances.shape + (3,), np.uint8)
     seg[..., 2] = np.where(instances == 1, 255, 0)
     seg[..., 1] = np.where(instances == labels["objects"][0]["instance"], 255, 0)
     _write(base / "seg" / f"{frame_id}.png", seg)
     if has_depth:
-        _write(base / "depth" / f"{frame_id}.png", depth_code(_depth_metres(root / names["depth"])))
+        code = depth_code(_depth_metres(root / names["depth"]))
+        _write(base / "depth" / f"{frame_id}.png", code[:, ::-1] if flip else code)
     object_mesh = root / names[OBJECT_MESHES]
-    meta = ho3d_meta(labels, np.load(object_mesh) if object_mesh.is_file() else None)
+    mesh = np.load(object_mesh) if object_mesh.is_file() else None
+    meta = ho3d_meta(labels, mirror_points(mesh) if flip and mesh is not None else mesh)
+    if flip:
+        meta["flipped"] = True
     path = base / "meta" / f"{frame_id}.pkl"
     path.parent.mkdir(parents=True, exist_ok=True)
     write_bytes(path, pickle.dumps(meta, protocol=2))
+
+
+def mirrored_labels(labels: dict) -> dict:
+    """The labels ho3d_meta reads of a frame mirrored left-right (x -> -x in the camera frame; pixel column
+    u -> W - u, darthand's pixel-corner origin): its hand the right hand that is the left one's mirror image, its
+    object the object's mirror image (rotation conjugated by the mirror, its rest frame mirrored)."""
+    width = float(labels["image_size"][0])
+    K = np.array(labels["K"], np.float64)
+    K[0, 2], K[0, 1] = width - K[0, 2], -K[0, 1]
+    out = {**labels, "K": K.tolist(), "objects": [_mirror_object(o, width) for o in labels["objects"]]}
+    if "hands" in labels:
+        out["hands"] = [_mirror_hand(h, width) for h in labels["hands"]]
+        return out
+    return out | _mirror_hand(labels, width)
+
+
+def _mirror_hand(hand: dict, width: float) -> dict:
+    """A hand's labels (side, MANO parameters, 3-D joints and keypoints, 2-D keypoints) mirrored left-right."""
+    mano = dict(hand["mano"])
+    mano["global_orient"] = mirror_pose(mano["global_orient"]).tolist()
+    mano["hand_pose"] = mirror_pose(mano["hand_pose"]).tolist()
+    mano["trans"] = mirror_points(np.asarray(mano["trans"], np.float64)).tolist()
+    out = {**hand, "side": "right" if hand["side"] == "left" else "left", "mano": mano}
+    for key in ("joints_3d", "keypoints_3d"):
+        out[key] = mirror_points(np.asarray(hand[key], np.float64)).tolist()
+    if "keypoints_2d" in hand:
+        out["keypoints_2d"] = _mirror_pixels(hand["keypoints_2d"], width)
+    return out
+
+
+def _mirror_object(held: dict, width: float) -> dict:
+    """A held object's pose, corners (3-D and 2-D) mirrored left-right: R -> M R M, t -> M t (M = MIRROR)."""
+    R, t = np.asarray(held["pose"]["R"], np.float64), np.asarray(held["pose"]["t"], np.float64)
+    out = {**held, "pose": {**held["pose"], "R": (MIRROR @ R @ MIRROR).tolist(), "t": (MIRROR @ t).tolist()},
+           "corners_3d": mirror_points(np.asarray(held["corners_3d"], np.float64)).tolist()}
+    if "corners_2d" in held:
+        out["corners_2d"] = _mirror_pixels(held["corners_2d"], width)
+    return out
+
+
+def _mirror_pixels(points, width: float) -> list:
+    """(N, 2) pixel positions (pixel-corner origin) of the image flipped left-right: u -> W - u."""
+    p = np.array(points, np.float64)
+    p[:, 0] = width - p[:, 0]
+    return p.tolist()
 
 
 def _write(path: Path, pixels: np.ndarray) -> None:

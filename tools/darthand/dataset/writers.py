@@ -48,7 +48,7 @@ def _interhand(dataset, out, *, left: str = "mirror", allow_non_mano: bool = Fal
 
 
 def _ho3d(dataset, out, *, left: str = "mirror", allow_non_mano: bool = False) -> Path:
-    return write_ho3d(dataset, out)
+    return write_ho3d(dataset, out, left=left)
 
 
 FORMATS: dict[str, Writer] = {"freihand": _freihand, "webdataset": _webdataset, "hamer": _hamer, "coco": _coco,

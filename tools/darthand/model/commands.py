@@ -134,25 +134,28 @@ def parse_betas(text: str | None) -> np.ndarray | None:
 
 def fit_library(args) -> int:
     """`model fit-library`: the pose library fitted to a model, written as a fit record (model/library_fit)."""
-    from darthand.model.library_fit import fit_library as fit, write_fit   # the fit loads MeshLab
+    from darthand.model.library_fit import earlier_fit, fit_library as fit, select_poses, write_fit   # MeshLab
 
     model = load_model(args.model)
-    record = fit(model)
+    previous = None if args.no_reuse else earlier_fit(args.out)
+    record = fit(model, select_poses(args.poses), jobs=args.jobs, previous=previous)
     write_fit(args.out, record)
     status = [p["status"] for p in record["poses"].values()]
     fits = ", ".join(f"{status.count(s)} {s}" for s in ("kept", "fitted", "unresolved") if s in status)
+    reused = f", {record['reused']} of them unchanged since the last fit" if record["reused"] else ""
     print(f"{args.out}: {len(status)} library poses fitted to {model.meta.get('source', args.model)} in "
-          f"{record['seconds']:.0f} s ({fits})")
+          f"{record['seconds']:.0f} s ({fits}{reused})")
     return 0
 
 
 def library_sheet(args) -> int:
     """`model library-sheet`: the pose library drawn on a model, one contact sheet per group."""
-    from darthand.model.library_fit import model_library
+    from darthand.model.library_fit import fitted_poses, model_library
     from darthand.model.library_sheet import library_sheets
 
     model = load_model(args.model)
-    library = model_library(model, fit=args.fit, beside=args.model)
+    poses = fitted_poses(model, fit=args.fit, beside=args.model)
+    library = model_library(model, fit=args.fit, poses=poses, beside=args.model)
     for path in library_sheets(model, library, args.out_dir):
         print(path)
     return 0

@@ -6,6 +6,12 @@ touch) and returns a record (FIT_FORMAT) that `make assets` writes to build/pose
 beside the model's (the model build, and everything after it, does not wait for ~140 fits). The left model is the
 right one's mirror and anatomical angles are mirror-symmetric, so that one fit serves both sides (`model_digest`).
 
+A fit is cheap to repeat: each pose's entry carries `key`, the fingerprint of everything its fit depends on (the
+model's digest, the pose's authored angles and contacts, the fit's settings and the source of the modules that fit
+it), and `fit_library(..., previous=record)` takes the entry of an earlier record whose key matches instead of
+fitting again (`make assets` passes the record it is replacing, so editing one library pose, or any model code
+the fit does not run, refits only what changed); the poses left to fit run in `jobs` processes.
+
 `model_library(model)` is the library on a model: the fitted angles when a fit of this very model is found (the
 record names the model's geometry digest; found beside the model file, build/poses/right.json for
 build/model/<side>.npz, or named), else the authored angles, as a model without a gesture record gets the authored
@@ -15,8 +21,11 @@ is the one datasets use.
 
 from __future__ import annotations
 
+import concurrent.futures as cf
 import hashlib
 import json
+import multiprocessing
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,10 +40,14 @@ from darthand.model.gestures import angles_to_joints, joints_to_angles
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import NUM_JOINTS
 from darthand.model.pose_library import LibraryPose, library_poses
+from darthand.processes import deaf_to_ctrl_c, init_worker
 
 FIT_FORMAT = "darthand-fitted-pose-library"
 FIT_VERSION = 1
 FIT_FOLDER = "poses"            # build/poses/right.json beside build/model/right.npz
+# The modules whose code decides a fit's result (a pose's `key` covers their source: editing one refits).
+FIT_MODULES = ("anatomy", "forward", "gesture_fit", "gestures", "hand_model", "intersections", "layout",
+               "library_fit", "proximity", "topology")
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,34 +83,133 @@ def model_digest(model: HandModel) -> str:
 # ------------------------------------------------------------------------------------------------ fit
 
 
-def fit_library(model: HandModel, poses: list[LibraryPose] | None = None, progress=None) -> dict:
+def fit_library(model: HandModel, poses: list[LibraryPose] | None = None, progress=None, jobs: int = 1,
+                previous: dict | None = None) -> dict:
     """The record of the library (default: all of it) fitted to `model`: per pose its fitted angles ('joints', the
     pose files' layout), status ('kept', 'fitted', 'unresolved'), what changed (degrees), the digit pairs still
-    crossing and the seconds it took. progress: called with (done, total) after each pose."""
-    # MeshLab and the proximity queries load only for a fit (the sampler reads fits without them).
-    from darthand.model.gesture_fit import CLEARANCE, CONTACT_GAP, MAX_CHANGE_DEG, ROUNDS, fit_gesture
-    from darthand.model.intersections import face_parts   # MeshLab: only for a fit
-    from darthand.model.proximity import PartSurfaces     # the fit's distances: only for a fit
+    crossing, the seconds it took and its `key` (pose_key). An entry of `previous` (an earlier record) with the same
+    key is taken as it is; the other poses are fitted in `jobs` processes. progress: called with (done, total)
+    after each pose."""
+    from darthand.model.gesture_fit import CLEARANCE, CONTACT_GAP, MAX_CHANGE_DEG, ROUNDS   # with the fit's imports
 
     poses = library_poses() if poses is None else poses
-    surfaces, frames, face_part = PartSurfaces(model), joint_frames(model), face_parts(model)
-    out = {}
     start = time.perf_counter()
-    for k, pose in enumerate(poses):
-        t0 = time.perf_counter()
-        with threadpool_limits(limits=1, user_api="blas"):   # small products: threaded BLAS only spin-waits
-            r = fit_gesture(model, surfaces, frames, pose.name, pose.angles, list(pose.contacts), face_part)
-        out[pose.name] = {"joints": angles_to_joints(r.angles), "status": r.status, "changed_deg": r.changed,
-                          "max_change_deg": round(max(map(abs, r.changed.values()), default=0.0), 3),
-                          "crossing": r.crossing, "seconds": round(time.perf_counter() - t0, 3)}
+    keys = {p.name: pose_key(model, p) for p in poses}
+    reused = {p.name: (previous or {}).get("poses", {}).get(p.name) for p in poses}
+    out = {p.name: reused[p.name] for p in poses
+           if isinstance(reused[p.name], dict) and reused[p.name].get("key") == keys[p.name]}
+    todo = [p for p in poses if p.name not in out]
+    for k, (name, entry) in enumerate(_fit_poses(model, todo, jobs)):
+        out[name] = entry | {"key": keys[name]}
         if progress is not None:
-            progress(k + 1, len(poses))
+            progress(len(poses) - len(todo) + k + 1, len(poses))
     return {"format": FIT_FORMAT, "version": FIT_VERSION, "model": {"side": model.side,
                                                                      "digest": model_digest(model),
                                                                      "source": str(model.meta.get("source", ""))},
             "settings": {"clearance_mm": CLEARANCE * 1e3, "contact_gap_mm": CONTACT_GAP * 1e3, "rounds": ROUNDS,
                          "max_change_deg": MAX_CHANGE_DEG},
-            "seconds": round(time.perf_counter() - start, 2), "poses": out}
+            "seconds": round(time.perf_counter() - start, 2), "reused": len(poses) - len(todo),
+            "poses": {p.name: out[p.name] for p in poses}}
+
+
+def pose_key(model: HandModel, pose: LibraryPose) -> str:
+    """sha256 (hex, 16 characters) of what one pose's fit depends on: the model's digest, the pose's authored angles
+    (radians, float64) and contacts, FIT_VERSION and the source of the FIT_MODULES."""
+    h = hashlib.sha256(f"{FIT_VERSION} {model_digest(model)} {fit_code_digest()}".encode())
+    h.update(np.ascontiguousarray(pose.angles, np.float64).tobytes())
+    h.update(json.dumps(sorted(sorted(c) for c in pose.contacts)).encode())
+    return h.hexdigest()[:16]
+
+
+_CODE_DIGEST: list[str] = []
+
+
+def fit_code_digest() -> str:
+    """sha256 (hex) of the FIT_MODULES' source files, read once per process."""
+    if not _CODE_DIGEST:
+        folder = Path(__file__).resolve().parent
+        h = hashlib.sha256()
+        for name in FIT_MODULES:
+            h.update((folder / f"{name}.py").read_bytes())
+        _CODE_DIGEST.append(h.hexdigest())
+    return _CODE_DIGEST[0]
+
+
+def _fit_poses(model: HandModel, poses: list[LibraryPose], jobs: int):
+    """(name, entry without its key) of each pose fitted to `model`, in order; in `jobs` processes (spawned, each
+    building the model's part surfaces once) when jobs > 1 and there is more than one pose."""
+    if not poses:
+        return
+    if jobs <= 1 or len(poses) == 1:
+        _prepare_worker(model)
+        yield from (_fit_one(p) for p in poses)
+        return
+    ctx = multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(max_workers=min(jobs, len(poses)), mp_context=ctx, initializer=_prepare_worker,
+                                initargs=(model, os.getpid())) as pool:
+        with deaf_to_ctrl_c():
+            futures = [pool.submit(_fit_one, p) for p in poses]
+        yield from (f.result() for f in futures)
+
+
+_WORKER: dict = {}     # this process's fit state: the model and its part surfaces, joint frames and face parts
+
+
+def _prepare_worker(model: HandModel, parent: int | None = None) -> None:
+    """Build this process's fit state for `model` (in a worker process: also its Ctrl-C and parent handling)."""
+    # MeshLab and the proximity queries load only for a fit (the sampler reads fits without them).
+    from darthand.model.intersections import face_parts   # MeshLab: only for a fit
+    from darthand.model.proximity import PartSurfaces     # the fit's distances: only for a fit
+
+    if parent is not None:
+        init_worker(parent)
+    if _WORKER.get("digest") != model_digest(model):
+        _WORKER.update(digest=model_digest(model), model=model, surfaces=PartSurfaces(model),
+                       frames=joint_frames(model), face_part=face_parts(model))
+
+
+def _fit_one(pose: LibraryPose) -> tuple[str, dict]:
+    """(name, record entry) of one pose fitted to this process's model (_prepare_worker)."""
+    from darthand.model.gesture_fit import fit_gesture   # MeshLab: only for a fit
+
+    w = _WORKER
+    t0 = time.perf_counter()
+    with threadpool_limits(limits=1, user_api="blas"):   # small products: threaded BLAS only spin-waits
+        r = fit_gesture(w["model"], w["surfaces"], w["frames"], pose.name, pose.angles, list(pose.contacts),
+                        w["face_part"])
+    return pose.name, {"joints": angles_to_joints(r.angles), "status": r.status, "changed_deg": r.changed,
+                       "max_change_deg": round(max(map(abs, r.changed.values()), default=0.0), 3),
+                       "crossing": r.crossing, "seconds": round(time.perf_counter() - t0, 3)}
+
+
+def earlier_fit(path: str | Path) -> dict | None:
+    """The fit record at `path` to take unchanged poses from, or None when there is none or it is unreadable (a
+    damaged record is fitted again, not an error)."""
+    try:
+        return read_fit(path) if Path(path).is_file() else None
+    except (InputError, OSError):
+        return None
+
+
+def select_poses(names: list[str] | None) -> list[LibraryPose]:
+    """The library poses named `names` (library order), or all of them for None; InputError naming an unknown one."""
+    poses = library_poses()
+    if names is None:
+        return poses
+    known = {p.name for p in poses}
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise InputError(f"--poses: no library pose {unknown[0]!r} (assets_src/poses/library)")
+    return [p for p in poses if p.name in set(names)]
+
+
+def fitted_poses(model: HandModel, fit: str | Path | None = None,
+                 beside: str | Path | None = None) -> list[LibraryPose]:
+    """The library poses the fit of `model` found as model_library finds it holds (a fit of part of the library,
+    `make assets LIBRARY_POSES=...`, holds some); all of them when there is no fit."""
+    _, record = _fit_record(model, fit, beside)
+    poses = library_poses()
+    return poses if record is None else [p for p in poses if p.name in record["poses"]]
 
 
 def write_fit(path: str | Path, record: dict) -> None:

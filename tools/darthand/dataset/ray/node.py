@@ -38,7 +38,7 @@ class NodeWorker:
     def __init__(self, specs: dict, settings: dict, labels: dict, token: str, nonce: str, probe: str, files: str,
                  open_files: dict):
         self.specs, self.labels, self.files_mode, self.open_files = specs, labels, files, open_files
-        self.out_dir = settings["out_dir"]
+        self.out_dir, self.objects_catalog = settings["out_dir"], settings.get("objects")
         root = Path(tempfile.gettempdir()) / CACHE / token
         self.files = NodeFiles(files, root / "files")
         self.sees_output = files != "ship" and _read(probe) == nonce
@@ -86,6 +86,7 @@ class NodeWorker:
             default = next(iter(self.specs))
             for side in dict.fromkeys(side for job, _ in items for side in job_sides(job, default)):
                 self._open(side)
+            self._locate_objects()
             result = local.render_chunk([(self.files.node_job(job), digest) for job, digest in items])
             if not self.sees_output:
                 result["files"] = self._take_staged(result["frames"])
@@ -117,6 +118,12 @@ class NodeWorker:
         if label is not None:
             source.relabel(label)
         self.opened.add(side)
+
+    def _locate_objects(self) -> None:
+        """The object catalogue in the worker's settings as this node reads it (its shipped copy, once shipped)."""
+        catalog = self.objects_catalog
+        if catalog and os.path.isabs(catalog):
+            self.state["settings"]["objects"] = self.files.node_path(catalog, f"catalog:{catalog}")
 
     def _take_staged(self, frames: list) -> list:
         """[(name, bytes)] of the staged frames' files in the order a local worker writes them (labels last),

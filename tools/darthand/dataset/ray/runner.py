@@ -85,7 +85,8 @@ class RayRunner(Runner):
 
     def _start(self, sources, processes) -> None:
         """The probe file, the actors (one per cluster CPU unless `processes`), their hellos."""
-        self.inputs = InputFiles(self.specs_given, sources or {})
+        self.inputs = InputFiles(self.specs_given, sources or {}, self.settings.get("objects"))
+        self.settings["objects"] = self.inputs.objects_catalog     # absolute: a node finds its shipped copy by it
         nonce = os.urandom(8).hex()
         self._probe.write_text(nonce)
         self.digest = code_digest()

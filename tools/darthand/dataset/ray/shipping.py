@@ -2,19 +2,23 @@
     auto    per node, as found (default): a node that sees the driver's input files (same path, size and
             modification time: a shared filesystem) reads them there; one that does not gets them through Ray's
             object store, only those its chunks need (the model, the catalogue files, the textures, accessories,
-            background images and pose/lights/camera files its jobs use), kept in a node-local cache for the run.
+            background images and pose/lights/camera files its jobs use, the object catalogue once a job holds an
+            object), kept in a node-local cache for the run.
             A node that sees the output folder (a probe file the driver wrote there) writes its frames into it;
             one that does not renders into node-local staging and returns the encoded files to the driver, which
             writes them atomically (labels last, as a local worker does).
     shared  every node must see everything: a node that does not is a one-line error before anything renders.
     ship    every node gets its inputs through Ray and returns its frames (no shared filesystem assumed).
 
-A group of files (a catalogue and the textures or accessories it lists, a USD package folder, a background folder)
+A group of files (a catalogue and the textures, accessories or object meshes it lists, a USD package folder, a
+background folder)
 is either seen or shipped as a whole on a node, so paths inside it stay relative to it. Groups are named by kind
 and root: 'file:<path>', 'dir:<folder>', 'catalog:<catalog.json>'.
 
 InputFiles is the driver's side (what a chunk needs, with fingerprints), NodeFiles a node's (where it reads each
-file: seen, or shipped into its cache).
+file: seen, or shipped into its cache). The grasp catalogue stays on the driver: the plan refits a grasp into the
+job (the hand's pose, the object's placement), so a node renders an object frame from its job and the object
+catalogue alone.
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ import os
 from dataclasses import replace
 from pathlib import Path
 
-from darthand.dataset.jobs import job_hands
+from darthand.dataset.jobs import job_hands, job_objects
 from darthand.errors import InputError
 from darthand.fileio import write_bytes
 from darthand.render.assets import default_catalogues
@@ -50,13 +54,15 @@ class InputFiles:
 
     specs: {side: SourceSpec} with every path made absolute; open_files: {side: [(path, group)]} what opening a
     side's source reads; per chunk, `needed(chunk)` adds what its jobs use (textures, accessories, backgrounds,
-    pose/lights/camera files)."""
+    pose/lights/camera files, the object catalogue `objects` (its catalog.json, absolute, as `objects_catalog`
+    names it) for a job holding an object)."""
 
-    def __init__(self, specs: dict, sources: dict):
+    def __init__(self, specs: dict, sources: dict, objects: str | None = None):
         self.sources = sources
         self.specs, self.open_files, self.labels = {}, {}, {}
         self._catalogue_files: dict = {}
         self._fingerprints: dict = {}
+        self.objects_catalog, self.object_files = object_catalogue_files(objects)
         for side, spec in specs.items():
             package = Path("build") / "model" / f"{spec.package}.npz" if spec.package in ("right", "left") \
                 else Path(spec.package)
@@ -117,6 +123,9 @@ class InputFiles:
         for job, _ in items:
             for path, group in self._job_files(job):
                 add(path, group)
+            if job_objects(job):
+                for path, group in self.object_files:
+                    add(path, group)
         return out
 
     def _job_files(self, job: dict):
@@ -157,6 +166,27 @@ class InputFiles:
         pose = hand.get("pose")
         if isinstance(pose, str) and os.path.isabs(pose):     # a file (names are gestures)
             yield pose, f"file:{pose}"
+
+
+def object_catalogue_files(path) -> tuple[str | None, list]:
+    """(catalog.json's absolute path, [(file, group)] of the catalogue and the meshes and textures it lists) of an
+    object catalogue (its file or folder); (path, []) when there is none there (a run without object frames, or
+    one the loader will refuse with its own error)."""
+    if not path:
+        return path, []
+    cat = Path(path) / "catalog.json" if Path(path).is_dir() else Path(path)
+    if not cat.is_file():
+        return str(path), []
+    cat = Path(absolute(cat))
+    group = f"catalog:{cat}"
+    files = [(cat, group)]
+    try:
+        for entry in json.loads(cat.read_text()).get("objects", []):
+            files += [(cat.parent / name, group) for name in (entry["files"].get("npz"),
+                                                              entry["files"].get("base_color")) if name]
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        pass                                       # the loader reports a broken catalogue
+    return str(cat), files
 
 
 class NodeFiles:
