@@ -149,6 +149,21 @@ def test_missing_catalogues_are_refused_in_one_line(sources, tmp_path, capsys):
 
 
 @pytest.mark.slow
+def test_a_ring_is_left_off_the_hand_on_the_object(sources, catalogues):
+    """Every frame drawn with the test build's ring: on held and handover frames nobody wears it (as on a one-hand
+    object frame: dataset/objects.LEFT_OFF) and the interaction's object record says it was left off."""
+    opened, _ = sources
+    spec = {"seed": 5, "two_hands": 1.0, "interactions": {"held": 1.0}, "accessory_share": 1.0}
+    jobs = list(Planner(spec, opened, {"objects": catalogues[0], "grasps": catalogues[1]}).jobs(0, 4))
+    on_object = [j for j in jobs if j["interaction"]["type"] == "held"]
+    assert on_object
+    for job in on_object:
+        assert [b.get("accessory") for b in job["bodies"][:2]] == ["none", "none"]
+        assert job["sample"]["accessory"] == "none" and job["interaction"]["object"]["accessory_left_off"] == "ring"
+    validate_jobs(opened, check_jobs(jobs), objects=ObjectLibrary.load(catalogues[0]))
+
+
+@pytest.mark.slow
 def test_object_categories_restrict_the_objects_of_both_hands(sources, catalogues):
     spec = {"seed": 2, "two_hands": 1.0, "interactions": {"held": 1.0}, "object_categories": ["box"]}
     assert plan_spec(**spec)["object_categories"] == ["box"]

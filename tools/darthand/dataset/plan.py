@@ -367,11 +367,13 @@ class Planner:
         i = job["index"]
         pair = self.pairs.sample(self.seed, i, u, np.asarray(pose, np.float64), job.get("betas"), job["accessory"],
                                  job["side"])
+        left_off = "object" in pair and job["sample"].get("accessory") in _objects_left_off()
+        worn = "none" if left_off else job["accessory"]
         bodies = []
         for side, key in (("right", "right_pose"), ("left", "left_pose")):
             body = {"kind": "hand", "side": side, "pose": np.asarray(pair[key], np.float64).tolist(),
                     "texture": job["texture"], "skin_tone_offset": job["skin_tone_offset"],
-                    "accessory": job["accessory"] if side == job["side"] else "none"}
+                    "accessory": worn if side == job["side"] else "none"}
             if "betas" in job:
                 body["betas"] = job["betas"]
             if side == "left":
@@ -386,7 +388,11 @@ class Planner:
             bodies.append({"kind": "object", "object": held["id"],
                            "placement": np.round(held["placement"], 9).tolist()})
             out["grasps"] = pair["grasps"]
-        return {**out, "bodies": bodies, "interaction": pair["record"]}
+        record = pair["record"]
+        if left_off:                                    # recorded as a one-hand object frame records it
+            out["sample"] = {**job["sample"], "accessory": "none"}
+            record = {**record, "object": {**record["object"], "accessory_left_off": job["sample"]["accessory"]}}
+        return {**out, "bodies": bodies, "interaction": record}
 
     def _lights(self, u, side: str):
         if self.lights == "random":
@@ -492,6 +498,14 @@ def _lights_mode(value):
     doc = read_json(value, "lights file") if isinstance(value, str) else value
     load_lighting(doc, str(value) if isinstance(value, str) else "lights")
     return doc
+
+
+def _objects_left_off() -> tuple:
+    """The accessory kinds a hand on an object does not wear (dataset/objects.LEFT_OFF: they pass into the object);
+    read when a plan draws an object frame, as the object modules are loaded only then."""
+    from darthand.dataset.objects import LEFT_OFF
+
+    return LEFT_OFF
 
 
 def _accessory_kind(source, accessory_id: str) -> str:
