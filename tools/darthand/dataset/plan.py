@@ -501,9 +501,8 @@ def _lights_mode(value):
 
 
 def _objects_left_off() -> tuple:
-    """The accessory kinds a hand on an object does not wear (dataset/objects.LEFT_OFF: they pass into the object);
-    read when a plan draws an object frame, as the object modules are loaded only then."""
-    from darthand.dataset.objects import LEFT_OFF
+    """The accessory kinds a hand on an object does not wear (dataset/objects.LEFT_OFF: they pass into the object)."""
+    from darthand.dataset.objects import LEFT_OFF     # the object modules load only for plans with objects
 
     return LEFT_OFF
 
