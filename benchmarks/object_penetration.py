@@ -29,25 +29,29 @@ JOBS_MM = 1.0            # a jobs file's limit (dataset/jobs.PASS_THROUGH_M)
 CONTACT_MM = 5.0         # the catalogue's contact bound (grasps/fit.MAX_CONTACT)
 
 
-def signed_distances(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(P,) signed distance (m, negative inside) of points (P, 3) to the closed mesh (vertices, faces): MeshLab's
-    vertex-to-mesh distance for the magnitude, trimesh's ray-parity `contains` for the sign (MeshLab's own sign, from
-    the nearest face's normal, flips for points in a cup's cavity whose nearest point is on the rim's edge)."""
+def signed_distances(points: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:
+    """(P,) signed distance (m, negative inside) of points (P, 3) to the closed `mesh`: MeshLab's vertex-to-mesh
+    distance for the magnitude, trimesh's ray-parity `contains` for the sign (MeshLab's own sign, from the nearest
+    face's normal, flips for points in a cup's cavity whose nearest point is on the rim's edge)."""
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.asarray(points, np.float64), face_matrix=np.zeros((0, 3), np.int32)))
-    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.asarray(vertices, np.float64),
-                               face_matrix=np.asarray(faces, np.int32)))
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.asarray(mesh.vertices, np.float64),
+                               face_matrix=np.asarray(mesh.faces, np.int32)))
     ms.compute_scalar_by_distance_from_another_mesh_per_vertex(measuremesh=0, refmesh=1, signeddist=False,
                                                                maxdist=pymeshlab.PureValue(10.0))
     distance = np.abs(ms.mesh(0).vertex_scalar_array())
-    inside = trimesh.Trimesh(vertices, faces, process=False).contains(points)
-    return np.where(inside, -distance, distance)
+    return np.where(mesh.contains(points), -distance, distance)
 
 
-def depth_mm(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> tuple[float, np.ndarray]:
+def depth_mm(points: np.ndarray, mesh: trimesh.Trimesh) -> tuple[float, np.ndarray]:
     """(deepest inside depth in mm, 0 if none; the signed distances in m)."""
-    d = signed_distances(points, vertices, faces)
+    d = signed_distances(points, mesh)
     return max(0.0, -1e3 * float(d.min())), d
+
+
+def object_meshes(items) -> dict:
+    """{id: trimesh.Trimesh} of catalogue items (object frame), built once: its inside test's structures too."""
+    return {it.id: trimesh.Trimesh(it.vertices, it.faces, process=False) for it in items}
 
 
 def catalogue_figures(grasps_path: Path, objects_path: Path, models: Path) -> dict:
@@ -57,15 +61,14 @@ def catalogue_figures(grasps_path: Path, objects_path: Path, models: Path) -> di
     from darthand.model.npz_io import load_npz
     from darthand.objects.loader import load_object_catalog
 
-    items = {it.id: it for it in load_object_catalog(objects_path)}
+    meshes = object_meshes(load_object_catalog(objects_path))
     grasps = load_grasp_catalog(grasps_path)
     hands = {side: load_npz(models / f"{side}.npz") for side in sorted({g.side for g in grasps})}
     depths, contacts, worst = [], [], []
     for g in grasps:
-        model, item = hands[g.side], items[g.object_id]
-        hand = forward(model, np.asarray(g.pose, np.float64)[None]).vertices[0]
-        P = g.placement
-        deepest, d = depth_mm(hand, item.vertices @ P[:3, :3].T + P[:3, 3], item.faces)
+        hand = forward(hands[g.side], np.asarray(g.pose, np.float64)[None]).vertices[0]
+        P = g.placement                                    # object frame -> the hand's: the hand into the object's
+        deepest, d = depth_mm((hand - P[:3, 3]) @ P[:3, :3], meshes[g.object_id])
         depths.append(deepest)
         contacts.extend(np.abs(1e3 * d[g.contact_vertices]).tolist())
         worst.append((deepest, g.id))
@@ -106,7 +109,8 @@ def dataset_figures(frames: int, objects_path: Path, grasps_path: Path, models: 
             obj = np.load(mesh_file).astype(np.float64)
             hands = np.load(out / "meshes" / mesh_file.name).astype(np.float64)
             hands = hands[None] if hands.ndim == 2 else hands
-            depths += [depth_mm(h, obj, faces[labels["objects"][0]["id"]])[0] for h in hands]
+            mesh = trimesh.Trimesh(obj, faces[labels["objects"][0]["id"]], process=False)
+            depths += [depth_mm(h, mesh)[0] for h in hands]
     depths_a = np.array(depths)
     return {"frames": frames, "object_frames": len(mesh_files), "hands": len(depths_a),
             "penetration_max_mm": round(float(depths_a.max(initial=0.0)), 3),

@@ -15,8 +15,8 @@ def test_sphere_distances_are_the_radius_difference():
     sphere = trimesh.creation.icosphere(5, radius=0.05)
     points = np.array([[0, 0, 0.04], [0, 0.06, 0], [0.03, 0.0, 0.0], [0.0, 0.0, -0.2]])
     expected = np.linalg.norm(points, axis=1) - 0.05
-    assert np.allclose(signed_distances(points, sphere.vertices, sphere.faces), expected, atol=1e-4)
-    assert abs(depth_mm(points, sphere.vertices, sphere.faces)[0] - 20.0) < 0.1
+    assert np.allclose(signed_distances(points, sphere), expected, atol=1e-4)
+    assert abs(depth_mm(points, sphere)[0] - 20.0) < 0.1
 
 
 def test_a_cups_cavity_is_outside_and_its_wall_inside():
@@ -28,6 +28,6 @@ def test_a_cups_cavity_is_outside_and_its_wall_inside():
                        [0.030, 0.0, 0.079],      # inside the cavity just below the rim
                        [0.038, 0.0, 0.040],      # in the middle of the wall: 2 mm deep
                        [0.0, 0.0, 0.0025]])      # in the bottom: 2.5 mm deep
-    d = signed_distances(points, cup.vertices, cup.faces)
+    d = signed_distances(points, cup)
     assert (d[:2] > 0).all()
     assert np.allclose(d[2:], [-0.002, -0.0025], atol=2e-4)

@@ -273,7 +273,7 @@ def test_writers_of_two_hands_on_one_object(rendered, tmp_path, capsys):
                               np.load(root / "object_meshes" / f"{key}.npy"))
     capsys.readouterr()
     assert main(["dataset", "export", str(root), "--format", "ho3d", "--out", str(tmp_path / "ho3d")]) == 2
-    assert "no frame of a right hand holding an object" in capsys.readouterr().err    # two hands: left out
+    assert "no frame of a hand holding an object to write" in capsys.readouterr().err    # two hands: left out
 
 
 # ------------------------------------------------------------------------------------------------ helpers

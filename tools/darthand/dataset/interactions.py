@@ -102,18 +102,20 @@ class InteractionSampler:
         dart_pose: the plan's pose of the frame (right-handed, (48,)); betas: both hands' shape (or None); accessory:
         the catalogue id the `wearer` side's hand wears ('none': none), part of that hand in the penetration fit."""
         asked = choose_type(u, self.shares)
+        # (kind, its draw's index on INTERACTION_STREAM, the attempts the frame took when it resolves)
         if asked in OBJECT_TYPES:
             held = self.with_object(asked, seed, index, betas)
             if held is not None:
                 return held
-        tried = self.objects.attempts if asked in OBJECT_TYPES and self.objects is not None else ATTEMPTS
-        draws = [(asked, k) for k in range(ATTEMPTS) if asked not in OBJECT_TYPES] + [(FALLBACK, tried)]
-        for kind, k in draws:
-            rng = np.random.default_rng([int(seed), INTERACTION_STREAM, int(index), min(k, ATTEMPTS)])
+            draws = [(FALLBACK, ATTEMPTS, self.objects.attempts + 1)]      # every object draw failed: apart
+        else:
+            draws = [(asked, k, k + 1) for k in range(ATTEMPTS)] + [(FALLBACK, ATTEMPTS, ATTEMPTS + 1)]
+        for kind, k, attempts in draws:
+            rng = np.random.default_rng([int(seed), INTERACTION_STREAM, int(index), k])
             out = self.draw(kind, rng, np.asarray(dart_pose, np.float64), betas, (accessory, wearer))
             kind = "apart" if kind == FALLBACK else kind
             if out is not None and out["resolution"].resolved:
-                record = {"type": kind, "contact_parts": out["contact_parts"], "attempts": k + 1,
+                record = {"type": kind, "contact_parts": out["contact_parts"], "attempts": attempts,
                           "resolved": out["resolution"].figures()}
                 if kind != asked:
                     record["redrawn_from"] = asked

@@ -126,9 +126,9 @@ def object_job(job: dict, draw: ObjectDraw) -> dict:
     the object at its placement) with the grasp record; the sampling record says which object and grasp, and that
     the hand's pose is the grasp's ('pose': {'mode': 'grasp', 'grasp': id}, in place of the pose sampler's draw);
     an accessory of a kind in LEFT_OFF is left off (module docstring)."""
-    left_off = job["sample"].get("accessory") in LEFT_OFF
+    worn, left_off = worn_accessory(job)
     hand = {"kind": "hand", "side": job["side"], "pose": np.round(draw.pose, 9).tolist(), "texture": job["texture"],
-            "skin_tone_offset": job["skin_tone_offset"], "accessory": "none" if left_off else job["accessory"]}
+            "skin_tone_offset": job["skin_tone_offset"], "accessory": worn}
     if "betas" in job:
         hand["betas"] = job["betas"]
     held = {"kind": "object", "object": draw.object_id, "placement": np.round(draw.placement, 9).tolist()}
@@ -138,11 +138,18 @@ def object_job(job: dict, draw: ObjectDraw) -> dict:
     # The hand's pose is the grasp's: the sampling record says so instead of carrying the pose sampler's unused draw.
     record = {"id": draw.object_id, "category": draw.category, "grasp": draw.grasp.type, "redraws": draw.redraws}
     if left_off:
-        record["accessory_left_off"] = job["sample"]["accessory"]
+        record["accessory_left_off"] = left_off
     out["sample"] = {**job["sample"], "pose": {"mode": "grasp", "grasp": draw.grasp.id}, "object": record,
                      **({"accessory": "none"} if left_off else {})}
     return {**out, "bodies": [hand, held], "grasp": {"type": draw.grasp.type, "id": draw.grasp.id,
                                                      "figures": draw.figures}}
+
+
+def worn_accessory(job: dict) -> tuple[str, str | None]:
+    """(the accessory id a hand on an object wears: the job's, or 'none' when its kind is in LEFT_OFF; that kind
+    left off, or None)."""
+    kind = job["sample"].get("accessory")
+    return ("none", kind) if kind in LEFT_OFF else (job["accessory"], None)
 
 
 def _choose(u: float, n: int) -> int:

@@ -367,8 +367,7 @@ class Planner:
         i = job["index"]
         pair = self.pairs.sample(self.seed, i, u, np.asarray(pose, np.float64), job.get("betas"), job["accessory"],
                                  job["side"])
-        left_off = "object" in pair and job["sample"].get("accessory") in _objects_left_off()
-        worn = "none" if left_off else job["accessory"]
+        worn, left_off = _worn_on_object(job) if "object" in pair else (job["accessory"], None)
         bodies = []
         for side, key in (("right", "right_pose"), ("left", "left_pose")):
             body = {"kind": "hand", "side": side, "pose": np.asarray(pair[key], np.float64).tolist(),
@@ -391,7 +390,7 @@ class Planner:
         record = pair["record"]
         if left_off:                                    # recorded as a one-hand object frame records it
             out["sample"] = {**job["sample"], "accessory": "none"}
-            record = {**record, "object": {**record["object"], "accessory_left_off": job["sample"]["accessory"]}}
+            record = {**record, "object": {**record["object"], "accessory_left_off": left_off}}
         return {**out, "bodies": bodies, "interaction": record}
 
     def _lights(self, u, side: str):
@@ -500,11 +499,12 @@ def _lights_mode(value):
     return doc
 
 
-def _objects_left_off() -> tuple:
-    """The accessory kinds a hand on an object does not wear (dataset/objects.LEFT_OFF: they pass into the object)."""
-    from darthand.dataset.objects import LEFT_OFF     # the object modules load only for plans with objects
+def _worn_on_object(job: dict) -> tuple[str, str | None]:
+    """dataset/objects.worn_accessory: a ring or a glove is left off a hand on an object, as on a one-hand object
+    frame."""
+    from darthand.dataset.objects import worn_accessory     # the object modules load only for plans with objects
 
-    return LEFT_OFF
+    return worn_accessory(job)
 
 
 def _accessory_kind(source, accessory_id: str) -> str:

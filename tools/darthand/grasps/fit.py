@@ -144,8 +144,7 @@ class GraspProblem:
         return M
 
     def placed(self, points: np.ndarray, y: np.ndarray) -> np.ndarray:
-        M = self.transform(y)
-        return points @ M[:3, :3].T + M[:3, 3]
+        return self.placed_points(points, self.transform(y))
 
     def select(self, y: np.ndarray) -> None:
         """Fit only the vertices within REACH of the object (and every contact part's) at y, keeping their
@@ -177,10 +176,10 @@ class GraspProblem:
         angles = self.angles(y)
         posed = self.rig.pose(angles)
         M = self.transform(y)
-        q = posed.vertices[0][self.ids] @ M[:3, :3].T + M[:3, 3]
+        q = self.placed_points(posed.vertices[0][self.ids], M)
         d, u, _ = self.field.query(q, self.candidate_faces(q))
         omega = turn_axes(self.rig.frames, angles, posed.world_rotations[0], self.rig.model.parents, self.free)
-        pivot = posed.joints[0, self.free // 3] @ M[:3, :3].T + M[:3, 3]
+        pivot = self.placed_points(posed.joints[0, self.free // 3], M)
         rows = np.hstack([np.cross(q - self.centre - y[3:6], u), u,
                           angle_rows(q, u, self.share[self.ids], omega @ M[:3, :3].T, pivot)])   # (n, 6 + k)
         inside = d < CLEARANCE
@@ -247,6 +246,7 @@ class GraspProblem:
 
     @staticmethod
     def placed_points(points: np.ndarray, M: np.ndarray) -> np.ndarray:
+        """(n, 3) points (n, 3) of the hand model frame placed by M (4, 4) into the object frame."""
         return points @ M[:3, :3].T + M[:3, 3]
 
     def solve(self, rounds: int | None = None, nfev: int | None = None) -> tuple[np.ndarray, int]:
@@ -268,7 +268,7 @@ class GraspProblem:
         angles = self.angles(y)
         posed = self.rig.pose(angles)
         M = self.transform(y)
-        q = posed.vertices[0] @ M[:3, :3].T + M[:3, 3]
+        q = self.placed_points(posed.vertices[0], M)
         d, near = np.full(len(q), np.inf), q.copy()    # outside the object's box: outside it
         inside = self.field.in_box(q, MAX_CONTACT)
         d[inside], _, near[inside] = self.field.query(q[inside])
