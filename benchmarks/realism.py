@@ -72,12 +72,14 @@ BEFORE = ["--lights", "random", "--backgrounds", "builtin", "--film", "none", "-
           "--skin-detail", "0", "--arm", "off"]          # the defaults before issue 28
 SETTINGS: dict[str, list[str]] = {
     "default": [],
+    "gesture-poses": ["--poses", "gestures"],
     "before": BEFORE,
     "lights-random": ["--lights", "random", "--backgrounds", "builtin"],
     "no-backdrop": ["--backgrounds", "builtin"],
-    "no-film": ["--film", "none"],
+    "random-film": ["--film", "random"],
     "no-arm": ["--arm", "off"],
-    "single-lobe-skin": ["--skin-specular", "single", "--skin-detail", "0"],
+    "dual-skin": ["--skin-specular", "dual", "--skin-detail", "1"],
+    "skin-relief": ["--skin-detail", "1"],
     "subdivision": ["--subdivision", "1"],
     "no-background": ["--backgrounds", "none"],
     "cycles": ["--engine", "cycles", "--film", "none"],

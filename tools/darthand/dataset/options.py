@@ -35,11 +35,13 @@ DEFAULT_SHARD_SIZE = 16384
 # indirect rays instead of 16 would save 1.6 ms more for +0.18 codes (0.67 -> 0.85), so the shading defaults stay.
 DEFAULT_SAMPLES = 4
 # What a dataset draws beyond the renderer's defaults, for frames that look like photographs (issue 28; measured in
-# benchmarks/realism.py and render_dataset.py): the skin's two specular lobes, sheen and relief, and the forearm
-# going on out of the frame (a model source; 0.3 m, render/arm.ARM_ON_M). The lights and backgrounds are the plan's
-# (an environment map per frame, seen behind the hand). A random camera per frame (film 'random') stays an option:
-# it took MediaPipe's detection rate from 75 % to 61 % (realism benchmark, 500 frames, 138 counted).
-PHOTO_SHADING = {"skin_specular": "dual", "skin_detail": 1.0}
+# benchmarks/realism.py and render_dataset.py): the forearm going on out of the frame (a model source; 0.3 m,
+# render/arm.ARM_ON_M). The lights and backgrounds are the plan's (an environment map per frame, seen behind the
+# hand). The skin keeps the renderer's single lobe without relief: on the 64 frames MediaPipe was compared with
+# Cycles on, the two lobes, sheen and relief took its detection rate from 83 to 73 % (relief alone 83 -> 80 %) and
+# cost about 56 ms of CPU a frame, so they stay options (--skin-specular dual, --skin-detail X). A random camera per
+# frame (film 'random') stays an option too: it took the detection rate from 75 % to 61 % (500 frames, 138 counted).
+PHOTO_SHADING: dict = {}
 PHOTO_GEOMETRY = {"subdivision": 0, "arm": 0.3}
 DEFAULT_SIZE = 512
 DEFAULT_COUNT = 100
