@@ -1,0 +1,110 @@
+"""Per-frame work done once or on less of the frame, with the same bits as the plain computation: the cotangent
+curvature's face-only structure (render/skin.mesh_structure, remembered per face array) against the Laplacian
+assembled by scipy with np.add.at's sums, and the one-pixel dilation on a mask's bounding box (render/dress.beside)
+against scipy's dilation of the whole image."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy import ndimage
+
+from darthand.model.topology import boundary_loops
+from darthand.render import skin
+from darthand.render.dress import beside
+
+
+def plain_curvature_radius(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """The curvature radius of skin.curvature_radius's definition, assembled the plain way: scipy's COO
+    constructor for the cotangent matrix, np.add.at for areas and normals, the boundary walked per call."""
+    v, f = np.asarray(v, np.float64), np.asarray(f, np.int64)
+    n = len(v)
+    rows, cols, vals = [], [], []
+    area, normals = np.zeros(n), np.zeros((n, 3))
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        e1, e2 = v[f[:, j]] - v[f[:, i]], v[f[:, k]] - v[f[:, i]]
+        cot = np.einsum("ij,ij->i", e1, e2) / np.maximum(np.linalg.norm(np.cross(e1, e2), axis=1), 1e-30)
+        rows += [f[:, j], f[:, k]]
+        cols += [f[:, k], f[:, j]]
+        vals += [0.5 * cot, 0.5 * cot]
+        np.add.at(area, f[:, i], 0.5 * np.linalg.norm(fn, axis=1) / 3)
+    W = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    lap = (W @ v - np.asarray(W.sum(axis=1)) * v) / np.maximum(area, 1e-30)[:, None]
+    np.add.at(normals, f.ravel(), np.repeat(fn, 3, axis=0))
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
+    H = -0.5 * np.einsum("ij,ij->i", lap, normals)
+    radius = np.where(H > 0, 1 / np.maximum(H, 1e-30), skin.FLAT_RADIUS)
+    for loop in boundary_loops(f):
+        radius[loop] = skin.FLAT_RADIUS
+    return np.clip(radius, skin.MIN_RADIUS, skin.FLAT_RADIUS).astype(np.float32)
+
+
+def _bumpy_ball(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh
+
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=0.01)
+    rng = np.random.default_rng(seed)
+    return ball.vertices * (1 + 0.2 * rng.random((len(ball.vertices), 1))), np.asarray(ball.faces, np.int64)
+
+
+def _open_tube() -> tuple[np.ndarray, np.ndarray]:
+    """A tube of 24 x 6 vertices without caps (two boundary loops), bulging in the middle."""
+    phi = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    zs = np.linspace(-0.02, 0.02, 6)
+    v = np.array([[(0.008 + 0.1 * (0.0004 - z * z)) * np.cos(a), 0.008 * np.sin(a), z] for z in zs for a in phi])
+    f = [[j * 24 + i, j * 24 + (i + 1) % 24, (j + 1) * 24 + (i + 1) % 24] for j in range(5) for i in range(24)]
+    f += [[j * 24 + i, (j + 1) * 24 + (i + 1) % 24, (j + 1) * 24 + i] for j in range(5) for i in range(24)]
+    return v, np.array(f, np.int64)
+
+
+@pytest.mark.parametrize("mesh", ["ball", "tube", "float32"])
+def test_curvature_radius_is_the_plain_assembly_bit_for_bit(mesh):
+    v, f = _open_tube() if mesh == "tube" else _bumpy_ball(3)
+    if mesh == "float32":
+        v = v.astype(np.float32)
+    want = plain_curvature_radius(v, f)
+    assert skin.curvature_radius(v, f).tobytes() == want.tobytes()
+    assert skin.curvature_radius(v, f).tobytes() == want.tobytes()           # served from the remembered structure
+    if mesh == "tube":
+        assert (want[:24] == skin.FLAT_RADIUS).all() and (want[24:-24] < skin.FLAT_RADIUS).any()
+
+
+def test_a_face_array_changed_in_place_is_not_served_the_old_structure():
+    v, f = _bumpy_ball(5)
+    first = skin.curvature_radius(v, f)
+    f[:, [1, 2]] = f[:, [2, 1]].copy()                      # the same array object, every face turned over
+    f[7] = f[8]                                             # and a repeated face: a non-manifold mesh
+    got = skin.curvature_radius(v, f)
+    assert got.tobytes() == plain_curvature_radius(v, f).tobytes()
+    assert got.tobytes() != first.tobytes()
+    assert not skin.mesh_structure(f, len(v)).exact                # three cotangents on an edge: scipy's own assembly
+
+
+def test_the_structure_is_kept_per_face_array_contents():
+    v, f = _bumpy_ball(1)
+    n = len(v)
+    assert skin.mesh_structure(f, n) is skin.mesh_structure(f.copy(), n)
+    assert skin.mesh_structure(f, n) is not skin.mesh_structure(f[::-1].copy(), n)
+    assert skin.mesh_structure(f, n) is not skin.mesh_structure(f, n + 1)
+
+
+def test_vertices_no_face_uses_keep_the_plain_results():
+    v, f = _bumpy_ball(2)
+    v = np.concatenate([v, [[0.5, 0.5, 0.5]]])            # one vertex past the faces' last index
+    assert skin.curvature_radius(v, f).tobytes() == plain_curvature_radius(v, f).tobytes()
+
+
+def test_dilation_on_the_bounding_box_is_the_whole_images():
+    rng = np.random.default_rng(0)
+    full = np.ones((3, 3), bool)
+    for k in range(200):
+        h, w = rng.integers(1, 40, 2)
+        mask = np.zeros((h, w), bool)
+        if k % 9:                                          # some empty masks
+            r0, c0 = rng.integers(0, h), rng.integers(0, w)
+            r1, c1 = r0 + rng.integers(1, h + 1), c0 + rng.integers(1, w + 1)     # past the edge at times
+            mask[r0:r1, c0:c1] = rng.random(mask[r0:r1, c0:c1].shape) < 0.4
+        assert (beside(mask) == ndimage.binary_dilation(mask, full)).all()
+        assert beside(mask).dtype == bool
