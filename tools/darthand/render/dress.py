@@ -112,8 +112,20 @@ def model_coverage(alpha: np.ndarray, geom: np.ndarray, surfaces: tuple) -> np.n
     if not arm:
         return alpha
     model = (geom >= 0) & ~np.isin(geom, arm)
-    keep = model | ((geom < 0) & ndimage.binary_dilation(model, np.ones((3, 3), bool)))
+    keep = model | ((geom < 0) & beside(model))
     return np.where(keep, alpha, 0).astype(np.float32)
+
+
+def beside(mask: np.ndarray) -> np.ndarray:
+    """(H, W) bool: `mask` (H, W) bool dilated by one pixel (8-neighbourhood), worked out on its bounding box and a
+    pixel around it only (the same pixels as dilating the whole image: nothing farther can change)."""
+    rows, cols = np.flatnonzero(mask.any(1)), np.flatnonzero(mask.any(0))
+    out = np.zeros_like(mask)
+    if not len(rows):
+        return out
+    box = (slice(max(rows[0] - 1, 0), rows[-1] + 2), slice(max(cols[0] - 1, 0), cols[-1] + 2))
+    out[box] = ndimage.binary_dilation(mask[box], np.ones((3, 3), bool))
+    return out
 
 
 def clear_of_camera(surfaces: tuple, camera: Camera) -> tuple:
