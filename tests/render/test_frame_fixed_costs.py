@@ -1,7 +1,8 @@
-"""Per-frame work done once or on less of the frame, with the same bits as the plain computation: the cotangent
-curvature's face-only structure (render/skin.mesh_structure, remembered per face array) against the Laplacian
-assembled by scipy with np.add.at's sums, and the one-pixel dilation on a mask's bounding box (render/dress.beside)
-against scipy's dilation of the whole image."""
+"""Per-frame work done once, on less of the frame or in one pass, with the same bits as the plain computation: the
+cotangent curvature's face-only structure (render/skin.mesh_structure, remembered per face array) against the
+Laplacian assembled by scipy with np.add.at's sums, the one-pixel dilation on a mask's bounding box
+(render/dress.beside) against scipy's dilation of the whole image, and the keypoints' nearest-vertex distances
+(render/labels.keypoint_thickness) against numpy's broadcast."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from scipy import ndimage
 from darthand.model.topology import boundary_loops
 from darthand.render import skin
 from darthand.render.dress import beside
+from darthand.render.labels import keypoint_thickness
 
 
 def plain_curvature_radius(v: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -108,3 +110,19 @@ def test_dilation_on_the_bounding_box_is_the_whole_images():
             mask[r0:r1, c0:c1] = rng.random(mask[r0:r1, c0:c1].shape) < 0.4
         assert (beside(mask) == ndimage.binary_dilation(mask, full)).all()
         assert beside(mask).dtype == bool
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_keypoint_thickness_is_numpys_nearest_distance(dtype):
+    rng = np.random.default_rng(4)
+    for trial in range(20):
+        keypoints = rng.normal(size=(21, 3)) * 0.05
+        vertices = (rng.normal(size=(500, 3)) * 0.05).astype(dtype)
+        if trial == 3:
+            vertices[40, 2] = np.nan                         # numpy's min: NaN everywhere
+        d2 = ((keypoints[:, None, :] - vertices[None, :, :].astype(np.float64)) ** 2).sum(-1)
+        want = np.sqrt(d2.min(axis=1))
+        got = keypoint_thickness(keypoints, vertices, "mano")
+        fingertips = slice(16, 21)                           # a tip takes its distal joint's (mano order)
+        assert got[:16].tobytes() == want[:16].tobytes()
+        assert np.array_equal(got[fingertips], want[[15, 3, 6, 12, 9]], equal_nan=True)
