@@ -126,3 +126,28 @@ def test_keypoint_thickness_is_numpys_nearest_distance(dtype):
         fingertips = slice(16, 21)                           # a tip takes its distal joint's (mano order)
         assert got[:16].tobytes() == want[:16].tobytes()
         assert np.array_equal(got[fingertips], want[[15, 3, 6, 12, 9]], equal_nan=True)
+
+
+def test_model_coverage_is_the_plain_mask_of_the_models_pixels():
+    """The coverage without the arm's and an object's pixels, edge pixels kept beside the model's, as np.isin,
+    scipy's dilation and np.where give it (NaN and -0 coverage copied as they are)."""
+    from types import SimpleNamespace
+
+    from darthand.render.arm import ARM, ARM_END
+    from darthand.render.dress import model_coverage
+
+    surfaces = (SimpleNamespace(name="hand", role="hand"), SimpleNamespace(name=ARM, role="arm"),
+                SimpleNamespace(name="ring", role="accessory"), SimpleNamespace(name=ARM_END, role="arm"),
+                SimpleNamespace(name="mug", role="object"))
+    left_out = [1, 3, 4]
+    rng = np.random.default_rng(6)
+    for k in range(40):
+        geom = rng.integers(-1, 5, (30, 41)).astype(np.int8)
+        geom[rng.random(geom.shape) < (0.2 * (k % 5))] = -1
+        alpha = (rng.random(geom.shape) * (rng.random(geom.shape) < 0.8)).astype(np.float32)
+        alpha[0, 0], alpha[-1, -1] = np.nan, -0.0
+        model = (geom >= 0) & ~np.isin(geom, left_out)
+        keep = model | ((geom < 0) & ndimage.binary_dilation(model, np.ones((3, 3), bool)))
+        want = np.where(keep, alpha, 0).astype(np.float32)
+        assert model_coverage(alpha, geom, surfaces).tobytes() == want.tobytes()
+    assert model_coverage(alpha, geom, surfaces[:1]) is alpha                # nothing left out: alpha itself

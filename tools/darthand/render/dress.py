@@ -110,9 +110,13 @@ def model_coverage(alpha: np.ndarray, geom: np.ndarray, surfaces: tuple) -> np.n
     arm = [i for i, s in enumerate(surfaces) if s.name in (ARM, ARM_END) or s.role == "object"]
     if not arm:
         return alpha
-    model = (geom >= 0) & ~np.isin(geom, arm)
+    model = geom >= 0
+    for index in arm:                   # a comparison per left-out surface (one to three): cheaper than np.isin's
+        model &= geom != index
     keep = model | ((geom < 0) & beside(model))
-    return np.where(keep, alpha, 0).astype(np.float32)
+    out = np.zeros(alpha.shape, np.float32)
+    np.copyto(out, alpha, where=keep)
+    return out
 
 
 def beside(mask: np.ndarray) -> np.ndarray:
