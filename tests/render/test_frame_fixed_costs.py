@@ -2,7 +2,8 @@
 cotangent curvature's face-only structure (render/skin.mesh_structure, remembered per face array) against the
 Laplacian assembled by scipy with np.add.at's sums, the one-pixel dilation on a mask's bounding box
 (render/dress.beside) against scipy's dilation of the whole image, and the keypoints' nearest-vertex distances
-(render/labels.keypoint_thickness) against numpy's broadcast."""
+(render/labels.keypoint_thickness) and the share of the sky a vertex's rays see (render/indirect._sky_share_kernel)
+against numpy's broadcasts."""
 
 from __future__ import annotations
 
@@ -151,3 +152,30 @@ def test_model_coverage_is_the_plain_mask_of_the_models_pixels():
         want = np.where(keep, alpha, 0).astype(np.float32)
         assert model_coverage(alpha, geom, surfaces).tobytes() == want.tobytes()
     assert model_coverage(alpha, geom, surfaces[:1]) is alpha                # nothing left out: alpha itself
+
+
+def test_sky_share_is_numpys_where_and_sums():
+    """indirect._sky_share_kernel against VertexLight._environment_seen's definition in numpy, over dark and bright
+    skies, all-blocked and open vertices, NaN and signed zeros."""
+    from darthand.render.indirect import _sky_share_kernel
+
+    rng = np.random.default_rng(8)
+    for trial in range(60):
+        k, n = int(rng.integers(1, 33)), int(rng.integers(0, 200))
+        open_sky = (rng.normal(size=(n, 3)) * 10.0 ** rng.integers(-3, 3, (n, 1))).astype(np.float32)
+        sky = (rng.random((n * k, 3)) * 10.0 ** rng.integers(-14, 3, (n * k, 1))).astype(np.float32)
+        blocked = rng.random(n * k) < rng.random()
+        if n > 4:
+            open_sky[rng.random(open_sky.shape) < 0.1] = -0.0
+            open_sky[0, 0], sky[2 * k, 2] = np.nan, np.nan
+            sky[3 * k:4 * k] = 0
+            blocked[4 * k:5 * k] = True
+        rays = sky.reshape(n, k, 3).astype(np.float64)
+        seen = np.where(blocked.reshape(n, k, 1), 0.0, rays).sum(axis=1)
+        total = rays.sum(axis=1)
+        share = np.where(total > 1e-12, seen / np.maximum(total, 1e-12),
+                         1.0 - blocked.reshape(n, k).mean(axis=1, keepdims=True))
+        want = (np.maximum(open_sky, 0) * share).astype(np.float32)
+        got = np.empty((n, 3), np.float32)
+        _sky_share_kernel(open_sky, sky, blocked, k, got)
+        assert got.tobytes() == want.tobytes(), trial
