@@ -179,3 +179,21 @@ def test_sky_share_is_numpys_where_and_sums():
         got = np.empty((n, 3), np.float32)
         _sky_share_kernel(open_sky, sky, blocked, k, got)
         assert got.tobytes() == want.tobytes(), trial
+
+
+def test_builtin_maps_are_listed_again_when_the_folder_changes(tmp_path, monkeypatch):
+    import os
+
+    from darthand.render import environment
+
+    monkeypatch.setattr(environment, "BUILTIN_DIR", tmp_path)
+    for name in ("b", "a"):
+        (tmp_path / f"{name}.exr").write_bytes(b"")
+    (tmp_path / "notes.txt").write_text("not a map")
+    os.utime(tmp_path, ns=(10**18, 10**18))
+    assert environment.list_builtin() == ["a", "b"]
+    (tmp_path / "c.exr").write_bytes(b"")
+    os.utime(tmp_path, ns=(10**18 + 1, 10**18 + 1))      # as adding the file does (set: a tick may be coarser)
+    assert environment.list_builtin() == ["a", "b", "c"] == sorted(p.stem for p in tmp_path.glob("*.exr"))
+    environment.list_builtin().append("x")                  # a caller's list is its own
+    assert environment.list_builtin() == ["a", "b", "c"]

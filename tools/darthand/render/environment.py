@@ -78,8 +78,19 @@ LUMA = np.array([0.2126, 0.7152, 0.0722])      # Rec. 709 luminance of linear RG
 
 
 def list_builtin() -> list[str]:
-    """The built-in maps' names (stems of render/environments/*.exr), sorted."""
-    return sorted(p.stem for p in BUILTIN_DIR.glob("*.exr"))
+    """The built-in maps' names (stems of render/environments/*.exr), sorted. Listed again only when the folder
+    changes (its modification time: a map added or removed), not on each of a frame's three lookups."""
+    try:
+        stamp = BUILTIN_DIR.stat().st_mtime_ns
+    except OSError:
+        stamp = None
+    return list(_builtin_names(BUILTIN_DIR, stamp))
+
+
+@functools.lru_cache(maxsize=4)
+def _builtin_names(folder: Path, stamp: int | None) -> tuple[str, ...]:
+    """list_builtin's names while `folder` has modification time `stamp`."""
+    return tuple(sorted(p.stem for p in folder.glob("*.exr")))
 
 
 def map_path(name_or_path: str | Path) -> Path:
