@@ -78,8 +78,19 @@ LUMA = np.array([0.2126, 0.7152, 0.0722])      # Rec. 709 luminance of linear RG
 
 
 def list_builtin() -> list[str]:
-    """The built-in maps' names (stems of render/environments/*.exr), sorted."""
-    return sorted(p.stem for p in BUILTIN_DIR.glob("*.exr"))
+    """The built-in maps' names (stems of render/environments/*.exr), sorted. Listed again only when the folder
+    changes (its modification time: a map added or removed), not on each of a frame's three lookups."""
+    try:
+        stamp = BUILTIN_DIR.stat().st_mtime_ns
+    except OSError:
+        stamp = None
+    return list(_builtin_names(BUILTIN_DIR, stamp))
+
+
+@functools.lru_cache(maxsize=4)
+def _builtin_names(folder: Path, stamp: int | None) -> tuple[str, ...]:
+    """list_builtin's names while `folder` has modification time `stamp`."""
+    return tuple(sorted(p.stem for p in folder.glob("*.exr")))
 
 
 def map_path(name_or_path: str | Path) -> Path:
@@ -603,14 +614,17 @@ def upsample(image: np.ndarray, step: int, height: int, width: int) -> np.ndarra
 @kernel
 def _upsample_kernel(image, r0, r1, fr, c0, c1, fc, out):
     """out[i, j] = rows r0[i], r1[i] of image (h, w, C) float32 blended by fr[i], then columns c0[j], c1[j] of that
-    row blended by fc[j] (float32, in that order: the numpy separable blend's numbers)."""
+    row blended by fc[j] (float32, in that order: the numpy separable blend's numbers). Each output row's blended
+    coarse row is made once, not again for every pixel that reads it."""
+    row = np.empty((image.shape[1], image.shape[2]), np.float32)
     for i in range(out.shape[0]):
         a, b, f = r0[i], r1[i], fr[i]
         g = np.float32(1) - f
+        for q in range(image.shape[1]):
+            for c in range(image.shape[2]):
+                row[q, c] = image[a, q, c] * g + image[b, q, c] * f
         for j in range(out.shape[1]):
             p, q, e = c0[j], c1[j], fc[j]
             h = np.float32(1) - e
             for c in range(out.shape[2]):
-                left = image[a, p, c] * g + image[b, p, c] * f
-                right = image[a, q, c] * g + image[b, q, c] * f
-                out[i, j, c] = left * h + right * e
+                out[i, j, c] = row[p, c] * h + row[q, c] * e

@@ -326,13 +326,11 @@ class VertexLight:
         bright patch that the blocked rays' sky does not, and their difference went below zero in one channel
         (blue blotches between fingers under a blue sky)."""
         assert self.environment is not None
-        open_sky = self.environment.irradiance(normals.T).T
-        sky = self.environment.sky(dirs).reshape(len(normals), k, 3).astype(np.float64)
-        seen = np.where(blocked.reshape(len(normals), k, 1), 0.0, sky).sum(axis=1)
-        total = sky.sum(axis=1)
-        share = np.where(total > 1e-12, seen / np.maximum(total, 1e-12), 1.0 - blocked.reshape(len(normals), k)
-                         .mean(axis=1, keepdims=True))
-        return (np.maximum(open_sky, 0) * share).astype(np.float32)
+        open_sky = np.ascontiguousarray(self.environment.irradiance(normals.T).T, np.float32)
+        sky = np.ascontiguousarray(self.environment.sky(dirs), np.float32)
+        out = np.empty((len(normals), 3), np.float32)
+        _sky_share_kernel(open_sky, sky, np.ascontiguousarray(blocked, np.bool_), int(k), out)
+        return out
 
     def at(self, g: int, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(E (3, M) float32 indirect irradiance, V (M,) open fraction) at hits on faces prim (M,) of surface g
@@ -347,6 +345,35 @@ class VertexLight:
 # ------------------------------------------------------------------------------------------------ kernels
 # Each does in one pass what a chain of numpy steps did, in their float32 order: tests/render/test_indirect_kernels.py
 # compares them bit for bit with that numpy (tests/render/indirect_numpy.py).
+
+
+
+@kernel
+def _sky_share_kernel(open_sky, sky, blocked, k, out):
+    """out (N, 3) float32 = max(open_sky, 0) x share, the share per vertex and channel of the sky its k rays see
+    (sky (N * k, 3) float32 along each ray, `blocked` (N * k,) bool): the open rays' sky over all rays' sky, summed
+    in float64 ray by ray, or where that sum is not over 1e-12 the open rays' fraction. numpy's
+    where(blocked, 0, sky).sum(1) / sky.sum(1) and mean of the blocked, in the same order (_environment_seen's
+    definition, tests/render/test_frame_fixed_costs.py)."""
+    zero = np.float32(0)
+    for n in range(out.shape[0]):
+        first = n * k
+        closed = 0
+        for j in range(k):
+            if blocked[first + j]:
+                closed += 1
+        open_fraction = 1.0 - closed / k
+        for c in range(3):
+            total = np.float64(sky[first, c])
+            seen = 0.0 if blocked[first] else total
+            for j in range(1, k):
+                value = np.float64(sky[first + j, c])
+                seen += 0.0 if blocked[first + j] else value
+                total += value
+            share = seen / total if total > 1e-12 else open_fraction
+            o = open_sky[n, c]
+            lit = o if (o > zero or o != o) else zero            # numpy's maximum(o, 0): NaN kept, -0 -> 0
+            out[n, c] = np.float32(np.float64(lit) * share)
 
 
 @kernel

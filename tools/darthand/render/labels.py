@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from darthand.jit import kernel
 from darthand.model.layout import FINGER_JOINTS, FINGERS, JOINT_NAMES, KEYPOINT_ORDERS, MANO_PARENTS
 from darthand.model.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from darthand.render.arm import ARM, ARM_END
@@ -64,8 +65,12 @@ def own_parts(order: str) -> list[frozenset]:
 
 def keypoint_thickness(keypoints: np.ndarray, hand_vertices: np.ndarray, order: str) -> np.ndarray:
     """(21,) metres: each keypoint's distance to the nearest hand vertex; a fingertip takes its distal joint's."""
-    d2 = ((keypoints[:, None, :] - hand_vertices[None, :, :].astype(np.float64)) ** 2).sum(-1)
-    depth = np.sqrt(d2.min(axis=1))
+    vertices = np.asarray(hand_vertices)
+    if vertices.dtype not in (np.float32, np.float64):
+        vertices = vertices.astype(np.float64)
+    nearest = np.empty(len(keypoints))
+    _nearest_squared_kernel(np.ascontiguousarray(keypoints, np.float64), np.ascontiguousarray(vertices), nearest)
+    depth = np.sqrt(nearest)
     mano = KEYPOINT_ORDERS[order]
     where = {int(m): k for k, m in enumerate(mano)}
     for k, m in enumerate(mano):
@@ -73,6 +78,25 @@ def keypoint_thickness(keypoints: np.ndarray, hand_vertices: np.ndarray, order: 
             depth[k] = depth[where[FINGER_JOINTS[FINGERS[m - len(JOINT_NAMES)]][2]]]
     return depth
 
+
+
+@kernel
+def _nearest_squared_kernel(points, vertices, out):
+    """out[k] = the least squared distance (float64) from points[k] (K, 3) float64 to vertices (N, 3), as numpy's
+    ((points[:, None] - vertices[None]) ** 2).sum(-1).min(1) has it: x, y and z added in that order, NaN if any
+    distance is NaN. One pass, without the (K, N, 3) temporaries."""
+    for k in range(points.shape[0]):
+        best = np.inf
+        for i in range(vertices.shape[0]):
+            dx = points[k, 0] - np.float64(vertices[i, 0])
+            dy = points[k, 1] - np.float64(vertices[i, 1])
+            dz = points[k, 2] - np.float64(vertices[i, 2])
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 < best or d2 != d2:
+                best = d2
+                if d2 != d2:
+                    break
+        out[k] = best
 
 def visibility(scene: Scene, camera: Camera, keypoints: np.ndarray, thickness: np.ndarray,
                parts: list[frozenset], own: frozenset | None = None) -> np.ndarray:

@@ -145,33 +145,79 @@ def skin_width(material) -> np.ndarray:
 def curvature_radius(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(N,) float32 radius (metres) of the sphere of each vertex's mean curvature H (r = 1 / H), from the cotangent
     Laplacian (H n = -1/2 Laplace-Beltrami x); FLAT_RADIUS where the surface is flat or concave (H <= 0) or the
-    vertex is on a boundary; between MIN_RADIUS and FLAT_RADIUS."""
+    vertex is on a boundary; between MIN_RADIUS and FLAT_RADIUS. What depends on the faces alone (the Laplacian's
+    sparsity, the boundary) is worked out once per face array (mesh_structure)."""
     v = np.asarray(vertices, np.float64)
     f = np.asarray(faces, np.int64)
     n = len(v)
-    corners = [(0, 1, 2), (1, 2, 0), (2, 0, 1)]
-    rows, cols, vals = [], [], []
-    area = np.zeros(n)
+    structure = mesh_structure(f, n)
     fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
     face_area = 0.5 * np.linalg.norm(fn, axis=1)
-    for i, j, k in corners:
+    vals = []
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
         # the angle at corner i is opposite edge (j, k): cot weight on that edge
         e1, e2 = v[f[:, j]] - v[f[:, i]], v[f[:, k]] - v[f[:, i]]
         cot = np.einsum("ij,ij->i", e1, e2) / np.maximum(np.linalg.norm(np.cross(e1, e2), axis=1), 1e-30)
-        rows += [f[:, j], f[:, k]]
-        cols += [f[:, k], f[:, j]]
         vals += [0.5 * cot, 0.5 * cot]
-        np.add.at(area, f[:, i], face_area / 3)
-    W = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    W = structure.laplacian_weights(np.concatenate(vals))
+    # corner by corner in face order, as np.add.at would add them (bincount adds in the same order: same bits)
+    area = np.bincount(structure.corners, np.tile(face_area / 3, 3), minlength=n)
     lap = (W @ v - np.asarray(W.sum(axis=1)) * v) / np.maximum(area, 1e-30)[:, None]       # Laplace-Beltrami of x
-    normals = np.zeros((n, 3))
-    np.add.at(normals, f.ravel(), np.repeat(fn, 3, axis=0))
+    normals: np.ndarray = np.stack([np.bincount(structure.face_vertices, np.repeat(fn[:, c], 3), minlength=n)
+                                    for c in range(3)], axis=1)
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
     H = -0.5 * np.einsum("ij,ij->i", lap, normals)
     radius = np.where(H > 0, 1 / np.maximum(H, 1e-30), FLAT_RADIUS)
-    for loop in boundary_loops(f):
-        radius[loop] = FLAT_RADIUS
+    radius[structure.boundary] = FLAT_RADIUS
     return np.clip(radius, MIN_RADIUS, FLAT_RADIUS).astype(np.float32)
+
+
+class MeshStructure:
+    """What curvature_radius needs of a face array (F, 3) int64 over n vertices that the vertices' positions do
+    not change: the boundary vertices, the corners' vertex orders for its sums, and the cotangent Laplacian's
+    sparsity (CSR) with where each cotangent entry (rows then columns: (j, k) and (k, j) per corner, corners 0, 1,
+    2) lands in it."""
+
+    def __init__(self, faces: np.ndarray, n: int):
+        self.n = n
+        self.boundary = np.concatenate([np.zeros(0, np.int64), *boundary_loops(faces)])
+        self.corners = faces.T.ravel()                  # corner 0 of every face, then corner 1, then corner 2
+        self.face_vertices = faces.ravel()
+        rows, cols = [], []
+        for _, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+            rows += [faces[:, j], faces[:, k]]
+            cols += [faces[:, k], faces[:, j]]
+        rows, cols = np.concatenate(rows), np.concatenate(cols)
+        keys, self.slot, counts = np.unique(rows * max(n, 1) + cols, return_inverse=True, return_counts=True)
+        # An entry summed from more than two cotangents depends on the order scipy adds them in (a + b is the same
+        # bits either way, a + b + c is not): such a (non-manifold) mesh takes scipy's own assembly.
+        self.exact = bool((counts <= 2).all())
+        self.rows, self.cols = rows, cols
+        self.indices = (keys % max(n, 1)).astype(np.int32)
+        self.indptr = np.searchsorted(keys // max(n, 1), np.arange(n + 1)).astype(np.int32)
+
+    def laplacian_weights(self, vals: np.ndarray) -> sp.csr_matrix:
+        """(n, n) CSR matrix of the cotangent entries `vals` (the constructor's order) with repeated entries summed:
+        the matrix sp.csr_matrix((vals, (rows, cols))) builds, without its sort."""
+        if not self.exact:
+            return sp.csr_matrix((vals, (self.rows, self.cols)), shape=(self.n, self.n))
+        data = np.bincount(self.slot, vals, minlength=len(self.indices))
+        return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
+
+
+_STRUCTURES: dict = {}
+
+
+def mesh_structure(faces: np.ndarray, n: int) -> MeshStructure:
+    """MeshStructure of a face array (F, 3) int64 over n vertices, remembered by the faces' contents (each frame's
+    rest mesh is new, its faces are not; a face array changed in place is a new key, never a stale entry)."""
+    key = (n, faces.shape, faces.tobytes())
+    entry = _STRUCTURES.get(key)
+    if entry is None:
+        if len(_STRUCTURES) > 16:
+            _STRUCTURES.clear()
+        entry = _STRUCTURES[key] = MeshStructure(np.ascontiguousarray(faces, np.int64), n)
+    return entry
 
 
 _RADII: dict = {}
