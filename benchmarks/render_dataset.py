@@ -88,7 +88,7 @@ def run(frames: int | None = None) -> dict:
         "accessory_share": round(1 - counts.get("accessory_type", {}).get("none", 0) / max(1, frames), 4),
         "sides": counts.get("side"), "kb_per_frame_on_disk": round(disk / max(1, frames) / 1024, 1),
         "what": "512x512, DART poses (grid + slerp over the gestures), all catalogue textures, 25 % accessories, "
-                "both hands, the dataset defaults (environment light and backdrop, two-lobe skin and relief, arm), "
+                "both hands, the dataset defaults (environment light and backdrop, single-lobe skin, arm), "
                 "labels with MANO parameters and meshes",
     }
 
