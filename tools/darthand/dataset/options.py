@@ -37,10 +37,10 @@ DEFAULT_SAMPLES = 4
 # What a dataset draws beyond the renderer's defaults, for frames that look like photographs (issue 28; measured in
 # benchmarks/realism.py and render_dataset.py): the forearm going on out of the frame (a model source; 0.3 m,
 # render/arm.ARM_ON_M). The lights and backgrounds are the plan's (an environment map per frame, seen behind the
-# hand). The skin keeps the renderer's single lobe without relief: on the 64 frames MediaPipe was compared with
-# Cycles on, the two lobes, sheen and relief took its detection rate from 83 to 73 % (relief alone 83 -> 80 %) and
-# cost about 56 ms of CPU a frame, so they stay options (--skin-specular dual, --skin-detail X). A random camera per
-# frame (film 'random') stays an option too: it took the detection rate from 75 % to 61 % (500 frames, 138 counted).
+# hand). The skin keeps the renderer's single lobe without relief: on the 124 frames MediaPipe compares with
+# Cycles on (realism benchmark), the two lobes, sheen and relief took its detection rate from 79 to 72 % (relief
+# alone 79 -> 76 %) for 16 ms more CPU a frame, so they stay options (--skin-specular dual, --skin-detail X). A
+# random camera per frame (film 'random') stays an option too: 79 -> 59 %, 48 ms a frame.
 PHOTO_SHADING: dict = {}
 PHOTO_GEOMETRY = {"subdivision": 0, "arm": 0.3}
 DEFAULT_SIZE = 512
