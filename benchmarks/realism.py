@@ -72,8 +72,8 @@ BEFORE = ["--lights", "random", "--backgrounds", "builtin", "--film", "none", "-
           "--skin-detail", "0", "--arm", "off"]          # the defaults before issue 28
 SETTINGS: dict[str, list[str]] = {
     "default": [],
-    "gesture-poses": ["--poses", "gestures"],
     "before": BEFORE,
+    "gesture-poses": ["--poses", "gestures"],
     "lights-random": ["--lights", "random", "--backgrounds", "builtin"],
     "no-backdrop": ["--backgrounds", "builtin"],
     "random-film": ["--film", "random"],

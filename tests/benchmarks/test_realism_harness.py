@@ -128,7 +128,7 @@ def test_wilson_interval_matches_the_closed_form():
 def test_the_settings_table_starts_with_todays_default():
     names = list(realism.SETTINGS)
     assert names[:2] == ["default", "before"] and realism.SETTINGS["default"] == []
-    assert list(realism.chosen_settings("no-film,default")) == ["default", "no-film"]
+    assert list(realism.chosen_settings("random-film,default")) == ["default", "random-film"]
     with pytest.raises(SystemExit, match="unknown settings nope"):
         realism.chosen_settings("nope")
 
