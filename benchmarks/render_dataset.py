@@ -1,7 +1,7 @@
 """DART-style dataset benchmark: `darthand render-dataset` end to end as a researcher runs it. 10,000 frames of
 512^2 over every texture of the build's catalogue (325), both hands, an accessory on 25 % of the frames, the
-dataset defaults' look (an environment map per frame lighting the hand and seen behind it, two-lobe skin with its
-relief, the arm going on), poses from DART's grid-and-slerp sampler over the gesture library, labels with MANO
+dataset defaults' look (an environment map per frame lighting the hand and seen behind it, the skin's single
+lobe, the arm going on), poses from DART's grid-and-slerp sampler over the gesture library, labels with MANO
 parameters and meshes; worker processes, one per core. DARTHAND_BENCH_DATASET_FRAMES changes the frame count.
 
 Figures (dataset/run.RunStats.timings): images_per_second is the steady state after every worker has started

@@ -1,7 +1,7 @@
 """The render alone, and its Embree queries: where a default dataset frame's ray tracing goes.
 
 The first frames of the default plan (seed 0) rendered as `render-dataset` renders them (dataset/frames.render_job
-with the dataset's defaults: 512^2, 4 edge sub-samples, two-lobe skin with relief, the arm going on), in this
+with the dataset's defaults: 512^2, 4 edge sub-samples, single-lobe skin, the arm going on), in this
 process on one thread, after a warm-up pass over the same frames (kernels, maps and textures loaded). Figures per
 frame: CPU ms of the render (time.process_time around render_job), and per Embree query kind (closest hit:
 render/scene.Scene.intersect; occlusion: Scene.occluded) the rays, the CPU ms and the ns a ray. The frame's own ray

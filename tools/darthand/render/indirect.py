@@ -347,7 +347,6 @@ class VertexLight:
 # compares them bit for bit with that numpy (tests/render/indirect_numpy.py).
 
 
-
 @kernel
 def _sky_share_kernel(open_sky, sky, blocked, k, out):
     """out (N, 3) float32 = max(open_sky, 0) x share, the share per vertex and channel of the sky its k rays see

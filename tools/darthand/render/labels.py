@@ -79,7 +79,6 @@ def keypoint_thickness(keypoints: np.ndarray, hand_vertices: np.ndarray, order: 
     return depth
 
 
-
 @kernel
 def _nearest_squared_kernel(points, vertices, out):
     """out[k] = the least squared distance (float64) from points[k] (K, 3) float64 to vertices (N, 3), as numpy's
@@ -97,6 +96,7 @@ def _nearest_squared_kernel(points, vertices, out):
                 if d2 != d2:
                     break
         out[k] = best
+
 
 def visibility(scene: Scene, camera: Camera, keypoints: np.ndarray, thickness: np.ndarray,
                parts: list[frozenset], own: frozenset | None = None) -> np.ndarray:
