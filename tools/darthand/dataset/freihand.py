@@ -101,15 +101,27 @@ def freihand_K(K) -> np.ndarray:
 def mirror_labels(labels: dict) -> dict:
     """The labels FreiHAND's writer reads (K, keypoints_3d, mano) of a frame mirrored left-right: the right hand
     that is the mirror image of the frame's left hand, seen in the image flipped left-right."""
+    return {**mirror_hand(labels), "K": mirrored_K(labels), "side": "right"}
+
+
+def mirrored_K(labels: dict) -> list:
+    """A frame's K (3, 3) for its image flipped left-right: pixel column u -> W - u (pixel-corner origin), a skew
+    (were there one) negated."""
     K = np.array(labels["K"], float)
-    K[0, 2] = labels["image_size"][0] - K[0, 2]         # pixel column u -> W - u (pixel-corner origin)
-    K[0, 1] = -K[0, 1]                                    # (a skew, were there one)
-    mano = dict(labels["mano"])
+    K[0, 2] = labels["image_size"][0] - K[0, 2]
+    K[0, 1] = -K[0, 1]
+    return K.tolist()
+
+
+def mirror_hand(hand: dict, points: tuple = ("keypoints_3d",)) -> dict:
+    """A hand's labels mirrored left-right (x -> -x in the camera frame): the other side, its MANO parameters
+    (axis-angles and translation) and its 3-D `points` fields."""
+    mano = dict(hand["mano"])
     mano["global_orient"] = mirror_pose(mano["global_orient"]).tolist()
     mano["hand_pose"] = mirror_pose(mano["hand_pose"]).tolist()
     mano["trans"] = mirror_points(mano["trans"]).tolist()
-    return {**labels, "K": K.tolist(), "mano": mano, "side": "right",
-            "keypoints_3d": mirror_points(np.asarray(labels["keypoints_3d"], float)).tolist()}
+    return {**hand, "mano": mano, "side": "right" if hand.get("side") == "left" else "left",
+            **{key: mirror_points(np.asarray(hand[key], float)).tolist() for key in points}}
 
 
 def model_kinds(models: dict) -> dict:

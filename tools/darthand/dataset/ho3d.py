@@ -48,12 +48,13 @@ import numpy as np
 import OpenImageIO as oiio
 
 from darthand.dataset.frames import OBJECT_MESHES, frame_names
+from darthand.dataset.freihand import mirror_hand, mirrored_K
 from darthand.dataset.hands import hands_of
 from darthand.dataset.run import rendered_dataset
 from darthand.errors import InputError
 from darthand.fileio import make_folder, read_json, write_bytes
 from darthand.model.layout import KEYPOINT_ORDERS
-from darthand.model.mirror import mirror_points, mirror_pose
+from darthand.model.mirror import mirror_points
 from darthand.model.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from darthand.render.image import read_png, write_png
 
@@ -65,6 +66,7 @@ MANO_VERTICES = 778
 BETAS = 10
 LEFT_MODES = ("mirror", "skip")
 MIRROR = np.diag([-1.0, 1.0, 1.0])             # the camera frame's left-right mirror (either frame: commutes with C)
+HAND_POINTS = ("joints_3d", "keypoints_3d")     # the 3-D fields of a hand that ho3d_meta reads (mirrored with it)
 
 
 def write_ho3d(dataset, out=None, *, left: str = "mirror") -> Path:
@@ -149,47 +151,21 @@ def write_frame_files(root: Path, names: dict, labels: dict, base: Path, frame_i
 
 def mirrored_labels(labels: dict) -> dict:
     """The labels ho3d_meta reads of a frame mirrored left-right (x -> -x in the camera frame; pixel column
-    u -> W - u, darthand's pixel-corner origin): its hand the right hand that is the left one's mirror image, its
-    object the object's mirror image (rotation conjugated by the mirror, its rest frame mirrored)."""
-    width = float(labels["image_size"][0])
-    K = np.array(labels["K"], np.float64)
-    K[0, 2], K[0, 1] = width - K[0, 2], -K[0, 1]
-    out = {**labels, "K": K.tolist(), "objects": [_mirror_object(o, width) for o in labels["objects"]]}
+    u -> W - u, darthand's pixel-corner origin): its hand the right hand that is the left one's mirror image
+    (freihand.mirror_hand, with its joints), its object the object's mirror image (rotation conjugated by the
+    mirror, its rest frame mirrored)."""
+    out = {**labels, "K": mirrored_K(labels), "objects": [_mirror_object(o) for o in labels["objects"]]}
     if "hands" in labels:
-        out["hands"] = [_mirror_hand(h, width) for h in labels["hands"]]
+        out["hands"] = [mirror_hand(h, HAND_POINTS) for h in labels["hands"]]
         return out
-    return out | _mirror_hand(labels, width)
+    return out | mirror_hand(labels, HAND_POINTS)
 
 
-def _mirror_hand(hand: dict, width: float) -> dict:
-    """A hand's labels (side, MANO parameters, 3-D joints and keypoints, 2-D keypoints) mirrored left-right."""
-    mano = dict(hand["mano"])
-    mano["global_orient"] = mirror_pose(mano["global_orient"]).tolist()
-    mano["hand_pose"] = mirror_pose(mano["hand_pose"]).tolist()
-    mano["trans"] = mirror_points(np.asarray(mano["trans"], np.float64)).tolist()
-    out = {**hand, "side": "right" if hand["side"] == "left" else "left", "mano": mano}
-    for key in ("joints_3d", "keypoints_3d"):
-        out[key] = mirror_points(np.asarray(hand[key], np.float64)).tolist()
-    if "keypoints_2d" in hand:
-        out["keypoints_2d"] = _mirror_pixels(hand["keypoints_2d"], width)
-    return out
-
-
-def _mirror_object(held: dict, width: float) -> dict:
-    """A held object's pose, corners (3-D and 2-D) mirrored left-right: R -> M R M, t -> M t (M = MIRROR)."""
+def _mirror_object(held: dict) -> dict:
+    """A held object's pose and 3-D corners mirrored left-right: R -> M R M, t -> M t (M = MIRROR)."""
     R, t = np.asarray(held["pose"]["R"], np.float64), np.asarray(held["pose"]["t"], np.float64)
-    out = {**held, "pose": {**held["pose"], "R": (MIRROR @ R @ MIRROR).tolist(), "t": (MIRROR @ t).tolist()},
-           "corners_3d": mirror_points(np.asarray(held["corners_3d"], np.float64)).tolist()}
-    if "corners_2d" in held:
-        out["corners_2d"] = _mirror_pixels(held["corners_2d"], width)
-    return out
-
-
-def _mirror_pixels(points, width: float) -> list:
-    """(N, 2) pixel positions (pixel-corner origin) of the image flipped left-right: u -> W - u."""
-    p = np.array(points, np.float64)
-    p[:, 0] = width - p[:, 0]
-    return p.tolist()
+    return {**held, "pose": {**held["pose"], "R": (MIRROR @ R @ MIRROR).tolist(), "t": (MIRROR @ t).tolist()},
+            "corners_3d": mirror_points(np.asarray(held["corners_3d"], np.float64)).tolist()}
 
 
 def _write(path: Path, pixels: np.ndarray) -> None:

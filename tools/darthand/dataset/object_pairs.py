@@ -48,15 +48,14 @@ FOREARM_M = 0.2
 FOREARM_CLEAR_M = 0.04
 RECEIVER_CLOSE = (0.5, 0.85)
 RECEIVER_SHORT_M = (0.01, 0.04)
-OBJECT_TYPES = ("held", "handover")
 SIDES = ("right", "left")
 
 
 class PairDraw(NamedTuple):
     """One two-hands-and-object draw: poses (48,) of the right and left hands on their shaped models, the left
     hand's placement (4, 4) and the object's (4, 4) in the world (the right's model frame), the object's id and
-    category, per hand its grasp record, the hand-hand and hand-object figures (mm), the receiver's side (None
-    for held) and the draw's planning CPU seconds."""
+    category, per hand its grasp record, the hand-hand and hand-object figures (mm) and the receiver's side (None
+    for held)."""
 
     right_pose: np.ndarray
     left_pose: np.ndarray
@@ -96,13 +95,13 @@ class PairTable:
         lefts = self.frames.grasps["left"].get(object_id, [])
         if extent < MIN_EXTENT_M or not rights or not lefts:
             return []
-        posed = {side: [grasp_hand(self.frames.models[side], g) for g in gs]
+        posed = {side: [table_hand(self.frames.models[side], g) for g in gs]
                  for side, gs in (("right", rights), ("left", lefts))}
         out = []
         for i, a in enumerate(posed["right"]):
             for j, b in enumerate(posed["left"]):
                 self.tested += 1
-                if forearms_apart(a, b, rights[i].placement, lefts[j].placement) and hands_apart(a, b):
+                if forearms_apart(a, b) and hands_apart(a, b):
                     out.append((i, j))
         return out
 
@@ -185,35 +184,42 @@ def grasp_record(hand: int, side: str, grasp, fit, depth: float, receiver: str |
     return {"hand": hand, "side": side, "type": grasp.type, "id": grasp.id, "role": role, "figures": figures}
 
 
-def grasp_hand(model, grasp) -> hand_pair.PosedHand:
-    """A catalogue grasp's hand posed on `model` in the object frame (its placement inverted)."""
-    return hand_pair.pose_hand(model, grasp.pose, None, np.linalg.inv(np.asarray(grasp.placement, np.float64)))
+class TableHand(NamedTuple):
+    """A catalogue grasp's hand in the object frame with what the pair table's tests read of it, made once per
+    grasp (not per pair): the posed hand, a KD-tree of its vertices, its forearm segment (wrist, end)."""
+
+    hand: hand_pair.PosedHand
+    tree: cKDTree
+    forearm: tuple
 
 
-def hands_apart(a: hand_pair.PosedHand, b: hand_pair.PosedHand) -> bool:
+def table_hand(model, grasp) -> TableHand:
+    """A catalogue grasp's TableHand on `model`: posed in the object frame (its placement inverted), its forearm
+    FOREARM_M from the wrist along the hand model frame's +X."""
+    H = np.linalg.inv(np.asarray(grasp.placement, np.float64))
+    hand = hand_pair.pose_hand(model, grasp.pose, None, H)
+    wrist = hand.vertices[hand.vertex_joint == 0].mean(0)
+    return TableHand(hand, cKDTree(hand.vertices), (wrist, wrist + FOREARM_M * H[:3, 0]))
+
+
+def hands_apart(a: TableHand, b: TableHand) -> bool:
     """The table's quick test that two posed hands do not pass into each other: no vertex of either lies more than
     PASS_THROUGH_M behind the other's nearest vertex along that vertex's normal (within PAIR_CLEAR_M + 5 mm of it).
     Approximate (the frame's draw measures exactly): pairs whose vertices stay PAIR_CLEAR_M apart pass at once."""
     for p, q in ((a, b), (b, a)):
-        gap, at = cKDTree(q.vertices).query(p.vertices, k=1, distance_upper_bound=PAIR_CLEAR_M + 0.005)
+        gap, at = q.tree.query(p.hand.vertices, k=1, distance_upper_bound=PAIR_CLEAR_M + 0.005)
         near = np.isfinite(gap)
         if not near.any():
             return True
-        offset = ((p.vertices[near] - q.vertices[at[near]]) * q.normals[at[near]]).sum(1)
+        offset = ((p.hand.vertices[near] - q.hand.vertices[at[near]]) * q.hand.normals[at[near]]).sum(1)
         if (offset < -PASS_THROUGH_M).any():
             return False
     return True
 
 
-def forearms_apart(a, b, placement_a: np.ndarray, placement_b: np.ndarray) -> bool:
-    """Whether the forearms of two grasping hands (FOREARM_M from each wrist along its model frame's +X, in the
-    object frame) stay FOREARM_CLEAR_M apart. a, b: the posed hands (object frame); placements: object -> hand."""
-    segments = []
-    for hand, P in ((a, placement_a), (b, placement_b)):
-        H = np.linalg.inv(np.asarray(P, np.float64))
-        wrist = hand.vertices[hand.vertex_joint == 0].mean(0)
-        segments.append((wrist, wrist + FOREARM_M * H[:3, 0]))
-    return segment_distance(*segments[0], *segments[1]) >= FOREARM_CLEAR_M
+def forearms_apart(a: TableHand, b: TableHand) -> bool:
+    """Whether the forearms of two grasping hands (in the object frame) stay FOREARM_CLEAR_M apart."""
+    return segment_distance(*a.forearm, *b.forearm) >= FOREARM_CLEAR_M
 
 
 def segment_distance(p0, p1, q0, q1) -> float:

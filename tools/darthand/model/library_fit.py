@@ -22,6 +22,7 @@ is the one datasets use.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import functools
 import hashlib
 import json
 import multiprocessing
@@ -94,7 +95,8 @@ def fit_library(model: HandModel, poses: list[LibraryPose] | None = None, progre
 
     poses = library_poses() if poses is None else poses
     start = time.perf_counter()
-    keys = {p.name: pose_key(model, p) for p in poses}
+    prefix = key_prefix(model)
+    keys = {p.name: _pose_key(prefix, p) for p in poses}
     reused = {p.name: (previous or {}).get("poses", {}).get(p.name) for p in poses}
     out = {p.name: reused[p.name] for p in poses
            if isinstance(reused[p.name], dict) and reused[p.name].get("key") == keys[p.name]}
@@ -115,24 +117,29 @@ def fit_library(model: HandModel, poses: list[LibraryPose] | None = None, progre
 def pose_key(model: HandModel, pose: LibraryPose) -> str:
     """sha256 (hex, 16 characters) of what one pose's fit depends on: the model's digest, the pose's authored angles
     (radians, float64) and contacts, FIT_VERSION and the source of the FIT_MODULES."""
-    h = hashlib.sha256(f"{FIT_VERSION} {model_digest(model)} {fit_code_digest()}".encode())
+    return _pose_key(key_prefix(model), pose)
+
+
+def key_prefix(model: HandModel) -> str:
+    """What every pose's key shares for `model`: FIT_VERSION, the model's digest, the fit code's digest."""
+    return f"{FIT_VERSION} {model_digest(model)} {fit_code_digest()}"
+
+
+def _pose_key(prefix: str, pose: LibraryPose) -> str:
+    h = hashlib.sha256(prefix.encode())
     h.update(np.ascontiguousarray(pose.angles, np.float64).tobytes())
     h.update(json.dumps(sorted(sorted(c) for c in pose.contacts)).encode())
     return h.hexdigest()[:16]
 
 
-_CODE_DIGEST: list[str] = []
-
-
+@functools.cache
 def fit_code_digest() -> str:
     """sha256 (hex) of the FIT_MODULES' source files, read once per process."""
-    if not _CODE_DIGEST:
-        folder = Path(__file__).resolve().parent
-        h = hashlib.sha256()
-        for name in FIT_MODULES:
-            h.update((folder / f"{name}.py").read_bytes())
-        _CODE_DIGEST.append(h.hexdigest())
-    return _CODE_DIGEST[0]
+    folder = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for name in FIT_MODULES:
+        h.update((folder / f"{name}.py").read_bytes())
+    return h.hexdigest()
 
 
 def _fit_poses(model: HandModel, poses: list[LibraryPose], jobs: int):
@@ -163,8 +170,9 @@ def _prepare_worker(model: HandModel, parent: int | None = None) -> None:
 
     if parent is not None:
         init_worker(parent)
-    if _WORKER.get("digest") != model_digest(model):
-        _WORKER.update(digest=model_digest(model), model=model, surfaces=PartSurfaces(model),
+    digest = model_digest(model)
+    if _WORKER.get("digest") != digest:
+        _WORKER.update(digest=digest, model=model, surfaces=PartSurfaces(model),
                        frames=joint_frames(model), face_part=face_parts(model))
 
 

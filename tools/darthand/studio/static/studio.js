@@ -121,7 +121,7 @@ function applyPose() {
   hand.rig.joints.forEach((name, i) => hand.bones[name]?.quaternion.fromArray(quats[i]));
   const weights = R.correctiveWeights(hand.rig, hand.table, rotations);
   for (const mesh of morphMeshes()) setMorphWeights(mesh, hand.table, weights);
-  placeHeld();
+  placeHeld(rotations[0]);
   requestDraw();
 }
 
@@ -261,10 +261,11 @@ async function selectObject(id, graspId = null, { keepAngles = false } = {}) {
 }
 
 /** Put the held object where the shown hand holds it: the grasp's placement carried by the root joint's rotation
- * since the grasp, about the root's rest centre (studio/objects.held_placement: the export places it the same). */
-function placeHeld() {
+ * since the grasp, about the root's rest centre (studio/objects.held_placement: the export places it the same).
+ * root: the root joint's rotation under state.angles, when the caller has it. */
+function placeHeld(root = R.manoRotations(hand.rig, state.angles)[0]) {
   if (!held) return;
-  const D = R.mul(R.manoRotations(hand.rig, state.angles)[0], R.transpose(held.graspRoot));
+  const D = R.mul(root, R.transpose(held.graspRoot));
   const c = held.pivot, P = held.placement;
   const Dc = D.map((row) => row[0] * c[0] + row[1] * c[1] + row[2] * c[2]);
   const motion = new THREE.Matrix4().set(...D[0], c[0] - Dc[0], ...D[1], c[1] - Dc[1], ...D[2], c[2] - Dc[2], 0, 0, 0, 1);
