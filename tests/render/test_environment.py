@@ -248,3 +248,34 @@ def test_environment_frames_are_deterministic_and_keep_the_labels(assets):
 def test_environment_background_without_an_environment_is_refused(assets):
     with pytest.raises(InputError, match="needs lights with an environment"):
         Renderer(assets, threads=1).render(None, width=32, height=32, background="environment")
+
+
+# ------------------------------------------------------------------------------------------------ exposure's key
+
+
+def test_key_white_of_a_uniform_map_is_its_radiance_times_the_strongest_channel(tmp_path):
+    """Under a uniform map of radiance L a white Lambertian card renders L whichever way it faces (the closed form
+    the renderer's units are defined by), so the key is L x strength x the largest white-balance gain."""
+    path = write_exr(tmp_path / "grey.exr", np.full((32, 64, 3), 0.3, np.float32))
+    doc = env.Environment(str(path), rotation=40.0, strength=2.0, white_balance=(0.9, 1.0, 1.1))
+    assert env.key_white(doc) == pytest.approx(0.3 * 2.0 * 1.1, rel=2e-3)
+
+
+@pytest.mark.parametrize("behind_hand", [True, False])
+def test_key_white_of_one_bright_texel_is_its_light_on_the_best_facing_card(tmp_path, behind_hand):
+    """One bright texel is a directional light of pi-folded intensity L dOmega / pi (the test above), toward-light
+    direction t in camera axes. A card facing the camera (normal n, n_z <= 0) renders at most intensity x max n.t:
+    1 for a light on the camera's side (t_z <= 0), sqrt(1 - t_z^2) at the rim for one behind the hand (t_z > 0).
+    Frame 'camera', rotation 0: the map's centre column is where the camera looks, its edge behind the camera."""
+    h, value = 64, 4000.0
+    row, col = h // 2, (h + 11 if behind_hand else 3)          # 33 degrees off the view axis, or behind the camera
+    pixels = np.zeros((h, 2 * h, 3), np.float32)
+    pixels[row, col] = value
+    path = write_exr(tmp_path / "sun.exr", pixels)
+    theta_top, theta_bottom = np.pi * (0.5 - row / h), np.pi * (0.5 - (row + 1) / h)
+    intensity = value * (np.sin(theta_top) - np.sin(theta_bottom)) * 2 * np.pi / (2 * h) / np.pi
+    d_e = texel_direction(row, col, h)
+    t = np.array([d_e[1], -d_e[2], -d_e[0]])                  # frame 'camera': d_E = (-z, x, -y)
+    assert (t[2] > 0.8) == behind_hand and (t[2] < -0.9) != behind_hand
+    best = np.sqrt(1.0 - t[2] ** 2) if t[2] > 0 else 1.0
+    assert env.key_white(env.Environment(str(path))) == pytest.approx(intensity * best, rel=0.01)

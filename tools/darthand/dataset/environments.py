@@ -3,6 +3,12 @@ random azimuth, at a strength that brings the map's mean radiance to a common le
 white balance drawn around daylight, as the `environment` field of the frame's lights document
 (schemas/lights.schema.json; render/environment.py draws it).
 
+Exposure keeps skin from washing out: the strength is then capped so that a white card turned to the frame's
+brightest side (render/environment.key_white, the incident light, not the hand's own brightness) renders at most
+KEY_WHITE. A map with a sun in front of the hand is exposed for the sun, as a camera metering the scene's light
+would; a dark hand stays dark and a light one light, and neither clips where it is lit diffusely (the specular
+highlights still may).
+
 Planning checks every map of the set once (`EnvironmentSet`): one that does not decode, is not equirectangular or
 holds NaN/Inf or negative values is left out and recorded (dataset.json's plan description), so one bad file among
 hundreds never ends a long run; a set with no usable map is refused in one line. A map's mean radiance (luminance,
@@ -30,6 +36,7 @@ KELVIN_RANGE = (5000.0, 8000.0)  # white balance: the light's colour as a camera
 BLUR_RANGE_DEG = (1.0, 3.0)    # the backdrop's blur (render/environment.background_view): out of focus
 ROTATION, STRENGTH, KELVIN, BLUR = 1, 2, 3, 4
 MATCH_LIMITS = (0.25, 2.0)     # a photo backdrop scales the light by its level / TARGET_RADIANCE within these
+KEY_WHITE = 1.0                # the exposure cap: white (8-bit 255) for a white card facing the brightest light
 
 
 def list_maps(folder) -> list[str]:
@@ -82,9 +89,11 @@ class EnvironmentSet:
         doc = {"map": name, "rotation": round(360.0 * float(u[ROTATION]), 3),
                "strength": round(TARGET_RADIANCE / max(level, 1e-6) * 2.0 ** stops, 6),
                "white_balance": white_balance(kelvin), "frame": "camera"}
+        capped = exposure_capped(doc)
         record = {"rig": "environment", "map": Path(name).stem, "kelvin": round(kelvin, 1),
-                  "stops": round(stops, 4)}
-        return doc, record
+                  "stops": round(stops, 4),
+                  "capped_stops": round(float(np.log2(capped["strength"] / doc["strength"])), 4)}
+        return capped, record
 
     @staticmethod
     def backdrop(u: np.ndarray) -> dict:
@@ -103,8 +112,19 @@ def match_background(doc: dict, pixels: np.ndarray) -> dict:
     scale = float(np.clip(level / TARGET_RADIANCE, *MATCH_LIMITS))
     tint = np.sqrt(np.maximum(mean, 1e-4) / max(float(mean.mean()), 1e-4))
     balance = np.asarray(doc.get("white_balance", [1.0, 1.0, 1.0])) * tint
-    return {**doc, "strength": round(float(doc.get("strength", 1.0)) * scale, 6),
-            "white_balance": [round(float(c), 5) for c in balance / balance.mean()]}
+    return exposure_capped({**doc, "strength": round(float(doc.get("strength", 1.0)) * scale, 6),
+                            "white_balance": [round(float(c), 5) for c in balance / balance.mean()]})
+
+
+def exposure_capped(doc: dict) -> dict:
+    """The environment field `doc` (frame 'camera') with its strength lowered, where needed, so that a white
+    Lambertian card facing the camera's side renders at most KEY_WHITE under it (render/environment.key_white)."""
+    unit = environment.Environment(str(doc["map"]), float(doc.get("rotation", 0.0)), 1.0,
+                                   tuple(float(c) for c in doc.get("white_balance", (1.0, 1.0, 1.0))),
+                                   str(doc.get("frame", "camera")))
+    cap = KEY_WHITE / max(environment.key_white(unit), 1e-9)
+    strength = float(doc.get("strength", 1.0))
+    return doc if strength <= cap else {**doc, "strength": round(cap, 6)}
 
 
 def mean_luminance(pixels: np.ndarray) -> float:

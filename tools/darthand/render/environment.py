@@ -527,6 +527,16 @@ class FrameEnvironment:
         n = np.asarray(normals, np.float64).T @ self.M.T
         return (sh_irradiance(self.lighting.sh, n) * self.scale).T.astype(np.float32)
 
+    def white(self, normals: np.ndarray) -> np.ndarray:
+        """(3, N) float64 the radiance a white Lambertian surface renders at world unit normals (3, N), unshadowed:
+        the remainder's irradiance plus each light's radiance x the cosine toward it."""
+        normals = np.asarray(normals, np.float64)
+        total = self.irradiance(normals).astype(np.float64)
+        for light in self.lights:
+            cosine = np.maximum(-np.asarray(light["direction"], np.float64) @ normals, 0.0)
+            total += np.asarray(light["radiance"], np.float64)[:, None] * cosine[None]
+        return total
+
     def specular(self, directions: np.ndarray, roughness: np.ndarray) -> np.ndarray:
         """(3, N) float32 the remainder prefiltered for GGX roughness (N,) along world reflection directions
         (3, N): blurred over about 90 alpha degrees (alpha = roughness^2, the lobe's width)."""
@@ -549,6 +559,30 @@ def frame_environment(environment: Environment, R: np.ndarray) -> FrameEnvironme
     lights = [{"type": "directional", "radiance": (p * scale).astype(np.float32), "shadows": True,
                "direction": -(M.T @ d)} for d, p in zip(lighting.light_dirs, lighting.light_power)]
     return FrameEnvironment(lights, lighting, M, scale)
+
+
+def key_white(environment: Environment, R: np.ndarray | None = None) -> float:
+    """The brightest a white Lambertian surface facing the camera renders under `environment` (unshadowed, the
+    largest channel, over `facing_normals()`, spread evenly over the hemisphere that faces the camera): what an
+    exposure must keep below white for no skin to clip. R (3, 3) world -> camera; None: the identity, which is all a
+    frame-'camera' environment needs (it turns with the camera)."""
+    R = np.eye(3) if R is None else np.asarray(R, np.float64)
+    normals = R.T @ facing_normals()
+    return float(frame_environment(environment, R).white(normals).max())
+
+
+@functools.cache
+def facing_normals(count: int = 512, rim: int = 64) -> np.ndarray:
+    """(3, count + rim) unit normals in camera axes (OpenCV: the camera looks along +z) spread evenly over the
+    hemisphere that faces the camera (a Fibonacci lattice, z from -1 to 0), plus `rim` on its rim (z = 0), where a
+    light from behind the hand is brightest."""
+    k = np.arange(count, dtype=np.float64)
+    z = -1.0 + k / count
+    r = np.sqrt(1.0 - z * z)
+    phi = k * np.pi * (3.0 - np.sqrt(5.0))
+    ring = np.linspace(0.0, 2 * np.pi, rim, endpoint=False)
+    return np.concatenate([np.stack([r * np.cos(phi), r * np.sin(phi), z]),
+                           np.stack([np.cos(ring), np.sin(ring), np.zeros(rim)])], axis=1)
 
 
 def backdrop_blur(background) -> float | None:
