@@ -135,6 +135,8 @@ def test_a_photo_backdrop_sets_the_lights_level_and_tint():
     cap = environments.KEY_WHITE / environment.key_white(environment.Environment("studio"))
     assert 0.5 * environments.MATCH_LIMITS[1] > cap                     # the studio's lamps: the cap binds
     assert bright["strength"] == pytest.approx(cap, rel=1e-5)       # within its limits, then the exposure's cap
+    world = {**doc, "frame": "world", "strength": 100.0}                  # its light depends on an unknown camera
+    assert environments.exposure_capped(world) == world
     red = environments.match_background(doc, np.broadcast_to(np.float32([0.6, 0.3, 0.15]), (8, 8, 3)))
     r, g, b = red["white_balance"]
     assert r > g > b and np.mean(red["white_balance"]) == pytest.approx(1.0, abs=1e-4)

@@ -117,11 +117,13 @@ def match_background(doc: dict, pixels: np.ndarray) -> dict:
 
 
 def exposure_capped(doc: dict) -> dict:
-    """The environment field `doc` (frame 'camera') with its strength lowered, where needed, so that a white
-    Lambertian card facing the camera's side renders at most KEY_WHITE under it (render/environment.key_white)."""
+    """The environment field `doc` with its strength lowered, where needed, so that a white Lambertian card facing
+    the camera's side renders at most KEY_WHITE under it (render/environment.key_white). A frame-'world' field (a
+    user's jobs file) is left as it is: where its light comes from depends on a camera not known here."""
+    if doc.get("frame", "camera") != "camera":
+        return doc
     unit = environment.Environment(str(doc["map"]), float(doc.get("rotation", 0.0)), 1.0,
-                                   tuple(float(c) for c in doc.get("white_balance", (1.0, 1.0, 1.0))),
-                                   str(doc.get("frame", "camera")))
+                                   tuple(float(c) for c in doc.get("white_balance", (1.0, 1.0, 1.0))))
     cap = KEY_WHITE / max(environment.key_white(unit), 1e-9)
     strength = float(doc.get("strength", 1.0))
     return doc if strength <= cap else {**doc, "strength": round(cap, 6)}
