@@ -61,6 +61,20 @@ def test_object_types_without_catalogues_are_refused_in_one_line(sources):
         Planner({"two_hands": 1.0, "interactions": {"held": 1.0}}, opened)
 
 
+def test_forearms_apart_by_the_exact_distance_of_two_skew_segments():
+    """Perpendicular segments at heights 0 and d whose nearest points (x = y = 0) lie a quarter along each: their
+    distance is d exactly; 30 um under the clearance is too close (a 64-point sampling would find ~0.06 mm more)."""
+    clear = object_pairs.FOREARM_CLEAR_M
+
+    def arm(axis, height):
+        start, end = np.zeros(3), np.zeros(3)
+        start[axis], end[axis], start[2], end[2] = -0.1, 0.3, height, height
+        return object_pairs.TableHand(None, None, (start, end))
+
+    assert not object_pairs.forearms_apart(arm(0, 0.0), arm(1, clear - 3e-5))
+    assert object_pairs.forearms_apart(arm(0, 0.0), arm(1, clear + 3e-5))
+
+
 @pytest.fixture(scope="module")
 def catalogues(hand, tmp_path_factory):
     """(objects catalogue, grasp catalogue): the toy ball's and box's grasps fitted on both sides of the test
