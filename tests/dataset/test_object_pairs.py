@@ -206,6 +206,30 @@ def test_no_suitable_pair_is_refused_in_one_line(sources, catalogues, monkeypatc
                 {"objects": catalogues[0], "grasps": catalogues[1]})
 
 
+@pytest.mark.slow
+def test_one_hand_object_frames_share_the_pairs_catalogues_where_the_sides_agree(sources, catalogues, monkeypatch):
+    """A plan of one-hand object frames and held/handover frames builds the catalogues and distance fields once
+    when both draw on the same models (both sides), and plans what two separate samplers plan; with one side asked
+    the one-hand sampler is its own (it describes that side only)."""
+    from darthand.dataset import plan
+
+    catalogs = {"objects": catalogues[0], "grasps": catalogues[1]}
+    spec = {"seed": 3, "objects": 0.4, "two_hands": 0.5, "interactions": {"held": 0.5, "handover": 0.5}}
+    shared = Planner(spec, sources[0], catalogs)
+    assert shared.object_frames is shared.pairs.objects.frames
+    jobs = [shared.job(i) for i in range(FRAMES)]
+    assert {j["interaction"]["type"] for j in jobs if "interaction" in j} & {"held", "handover"}
+    assert any("grasp" in j for j in jobs)
+    one_side = Planner({**spec, "sides": ["right"]}, sources[0], catalogs)
+    assert one_side.object_frames is not one_side.pairs.objects.frames
+    assert set(one_side.object_frames.grasps) == {"right"}
+    monkeypatch.setattr(plan, "_same_models", lambda a, b: False)
+    apart = Planner(spec, sources[0], catalogs)
+    assert apart.object_frames is not apart.pairs.objects.frames
+    assert [apart.job(i) for i in range(FRAMES)] == jobs
+    assert apart.describe() == shared.describe()
+
+
 @pytest.fixture(scope="module")
 def rendered(sources, catalogues, planned, tmp_path_factory):
     """(dataset folder, jobs file): the planned frames rendered, and their jobs file."""
