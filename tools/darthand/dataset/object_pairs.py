@@ -147,15 +147,18 @@ class ObjectPairs:
             return None
         poses = [np.asarray(f.pose, np.float64) for f in fits]
         to_object = [np.linalg.inv(np.asarray(f.placement, np.float64)) for f in fits]   # hand model -> object
-        receiver = None
+        receiver, posed = None, {}
         if kind == "handover":
             receiver = SIDES[int(u[2] >= 0.5)]
             r = SIDES.index(receiver)
             poses[r] = opened(poses[r], float(np.interp(u[3], (0, 1), RECEIVER_CLOSE)))
             hand = hand_pair.pose_hand(models[receiver], poses[r], None, to_object[r])
             away = _unit(hand.vertices.mean(0) - _centre(item))
-            to_object[r] = translated(to_object[r], float(np.interp(u[4], (0, 1), RECEIVER_SHORT_M)) * away)
-        hands = [hand_pair.pose_hand(models[s], p, None, T) for s, p, T in zip(SIDES, poses, to_object)]
+            offset = float(np.interp(u[4], (0, 1), RECEIVER_SHORT_M)) * away
+            to_object[r] = translated(to_object[r], offset)
+            posed[r] = hand.moved(translated(np.eye(4), offset))       # backed off: the same pose, moved
+        hands = [posed[k] if k in posed else hand_pair.pose_hand(models[s], p, None, T)
+                 for k, (s, p, T) in enumerate(zip(SIDES, poses, to_object))]
         depth = [f.penetration_max_m for f in fits]
         if receiver is not None:
             r = SIDES.index(receiver)
