@@ -1,6 +1,7 @@
 """Worn accessories against the held object (issue 30): over planned object frames of the build's catalogues, every
-frame wearing an accessory, how deep each accessory kind passes into the object (MeshLab's signed distance,
-pymeshlab, of the posed accessory's vertices to the object's mesh in its frame). The plan leaves the kinds of
+frame wearing an accessory, how deep each accessory kind passes into the object (the posed accessory's vertices
+carried into the object's frame and measured by benchmarks/object_penetration.depth_mm: MeshLab's vertex-to-mesh
+distance signed by trimesh's inside test, one mesh per object). The plan leaves the kinds of
 dataset/objects.LEFT_OFF off object frames; this measures them worn as planned before that rule (the frames' own
 accessory, put back on). DARTHAND_BENCH_OBJECT_FRAMES sets the frames (default 200).
 
@@ -14,21 +15,15 @@ import os
 import numpy as np
 
 from benchmarks.object_dataset import _catalogs
+from benchmarks.object_penetration import depth_mm, object_meshes
 from benchmarks.render import ROOT
 
 
-def penetration_mm(item, placement, vertices: np.ndarray) -> float:
-    """mm the deepest of `vertices` (n, 3, world) lies inside the object `item` placed at `placement` (4, 4)."""
-    import pymeshlab       # MeshLab: the independent distance (the grasp fit uses darthand's own field)
-
+def penetration_mm(mesh, placement, vertices: np.ndarray) -> float:
+    """mm the deepest of `vertices` (n, 3, world) lies inside the object's `mesh` (trimesh, object frame) placed at
+    `placement` (4, 4): the vertices go into the object's frame, the object mesh stays as built."""
     P = np.asarray(placement, np.float64)
-    local = (np.asarray(vertices, np.float64) - P[:3, 3]) @ P[:3, :3]
-    ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(local), "accessory")
-    ms.add_mesh(pymeshlab.Mesh(np.asarray(item.vertices, np.float64), np.asarray(item.faces, np.int32)), "object")
-    ms.compute_scalar_by_distance_from_another_mesh_per_vertex(measuremesh=0, refmesh=1, signeddist=True,
-                                                               maxdist=pymeshlab.PureValue(1.0))
-    return 1000 * max(0.0, float(-ms.mesh(0).vertex_scalar_array().min()))      # negative inside
+    return depth_mm((np.asarray(vertices, np.float64) - P[:3, 3]) @ P[:3, :3], mesh)[0]
 
 
 def run() -> dict:
@@ -45,7 +40,7 @@ def run() -> dict:
     planner = Planner({**PlanOptions(objects=1.0, accessory_share=1.0).spec(), "sides": list(sources)}, sources,
                       {"objects": catalog, "grasps": grasps})
     plain = Planner({**PlanOptions(accessory_share=1.0).spec(), "sides": list(sources)}, sources)
-    items = {i.id: i for i in load_object_catalog(catalog)}
+    meshes = object_meshes(load_object_catalog(catalog))
     depths: dict = {}
     for i in range(frames):
         job = planner.job(i)
@@ -57,7 +52,7 @@ def run() -> dict:
             continue
         source = sources[hand["side"]]
         subject = source.subject(np.asarray(hand["pose"]), accessory=accessory, betas=hand.get("betas"))
-        depth = penetration_mm(items[held["object"]], held["placement"], subject.surfaces[1].vertices)
+        depth = penetration_mm(meshes[held["object"]], held["placement"], subject.surfaces[1].vertices)
         depths.setdefault(source.accessory_type(accessory), []).append(depth)
     out: dict = {"frames": frames}
     for kind, values in sorted(depths.items()):

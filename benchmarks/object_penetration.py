@@ -88,15 +88,16 @@ def catalogue_figures(grasps_path: Path, objects_path: Path, models: Path) -> di
 
 def dataset_figures(frames: int, objects_path: Path, grasps_path: Path, models: Path) -> dict:
     """A planned dataset whose every frame is asked to hold an object, rendered small (64^2); its written hand meshes
-    (meshes/<n>.npy) against its written object meshes (object_meshes/<n>.npy, faces from the catalogue by the
-    labels' object id), both in the camera frame."""
+    (meshes/<n>.npy, camera frame) carried into the object's frame by the labels' object pose (object frame ->
+    camera: R, t), against the object's catalogue mesh (one per object, as for the grasps); a frame is an object
+    frame when it wrote its object mesh (object_meshes/<n>.npy)."""
     from darthand.dataset.api import render_dataset
     from darthand.dataset.options import DatasetOptions
     from darthand.dataset.plan import PlanOptions
     from darthand.fileio import read_json
     from darthand.objects.loader import load_object_catalog
 
-    faces = {it.id: it.faces for it in load_object_catalog(objects_path)}
+    meshes = object_meshes(load_object_catalog(objects_path))
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "ds"
         render_dataset(DatasetOptions(str(models / "right.npz"), str(out), count=frames, size=64, resume=False,
@@ -105,12 +106,11 @@ def dataset_figures(frames: int, objects_path: Path, grasps_path: Path, models: 
         depths = []
         mesh_files = sorted((out / "object_meshes").glob("*.npy"))
         for mesh_file in mesh_files:
-            labels = read_json(out / "labels" / f"{mesh_file.stem}.json", "labels")
-            obj = np.load(mesh_file).astype(np.float64)
+            held = read_json(out / "labels" / f"{mesh_file.stem}.json", "labels")["objects"][0]
+            R, t = np.asarray(held["pose"]["R"], np.float64), np.asarray(held["pose"]["t"], np.float64)
             hands = np.load(out / "meshes" / mesh_file.name).astype(np.float64)
             hands = hands[None] if hands.ndim == 2 else hands
-            mesh = trimesh.Trimesh(obj, faces[labels["objects"][0]["id"]], process=False)
-            depths += [depth_mm(h, mesh)[0] for h in hands]
+            depths += [depth_mm((h - t) @ R, meshes[held["id"]])[0] for h in hands]
     depths_a = np.array(depths)
     return {"frames": frames, "object_frames": len(mesh_files), "hands": len(depths_a),
             "penetration_max_mm": round(float(depths_a.max(initial=0.0)), 3),

@@ -61,6 +61,20 @@ def test_object_types_without_catalogues_are_refused_in_one_line(sources):
         Planner({"two_hands": 1.0, "interactions": {"held": 1.0}}, opened)
 
 
+def test_forearms_apart_by_the_exact_distance_of_two_skew_segments():
+    """Perpendicular segments at heights 0 and d whose nearest points (x = y = 0) lie a quarter along each: their
+    distance is d exactly; 30 um under the clearance is too close (a 64-point sampling would find ~0.06 mm more)."""
+    clear = object_pairs.FOREARM_CLEAR_M
+
+    def arm(axis, height):
+        start, end = np.zeros(3), np.zeros(3)
+        start[axis], end[axis], start[2], end[2] = -0.1, 0.3, height, height
+        return object_pairs.TableHand(None, None, (start, end))
+
+    assert not object_pairs.forearms_apart(arm(0, 0.0), arm(1, clear - 3e-5))
+    assert object_pairs.forearms_apart(arm(0, 0.0), arm(1, clear + 3e-5))
+
+
 @pytest.fixture(scope="module")
 def catalogues(hand, tmp_path_factory):
     """(objects catalogue, grasp catalogue): the toy ball's and box's grasps fitted on both sides of the test
@@ -190,6 +204,30 @@ def test_no_suitable_pair_is_refused_in_one_line(sources, catalogues, monkeypatc
     with pytest.raises(InputError, match=r"^held/handover: no object of the catalogue takes two hands"):
         Planner({"two_hands": 1.0, "interactions": {"handover": 1.0}}, sources[0],
                 {"objects": catalogues[0], "grasps": catalogues[1]})
+
+
+@pytest.mark.slow
+def test_one_hand_object_frames_share_the_pairs_catalogues_where_the_sides_agree(sources, catalogues, monkeypatch):
+    """A plan of one-hand object frames and held/handover frames builds the catalogues and distance fields once
+    when both draw on the same models (both sides), and plans what two separate samplers plan; with one side asked
+    the one-hand sampler is its own (it describes that side only)."""
+    from darthand.dataset import plan
+
+    catalogs = {"objects": catalogues[0], "grasps": catalogues[1]}
+    spec = {"seed": 3, "objects": 0.4, "two_hands": 0.5, "interactions": {"held": 0.5, "handover": 0.5}}
+    shared = Planner(spec, sources[0], catalogs)
+    assert shared.object_frames is shared.pairs.objects.frames
+    jobs = [shared.job(i) for i in range(FRAMES)]
+    assert {j["interaction"]["type"] for j in jobs if "interaction" in j} & {"held", "handover"}
+    assert any("grasp" in j for j in jobs)
+    one_side = Planner({**spec, "sides": ["right"]}, sources[0], catalogs)
+    assert one_side.object_frames is not one_side.pairs.objects.frames
+    assert set(one_side.object_frames.grasps) == {"right"}
+    monkeypatch.setattr(plan, "_same_models", lambda a, b: False)
+    apart = Planner(spec, sources[0], catalogs)
+    assert apart.object_frames is not apart.pairs.objects.frames
+    assert [apart.job(i) for i in range(FRAMES)] == jobs
+    assert apart.describe() == shared.describe()
 
 
 @pytest.fixture(scope="module")

@@ -35,6 +35,7 @@ from scipy.spatial import cKDTree
 from darthand.dataset.jobs import PASS_THROUGH_M
 from darthand.dataset.objects import ObjectFrames
 from darthand.errors import InputError
+from darthand.grasps.digit_clearance import segment_distances
 from darthand.grasps.refit import refit_grasp
 from darthand.model import hand_pair
 from darthand.render.object_contacts import object_contacts
@@ -146,15 +147,18 @@ class ObjectPairs:
             return None
         poses = [np.asarray(f.pose, np.float64) for f in fits]
         to_object = [np.linalg.inv(np.asarray(f.placement, np.float64)) for f in fits]   # hand model -> object
-        receiver = None
+        receiver, posed = None, {}
         if kind == "handover":
             receiver = SIDES[int(u[2] >= 0.5)]
             r = SIDES.index(receiver)
             poses[r] = opened(poses[r], float(np.interp(u[3], (0, 1), RECEIVER_CLOSE)))
             hand = hand_pair.pose_hand(models[receiver], poses[r], None, to_object[r])
             away = _unit(hand.vertices.mean(0) - _centre(item))
-            to_object[r] = translated(to_object[r], float(np.interp(u[4], (0, 1), RECEIVER_SHORT_M)) * away)
-        hands = [hand_pair.pose_hand(models[s], p, None, T) for s, p, T in zip(SIDES, poses, to_object)]
+            offset = float(np.interp(u[4], (0, 1), RECEIVER_SHORT_M)) * away
+            to_object[r] = translated(to_object[r], offset)
+            posed[r] = hand.moved(translated(np.eye(4), offset))       # backed off: the same pose, moved
+        hands = [posed[k] if k in posed else hand_pair.pose_hand(models[s], p, None, T)
+                 for k, (s, p, T) in enumerate(zip(SIDES, poses, to_object))]
         depth = [f.penetration_max_m for f in fits]
         if receiver is not None:
             r = SIDES.index(receiver)
@@ -219,14 +223,8 @@ def hands_apart(a: TableHand, b: TableHand) -> bool:
 
 def forearms_apart(a: TableHand, b: TableHand) -> bool:
     """Whether the forearms of two grasping hands (in the object frame) stay FOREARM_CLEAR_M apart."""
-    return segment_distance(*a.forearm, *b.forearm) >= FOREARM_CLEAR_M
-
-
-def segment_distance(p0, p1, q0, q1) -> float:
-    """The least distance (m) between segments p0-p1 and q0-q1 (sampled finely: 64 points each)."""
-    t = np.linspace(0.0, 1.0, 64)[:, None]
-    p, q = p0 + t * (p1 - p0), q0 + t * (q1 - q0)
-    return float(np.sqrt(((p[:, None] - q[None]) ** 2).sum(-1)).min())
+    ends = (np.asarray(p, np.float64)[None] for p in (*a.forearm, *b.forearm))
+    return float(segment_distances(*ends)[0][0]) >= FOREARM_CLEAR_M
 
 
 def opened(pose: np.ndarray, close: float) -> np.ndarray:

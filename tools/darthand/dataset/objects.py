@@ -12,9 +12,10 @@ nor change.
 
 The hand of an object frame wears its frame's accessory unless that is of a kind in LEFT_OFF (then none; the sampling
 record says which kind was left off): a grasp is fitted to the bare hand, and measured over 200 planned object frames
-of the default build (every frame an accessory; MeshLab's signed distance of the accessory's vertices to the object),
-rings passed into the object in 6 of 44 frames (5 deeper than 1 mm, up to 6.8 mm) and gloves in 54 of 56 (median
-0.9 mm, their thickness, up to 7.5 mm), while bracelets (65) and watches (35) never touched it.
+of the default build (every frame an accessory; benchmarks/object_accessories: MeshLab's distance of the accessory's
+vertices to the object, signed by trimesh's inside test), rings passed into the object in 6 of 44 frames (5 deeper
+than 1 mm, up to 4.9 mm) and gloves in 54 of 56 (median 0.9 mm, their thickness, up to 2.0 mm), while bracelets (65)
+and watches (35) never touched it.
 """
 
 from __future__ import annotations

@@ -287,7 +287,7 @@ class Planner:
         self.two_hands = spec.get("two_hands", 0.0)
         self.pairs = _interaction_sampler(spec, sources, self.model, catalogs or {}) if self.two_hands else None
         self.objects = spec.get("objects", 0.0)
-        self.object_frames = _object_frames(spec, sources, catalogs or {}) if self.objects else None
+        self.object_frames = _object_frames(spec, sources, catalogs or {}, self.pairs) if self.objects else None
         self.object_redraws = 0             # refits that failed and were drawn again (this planner's jobs)
 
     def describe(self) -> dict:
@@ -448,8 +448,10 @@ def _interaction_sampler(spec: dict, sources: dict, model, catalogs: dict):
                                            fit_digits=spec["interaction_fit"] == "digits", objects=held)
 
 
-def _object_frames(spec: dict, sources: dict, catalogs: dict):
-    """The object-frame sampler (dataset/objects.ObjectFrames) on the models of the plan's sides' sources."""
+def _object_frames(spec: dict, sources: dict, catalogs: dict, pairs=None):
+    """The object-frame sampler (dataset/objects.ObjectFrames) on the models of the plan's sides' sources: the one
+    the held/handover draws of `pairs` (the plan's InteractionSampler, or None) built when it is on the same models
+    in the same order (the catalogues, their distance fields and its description are then the same), else its own."""
     # Imported here: the grasp refit (the fit's least squares, the objects' distance fields) loads only for plans
     # with objects.
     from darthand.dataset.objects import ObjectFrames
@@ -460,7 +462,15 @@ def _object_frames(spec: dict, sources: dict, catalogs: dict):
     if not catalogs.get("objects") or not catalogs.get("grasps"):
         raise InputError("objects: the plan needs the object and grasp catalogues (--objects-catalog, "
                          "--grasps-catalog)")
+    held = None if pairs is None or pairs.objects is None else pairs.objects.frames
+    if held is not None and _same_models(held.models, models):
+        return held
     return ObjectFrames(catalogs["objects"], catalogs["grasps"], models, spec.get("object_categories"))
+
+
+def _same_models(a: dict, b: dict) -> bool:
+    """Whether two {side: HandModel} are the same sides in the same order, each the same model object."""
+    return list(a) == list(b) and all(a[side] is b[side] for side in a)
 
 
 def _shape_sampler(opts: dict, model) -> shapes.ShapeSampler:

@@ -62,7 +62,7 @@ class InputFiles:
         self.specs, self.open_files, self.labels = {}, {}, {}
         self._catalogue_files: dict = {}
         self._fingerprints: dict = {}
-        self.objects_catalog, self.object_files = object_catalogue_files(objects)
+        self.objects_catalog, self.object_files = catalogue_files(objects, "objects", ("npz", "base_color"))
         for side, spec in specs.items():
             package = Path("build") / "model" / f"{spec.package}.npz" if spec.package in ("right", "left") \
                 else Path(spec.package)
@@ -87,23 +87,13 @@ class InputFiles:
             self.labels[side] = None if src is None else str(getattr(src, "interface", None) or src.source)
 
     def _catalogue(self, path, files: list, kind: str):
-        """The catalogue file (absolute) of a catalogue path (file or folder); its open-time files added."""
-        if not path:
-            return path
-        cat = Path(path) / "catalog.json" if Path(path).is_dir() else Path(path)
-        if not cat.is_file():
-            return str(path)                       # opening it fails with the loader's own error
-        cat = Path(absolute(cat))
-        group = f"catalog:{cat}"
-        files.append((cat, group))
-        if kind == "accessories":
-            try:
-                doc = json.loads(cat.read_text())
-                files += [(cat.parent / e["files"]["npz"], group) for e in doc.get("accessories", [])]
-            except (OSError, ValueError, KeyError, TypeError):
-                pass                               # the loader reports a broken catalogue
-        self._catalogue_files[kind, str(cat)] = group
-        return str(cat)
+        """The catalogue file (absolute) of a catalogue path (file or folder); its open-time files added (the
+        accessories' meshes; the textures' images are a job's)."""
+        cat, found = catalogue_files(path, kind, ("npz",) if kind == "accessories" else ())
+        if found:
+            files += found
+            self._catalogue_files[kind, cat] = found[0][1]
+        return cat
 
     def needed(self, items: list, sides: set) -> dict:
         """{path: [group, size, mtime_ns]} of the files a chunk [(job, digest)] reads: its sides' open-time files,
@@ -168,10 +158,10 @@ class InputFiles:
             yield pose, f"file:{pose}"
 
 
-def object_catalogue_files(path) -> tuple[str | None, list]:
-    """(catalog.json's absolute path, [(file, group)] of the catalogue and the meshes and textures it lists) of an
-    object catalogue (its file or folder); (path, []) when there is none there (a run without object frames, or
-    one the loader will refuse with its own error)."""
+def catalogue_files(path, kind: str, names: tuple = ()) -> tuple[str | None, list]:
+    """(catalog.json's absolute path, [(file, group)]: the catalogue and, for each entry of its `kind` list, the files
+    its 'files' names under `names`) of a catalogue (its file or folder); (path, []) when there is none there (a run
+    without it, or one the loader will refuse with its own error)."""
     if not path:
         return path, []
     cat = Path(path) / "catalog.json" if Path(path).is_dir() else Path(path)
@@ -180,10 +170,11 @@ def object_catalogue_files(path) -> tuple[str | None, list]:
     cat = Path(absolute(cat))
     group = f"catalog:{cat}"
     files = [(cat, group)]
+    if not names:
+        return str(cat), files
     try:
-        for entry in json.loads(cat.read_text()).get("objects", []):
-            files += [(cat.parent / name, group) for name in (entry["files"].get("npz"),
-                                                              entry["files"].get("base_color")) if name]
+        for entry in json.loads(cat.read_text()).get(kind, []):
+            files += [(cat.parent / entry["files"][name], group) for name in names if entry["files"].get(name)]
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         pass                                       # the loader reports a broken catalogue
     return str(cat), files
