@@ -18,6 +18,9 @@ keypoints visible, for the frames without an accessory ('bare', the headline), w
   order (wrist, then each finger root to tip, thumb to pinky); `order_check` verifies it on the run's detections;
 - handedness: share of those frames whose MediaPipe handedness, turned (it assumes a mirrored selfie image: its
   'Left' is a right hand), is the frame's side;
+- washed_out: whether skin washes out (issue 28: "the tone a frame's labels record is the tone its image shows"):
+  of the bare counted frames, how many have over 5 % and over 20 % of their hand's inner pixels (the mask's full
+  pixels eroded by one: an edge pixel mixes in the backdrop) at 255 in some channel, and the mean share;
 - cpu_s_per_frame: CPU seconds of the whole render-dataset command (its workers included, start-up too) per frame
   rendered; cpu_ms_per_image: the run's own steady-state figure (dataset.json timings).
 
@@ -46,6 +49,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy import ndimage
 
 from darthand.dataset.frames import frame_names
 from darthand.fileio import write_json
@@ -287,9 +291,29 @@ def measure_setting(folder: Path, frames: int, options: list[str], confidence: f
         return {**render, "error": str(e)}, {}
     by_index = {i: found[Path(frame_names(i)["image"]).name] for i in labels}
     records = [{"index": i, **frame_record(labels[i], by_index[i])} for i in sorted(labels)]
+    counted = [r["index"] for r in records if r["visible"] >= MIN_VISIBLE and not r["accessory"]]
     result = {**render, **subsets(records), "order_check": order_check(records, labels, by_index),
+              "washed_out": washed_out([clipped_share(folder, i) for i in counted]),
               "harness_cpu_s": round(time.process_time() - t0, 2)}
     return result, by_index
+
+
+def clipped_share(folder: Path, index: int) -> float:
+    """The share of frame `index`'s inner hand pixels (its mask's full pixels eroded by one) that are 255 in some
+    channel of its image (0 without any)."""
+    names = frame_names(index)
+    image = read_straight_png(folder / names["image"])[..., :3]
+    hand = ndimage.binary_erosion(read_straight_png(folder / names["mask"])[..., 0] == 255)
+    return float((image[hand].max(axis=1) == 255).mean()) if hand.any() else 0.0
+
+
+def washed_out(shares: list[float]) -> dict:
+    """{'frames', 'over_5', 'over_20': frames with over 5 % / 20 % of their hand clipped, 'mean': the mean share}
+    of per-frame clipped shares (clipped_share)."""
+    shares_array = np.asarray(shares, np.float64)
+    return {"frames": len(shares), "over_5": int((shares_array > 0.05).sum()),
+            "over_20": int((shares_array > 0.2).sum()),
+            "mean": round(float(shares_array.mean()), 5) if len(shares) else None}
 
 
 # ------------------------------------------------------------------ the contact sheet
@@ -443,26 +467,31 @@ def summary(res: dict) -> str:
              f"(no accessory, >= {res['min_visible']} of 21 keypoints visible; seed {res['seed']}, {res['frames']} "
              "frames planned).", "",
              "| setting | frames | detection (95 %) | PCK 0.1 | PCK 0.2 | handedness | with accessory: detection | "
-             "CPU ms/frame: steady, whole command |", "|---|---|---|---|---|---|---|---|"]
+             "skin clipped: frames over 5 % | CPU ms/frame: steady, whole command |", "|---" * 9 + "|"]
     for name in res.get("order", res["settings"]):       # the table's order (JSON files sort their keys)
         r = res["settings"][name]
         if "error" in r:
-            lines.append(f"| {name} | failed: {r['error']} (`{r['command']}`) | | | | | | |")
+            lines.append(f"| {name} | failed: {r['error']} (`{r['command']}`) | | | | | | | |")
             continue
         b = r["bare"]
         lo, hi = b["detection_rate_95"]
         lines.append(f"| {name} | {b['frames']} | {_pct(b['detection_rate'])} ({_pct(lo)}-{_pct(hi)}) | "
                      f"{_num(b['pck_0.1'])} | {_num(b['pck_0.2'])} | {_pct(b['handedness'])} | "
                      f"{_pct(r['accessory']['detection_rate'])} of {r['accessory']['frames']} | "
-                     f"{_ms(r['cpu_ms_per_image'])}, {_ms(r['cpu_s_per_frame'] and 1000 * r['cpu_s_per_frame'])} |")
+                     f"{_clipped(r.get('washed_out'))} | {_ms(r['cpu_ms_per_image'])}, "
+                     f"{_ms(r['cpu_s_per_frame'] and 1000 * r['cpu_s_per_frame'])} |")
         if r.get("compared_with"):
             c = r["compared_with"]
             lines.append(f"| ({c['setting']} on {name}'s frames) | {c['bare']['frames']} | "
                          f"{_pct(c['bare']['detection_rate'])} | {_num(c['bare']['pck_0.1'])} | "
-                         f"{_num(c['bare']['pck_0.2'])} | {_pct(c['bare']['handedness'])} | | |")
+                         f"{_num(c['bare']['pck_0.2'])} | {_pct(c['bare']['handedness'])} | | | |")
     if res.get("sheet"):
         lines += ["", f"Contact sheet: `{res['sheet']}` (frames {', '.join(map(str, res['sheet_frames']))})."]
     return "\n".join(lines)
+
+
+def _clipped(w: dict | None) -> str:
+    return "n/a" if not w else f"{w['over_5']} of {w['frames']}"
 
 
 def _pct(x) -> str:

@@ -158,3 +158,24 @@ def test_without_the_detector_the_benchmark_reports_itself_skipped(monkeypatch, 
     res = realism.run(out=tmp_path, frames=2)
     assert res == {"skipped": res["skipped"]} and "make detector" in res["skipped"]
     assert not list(tmp_path.iterdir())                 # nothing rendered, no sheet
+
+
+def test_clipped_share_counts_the_hands_inner_pixels_at_255(tmp_path):
+    """A 6 x 6 hand in a 12 x 12 frame: its inner 4 x 4 (eroded by one) is what counts. Four of those 16 at 255 in
+    one channel: 0.25; a clipped pixel on the hand's edge or in the backdrop does not count."""
+    from darthand.dataset.frames import frame_names
+    from darthand.render.image import write_png
+
+    names = frame_names(7)
+    image = np.full((12, 12, 3), 120, np.uint8)
+    mask = np.zeros((12, 12), np.uint8)
+    mask[3:9, 3:9] = 255
+    image[4:6, 4:6, 0] = 255                          # inner pixels (rows and columns 4..7 are inner)
+    image[3, 5] = 255                                 # the hand's edge
+    image[0, 0] = 255                                 # the backdrop
+    for key, pixels in (("image", image), ("mask", mask)):
+        (tmp_path / names[key]).parent.mkdir(parents=True, exist_ok=True)
+        write_png(tmp_path / names[key], pixels)
+    assert realism.clipped_share(tmp_path, 7) == pytest.approx(4 / 16)
+    figures = realism.washed_out([0.0, 0.06, 0.25, 0.01])
+    assert figures == {"frames": 4, "over_5": 2, "over_20": 1, "mean": pytest.approx(0.08)}
