@@ -33,10 +33,11 @@ def film_setting(value) -> dict | None:
 
 def frame_film(setting: dict | None, job: dict) -> tuple[dict | None, int]:
     """(film settings or None, noise seed) of a frame: the run's fixed settings, or for 'random' a draw from
-    numpy's Generator seeded with the job's hash."""
-    seed = job_seed(job)
+    numpy's Generator seeded with the job's hash; (None, 0) without a film (no noise to seed: the job's hash is
+    not worked out)."""
     if setting is None:
-        return None, seed
+        return None, 0
+    seed = job_seed(job)
     if setting.get("random"):
         return render_film.random_film(np.random.default_rng([seed, 1]).random(render_film.RANDOM_UNIFORMS)), seed
     return setting, seed

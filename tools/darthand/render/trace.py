@@ -410,20 +410,38 @@ def tile_pixels(tiles: np.ndarray, h: int, w: int, tile: int = TILE) -> np.ndarr
 
 @kernel
 def _tile_pixels_kernel(tiles, h, w, tile, out):
+    """tile_pixels' indices into out, row by row and, in a row, run by run of a True tile's columns (no division
+    per pixel); returns how many."""
     m = 0
     for r in range(h):
-        for c in range(w):
-            if tiles[r // tile, c // tile]:
-                out[m] = r * w + c
-                m += 1
+        row, base = r // tile, r * w
+        for t in range(tiles.shape[1]):
+            if tiles[row, t]:
+                for c in range(t * tile, min(w, (t + 1) * tile)):
+                    out[m] = base + c
+                    m += 1
     return m
 
 
 def pixel_positions(index: np.ndarray, r0: int, c0: int, w: int) -> np.ndarray:
-    """(M, 2) float64 pixel-centre positions (u, v) of flat indices (M,) into the region of width w whose first
+    """(M, 2) float64 pixel-centre positions (u, v) of flat indices (M,) >= 0 into the region of width w whose first
     pixel is (row r0, column c0): as pixel_centres(r0, r1, c0, c1)[index]."""
-    rows, cols = np.divmod(index, w)
-    return np.stack([cols + (c0 + 0.5), rows + (r0 + 0.5)], axis=1)
+    index = np.ascontiguousarray(index, np.int64)
+    out = np.empty((len(index), 2), np.float64)
+    if len(index):
+        _pixel_positions_kernel(index, float(r0 + 0.5), float(c0 + 0.5), int(w), out)
+    return out
+
+
+@kernel
+def _pixel_positions_kernel(index, v0, u0, w, out):
+    """pixel_positions in one pass: numpy's (column + (c0 + 0.5), row + (r0 + 0.5)), the integer column and row of
+    each index converted to float64 before the one addition, so the same numbers."""
+    for i in range(index.shape[0]):
+        k = index[i]
+        r = k // w
+        out[i, 0] = float(k - r * w) + u0
+        out[i, 1] = float(r) + v0
 
 
 def pixel_centres(r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
