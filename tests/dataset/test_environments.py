@@ -17,7 +17,6 @@ from scipy import ndimage
 from render_scenes import write_image
 
 from darthand.dataset import environments, plan
-from darthand.render import environment
 from darthand.errors import InputError
 from darthand.schemas import check_schema
 
@@ -98,6 +97,20 @@ def test_strength_brings_each_map_to_the_target_level_within_the_exposure_cap(ma
     assert 0 < capped < 40
 
 
+def test_a_set_prepares_each_maps_light_once_for_the_cap(map_folder, monkeypatch):
+    """The cap reads each map's lights and harmonics from the set (render/environment.py keeps only MAPS_KEPT maps'
+    whole lighting: a folder of hundreds would otherwise be prepared again for every frame)."""
+    from darthand.render import environment
+
+    calls = []
+    prepare = environment.map_lighting
+    monkeypatch.setattr(environment, "map_lighting", lambda name: calls.append(name) or prepare(name))
+    env = environments.EnvironmentSet(str(map_folder))
+    for u in np.random.default_rng(1).random((30, environments.UNIFORMS)):
+        env.sample(u)
+    assert sorted(calls) == sorted(name for name, _ in env.maps)
+
+
 def test_planned_environments_follow_their_own_stream(sources, map_folder):
     base = {"seed": 5, "lights": "environment", "environments": str(map_folder)}
     lit = plan.Planner(base, sources[0])
@@ -126,15 +139,17 @@ def test_render_dataset_refuses_a_set_of_bad_maps_in_one_line(package, tmp_path,
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").rglob("*.png"))
 
 
-def test_a_photo_backdrop_sets_the_lights_level_and_tint():
-    doc = {"map": "studio", "strength": 0.5, "white_balance": [1.0, 1.0, 1.0]}
+def test_a_photo_backdrop_sets_the_lights_level_and_tint_within_the_exposure_cap(map_folder):
+    """The photo's mean level scales the strength (within MATCH_LIMITS), then the exposure's cap: under the grey
+    map (0.25 everywhere, neutral balance) a white card renders 0.25 x strength, so the cap is KEY_WHITE / 0.25
+    (within the harmonics' 0.5 % on a 16 x 32 map, as above)."""
+    doc = {"map": str(map_folder / "grey.hdr"), "strength": 3.0, "white_balance": [1.0, 1.0, 1.0]}
     grey = environments.match_background(doc, np.full((8, 8, 3), 0.3, np.float32))
-    assert grey["strength"] == pytest.approx(0.5 * 0.3 / environments.TARGET_RADIANCE, rel=1e-5)
-    assert grey["white_balance"] == pytest.approx([1.0, 1.0, 1.0], abs=1e-5) and grey["map"] == "studio"
+    assert grey["strength"] == pytest.approx(3.0 * 0.3 / environments.TARGET_RADIANCE, rel=1e-5)   # under the cap
+    assert grey["white_balance"] == pytest.approx([1.0, 1.0, 1.0], abs=1e-5) and grey["map"] == doc["map"]
     bright = environments.match_background(doc, np.full((8, 8, 3), 50.0, np.float32))
-    cap = environments.KEY_WHITE / environment.key_white(environment.Environment("studio"))
-    assert 0.5 * environments.MATCH_LIMITS[1] > cap                     # the studio's lamps: the cap binds
-    assert bright["strength"] == pytest.approx(cap, rel=1e-5)       # within its limits, then the exposure's cap
+    assert 3.0 * environments.MATCH_LIMITS[1] > environments.KEY_WHITE / 0.25          # so the cap binds
+    assert bright["strength"] == pytest.approx(environments.KEY_WHITE / 0.25, rel=5e-3)
     world = {**doc, "frame": "world", "strength": 100.0}                  # its light depends on an unknown camera
     assert environments.exposure_capped(world) == world
     red = environments.match_background(doc, np.broadcast_to(np.float32([0.6, 0.3, 0.15]), (8, 8, 3)))

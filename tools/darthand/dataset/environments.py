@@ -69,6 +69,7 @@ class EnvironmentSet:
             else:
                 raise InputError(f"environments: {environments!r} is neither 'builtin', a folder of maps nor a map")
         self.maps: list[tuple[str, float]] = []
+        self._lighting: dict = {}          # name -> render/environment.light_summary, made when first drawn
         self.skipped: list[dict] = []
         for name in names:
             try:
@@ -89,11 +90,18 @@ class EnvironmentSet:
         doc = {"map": name, "rotation": round(360.0 * float(u[ROTATION]), 3),
                "strength": round(TARGET_RADIANCE / max(level, 1e-6) * 2.0 ** stops, 6),
                "white_balance": white_balance(kelvin), "frame": "camera"}
-        capped = exposure_capped(doc)
+        capped = exposure_capped(doc, self.key_lighting(name))
         record = {"rig": "environment", "map": Path(name).stem, "kelvin": round(kelvin, 1),
                   "stops": round(stops, 4),
                   "capped_stops": round(float(np.log2(capped["strength"] / doc["strength"])), 4)}
         return capped, record
+
+    def key_lighting(self, name: str):
+        """A map's light_summary for the exposure's cap, made once per map of the set (render/environment.py keeps
+        only MAPS_KEPT maps' whole lighting: a set of hundreds would prepare a map again for every frame)."""
+        if name not in self._lighting:
+            self._lighting[name] = environment.light_summary(environment.map_lighting(name))
+        return self._lighting[name]
 
     @staticmethod
     def backdrop(u: np.ndarray) -> dict:
@@ -116,15 +124,16 @@ def match_background(doc: dict, pixels: np.ndarray) -> dict:
                             "white_balance": [round(float(c), 5) for c in balance / balance.mean()]})
 
 
-def exposure_capped(doc: dict) -> dict:
+def exposure_capped(doc: dict, lighting=None) -> dict:
     """The environment field `doc` with its strength lowered, where needed, so that a white Lambertian card facing
-    the camera's side renders at most KEY_WHITE under it (render/environment.key_white). A frame-'world' field (a
-    user's jobs file) is left as it is: where its light comes from depends on a camera not known here."""
+    the camera's side renders at most KEY_WHITE under it (render/environment.key_white; lighting: its map's, as
+    key_white takes it). A frame-'world' field (a user's jobs file) is left as it is: where its light comes from
+    depends on a camera not known here."""
     if doc.get("frame", "camera") != "camera":
         return doc
     unit = environment.Environment(str(doc["map"]), float(doc.get("rotation", 0.0)), 1.0,
                                    tuple(float(c) for c in doc.get("white_balance", (1.0, 1.0, 1.0))))
-    cap = KEY_WHITE / max(environment.key_white(unit), 1e-9)
+    cap = KEY_WHITE / max(environment.key_white(unit, lighting), 1e-9)
     strength = float(doc.get("strength", 1.0))
     return doc if strength <= cap else {**doc, "strength": round(cap, 6)}
 

@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -553,22 +553,31 @@ class FrameEnvironment:
 def frame_environment(environment: Environment, R: np.ndarray) -> FrameEnvironment:
     """The environment for a camera (R (3, 3) world -> camera): its map's lights turned into the world and scaled,
     its remainder's lookups."""
-    lighting = map_lighting(environment.map)
     M = frame_matrix(environment.frame, R, environment.rotation)
-    scale = environment.scale
+    return turned_lighting(map_lighting(environment.map), M, environment.scale)
+
+
+def turned_lighting(lighting: MapLighting, M: np.ndarray, scale: np.ndarray) -> FrameEnvironment:
+    """A map's lighting turned by M (3, 3) (world -> lookup directions) and scaled by scale (3,)."""
     lights = [{"type": "directional", "radiance": (p * scale).astype(np.float32), "shadows": True,
                "direction": -(M.T @ d)} for d, p in zip(lighting.light_dirs, lighting.light_power)]
     return FrameEnvironment(lights, lighting, M, scale)
 
 
-def key_white(environment: Environment, R: np.ndarray | None = None) -> float:
-    """The brightest a white Lambertian surface facing the camera renders under `environment` (unshadowed, the
-    largest channel, over `facing_normals()`, spread evenly over the hemisphere that faces the camera): what an
-    exposure must keep below white for no skin to clip. R (3, 3) world -> camera; None: the identity, which is all a
-    frame-'camera' environment needs (it turns with the camera)."""
-    R = np.eye(3) if R is None else np.asarray(R, np.float64)
-    normals = R.T @ facing_normals()
-    return float(frame_environment(environment, R).white(normals).max())
+def key_white(environment: Environment, lighting: MapLighting | None = None) -> float:
+    """The brightest a white Lambertian surface facing the camera renders under a frame-'camera' `environment`
+    (unshadowed, the largest channel, over `facing_normals()`, spread evenly over the hemisphere that faces the
+    camera; the environment turns with the camera, so no camera is needed): what an exposure must keep below white
+    for no skin to clip. lighting: the map's MapLighting or its light_summary (default map_lighting(map))."""
+    M = frame_matrix(environment.frame, np.eye(3), environment.rotation)
+    frame = turned_lighting(lighting or map_lighting(environment.map), M, environment.scale)
+    return float(frame.white(facing_normals()).max())
+
+
+def light_summary(lighting: MapLighting) -> MapLighting:
+    """The part of a map's lighting that key_white reads (its lights and harmonics), without its mip levels: a few
+    hundred bytes, kept per map where a set has more maps than MAPS_KEPT."""
+    return replace(lighting, remainder=[], full=[], packed=None)
 
 
 @functools.cache
