@@ -792,9 +792,9 @@ def _add_antialiasing_options(p, samples: int, aa_shading: str = "triangle") -> 
 
 
 def _add_shading_options(p, defaults: dict | None = None) -> None:
-    """--ao-rays, --no-interreflection, --skin, --skin-specular, --skin-detail, defaulting to the renderer's
-    (shade.ShadingOptions) updated with `defaults` (a dataset's)."""
-    from darthand.render.shade import SKIN_MODELS, SKIN_SPECULAR, ShadingOptions
+    """--ao-rays, --no-interreflection, --skin, --skin-specular, --skin-detail, --shadows, defaulting to the
+    renderer's (shade.ShadingOptions) updated with `defaults` (a dataset's)."""
+    from darthand.render.shade import SHADOW_MODES, SKIN_MODELS, SKIN_SPECULAR, ShadingOptions
 
     d = ShadingOptions(**(defaults or {}))
     p.add_argument("--ao-rays", type=number(int, 0, 4096), default=d.ao_rays, metavar="N",
@@ -812,6 +812,10 @@ def _add_shading_options(p, defaults: dict | None = None) -> None:
                    help="strength of the skin's fine relief (knuckle folds, palm and finger creases, pores) on its "
                         f"shading: 0 none, 1 nominal depths; built once per model, a few seconds (default "
                         f"{d.skin_detail:g})")
+    p.add_argument("--shadows", default=d.shadows, choices=SHADOW_MODES,
+                   help="the lights' shadow rays: one per pixel sample, or vertex: one per vertex of the triangles "
+                        "seen and per sample only where a triangle's corners disagree (a fraction of the rays; "
+                        f"nearly the same image) (default {d.shadows})")
 
 
 def _add_engine_options(p, engine: str | None = None, samples: int | None = None) -> None:

@@ -24,7 +24,9 @@ usual real-time ones, vectorised over every hit of a batch:
 - Shadows: one occlusion ray per (sample, light) that the light can reach. Its origin is lifted off the surface
   along the shading normal by SHADOW_LIFT x the scene's size (0.5 mm on a hand-sized scene): more than a coarse
   mesh's facets deviate from the smooth surface (no shadow acne at the terminator), and enough that the wrap
-  lighting just past the terminator is not cut off by the surface's own facets.
+  lighting just past the terminator is not cut off by the surface's own facets. With hits' corners
+  (`ShadingOptions.shadows` 'vertex') a light's rays are traced from the vertices of the faces hit, and per sample
+  only in faces whose corners disagree (shadows.py).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ import numpy as np
 from darthand.errors import InputError
 from darthand.jit import kernel
 from darthand.render.lights import light_table
+from darthand.render.shadows import ShadowCorners, vertex_rate_occlusion
 from darthand.render.skin import skin_width, sphere_blend_table, table_rows
 from darthand.render.skin_specular import SKIN_SPECULAR, skin_specular_radiance
 from darthand.render.subject import Material
@@ -47,6 +50,7 @@ SKIN_MODELS = ("subsurface", "wrap", "lambert")
 # scene.FaceData's POSITION, NORMAL, GEOMETRIC, UV, UV_SCALE rows, as _hits_kernel reads them
 FACE_ROWS = (0, 9, 18, 21, 27)
 DEFAULT_SKIN = "subsurface"
+SHADOW_MODES = ("pixel", "vertex")      # ShadingOptions.shadows: a ray per sample, or per vertex (shadows.py)
 
 
 @dataclass(frozen=True)
@@ -56,14 +60,17 @@ class ShadingOptions:
     interreflection, add light reflected between surfaces (False: ambient occlusion only); skin, the skin's diffuse
     model (SKIN_MODELS: 'subsurface', 'wrap' the earlier look, 'lambert'); skin_specular, the skin's specular
     response ('single': one GGX lobe; 'dual': two lobes and a sheen, skin_specular.py); skin_detail, the strength of
-    the skin's fine relief on its shading normal (skin_detail.py; 0: none, 1: nominal depths). to_json lists
-    skin_specular and skin_detail only when they differ from their defaults (records made before them stay)."""
+    the skin's fine relief on its shading normal (skin_detail.py; 0: none, 1: nominal depths); shadows, how the
+    lights' shadow rays are traced (SHADOW_MODES: 'pixel' one per sample; 'vertex' one per vertex of the faces
+    hit and per sample only where a face's corners disagree, shadows.py). to_json lists skin_specular, skin_detail
+    and shadows only when they differ from their defaults (records made before them stay)."""
 
     ao_rays: int = DEFAULT_AO_RAYS
     interreflection: bool = True
     skin: str = DEFAULT_SKIN
     skin_specular: str = "single"
     skin_detail: float = 0.0
+    shadows: str = "pixel"
 
     def __post_init__(self):
         if isinstance(self.ao_rays, bool) or not (isinstance(self.ao_rays, (int, np.integer))
@@ -78,6 +85,8 @@ class ShadingOptions:
         if isinstance(self.skin_detail, bool) or not (isinstance(self.skin_detail, (int, float, np.number))
                                                       and 0 <= self.skin_detail <= 4):
             raise InputError(f"skin_detail: {self.skin_detail!r} is not a number in 0..4")
+        if self.shadows not in SHADOW_MODES:
+            raise InputError(f"shadows: {self.shadows!r} is not one of {', '.join(SHADOW_MODES)}")
 
     def to_json(self) -> dict:
         out = {"ao_rays": int(self.ao_rays), "interreflection": bool(self.interreflection), "skin": self.skin}
@@ -85,6 +94,8 @@ class ShadingOptions:
             out["skin_specular"] = self.skin_specular
         if self.skin_detail:
             out["skin_detail"] = float(self.skin_detail)
+        if self.shadows != "pixel":
+            out["shadows"] = self.shadows
         return out
 
 
@@ -96,7 +107,8 @@ class Hits:
     light's open fraction (indirect.VertexLight.at), or None (the ambient light reaches everything unblocked);
     radius (M,) the surface's curvature radius (skin.surface_radius) and skin (M,) bool, not a nail, for the
     subsurface skin model, or None; region (M,) the face labels (model.layout.FACE_LABELS, -1 unlabelled) for
-    skin's dual-lobe specular, or None."""
+    skin's dual-lobe specular, or None; corners the hits' mesh corners (shadows.ShadowCorners) for shadow rays at
+    vertex rate (ShadingOptions.shadows 'vertex'), or None: a shadow ray per hit."""
 
     position: np.ndarray
     normal: np.ndarray
@@ -108,6 +120,7 @@ class Hits:
     radius: np.ndarray | None = None
     skin: np.ndarray | None = None
     region: np.ndarray | None = None
+    corners: ShadowCorners | None = None
 
 
 def surface_hits(faces, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray, directions: np.ndarray,
@@ -342,9 +355,14 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
     for k in range(len(lights)):
         a, b = offsets[k], offsets[k + 1]
         if b > a:
-            reached[k, ray_hit[a:b][occluded(origins[a:b], directions[a:b], tfar[a:b])]] = False
+            if hits.corners is None:
+                blocked, traced = occluded(origins[a:b], directions[a:b], tfar[a:b]), b - a
+            else:
+                blocked, traced = vertex_rate_occlusion(hits.corners, ray_hit[a:b], origins[a:b], directions[a:b],
+                                                        tfar[a:b], table[k], lift, occluded)
+            reached[k, ray_hit[a:b][blocked]] = False
             if counters is not None:
-                counters["shadow_rays"] = counters.get("shadow_rays", 0) + int(b - a)
+                counters["shadow_rays"] = counters.get("shadow_rays", 0) + int(traced)
     # absent inputs as their neutral values, the same numbers: f0 per hit, the ambient light as irradiance, x 1
     f0 = f32(np.broadcast_to(p.f0, (3, m)))
     ambient = f32(ambient)

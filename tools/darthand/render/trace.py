@@ -25,6 +25,7 @@ from darthand.render.environment import FrameEnvironment
 from darthand.render.indirect import VertexLight
 from darthand.render.scene import Scene, interpolate_columns
 from darthand.render.shade import DEFAULT_SKIN, shade, surface_hits
+from darthand.render.shadows import hit_corners
 from darthand.render.skin import surface_radius
 from darthand.render.skin_detail import detail_at
 
@@ -68,8 +69,9 @@ def pool(threads: int) -> ThreadPoolExecutor:
 class Context:
     """What every sample batch of one frame shares; indirect: the frame's indirect light at the vertices
     (indirect.VertexLight), or None; skin: the skin model (shade.SKIN_MODELS); environment: the frame's environment
-    map lighting (environment.FrameEnvironment; its lights are among `lights`), or None; skin_specular and
-    skin_detail: shade.ShadingOptions' (the skin's specular model, the strength of its relief)."""
+    map lighting (environment.FrameEnvironment; its lights are among `lights`), or None; skin_specular,
+    skin_detail and shadows: shade.ShadingOptions' (the skin's specular model, the strength of its relief, shadow
+    rays per sample or per vertex)."""
 
     scene: Scene
     camera: Camera
@@ -81,6 +83,7 @@ class Context:
     environment: FrameEnvironment | None = None
     skin_specular: str = "single"
     skin_detail: float = 0.0
+    shadows: str = "pixel"
     dDdx: np.ndarray = field(init=False)
     dDdy: np.ndarray = field(init=False)
 
@@ -216,6 +219,9 @@ def shade_hits(ctx: Context, hits: RayHits, footprint: float = 1.0,
             skin_at(at, surface, on.prim, on.u, on.v)
         _put_columns_kernel(idx, np.ascontiguousarray(at.normal, np.float32), normal)
         occlusion = skin_surface_at(ctx, at, surface, ctx.scene.faces[g].table, on.prim)
+        if ctx.shadows == "vertex":
+            at.corners = hit_corners(surface.faces, ctx.scene.faces[g].table, surface.vertices, surface.normals,
+                                     on.prim, at.view)
         colour = shade(surface.material, at, ctx.lights, ctx.ambient, ctx.scene.occluded, ctx.scene.extent,
                        counters, ctx.skin, ctx.environment, ctx.skin_specular)
         if occlusion is not None:
