@@ -134,7 +134,8 @@ def compare(jobs: list[dict], renderers, out: Path | None) -> dict:
             vertex, _ = render_job(renderer, job, mode_settings("vertex"))
         for mode, frame in zip(MODES, (pixel, vertex)):
             rays[mode].append(int(frame.stats.get("shadow_rays", 0)))
-        per_frame.append({"index": job["index"], **image_difference(pixel.rgba, vertex.rgba, pixel.alpha)})
+        per_frame.append({"index": job["index"], **image_difference(pixel.rgba, vertex.rgba, pixel.alpha),
+                          **{f"rays_{mode}": rays[mode][-1] for mode in MODES}})
         images[job["index"]] = (pixel.rgba, vertex.rgba)
     worst = sorted(per_frame, key=lambda f: -f["pixels"])[:WORST_WRITTEN]
     written = []
@@ -152,16 +153,19 @@ def compare(jobs: list[dict], renderers, out: Path | None) -> dict:
         "differing_pixels_mean": round(float(np.mean(differing)), 2), "differing_pixels_max": int(max(differing)),
         "largest_difference": int(max(f["max"] for f in per_frame)),
         "mean_difference_over_hand": round(float(np.mean([f["mean_over_hand"] for f in per_frame])), 5),
-        "worst_frames": worst, "written": written,
+        "worst_frames": worst, "written": written, "per_frame": per_frame,
     }
 
 
 def cpu_per_frame(jobs: list[dict], renderers) -> dict:
-    """Mean CPU ms per frame and of shade() per mode: blocks of BLOCK jobs alternating the modes, ROUNDS rounds."""
+    """Mean CPU ms per frame and of shade() per mode: blocks of BLOCK jobs alternating the modes, ROUNDS rounds;
+    also the frame's per half of the jobs ('plan': the plan's first frames, 'sunny': the ranked ones)."""
     from darthand.dataset.frames import render_job
 
     frame_s = {mode: 0.0 for mode in MODES}
     shade_s = {mode: 0.0 for mode in MODES}
+    half_s = {(half, mode): 0.0 for half in ("plan", "sunny") for mode in MODES}
+    first = len(jobs) // 2
     blocks = [jobs[a:a + BLOCK] for a in range(0, len(jobs), BLOCK)]
     for r in range(ROUNDS):
         for b, block in enumerate(blocks):
@@ -169,15 +173,20 @@ def cpu_per_frame(jobs: list[dict], renderers) -> dict:
                 settings = mode_settings(mode)
                 totals: dict = {}
                 with timed_shade(totals):
-                    c = time.process_time()
-                    for job in block:
+                    for j, job in enumerate(block):
+                        c = time.process_time()
                         render_job(renderers[job["side"]], job, settings)
-                    frame_s[mode] += time.process_time() - c
+                        seconds = time.process_time() - c
+                        frame_s[mode] += seconds
+                        half_s["plan" if b * BLOCK + j < first else "sunny", mode] += seconds
                 shade_s[mode] += totals.get("shade", 0.0)
     n = ROUNDS * len(jobs)
     frame_ms = {mode: round(1e3 * frame_s[mode] / n, 2) for mode in MODES}
     shade_ms = {mode: round(1e3 * shade_s[mode] / n, 2) for mode in MODES}
-    return {"frame_ms": frame_ms, "shade_ms": shade_ms,
+    count = {"plan": ROUNDS * first, "sunny": ROUNDS * (len(jobs) - first)}
+    halves = {half: {mode: round(1e3 * half_s[half, mode] / max(1, count[half]), 2) for mode in MODES}
+              for half in count}
+    return {"frame_ms": frame_ms, "shade_ms": shade_ms, "frame_ms_by_half": halves,
             "saved_frame_ms": round(frame_ms["pixel"] - frame_ms["vertex"], 2),
             "saved_shade_ms": round(shade_ms["pixel"] - shade_ms["vertex"], 2)}
 
@@ -200,6 +209,18 @@ def run(out: Path | None = None, frames: int | None = None) -> dict:
             "agreement": agreement, "cpu": cpu}
 
 
+def half_rows(res: dict) -> list[str]:
+    """summary's table rows per half of the frames: the plan's first, the sunniest ranked."""
+    frames = res["agreement"]["per_frame"]
+    first = len(frames) // 2
+    rows = []
+    for half, part in (("plan", frames[:first]), ("sunny", frames[first:])):
+        ms = res["cpu"]["frame_ms_by_half"][half]
+        rays = [round(float(np.mean([f[f"rays_{mode}"] for f in part]))) for mode in MODES]
+        rows.append(f"| {half} | {len(part)} | {rays[0]:,} | {rays[1]:,} | {ms['pixel']:.1f} | {ms['vertex']:.1f} |")
+    return rows
+
+
 def summary(res: dict) -> str:
     a, c = res["agreement"], res["cpu"]
     rays = a["shadow_rays_per_frame"]
@@ -216,6 +237,9 @@ def summary(res: dict) -> str:
         f"of {res['frames']} frames differ, {a['differing_pixels_mean']:.1f} pixels a frame on average (at most "
         f"{a['differing_pixels_max']}), largest channel difference {a['largest_difference']}, mean absolute "
         f"difference over the hand {a['mean_difference_over_hand']:.4f}.",
+        "",
+        "| half | frames | shadow rays pixel | vertex | CPU ms pixel | vertex |", "|---|---|---|---|---|---|",
+        *half_rows(res),
         "",
         f"summary: vertex-rate shadows trace {rays['vertex'] / max(1, rays['pixel']):.1%} of the shadow rays and save "
         f"{c['saved_frame_ms']:.1f} ms of CPU a frame ({c['saved_shade_ms']:.1f} ms in shade()); "
