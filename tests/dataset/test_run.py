@@ -135,10 +135,11 @@ def test_cli_plans_renders_and_a_written_plan_renders_the_same(package, tmp_path
 
 def test_shading_options_reach_the_frames_and_their_resume_digest(package, tmp_path, capsys):
     args = _cli(package, "--processes", "1", "--count", "1", "--out", str(tmp_path))
-    args = [*args, "--skin-specular", "dual"]
+    args = [*args, "--skin-specular", "dual", "--shadows", "vertex"]
     assert main(["render-dataset", *args, "--ao-rays", "0", "--skin", "lambert"]) == 0
     labels = json.loads((tmp_path / "labels" / "000000.json").read_text())
-    expected = {"ao_rays": 0, "interreflection": True, "skin": "lambert", "skin_specular": "dual"}
+    expected = {"ao_rays": 0, "interreflection": True, "skin": "lambert", "skin_specular": "dual",
+                "shadows": "vertex"}
     assert labels["render"]["shading"] == expected                  # no relief: a dataset's default
     assert json.loads((tmp_path / "dataset.json").read_text())["shading"] == expected
     unblocked = (tmp_path / "images" / "000000.png").read_bytes()

@@ -9,14 +9,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from render_scenes import flat_material, one_light, quad, render, subject, surface, top_camera
+from render_scenes import one_light, quad, render, subject, surface, top_camera
 
 from darthand.errors import InputError
 from darthand.render.api import Renderer
 from darthand.render.camera import look_at
 from darthand.render.lights import Light, Lighting
 from darthand.render.shade import ShadingOptions
-from darthand.render.shadows import ShadowCorners, hit_corners, vertex_rate_occlusion
+from darthand.render.shadows import hit_corners, vertex_rate_occlusion
 
 LIGHT = np.array([np.sin(np.pi / 5), 0.1, -np.cos(np.pi / 5)])       # travelling down and toward +x
 BOX = (np.array([0.0, 0.0, 0.5]), 0.2)                               # centre, half side (m)
