@@ -39,10 +39,10 @@ from darthand.errors import InputError
 from darthand.jit import kernel
 from darthand.render.lights import light_table
 from darthand.render.shadows import ShadowCorners, vertex_rate_occlusion
-from darthand.render.vertex_specular import SpecularCorners, vertex_specular
 from darthand.render.skin import skin_width, sphere_blend_table, table_rows
 from darthand.render.skin_specular import SKIN_SPECULAR, skin_specular_radiance
 from darthand.render.subject import Material
+from darthand.render.vertex_specular import SpecularCorners, vertex_specular
 
 SHADOW_LIFT = 2e-3          # shadow-ray origin offset, relative to the scene's bounding-box diagonal
 MIN_ROUGHNESS = 0.045       # GGX is singular at alpha = 0

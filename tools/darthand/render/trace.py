@@ -26,9 +26,9 @@ from darthand.render.indirect import VertexLight
 from darthand.render.scene import Scene, interpolate_columns
 from darthand.render.shade import DEFAULT_SKIN, shade, surface_hits
 from darthand.render.shadows import hit_corners
-from darthand.render.vertex_specular import specular_corners
 from darthand.render.skin import surface_radius
 from darthand.render.skin_detail import detail_at
+from darthand.render.vertex_specular import specular_corners
 
 NAIL = FACE_LABEL_IDS["nail"]
 MIN_CHUNK = 4096          # samples per parallel task, at least

@@ -23,7 +23,7 @@ from darthand.jit import kernel
 from darthand.render.environment import lookup_blurred_many, pack_levels
 from darthand.render.shadows import ShadowCorners
 
-GRAZING = 0.2           # a face with a corner seen at n.v below this is looked up per sample (silhouettes)
+GRAZING = 0.5           # a face with a corner seen at n.v below this is looked up per sample (silhouettes)
 
 @dataclass
 class SpecularCorners:
