@@ -61,12 +61,13 @@ def compared_visibility(totals: dict):
     """Within the context, the vertex mode's occlusion (shade.vertex_rate_occlusion) also traces every sample's own
     ray and adds into totals 'pairs' (sample, light) and 'differ' (visibility not the per-sample ray's)."""
     from darthand.render import shade
+    from darthand.render.shadows import sample_rays
 
     original = shade.vertex_rate_occlusion
 
-    def compared(corners, ray_hit, origins, directions, tfar, light, lift, occluded):
-        blocked, traced = original(corners, ray_hit, origins, directions, tfar, light, lift, occluded)
-        truth = occluded(origins, directions, tfar)
+    def compared(corners, ray_hit, position, normal, light, lift, occluded):
+        blocked, traced = original(corners, ray_hit, position, normal, light, lift, occluded)
+        truth = occluded(*sample_rays(position, normal, ray_hit, light, lift))
         totals["pairs"] = totals.get("pairs", 0) + len(truth)
         totals["differ"] = totals.get("differ", 0) + int((truth != blocked).sum())
         return blocked, traced

@@ -15,8 +15,10 @@ from darthand.errors import InputError
 from darthand.render.api import Renderer
 from darthand.render.camera import look_at
 from darthand.render.lights import Light, Lighting
+from darthand.render import shade
 from darthand.render.shade import ShadingOptions
-from darthand.render.shadows import hit_corners, vertex_rate_occlusion
+from darthand.render.shadows import hit_corners, sample_rays, vertex_rate_occlusion
+from darthand.render.skin import sphere_blend_table
 
 LIGHT = np.array([np.sin(np.pi / 5), 0.1, -np.cos(np.pi / 5)])       # travelling down and toward +x
 BOX = (np.array([0.0, 0.0, 0.5]), 0.2)                               # centre, half side (m)
@@ -155,9 +157,8 @@ def test_corners_trace_one_ray_per_vertex_and_side_and_split_faces_trace_their_o
     corners = hit_corners(faces, table, positions, normals, prim, view)
     assert corners.slots[-1].tolist() == [1, 5, 7] and corners.slots[0].tolist() == [0, 2, 4]
     x = np.array([0.6, 0.9, 0.2, 0.5, 1.2, 1.8, 1.4, 0.3], np.float32)  # the samples' positions along x
-    origins = np.stack([x, np.full_like(x, 0.5), np.full_like(x, 0.01)], axis=1)
-    directions = np.tile(np.array([0, 0, 1], np.float32), (len(x), 1))
-    tfar = np.full(len(x), np.inf, np.float32)
+    position = np.stack([x, np.full_like(x, 0.5), np.zeros_like(x)])
+    up = np.tile(np.array([[0], [0], [1]], np.float32), (1, len(x)))
     calls = []
 
     def occluded(o, d, t):
@@ -165,14 +166,41 @@ def test_corners_trace_one_ray_per_vertex_and_side_and_split_faces_trace_their_o
         return o[:, 0] > 1.5
 
     light = np.array([0, 0, 0, 1, 1, 1, 1, 1], np.float32)             # directional, toward +z, with shadows
-    blocked, traced = vertex_rate_occlusion(corners, np.arange(len(x)), origins, directions, tfar, light,
-                                            np.float32(0.01), occluded)
+    blocked, traced = vertex_rate_occlusion(corners, np.arange(len(x)), position, up, light, np.float32(0.01),
+                                            occluded)
     assert blocked.tolist() == [False, False, False, False, False, True, False, False]
     vertex_rays, own = calls
     assert len(vertex_rays) == 6 + 3                                   # vertices 0..5 above, 0, 2, 3 below
     below = vertex_rays[:, 2] < 0
     assert np.allclose(vertex_rays[below, 2], -0.01) and np.allclose(vertex_rays[~below, 2], 0.01)
-    assert np.allclose(own, origins[[4, 5, 6]]) and traced == 9 + 3
+    assert np.allclose(own, position[:, [4, 5, 6]].T + [0, 0, 0.01]) and traced == 9 + 3
+
+
+@pytest.mark.parametrize("point", [False, True])
+def test_the_rays_made_where_needed_are_the_per_sample_rays_to_the_bit(point):
+    """sample_rays against the rays shade's kernel writes for every reached hit (random hits, a wrap diffuse)."""
+    rng = np.random.default_rng(7)
+    m = 500
+    unit = lambda a: (a / np.linalg.norm(a, axis=0)).astype(np.float32)
+    normal, view = unit(rng.normal(size=(3, m))), unit(rng.normal(size=(3, m)))
+    position = rng.uniform(-0.1, 0.1, (3, m)).astype(np.float32)
+    light = np.array([1.0 if point else 0.0, 0.3, -0.2, 0.9, 1, 1, 1, 1], np.float32)
+    if not point:
+        light[1:4] /= np.linalg.norm(light[1:4])
+    lift = np.float32(0.0005)
+    wrap = np.array([0.3, 0.1, 0.0], np.float32)
+    nv, e2 = np.empty(m, np.float32), np.empty(m, np.float32)
+    diffuse, reached = np.empty((1, 3, m), np.float32), np.empty((1, m), np.bool_)
+    origins, directions, tfar = np.empty((m, 3), np.float32), np.empty((m, 3), np.float32), np.empty(m, np.float32)
+    ray_hit, offsets = np.empty(m, np.int64), np.zeros(2, np.int64)
+    shade._lights_kernel(normal, view, position, light[None], 1, False, wrap, np.zeros(0, np.float32),
+                         np.zeros(3, np.float32), np.zeros(0, np.bool_), sphere_blend_table(), lift, nv, e2, diffuse,
+                         reached, origins, directions, tfar, ray_hit, offsets)
+    k = offsets[1]
+    assert 100 < k < m
+    made = sample_rays(position, normal, ray_hit[:k], light, lift)
+    for got, want in zip(made, (origins[:k], directions[:k], tfar[:k])):
+        assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
 
 
 def test_the_option_is_off_by_default_checked_and_recorded_only_when_on():

@@ -358,8 +358,9 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
     rays = int(table[:, 7].sum()) * m
     nv, e2 = np.empty(m, np.float32), np.empty(m, np.float32)
     diffuse, reached = np.empty((len(lights), 3, m), np.float32), np.empty((len(lights), m), np.bool_)
-    origins, directions = np.empty((rays, 3), np.float32), np.empty((rays, 3), np.float32)
-    tfar, ray_hit, offsets = np.empty(rays, np.float32), np.empty(rays, np.int64), np.zeros(len(lights) + 1, np.int64)
+    made = 0 if hits.corners is not None else rays          # at vertex rate the rays are made where needed
+    origins, directions = np.empty((made, 3), np.float32), np.empty((made, 3), np.float32)
+    tfar, ray_hit, offsets = np.empty(made, np.float32), np.empty(rays, np.int64), np.zeros(len(lights) + 1, np.int64)
     _lights_kernel(n, v, position, table, model.kind, model.by_cosine, model.wrap, model.row_r, model.shifts,
                    model.skin, sphere_blend_table(), lift, nv, e2, diffuse, reached, origins, directions, tfar,
                    ray_hit, offsets)
@@ -371,8 +372,8 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
             if hits.corners is None:
                 blocked, traced = occluded(origins[a:b], directions[a:b], tfar[a:b]), b - a
             else:
-                blocked, traced = vertex_rate_occlusion(hits.corners, ray_hit[a:b], origins[a:b], directions[a:b],
-                                                        tfar[a:b], table[k], lift, occluded)
+                blocked, traced = vertex_rate_occlusion(hits.corners, ray_hit[a:b], position, n, table[k], lift,
+                                                        occluded)
             reached[k, ray_hit[a:b][blocked]] = False
             if counters is not None:
                 counters["shadow_rays"] = counters.get("shadow_rays", 0) + int(traced)
@@ -413,7 +414,8 @@ def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r,
     light k (row of `lights`, lights.light_table) and hit: the diffuse response diffuse[k, :, i] at n.l (DiffuseModel's
     kind, wrap, row_r, shifts, skin; `sphere` skin.sphere_blend_table), reached[k, i], and for a light
     with shadows a shadow ray per reached hit: origin p + lift n, direction toward the light, tfar (inf, or the
-    distance to a point light less lift), ray_hit its hit; light k's rays are [offsets[k], offsets[k + 1]).
+    distance to a point light less lift), ray_hit its hit; light k's rays are [offsets[k], offsets[k + 1]). With
+    origins, directions and tfar empty, only ray_hit and offsets (shadows.sample_rays makes the rays it needs).
     Float32 in the numpy formulas' order (subsurface's blend in float64, rounded once, as numpy promotes it)."""
     zero, one, tiny, floor = np.float32(0.0), np.float32(1.0), np.float32(1e-9), np.float32(1e-4)
     cos_half = np.float32(64.0)          # (skin.COS_STEPS - 1) / 2 (literals: a cached kernel would not see a
@@ -437,6 +439,7 @@ def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r,
     w0, w1, w2 = wrap[0], wrap[1], wrap[2]
     u0, u1, u2 = one + w0, one + w1, one + w2
     toward = np.empty((4, m), np.float32)          # a point light's direction and distance per hit
+    with_rays = origins.shape[0] > 0
     ndl = np.empty(m, np.float32)
     r = 0
     # loops of straight-line code, one per case (LLVM vectorises them), then the rays' compaction
@@ -487,15 +490,16 @@ def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r,
             continue
         for i in range(m):                         # the shadow rays of the reached hits, in order
             if reached[k, i]:
-                origins[r, 0] = position[0, i] + lift * normal[0, i]
-                origins[r, 1] = position[1, i] + lift * normal[1, i]
-                origins[r, 2] = position[2, i] + lift * normal[2, i]
-                if point:
-                    directions[r, 0], directions[r, 1], directions[r, 2] = toward[0, i], toward[1, i], toward[2, i]
-                    tfar[r] = max(toward[3, i] - lift, zero)
-                else:
-                    directions[r, 0], directions[r, 1], directions[r, 2] = px, py, pz
-                    tfar[r] = np.float32(np.inf)
+                if with_rays:
+                    origins[r, 0] = position[0, i] + lift * normal[0, i]
+                    origins[r, 1] = position[1, i] + lift * normal[1, i]
+                    origins[r, 2] = position[2, i] + lift * normal[2, i]
+                    if point:
+                        directions[r, 0], directions[r, 1], directions[r, 2] = toward[0, i], toward[1, i], toward[2, i]
+                        tfar[r] = max(toward[3, i] - lift, zero)
+                    else:
+                        directions[r, 0], directions[r, 1], directions[r, 2] = px, py, pz
+                        tfar[r] = np.float32(np.inf)
                 ray_hit[r] = i
                 r += 1
     offsets[lights.shape[0]] = r

@@ -54,13 +54,13 @@ def _slots_kernel(faces, table, prim, view, slots):
             slots[i, c] = 2 * faces[f, c] + (1 if back else 0)
 
 
-def vertex_rate_occlusion(corners: ShadowCorners, ray_hit: np.ndarray, origins: np.ndarray, directions: np.ndarray,
-                          tfar: np.ndarray, light: np.ndarray, lift: np.float32, occluded) -> tuple[np.ndarray, int]:
-    """(blocked (K,) bool, rays traced) for K per-sample shadow rays toward one light (shade._lights_kernel's:
-    origins, directions (K, 3), tfar (K,) float32, ray_hit (K,) the hit each leaves): one ray per corner slot of
-    the hits' faces, then each sample takes its corners' answer where all three agree and its own ray where they
-    do not. light (8,): its lights.light_table row; lift: the rays' offset along the normal (m); occluded: the
-    scene's occlusion query (shade.shade's)."""
+def vertex_rate_occlusion(corners: ShadowCorners, ray_hit: np.ndarray, position: np.ndarray, normal: np.ndarray,
+                          light: np.ndarray, lift: np.float32, occluded) -> tuple[np.ndarray, int]:
+    """(blocked (K,) bool, rays traced) for the K hits ray_hit (K,) that reach one light (shade._lights_kernel's
+    list; hits at positions, unit shading normals (3, M) float32): one ray per corner slot of the hits' faces, then
+    each hit takes its corners' answer where all three agree and its own ray (sample_rays) where they do not.
+    light (8,): its lights.light_table row; lift: the rays' offset along the normal (m); occluded: the scene's
+    occlusion query (shade.shade's)."""
     slot_ray = np.full(len(corners.positions) * 2, -1, np.int64)
     k = len(ray_hit)
     most = min(3 * k, len(slot_ray))
@@ -76,8 +76,42 @@ def vertex_rate_occlusion(corners: ShadowCorners, ray_hit: np.ndarray, origins: 
                                np.ascontiguousarray(corner_blocked, np.bool_), blocked, split)
     own = split[:m]
     if m:
-        blocked[own] = occluded(origins[own], directions[own], tfar[own])
+        blocked[own] = occluded(*sample_rays(position, normal, ray_hit[own], light, lift))
     return blocked, n + m
+
+
+def sample_rays(position: np.ndarray, normal: np.ndarray, hit: np.ndarray, light: np.ndarray,
+                lift: np.float32) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(origins (K, 3), directions (K, 3), tfar (K,)) float32: the shadow rays of hits `hit` (K,) toward a light
+    (its light_table row), the numbers shade._lights_kernel makes: origin p + lift n, direction toward the light,
+    tfar inf or the point light's distance less lift."""
+    k = len(hit)
+    origins, directions, tfar = np.empty((k, 3), np.float32), np.empty((k, 3), np.float32), np.empty(k, np.float32)
+    _sample_rays_kernel(position, normal, np.ascontiguousarray(hit, np.int64), np.ascontiguousarray(light, np.float32),
+                        np.float32(lift), origins, directions, tfar)
+    return origins, directions, tfar
+
+
+@kernel(error_model="numpy")
+def _sample_rays_kernel(position, normal, hit, light, lift, origins, directions, tfar):
+    """sample_rays' rays, in _lights_kernel's float32 operations and order."""
+    zero, tiny = np.float32(0.0), np.float32(1e-9)
+    point = light[0] != zero
+    px, py, pz = light[1], light[2], light[3]
+    for r in range(hit.shape[0]):
+        i = hit[r]
+        origins[r, 0] = position[0, i] + lift * normal[0, i]
+        origins[r, 1] = position[1, i] + lift * normal[1, i]
+        origins[r, 2] = position[2, i] + lift * normal[2, i]
+        if point:
+            lx, ly, lz = px - position[0, i], py - position[1, i], pz - position[2, i]
+            dist = np.sqrt(lx * lx + ly * ly + lz * lz)
+            d = max(dist, tiny)
+            directions[r, 0], directions[r, 1], directions[r, 2] = lx / d, ly / d, lz / d
+            tfar[r] = max(dist - lift, zero)
+        else:
+            directions[r, 0], directions[r, 1], directions[r, 2] = px, py, pz
+            tfar[r] = np.float32(np.inf)
 
 
 @kernel(error_model="numpy")
