@@ -227,3 +227,5 @@ def test_a_hands_labels_mask_and_maps_are_unchanged_by_the_option(assets):
     differ = np.abs(on.rgba.astype(int) - off.rgba.astype(int)).max(axis=-1) > 0
     assert differ.sum() <= 0.01 * (off.alpha > 0).sum()
     assert 0 < on.stats["shadow_rays"] < off.stats["shadow_rays"] / 3
+    two = Renderer(assets, threads=2).render("fist", shading={"shadows": "vertex"}, **common)
+    assert np.array_equal(two.rgba, on.rgba)                           # chunks trace their corners alike
