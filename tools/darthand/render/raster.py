@@ -121,10 +121,11 @@ def _project_kernel(vertices, P, near, xy):
 class SampleGrid:
     """Samples at pixel positions uv (N, 2) grouped by the pixel they lie in (floor of each coordinate), over the
     box of pixels [x0, x0 + width) x [y0, y0 + height) that holds them, each pixel's samples side by side in
-    memory: `samples` (N, 5) float32 in pixel order (row-major over the box, then ascending sample index), columns
+    memory, in pixel order (row-major over the box, then ascending sample index): `samples` (5, N) float64, rows
     x, y (the position as the ray saw it: rounded to float32, as trace._camera_rays_kernel does) and the ray's
-    direction; `order` (N,) int64 the sample index of each row; the rows of pixel (r, c) of the box are
-    start[r * width + c]:start[r * width + c + 1]. N >= 1."""
+    float32 direction (x, y, z); `order` (N,) int64 the sample index of each column; the columns of pixel (r, c)
+    of the box are start[r * width + c]:start[r * width + c + 1]. One row a quantity, so a face's test of a run of
+    samples is a loop over contiguous vectors. N >= 1."""
 
     def __init__(self, uv: np.ndarray, directions: np.ndarray):
         n = len(uv)
@@ -134,7 +135,7 @@ class SampleGrid:
         self.width, self.height = int(box[2] - box[0] + 1), int(box[3] - box[1] + 1)
         self.start = np.zeros(self.width * self.height + 1, np.int32)
         self.order = np.empty(n, np.int64)
-        self.samples = np.empty((n, 5), np.float32)
+        self.samples = np.empty((5, n), np.float64)
         _bucket_kernel(np.ascontiguousarray(uv, np.float64), np.ascontiguousarray(directions, np.float32), self.x0,
                        self.y0, self.width, self.start, self.order, self.samples)
 
@@ -179,8 +180,8 @@ def _bucket_kernel(uv, directions, x0, y0, width, start, order, samples):
         j = filled[pixel[i]]
         filled[pixel[i]] += 1
         order[j] = i
-        samples[j, 0], samples[j, 1] = np.float32(uv[i, 0]), np.float32(uv[i, 1])
-        samples[j, 2], samples[j, 3], samples[j, 4] = directions[0, i], directions[1, i], directions[2, i]
+        samples[0, j], samples[1, j] = np.float32(uv[i, 0]), np.float32(uv[i, 1])
+        samples[2, j], samples[3, j], samples[4, j] = directions[0, i], directions[1, i], directions[2, i]
 
 
 @kernel
@@ -199,7 +200,7 @@ def _face_order_kernel(xy, faces, y0, height, order):
         count[rows[f]] += 1
 
 
-@kernel
+@kernel(error_model="numpy")
 def _cover_kernel(xy, vertices, faces, face_order, origin, samples, x0, y0, width, height, start, nearest, face):
     """Rasterise the faces (F, 3) (vertices (V, 3) float32 world, xy (V, 2) their pixel positions), in face_order,
     over a SampleGrid's samples (x0, y0, width, height, start): where a face covers a sample (edge functions,
@@ -272,21 +273,21 @@ def _cover_kernel(xy, vertices, faces, face_order, origin, samples, x0, y0, widt
             if c_lo > c_hi:
                 continue
             row = r * width
+            xs, ys = samples[0], samples[1]
             for j in range(start[row + c_lo], start[row + c_hi + 1]):
-                x, y = np.float64(samples[j, 0]), np.float64(samples[j, 1])
-                e0 = d0x * (y - p0y) - d0y * (x - p0x)
-                e1 = d1x * (y - p1y) - d1y * (x - p1x)
-                e2 = d2x * (y - p2y) - d2y * (x - p2x)
+                # no branch in this loop (it compiles to vector code): a sample the face does not cover, or whose
+                # ray runs in its plane (nd = 0, divided by 1 instead), keeps what it had
+                e0 = d0x * (ys[j] - p0y) - d0y * (xs[j] - p0x)
+                e1 = d1x * (ys[j] - p1y) - d1y * (xs[j] - p1x)
+                e2 = d2x * (ys[j] - p2y) - d2y * (xs[j] - p2x)
                 inside = (((e0 * s0 > 0) | ((e0 == 0) & t0)) & ((e1 * s1 > 0) | ((e1 == 0) & t1))
                           & ((e2 * s2 > 0) | ((e2 == 0) & t2)))
-                if not inside:
-                    continue
-                nd = nx * samples[j, 2] + ny * samples[j, 3] + nz * samples[j, 4]
-                if nd == 0.0:
-                    continue
-                t = nd0 / nd
-                if t < nearest[j] or (t == nearest[j] and f < face[j]):
-                    nearest[j], face[j] = t, f
+                nd = nx * samples[2, j] + ny * samples[3, j] + nz * samples[4, j]
+                t = nd0 / (nd if nd != 0.0 else 1.0)
+                near, held = nearest[j], face[j]
+                better = inside & (nd != 0.0) & ((t < near) | ((t == near) & (f < held)))
+                nearest[j] = t if better else near
+                face[j] = f if better else held
 
 
 @kernel
@@ -296,7 +297,7 @@ def _barycentrics_kernel(vertices, faces, surface, first, origin, samples, order
     (face[j] >= 0, nearest[j] its depth): the ray (origin (3,) float64, the row's direction) against that face by
     Moeller-Trumbore in float64 (hit = (1 - u - v) v0 + u v1 + v v2, depth the ray parameter), rounded to float32;
     a ray in the face's plane to rounding (no determinant) keeps u = v = 0 and nearest[j]."""
-    for j in range(samples.shape[0]):
+    for j in range(samples.shape[1]):
         f = face[j]
         if f < 0:
             continue
@@ -307,7 +308,7 @@ def _barycentrics_kernel(vertices, faces, surface, first, origin, samples, order
         ox, oy, oz = np.float64(vertices[ia, 0]), np.float64(vertices[ia, 1]), np.float64(vertices[ia, 2])
         e1x, e1y, e1z = vertices[ib, 0] - ox, vertices[ib, 1] - oy, vertices[ib, 2] - oz
         e2x, e2y, e2z = vertices[ic, 0] - ox, vertices[ic, 1] - oy, vertices[ic, 2] - oz
-        dx, dy, dz = np.float64(samples[j, 2]), np.float64(samples[j, 3]), np.float64(samples[j, 4])
+        dx, dy, dz = samples[2, j], samples[3, j], samples[4, j]
         px, py, pz = dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x
         det = e1x * px + e1y * py + e1z * pz
         if det == 0.0:
