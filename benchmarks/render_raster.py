@@ -151,7 +151,7 @@ def cpu_per_frame(renderers, jobs, settings, rounds: int = ROUNDS) -> dict:
     """CPU ms a frame of the render and of its camera visibility, Embree and raster, in alternating blocks."""
     from darthand.dataset.frames import render_job
 
-    cpu = {"embree": [0.0, 0.0, 0], "raster": [0.0, 0.0, 0]}        # frame s, visibility s, frames
+    blocks: dict = {"embree": [], "raster": []}                    # per block: (frame ms, visibility ms)
     for _ in range(rounds):
         for mode in ("embree", "raster"):
             visibility = [0.0]
@@ -159,11 +159,13 @@ def cpu_per_frame(renderers, jobs, settings, rounds: int = ROUNDS) -> dict:
                 c = time.process_time()
                 for job in jobs:
                     render_job(renderers[job["side"]], job, settings)
-                cpu[mode][0] += time.process_time() - c
-            cpu[mode][1] += visibility[0]
-            cpu[mode][2] += len(jobs)
-    out = {mode: {"frame_ms": round(1e3 * f / n, 2), "visibility_ms": round(1e3 * v / n, 2)}
-           for mode, (f, v, n) in cpu.items()}
+                frame = time.process_time() - c
+            blocks[mode].append((1e3 * frame / len(jobs), 1e3 * visibility[0] / len(jobs)))
+    out: dict = {mode: {"frame_ms": round(float(np.mean([b[0] for b in runs])), 2),
+                        "visibility_ms": round(float(np.mean([b[1] for b in runs])), 2),
+                        "blocks_frame_ms": [round(b[0], 2) for b in runs],
+                        "blocks_visibility_ms": [round(b[1], 2) for b in runs]}
+                 for mode, runs in blocks.items()}
     out["saved_ms"] = round(out["embree"]["frame_ms"] - out["raster"]["frame_ms"], 2)
     out["visibility_saved_ms"] = round(out["embree"]["visibility_ms"] - out["raster"]["visibility_ms"], 2)
     out["frames_per_block"], out["rounds"] = len(jobs), rounds

@@ -59,7 +59,7 @@ def camera_hits(scene: Scene, camera: Camera, uv: np.ndarray, directions: np.nda
     origin = camera.centre.astype(np.float32).astype(np.float64)
     nearest, face = np.full(n, np.inf, np.float64), np.full(n, -1, np.int64)
     _cover_kernel(xy, mesh.vertices, mesh.faces, grid.face_order(xy, mesh.faces), origin, grid.samples, grid.x0,
-                  grid.y0, grid.width, grid.height, grid.start, nearest, face)
+                  grid.y0, grid.width, grid.height, grid.start, grid.row_y, nearest, face)
     _barycentrics_kernel(mesh.vertices, mesh.faces, mesh.surface, mesh.first, origin, grid.samples, grid.order, face,
                          nearest, geom, prim, u, v, depth)
     return geom, prim, u, v, depth
@@ -125,7 +125,8 @@ class SampleGrid:
     x, y (the position as the ray saw it: rounded to float32, as trace._camera_rays_kernel does) and the ray's
     float32 direction (x, y, z); `order` (N,) int64 the sample index of each column; the columns of pixel (r, c)
     of the box are start[r * width + c]:start[r * width + c + 1]. One row a quantity, so a face's test of a run of
-    samples is a loop over contiguous vectors. N >= 1."""
+    samples is a loop over contiguous vectors. row_y (height,): the y all samples of a pixel row share (pixel
+    centres, or one sub-sample offset), NaN where they differ or there are none. N >= 1."""
 
     def __init__(self, uv: np.ndarray, directions: np.ndarray):
         n = len(uv)
@@ -136,8 +137,9 @@ class SampleGrid:
         self.start = np.zeros(self.width * self.height + 1, np.int32)
         self.order = np.empty(n, np.int64)
         self.samples = np.empty((5, n), np.float64)
+        self.row_y = np.empty(self.height, np.float64)
         _bucket_kernel(np.ascontiguousarray(uv, np.float64), np.ascontiguousarray(directions, np.float32), self.x0,
-                       self.y0, self.width, self.start, self.order, self.samples)
+                       self.y0, self.width, self.start, self.order, self.samples, self.row_y)
 
     def face_order(self, xy: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """(F,) int64 the faces (F, 3) of vertices at pixel positions xy (V, 2) by their top pixel row in the box
@@ -165,8 +167,8 @@ def _box_kernel(uv, box):
 
 
 @kernel
-def _bucket_kernel(uv, directions, x0, y0, width, start, order, samples):
-    """SampleGrid's start, order and samples by a counting sort of the samples uv (N, 2) by pixel."""
+def _bucket_kernel(uv, directions, x0, y0, width, start, order, samples, row_y):
+    """SampleGrid's start, order, samples and row_y by a counting sort of the samples uv (N, 2) by pixel."""
     n = uv.shape[0]
     pixel = np.empty(n, np.int64)
     for i in range(n):
@@ -182,6 +184,13 @@ def _bucket_kernel(uv, directions, x0, y0, width, start, order, samples):
         order[j] = i
         samples[0, j], samples[1, j] = np.float32(uv[i, 0]), np.float32(uv[i, 1])
         samples[2, j], samples[3, j], samples[4, j] = directions[0, i], directions[1, i], directions[2, i]
+    for r in range(row_y.shape[0]):
+        a, b = start[r * width], start[(r + 1) * width]
+        row_y[r] = samples[1, a] if a < b else np.nan
+        for j in range(a + 1, b):
+            if samples[1, j] != row_y[r]:
+                row_y[r] = np.nan
+                break
 
 
 @kernel
@@ -201,9 +210,10 @@ def _face_order_kernel(xy, faces, y0, height, order):
 
 
 @kernel(error_model="numpy")
-def _cover_kernel(xy, vertices, faces, face_order, origin, samples, x0, y0, width, height, start, nearest, face):
+def _cover_kernel(xy, vertices, faces, face_order, origin, samples, x0, y0, width, height, start, row_y, nearest,
+                  face):
     """Rasterise the faces (F, 3) (vertices (V, 3) float32 world, xy (V, 2) their pixel positions), in face_order,
-    over a SampleGrid's samples (x0, y0, width, height, start): where a face covers a sample (edge functions,
+    over a SampleGrid's samples (x0, y0, width, height, start, row_y): where a face covers a sample (edge functions,
     top-left rule) and its plane is nearer along the sample's ray (from origin (3,)) than nearest[j] (float64, per
     grid row), or as near and a lower face, the sample takes it (nearest, face (N,) int64). A face visits, row by
     row of pixels, only the columns its outline spans in that row."""
@@ -250,8 +260,11 @@ def _cover_kernel(xy, vertices, faces, face_order, origin, samples, x0, y0, widt
             if start[r * width + b_lo] == start[r * width + b_hi]:
                 continue                 # no sample in this row of the face's box (edge sub-samples are sparse)
             # the outline's columns in this row of pixels: its corners in the band and its edges' crossings of
-            # the band's two lines, widened by rounding's share so no sample on the outline is left out
+            # the band's two lines (one line when the row's samples share their y), widened by rounding's share
+            # so no sample on the outline is left out
             band_lo, band_hi = np.float64(y0 + r), np.float64(y0 + r + 1)
+            if row_y[r] == row_y[r]:
+                band_lo, band_hi = row_y[r], row_y[r]
             left, right = np.inf, -np.inf
             for k in range(3):
                 ax, ay, bx, by = cx[k], cy[k], cx[(k + 1) % 3], cy[(k + 1) % 3]
