@@ -112,11 +112,12 @@ def sample_figures(entry: dict) -> dict:
 
 def image_figures(pairs: list) -> dict:
     """Pixels (of all frames) of the 8-bit images and masks that differ between Embree and raster frames, their
-    largest difference, and the frames whose labels differ."""
+    largest difference, the frames whose labels differ and in which top-level fields ('coverage' is the mask's
+    sum, so it follows the mask)."""
     from darthand.render.image import encode_mask8
 
     out: dict = {"frames": len(pairs), "pixels": 0, "image_pixels_differ": 0, "image_max_diff": 0,
-                 "mask_pixels_differ": 0, "mask_max_diff": 0, "labels_differ": 0}
+                 "mask_pixels_differ": 0, "mask_max_diff": 0, "labels_differ": 0, "labels_fields_differ": []}
     for embree, ours in pairs:
         out["pixels"] += embree.rgba.shape[0] * embree.rgba.shape[1]
         diff = np.abs(embree.rgba.astype(np.int16) - ours.rgba.astype(np.int16)).max(axis=2)
@@ -125,8 +126,10 @@ def image_figures(pairs: list) -> dict:
         mask = np.abs(encode_mask8(embree.alpha).astype(np.int16) - encode_mask8(ours.alpha).astype(np.int16))
         out["mask_pixels_differ"] += int((mask > 0).sum())
         out["mask_max_diff"] = max(out["mask_max_diff"], int(mask.max()))
-        same_labels = json.dumps(embree.labels, sort_keys=True) == json.dumps(ours.labels, sort_keys=True)
-        out["labels_differ"] += int(not same_labels)
+        fields = {k for k in set(embree.labels) | set(ours.labels) if json.dumps(embree.labels.get(k), sort_keys=True)
+                  != json.dumps(ours.labels.get(k), sort_keys=True)}
+        out["labels_differ"] += int(bool(fields))
+        out["labels_fields_differ"] = sorted(set(out.get("labels_fields_differ", [])) | fields)
     return out
 
 
@@ -188,6 +191,8 @@ def run(frames: int | None = None) -> dict:
                 with rasterising(on):
                     render_job(renderers[job["side"]], job, settings)
         agree = agreement(renderers, jobs[:frames], settings)
+        for job in jobs[:block]:          # their textures again: the agreement's frames pushed them out of the cache
+            render_job(renderers[job["side"]], job, settings)
         cpu = cpu_per_frame(renderers, jobs[:block], settings)
     return {"frames": frames, "inputs": where, "what": "render_job of the default plan's first frames, dataset "
             "defaults, one thread: camera visibility by Embree and rasterised (render/raster.py)",
@@ -198,12 +203,14 @@ def summary(result: dict) -> str:
     a, cpu = result["agreement"], result["cpu"]
     p, s = a["samples"].get("primary", {}), a["samples"].get("aa", {})
     img = a["images"]
+    fields = ", ".join(img.get("labels_fields_differ", [])) or "no field"
     return (f"raster: of {result['frames']} frames, {100 * p.get('differ_share', 0):.4f} % of primary samples and "
             f"{100 * s.get('differ_share', 0):.4f} % of edge sub-samples hit another face than Embree's (max |du| "
             f"{max(p.get('du_max', 0), s.get('du_max', 0)):.1e}); images: {img['image_pixels_differ']} of "
-            f"{img['pixels']} pixels differ (max {img['image_max_diff']}), labels differ in {img['labels_differ']} "
-            f"frames. CPU a frame {cpu['embree']['frame_ms']} -> {cpu['raster']['frame_ms']} ms (camera visibility "
-            f"{cpu['embree']['visibility_ms']} -> {cpu['raster']['visibility_ms']} ms).")
+            f"{img['pixels']} pixels differ (max {img['image_max_diff']}), masks {img['mask_pixels_differ']}, labels "
+            f"differ in {img['labels_differ']} frames ({fields}). CPU a frame {cpu['embree']['frame_ms']} -> "
+            f"{cpu['raster']['frame_ms']} ms (camera visibility {cpu['embree']['visibility_ms']} -> "
+            f"{cpu['raster']['visibility_ms']} ms).")
 
 
 if __name__ == "__main__":
