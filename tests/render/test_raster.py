@@ -1,8 +1,9 @@
 """Rasterised camera visibility (render/raster.py) against closed forms and against Embree: which pixel centres a
 square facing the camera covers (its edges and its diagonal through sample positions: each covered once, by the
 top-left rule), the barycentrics and depth of a slanted triangle against the ray-plane intersection solved here,
-a nearer square hiding a farther one, a posed hand with a ring and its arm against Embree's camera rays, and the
-fallback to Embree when a vertex is behind the camera."""
+a nearer square hiding a farther one, faces reaching behind the camera clipped at its near limit (a floor in
+closed form, a hand's face against Embree), a posed hand with a ring and its arm against Embree's camera rays, and
+the fallback to Embree when a vertex is not finite."""
 
 from __future__ import annotations
 
@@ -170,12 +171,49 @@ def solved_barycentrics(ctx, hits, on):
     return u, v
 
 
-def test_a_vertex_behind_the_camera_sends_the_rays_to_embree(assets, ring, rasterising):
+def test_a_floor_reaching_behind_the_camera_is_clipped_at_the_near_limit(rasterising):
+    """A floor 0.1 m below a camera (camera frame = world), from 1 m behind it to 5 m ahead: its triangles have
+    corners behind the camera, so they are clipped; a ray (x, y, 1) meets it where y > 0.1 / 5 and |x| 0.1 / y <
+    0.6, at depth 0.1 / y."""
+    K = np.array([[40.0, 0, 32], [0, 40.0, 32], [0, 0, 1]])
+    cam = Camera(K, np.eye(3), np.zeros(3), 64, 64)
+    floor = surface([(-0.6, 0.1, -1.0), (0.6, 0.1, -1.0), (0.6, 0.1, 5.0), (-0.6, 0.1, 5.0)], [[0, 1, 2], [0, 2, 3]])
+    subj = subject(floor)
+    uv = trace.pixel_centres(0, 64, 0, 64)
+    hits = trace.intersect_samples(context(subj, cam), uv)
+    x, y = (uv[:, 0] - 32) / 40, (uv[:, 1] - 32) / 40
+    with np.errstate(divide="ignore"):
+        reach = np.where(y > 0, 0.1 / y, np.inf)
+    on = (y > 0.02) & (np.abs(x) * reach < 0.6)
+    clear = (np.abs(y - 0.02) > 1e-6) & (np.abs(np.abs(x) * reach - 0.6) > 1e-6)
+    assert on.sum() > 300 and np.array_equal((hits.geom >= 0)[clear], on[clear])
+    assert np.allclose(hits.depth[on], reach[on], rtol=1e-6)
+    ref = embree_hits(context(subj, cam), uv)
+    assert np.array_equal(hits.geom, ref.geom) and np.array_equal(hits.prim, ref.prim)
+
+
+def test_a_hand_face_reaching_behind_the_camera_as_embree_sees_it(assets, rasterising):
     frame = Renderer(assets, 1).render("fist", camera="three_quarter", width=64, height=64, labels=False,
                                        samples=1)
     cam, hand = frame.camera, frame.subject.hand
-    behind = (cam.centre - 0.1 * cam.R[2]).astype(np.float32)
+    behind = (cam.centre - 0.1 * cam.R[2] + 0.02 * cam.R[1]).astype(np.float32)
     subj = subject(surface(np.vstack([hand.vertices, behind[None]]),
+                           np.vstack([hand.faces, [[0, 1, len(hand.vertices)]]])))
+    ctx = context(subj, cam)
+    uv = trace.pixel_centres(0, 64, 0, 64)
+    hits, ref = trace.intersect_samples(ctx, uv), embree_hits(ctx, uv)
+    on_new = (ref.geom == 0) & (ref.prim == len(hand.faces))
+    assert on_new.sum() > 20                                       # the clipped face is seen
+    agree = (hits.geom == ref.geom) & (hits.prim == ref.prim)
+    assert agree.mean() >= 0.999 and agree[on_new].all()
+    assert np.abs(hits.depth[agree & (ref.geom >= 0)] / ref.depth[agree & (ref.geom >= 0)] - 1).max() < 1e-4
+
+
+def test_a_vertex_that_is_not_finite_sends_the_rays_to_embree(assets, rasterising):
+    frame = Renderer(assets, 1).render("fist", camera="three_quarter", width=64, height=64, labels=False,
+                                       samples=1)
+    cam, hand = frame.camera, frame.subject.hand
+    subj = subject(surface(np.vstack([hand.vertices, [[np.nan, 0, 0]]]),
                            np.vstack([hand.faces, [[0, 1, len(hand.vertices)]]])))
     ctx = context(subj, cam)
     uv = trace.pixel_centres(0, 64, 0, 64)
