@@ -183,13 +183,12 @@ def _bucket_kernel(uv, directions, x0, y0, width, start, order, samples, row_y):
     for i in range(n):
         pixel[i] = ((np.int64(np.floor(np.float32(uv[i, 1]))) - y0) * width
                     + np.int64(np.floor(np.float32(uv[i, 0]))) - x0)
-        start[pixel[i] + 1] += 1
+        start[pixel[i]] += 1
     for b in range(1, start.shape[0]):
-        start[b] += start[b - 1]
-    filled = start[:-1].copy()
-    for i in range(n):
-        j = filled[pixel[i]]
-        filled[pixel[i]] += 1
+        start[b] += start[b - 1]     # start[b]: the end of pixel b's samples, until the fill below moves it back
+    for i in range(n - 1, -1, -1):  # backwards, so each pixel's samples stay in ascending index
+        start[pixel[i]] -= 1
+        j = start[pixel[i]]
         order[j] = i
         samples[0, j], samples[1, j] = np.float32(uv[i, 0]), np.float32(uv[i, 1])
         samples[2, j], samples[3, j], samples[4, j] = directions[0, i], directions[1, i], directions[2, i]
@@ -362,6 +361,7 @@ def _barycentrics_kernel(vertices, faces, surface, first, origin, samples, order
             continue
         sx, sy, sz = origin[0] - ox, origin[1] - oy, origin[2] - oz
         qx, qy, qz = sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x
-        u[i] = np.float32((sx * px + sy * py + sz * pz) / det)
-        v[i] = np.float32((dx * qx + dy * qy + dz * qz) / det)
-        depth[i] = np.float32((e2x * qx + e2y * qy + e2z * qz) / det)
+        inverse = 1.0 / det
+        u[i] = np.float32((sx * px + sy * py + sz * pz) * inverse)
+        v[i] = np.float32((dx * qx + dy * qy + dz * qz) * inverse)
+        depth[i] = np.float32((e2x * qx + e2y * qy + e2z * qz) * inverse)
