@@ -7,8 +7,9 @@ thread. Figures:
 - agreement: every camera sample of each frame (the primary samples at pixel centres, the edge pixels'
   sub-samples) traced by Embree and rasterised: the share whose surface or face differ, and where they agree the
   largest and mean |du|, |dv| and relative depth difference; then each frame rendered both ways: pixels of the
-  8-bit image and mask that differ and the largest difference, and frames whose labels differ (they come from the
-  model and the labels' own rays: none should).
+  8-bit image and mask that differ and the largest difference, frames whose labels differ (they come from the
+  model and the labels' own rays; only `coverage`, the mask's sum, may follow the mask) and in which fields, and
+  frames whose camera rays went to Embree after all (raster.camera_hits' fallback: a vertex not finite).
 - cpu: CPU ms a frame (time.process_time) of the render and of its camera visibility alone (trace
   .intersect_samples: the camera rays and their closest hits), after a warm-up pass over the same frames (kernels,
   maps, textures), in alternating blocks (Embree, raster) of the same frames, ROUNDS rounds.
@@ -146,8 +147,9 @@ def agreement(renderers, jobs, settings) -> dict:
         with rasterising(True):
             ours, _ = render_job(renderer, job, settings)
         pairs.append((embree, ours))
+    fell_back = sum(ours.stats.get("rasterised", 0) != ours.stats.get("rays", 0) for _, ours in pairs)
     return {"samples": {kind: sample_figures(entry) for kind, entry in sorted(totals.items())},
-            "images": image_figures(pairs)}
+            "images": image_figures(pairs), "frames_given_to_embree": int(fell_back)}
 
 
 def cpu_per_frame(renderers, jobs, settings, rounds: int = ROUNDS) -> dict:

@@ -47,8 +47,8 @@ def camera_hits(scene: Scene, camera: Camera, uv: np.ndarray, directions: np.nda
     """(geom (N,) int32 surface index or -1, prim (N,) int32 (-1 background), u, v (N,) float32 Embree's
     barycentrics (0 for background), depth (N,) float32 camera z (inf for background)) of the camera samples at
     pixel positions uv (N, 2) float64, whose ray directions (3, N) float32 (camera z = 1) are given; None when
-    rasterising is off or does not apply (see the module docstring): ask Embree."""
-    if not ENABLED or type(camera) is not Camera:
+    rasterising is off or does not apply (see the module docstring; or the scene has no surface): ask Embree."""
+    if not ENABLED or type(camera) is not Camera or not scene.surfaces:
         return None
     mesh = SceneMesh.of(scene)
     P = camera.K @ np.hstack([camera.R, camera.t[:, None]])
