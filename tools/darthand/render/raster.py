@@ -133,8 +133,8 @@ class SampleGrid:
     memory, in pixel order (row-major over the box, then ascending sample index): `samples` (5, N) float64, rows
     x, y (the position as the ray saw it: rounded to float32, as trace._camera_rays_kernel does) and the ray's
     float32 direction (x, y, z); `order` (N,) int64 the sample index of each column; the columns of pixel (r, c)
-    of the box are start[r * width + c]:start[r * width + c + 1]. One row a quantity, so a face's test of a run of
-    samples is a loop over contiguous vectors. row_y (height,): the y all samples of a pixel row share (pixel
+    of the box are start[r * width + c]:start[r * width + c + 1]. One row a quantity: a face's test of a run of
+    samples reads contiguous vectors. row_y (height,): the y all samples of a pixel row share (pixel
     centres, or one sub-sample offset), NaN where they differ or there are none. N >= 1."""
 
     def __init__(self, uv: np.ndarray, directions: np.ndarray):
@@ -320,8 +320,8 @@ def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, samples, 
                 row = r * width
                 xs, ys = samples[0], samples[1]
                 for j in range(start[row + c_lo], start[row + c_hi + 1]):
-                    # no branch in this loop (it compiles to vector code): a sample the face does not cover, or whose
-                    # ray runs in its plane (nd = 0, divided by 1 instead), keeps what it had
+                    # no branch on the (unpredictable) coverage: a sample the face does not cover, or whose ray
+                    # runs in its plane (nd = 0, divided by 1 instead), keeps what it had
                     e0 = d0x * (ys[j] - p0y) - d0y * (xs[j] - p0x)
                     e1 = d1x * (ys[j] - p1y) - d1y * (xs[j] - p1x)
                     e2 = d2x * (ys[j] - p2y) - d2y * (xs[j] - p2x)
