@@ -292,6 +292,26 @@ def test_chunks_group_frames_by_texture_across_sides():
     assert [len(c) for c in chunks] == sorted((len(c) for c in chunks), reverse=True)
 
 
+def test_chunks_group_frames_by_map_when_the_maps_outnumber_a_workers_cache():
+    """Over more maps than a worker keeps prepared (MAPS_KEPT), a chunk holds one map (a map costs about two frames
+    to prepare); over fewer, chunks stay grouped by texture, and a two-hand job counts its first hand's texture."""
+    from darthand.render.environment import MAPS_KEPT
+
+    def jobs(maps: int) -> list:
+        return [({"index": i, "side": "r", "texture": f"t{i % 5}", "accessory": "none",
+                  "lights": {"environment": {"map": f"m{i % maps}.exr", "strength": 1.0}}}, str(i)) for i in range(120)]
+
+    many = run.make_chunks(jobs(MAPS_KEPT + 4), processes=2, chunk_size=8)
+    assert sorted(j["index"] for c in many for j, _ in c) == list(range(120))
+    assert all(len({run.job_map(j) for j, _ in c}) == 1 for c in many)
+    assert all([run.job_texture(j) for j, _ in c] == sorted(run.job_texture(j) for j, _ in c) for c in many)
+    few = run.make_chunks(jobs(MAPS_KEPT), processes=2, chunk_size=8)
+    assert all(len({j["texture"] for j, _ in c}) == 1 for c in few)
+    assert any(len({run.job_map(j) for j, _ in c}) > 1 for c in few)
+    pair = {"index": 0, "bodies": [{"texture": "a"}, {"texture": "b"}]}
+    assert run.job_texture(pair) == "a" and run.job_map(pair) == ""
+
+
 def test_usd_packages_plan_their_gestures_by_name():
     from darthand.dataset.plan import Planner
 

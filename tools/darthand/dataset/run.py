@@ -43,6 +43,7 @@ from darthand.dataset.film import film_setting
 from darthand.render.api import shading_options
 from darthand.render.cycles import check_available, check_samples
 from darthand.render.engines import ENGINES
+from darthand.render.environment import MAPS_KEPT
 from darthand.render.dress import geometry_options
 
 DATASET_FORMAT = "darthand-dataset"
@@ -266,22 +267,44 @@ def _prepare_folders(out: Path, maps: tuple = ()) -> None:
 
 
 def make_chunks(items: list, processes: int, chunk_size: int | None = None) -> list[list]:
-    """Items [(job, digest)] in tasks for the workers: grouped by texture (a model's left and right hands read the
-    same texture files, and loading one costs as much as rendering a frame: a worker loads it once per chunk), each
+    """Items [(job, digest)] in tasks for the workers: grouped by what a worker loads before it can render a frame
+    (`load_key`: its texture, or its environment map when the items draw from more maps than a worker keeps), each
     group split into chunks of at most `chunk_size` frames (default: a quarter of an even share per process, at most
-    MAX_CHUNK), sorted by side and accessory inside; largest chunks first."""
+    MAX_CHUNK), sorted by texture, side and accessory inside; largest chunks first."""
     if not items:
         return []
     size = chunk_size or min(MAX_CHUNK, max(1, math.ceil(len(items) / (4 * processes))))
+    by_map = len({job_map(job) for job, _ in items}) > MAPS_KEPT
     groups: dict = {}
     for item in items:
-        groups.setdefault(str(item[0].get("texture")), []).append(item)
+        groups.setdefault(load_key(item[0], by_map), []).append(item)
     chunks = []
     for key in sorted(groups):
-        group = sorted(groups[key], key=lambda it: (str(it[0].get("side")), str(it[0].get("accessory")),
-                                                    it[0]["index"]))
+        group = sorted(groups[key], key=lambda it: (job_texture(it[0]), str(it[0].get("side")),
+                                                    str(it[0].get("accessory")), it[0]["index"]))
         chunks += [group[k:k + size] for k in range(0, len(group), size)]
     return sorted(chunks, key=len, reverse=True)
+
+
+def load_key(job: dict, by_map: bool) -> str:
+    """What a worker loads once for a run of frames: the job's texture (a model's left and right hands read the same
+    files; a decode costs about a frame's render), or with `by_map` its environment map (preparing a 2K map costs
+    about two frames, and a worker keeps MAPS_KEPT of them: a run over a large folder of maps grouped by texture
+    would prepare a map for nearly every frame)."""
+    return job_map(job) if by_map else job_texture(job)
+
+
+def job_texture(job: dict) -> str:
+    """The texture of a job's hand (of its first hand for a scene of several)."""
+    bodies = job.get("bodies")
+    return str(bodies[0].get("texture") if bodies else job.get("texture"))
+
+
+def job_map(job: dict) -> str:
+    """The environment map of a job's lights ('' for a light rig or the default lights)."""
+    lights = job.get("lights")
+    environment = lights.get("environment") if isinstance(lights, dict) else None
+    return str(environment.get("map", "")) if isinstance(environment, dict) else ""
 
 
 # ------------------------------------------------------------------------------------------------ statistics

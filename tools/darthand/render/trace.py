@@ -23,6 +23,7 @@ from darthand.model.layout import FACE_LABEL_IDS
 from darthand.render.camera import Camera, point_bounds
 from darthand.render.environment import FrameEnvironment
 from darthand.render.indirect import VertexLight
+from darthand.render.raster import camera_hits
 from darthand.render.scene import Scene, interpolate_columns
 from darthand.render.shade import DEFAULT_SKIN, shade, surface_hits
 from darthand.render.shadows import hit_corners
@@ -155,22 +156,28 @@ class RayHits:
 
 
 def intersect_samples(ctx: Context, uv: np.ndarray, stats: dict | None = None) -> RayHits:
-    """Closest hits of the camera rays through pixel positions uv (N, 2). stats: adds seconds 'trace', count
-    'rays'."""
+    """Closest hits of the camera rays through pixel positions uv (N, 2): rasterised (raster.py) when that is on
+    and applies, else Embree's. stats: adds seconds 'trace', counts 'rays' and 'rasterised' (of them)."""
     t0 = time.perf_counter()
     n = len(uv)
     origins, rays, directions = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32), np.empty((3, n), np.float32)
     _camera_rays_kernel(np.ascontiguousarray(uv, np.float64), ctx.camera.centre.astype(np.float32), ctx.D0,
                         ctx.dDdx, ctx.dDdy, origins, rays, directions)
-    hit = ctx.scene.intersect(origins, rays)
-    prim = hit["primID"].astype(np.int32)
-    geom, depth = np.empty(n, np.int32), np.empty(n, np.float32)
-    _closest_kernel(np.ascontiguousarray(hit["geomID"], np.int32), prim, np.ascontiguousarray(hit["tfar"], np.float32),
-                    geom, depth)
+    rasterised = camera_hits(ctx.scene, ctx.camera, uv, directions)      # None: off, or Embree must answer
+    if rasterised is not None:
+        geom, prim, u, v, depth = rasterised
+    else:
+        hit = ctx.scene.intersect(origins, rays)
+        prim, u, v = hit["primID"].astype(np.int32), hit["u"], hit["v"]
+        geom, depth = np.empty(n, np.int32), np.empty(n, np.float32)
+        _closest_kernel(np.ascontiguousarray(hit["geomID"], np.int32), prim,
+                        np.ascontiguousarray(hit["tfar"], np.float32), geom, depth)
     if stats is not None:
         stats["trace"] = stats.get("trace", 0.0) + time.perf_counter() - t0
         stats["rays"] = stats.get("rays", 0) + n
-    return RayHits(geom, prim, hit["u"], hit["v"], depth, directions)
+        if rasterised is not None:
+            stats["rasterised"] = stats.get("rasterised", 0) + n
+    return RayHits(geom, prim, u, v, depth, directions)
 
 
 @kernel

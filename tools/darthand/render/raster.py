@@ -1,0 +1,367 @@
+"""Camera visibility by rasterisation: the closest hit of each camera sample without a ray query.
+
+Every camera ray leaves the camera centre, so which triangle it meets first is a rasterisation question: project
+each posed surface's vertices into the image (surfaces in the world frame Embree sees: a rigid accessory's world
+vertices), cover the samples inside each projected triangle, keep the nearest. The samples are any pixel
+positions (trace.intersect_samples': the pixel centres of the traced tiles, or an edge pixel's sub-samples, each
+offset of aa.sample_offsets a shifted grid); they are bucketed by the pixel they lie in, and a triangle visits,
+row by row, the buckets of the pixels its outline spans (faces sorted by their top row, so the samples' memory
+is walked top to bottom).
+
+Coverage is decided in the image plane with edge functions in float64, with the top-left rule for samples exactly
+on an edge (Direct3D's: a sample on an edge shared by two triangles, or on a vertex shared by a fan, is covered by
+one of them). Each edge's function is evaluated with its endpoints in one canonical order (the smaller projected
+point first), so the two triangles of a shared edge compute the same number and the tie rule decides. Depth and
+barycentrics are those of the ray through the sample and the triangle's plane (Moeller-Trumbore), from the same
+float32 ray direction trace._camera_rays_kernel gives Embree, in float64: the camera centre is a metre or less
+from the hand and the triangles are millimetres wide, so float32 differences of camera-relative positions would
+add errors of 1e-4 to the barycentrics, which float64 keeps at 1e-12; what remains against Embree is Embree's own
+float32 rounding. u, v: hit = (1 - u - v) v0 + u v1 + v v2 over faces[prim] (Embree's); depth: the ray parameter
+along the camera-z = 1 direction, the hit's camera z (Embree's tfar). Between surfaces the nearer hit wins; at an
+exact tie, the surface rasterised first (the lower index), and within a surface the lower face.
+
+A face reaching behind the camera (the arm going on past it) is clipped at the near limit NEAR (camera z): its
+part in front, projected, is a triangle or a quad, fanned into triangles; the part within NEAR of the camera plane
+(a nanometre) is left out, and a face wholly behind is skipped (no camera ray reaches it). The depth and
+barycentrics stay the whole face's. Rasterising applies when every vertex of every surface is finite and the
+camera is render/camera.Camera (a pinhole with an upper-triangular K: straight lines stay straight in the image);
+otherwise `camera_hits` returns None and the caller asks Embree. Shadow, occlusion and indirect rays always go to
+Embree.
+
+The switch is ENABLED (off: every camera ray goes to Embree, the images as before).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from darthand.jit import kernel
+from darthand.render.camera import Camera
+from darthand.render.scene import Scene
+
+ENABLED = False          # rasterise camera samples (trace.intersect_samples); tests and benchmarks flip it
+NEAR = 1e-9              # metres of camera z: faces are clipped there (trace.touched_tiles' limit)
+
+
+def camera_hits(scene: Scene, camera: Camera, uv: np.ndarray, directions: np.ndarray) -> tuple | None:
+    """(geom (N,) int32 surface index or -1, prim (N,) int32 (-1 background), u, v (N,) float32 Embree's
+    barycentrics (0 for background), depth (N,) float32 camera z (inf for background)) of the camera samples at
+    pixel positions uv (N, 2) float64, whose ray directions (3, N) float32 (camera z = 1) are given; None when
+    rasterising is off or does not apply (see the module docstring; or the scene has no surface): ask Embree."""
+    if not ENABLED or type(camera) is not Camera or not scene.surfaces:
+        return None
+    mesh = SceneMesh.of(scene)
+    P = camera.K @ np.hstack([camera.R, camera.t[:, None]])
+    projected = mesh.project(P)
+    if projected is None:
+        return None
+    xy, z = projected
+    n = len(uv)
+    geom, prim = np.full(n, -1, np.int32), np.full(n, -1, np.int32)
+    u, v, depth = np.zeros(n, np.float32), np.zeros(n, np.float32), np.full(n, np.inf, np.float32)
+    if not n:
+        return geom, prim, u, v, depth
+    grid = SampleGrid(uv, directions)
+    origin = camera.centre.astype(np.float32).astype(np.float64)
+    nearest, face = np.full(n, np.inf, np.float64), np.full(n, -1, np.int64)
+    _cover_kernel(xy, z, P, NEAR, mesh.vertices, mesh.faces, grid.face_order(xy, mesh.faces), origin, grid.samples,
+                  grid.x0, grid.y0, grid.width, grid.height, grid.start, grid.row_y, nearest, face)
+    _barycentrics_kernel(mesh.vertices, mesh.faces, mesh.surface, mesh.first, origin, grid.samples, grid.order, face,
+                         nearest, geom, prim, u, v, depth)
+    return geom, prim, u, v, depth
+
+
+class SceneMesh:
+    """A scene's surfaces as one mesh in the world frame Embree sees (a rigid surface's world vertices): vertices
+    (V, 3) float32, faces (F, 3) int64 into them, surface (F,) int32 each face's surface index, first (S,) int64
+    the first face of each surface (a face's index in its surface is f - first[surface[f]]). The last one built is
+    kept: a frame's primary samples and its edge sub-samples share it."""
+
+    _last: tuple = ((), None)
+
+    def __init__(self, surfaces):
+        counts = [len(s.vertices) for s in surfaces]
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        self.vertices = np.ascontiguousarray(np.concatenate([s.vertices for s in surfaces]), np.float32)
+        self.faces = np.ascontiguousarray(np.concatenate([np.asarray(s.faces, np.int64) + offsets[k]
+                                                          for k, s in enumerate(surfaces)]), np.int64)
+        sizes = [len(s.faces) for s in surfaces]
+        self.surface = np.repeat(np.arange(len(surfaces), dtype=np.int32), sizes)
+        self.first = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+
+    @classmethod
+    def of(cls, scene: Scene) -> "SceneMesh":
+        """The mesh of the scene's surfaces, built again only when their vertex or face arrays changed."""
+        key = tuple(a for s in scene.surfaces for a in (s.vertices, s.faces))
+        last_key, mesh = cls._last
+        if mesh is None or len(last_key) != len(key) or any(a is not b for a, b in zip(key, last_key)):
+            mesh = cls(scene.surfaces)
+            cls._last = (key, mesh)
+        return mesh
+
+    def project(self, P: np.ndarray) -> tuple | None:
+        """(xy (V, 2) float64 pixel positions of the vertices under P = K [R | t] (3, 4) (NaN for a vertex at or
+        behind NEAR), z (V,) float64 their camera z), or None when a vertex is not finite."""
+        xy = np.empty((len(self.vertices), 2), np.float64)
+        z = np.empty(len(self.vertices), np.float64)
+        return (xy, z) if _project_kernel(self.vertices, P, NEAR, xy, z) else None
+
+
+@kernel
+def _project_kernel(vertices, P, near, xy, z):
+    """xy (V, 2) the pixel positions of vertices (V, 3) float32 under P = K [R | t] (3, 4) and z (V,) their camera z
+    (P's last row: K[2] = (0, 0, 1)), in float64; xy NaN where z is at or below `near`. False (the outputs partly
+    written) as soon as a vertex or its projection is not finite."""
+    for i in range(vertices.shape[0]):
+        x, y, w = np.float64(vertices[i, 0]), np.float64(vertices[i, 1]), np.float64(vertices[i, 2])
+        z[i] = P[2, 0] * x + P[2, 1] * y + P[2, 2] * w + P[2, 3]
+        if not (np.isfinite(x + y + w) and np.isfinite(z[i])):
+            return False
+        if z[i] <= near:
+            xy[i, 0], xy[i, 1] = np.nan, np.nan
+            continue
+        xy[i, 0] = (P[0, 0] * x + P[0, 1] * y + P[0, 2] * w + P[0, 3]) / z[i]
+        xy[i, 1] = (P[1, 0] * x + P[1, 1] * y + P[1, 2] * w + P[1, 3]) / z[i]
+        if not (np.isfinite(xy[i, 0]) and np.isfinite(xy[i, 1])):
+            return False
+    return True
+
+
+class SampleGrid:
+    """Samples at pixel positions uv (N, 2) grouped by the pixel they lie in (floor of each coordinate), over the
+    box of pixels [x0, x0 + width) x [y0, y0 + height) that holds them, each pixel's samples side by side in
+    memory, in pixel order (row-major over the box, then ascending sample index): `samples` (5, N) float64, rows
+    x, y (the position as the ray saw it: rounded to float32, as trace._camera_rays_kernel does) and the ray's
+    float32 direction (x, y, z); `order` (N,) int64 the sample index of each column; the columns of pixel (r, c)
+    of the box are start[r * width + c]:start[r * width + c + 1]. One row a quantity: a face's test of a run of
+    samples reads contiguous vectors. row_y (height,): the y all samples of a pixel row share (pixel
+    centres, or one sub-sample offset), NaN where they differ or there are none. N >= 1."""
+
+    def __init__(self, uv: np.ndarray, directions: np.ndarray):
+        n = len(uv)
+        box = np.empty(4, np.int64)
+        _box_kernel(np.ascontiguousarray(uv, np.float64), box)
+        self.x0, self.y0 = int(box[0]), int(box[1])
+        self.width, self.height = int(box[2] - box[0] + 1), int(box[3] - box[1] + 1)
+        self.start = np.zeros(self.width * self.height + 1, np.int32)
+        self.order = np.empty(n, np.int64)
+        self.samples = np.empty((5, n), np.float64)
+        self.row_y = np.empty(self.height, np.float64)
+        _bucket_kernel(np.ascontiguousarray(uv, np.float64), np.ascontiguousarray(directions, np.float32), self.x0,
+                       self.y0, self.width, self.start, self.order, self.samples, self.row_y)
+
+    def face_order(self, xy: np.ndarray, faces: np.ndarray) -> np.ndarray:
+        """(F,) int64 the faces (F, 3) of vertices at pixel positions xy (V, 2) by their top pixel row in the box
+        (a counting sort, stable): the faces then walk the samples' memory top to bottom, in cache."""
+        order = np.empty(len(faces), np.int64)
+        _face_order_kernel(xy, faces, self.y0, self.height, order)
+        return order
+
+
+@kernel
+def _box_kernel(uv, box):
+    """box (4,) int64: the smallest and largest pixel column and row (x0, y0, x1, y1) holding the float32-rounded
+    positions uv (N >= 1, 2)."""
+    for i in range(uv.shape[0]):
+        c = np.int64(np.floor(np.float32(uv[i, 0])))
+        r = np.int64(np.floor(np.float32(uv[i, 1])))
+        if i == 0 or c < box[0]:
+            box[0] = c
+        if i == 0 or r < box[1]:
+            box[1] = r
+        if i == 0 or c > box[2]:
+            box[2] = c
+        if i == 0 or r > box[3]:
+            box[3] = r
+
+
+@kernel
+def _bucket_kernel(uv, directions, x0, y0, width, start, order, samples, row_y):
+    """SampleGrid's start, order, samples and row_y by a counting sort of the samples uv (N, 2) by pixel."""
+    n = uv.shape[0]
+    pixel = np.empty(n, np.int64)
+    for i in range(n):
+        pixel[i] = ((np.int64(np.floor(np.float32(uv[i, 1]))) - y0) * width
+                    + np.int64(np.floor(np.float32(uv[i, 0]))) - x0)
+        start[pixel[i]] += 1
+    for b in range(1, start.shape[0]):
+        start[b] += start[b - 1]     # start[b]: the end of pixel b's samples, until the fill below moves it back
+    for i in range(n - 1, -1, -1):  # backwards, so each pixel's samples stay in ascending index
+        start[pixel[i]] -= 1
+        j = start[pixel[i]]
+        order[j] = i
+        samples[0, j], samples[1, j] = np.float32(uv[i, 0]), np.float32(uv[i, 1])
+        samples[2, j], samples[3, j], samples[4, j] = directions[0, i], directions[1, i], directions[2, i]
+    for r in range(row_y.shape[0]):
+        a, b = start[r * width], start[(r + 1) * width]
+        row_y[r] = samples[1, a] if a < b else np.nan
+        for j in range(a + 1, b):
+            if samples[1, j] != row_y[r]:
+                row_y[r] = np.nan
+                break
+
+
+@kernel
+def _face_order_kernel(xy, faces, y0, height, order):
+    """order (F,): the faces by the box row (clipped to 0 .. height - 1) of their highest corner, stable."""
+    count = np.zeros(height + 1, np.int64)
+    rows = np.empty(faces.shape[0], np.int64)
+    for f in range(faces.shape[0]):
+        r = np.floor(min(xy[faces[f, 0], 1], xy[faces[f, 1], 1], xy[faces[f, 2], 1])) - y0
+        rows[f] = np.int64(min(max(r, 0.0), height - 1.0)) if r == r else 0      # NaN: a corner behind the camera
+        count[rows[f] + 1] += 1
+    for r in range(1, height + 1):
+        count[r] += count[r - 1]
+    for f in range(faces.shape[0]):
+        order[count[rows[f]]] = f
+        count[rows[f]] += 1
+
+
+@kernel(error_model="numpy")
+def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, samples, x0, y0, width, height, start, row_y,
+                  nearest, face):
+    """Rasterise the faces (F, 3) (vertices (V, 3) float32 world, xy (V, 2) their pixel positions and z (V,) camera
+    z under P (3, 4)), in face_order, over a SampleGrid's samples (x0, y0, width, height, start, row_y): where a
+    face covers a sample (edge functions, top-left rule) and its plane is nearer along the sample's ray (from
+    origin (3,)) than nearest[j] (float64, per grid row), or as near and a lower face, the sample takes it
+    (nearest, face (N,) int64). A face with corners at or behind `near` is clipped there first (its part in front,
+    a triangle or a quad, fanned into triangles); one wholly behind is skipped. A triangle visits, row by row of
+    pixels, only the columns its outline spans in that row."""
+    edges = np.empty((3, 6))             # per edge: p (x, y), q - p (x, y), inside sign, claims ties (1 or 0)
+    cx = np.empty(3)
+    cy = np.empty(3)
+    poly = np.empty((4, 2))              # the face's part in front of `near`, projected
+    X = np.empty(3)
+    for m in range(face_order.shape[0]):
+        f = face_order[m]
+        ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
+        if max(z[ia], z[ib], z[ic]) <= near:
+            continue                     # wholly behind: no camera ray (t > near) reaches it
+        corners = 0
+        for k in range(3):
+            a, b = faces[f, k], faces[f, (k + 1) % 3]
+            if z[a] > near:
+                poly[corners, 0], poly[corners, 1] = xy[a, 0], xy[a, 1]
+                corners += 1
+            if (z[a] > near) != (z[b] > near):
+                # where the edge crosses `near`, from its endpoints in index order (the same point for both faces)
+                ea, eb = min(a, b), max(a, b)
+                w = (near - z[ea]) / (z[eb] - z[ea])
+                for c in range(3):
+                    X[c] = np.float64(vertices[ea, c]) + w * (np.float64(vertices[eb, c]) - vertices[ea, c])
+                depth = P[2, 0] * X[0] + P[2, 1] * X[1] + P[2, 2] * X[2] + P[2, 3]
+                poly[corners, 0] = (P[0, 0] * X[0] + P[0, 1] * X[1] + P[0, 2] * X[2] + P[0, 3]) / depth
+                poly[corners, 1] = (P[1, 0] * X[0] + P[1, 1] * X[1] + P[1, 2] * X[2] + P[1, 3]) / depth
+                corners += 1
+        ox, oy, oz = np.float64(vertices[ia, 0]), np.float64(vertices[ia, 1]), np.float64(vertices[ia, 2])
+        e1x, e1y, e1z = vertices[ib, 0] - ox, vertices[ib, 1] - oy, vertices[ib, 2] - oz
+        e2x, e2y, e2z = vertices[ic, 0] - ox, vertices[ic, 1] - oy, vertices[ic, 2] - oz
+        nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+        nd0 = nx * (ox - origin[0]) + ny * (oy - origin[1]) + nz * (oz - origin[2])
+        for fan in range(corners - 2):
+            for k in range(3):
+                corner = 0 if k == 0 else fan + k
+                cx[k], cy[k] = poly[corner, 0], poly[corner, 1]
+            area = (cx[1] - cx[0]) * (cy[2] - cy[0]) - (cy[1] - cy[0]) * (cx[2] - cx[0])
+            if area == 0.0 or not np.isfinite(area):
+                continue
+            top, bottom = min(cy[0], cy[1], cy[2]), max(cy[0], cy[1], cy[2])
+            r_lo = max(np.floor(top) - y0, 0.0)
+            r_hi = min(np.floor(bottom) - y0, height - 1.0)
+            box_lo = max(np.floor(min(cx[0], cx[1], cx[2])) - x0, 0.0)
+            box_hi = min(np.floor(max(cx[0], cx[1], cx[2])) - x0, width - 1.0)
+            if r_lo > r_hi or box_lo > box_hi:
+                continue
+            b_lo, b_hi = int(box_lo), int(box_hi) + 1
+            turn = 1.0 if area > 0 else -1.0
+            for k in range(3):
+                ax, ay, bx, by = cx[k], cy[k], cx[(k + 1) % 3], cy[(k + 1) % 3]
+                # canonical order (the smaller point first): both faces of a shared edge compute the same function
+                first = ax < bx or (ax == bx and ay < by)
+                px, py, qx, qy = (ax, ay, bx, by) if first else (bx, by, ax, ay)
+                edges[k, 0], edges[k, 1], edges[k, 2], edges[k, 3] = px, py, qx - px, qy - py
+                edges[k, 4] = turn if first else -turn
+                # top-left: the edge as the face winds it clockwise on screen (y down) goes up, or right when level
+                dx, dy = turn * (bx - ax), turn * (by - ay)
+                edges[k, 5] = 1.0 if dy < 0 or (dy == 0 and dx > 0) else 0.0
+            p0x, p0y, d0x, d0y, s0 = edges[0, 0], edges[0, 1], edges[0, 2], edges[0, 3], edges[0, 4]
+            p1x, p1y, d1x, d1y, s1 = edges[1, 0], edges[1, 1], edges[1, 2], edges[1, 3], edges[1, 4]
+            p2x, p2y, d2x, d2y, s2 = edges[2, 0], edges[2, 1], edges[2, 2], edges[2, 3], edges[2, 4]
+            t0, t1, t2 = edges[0, 5] > 0, edges[1, 5] > 0, edges[2, 5] > 0
+            for r in range(int(r_lo), int(r_hi) + 1):
+                if start[r * width + b_lo] == start[r * width + b_hi]:
+                    continue                 # no sample in this row of the face's box (edge sub-samples are sparse)
+                # the outline's columns in this row of pixels: its corners in the band and its edges' crossings of
+                # the band's two lines (one line when the row's samples share their y), widened by rounding's share
+                # so no sample on the outline is left out
+                band_lo, band_hi = np.float64(y0 + r), np.float64(y0 + r + 1)
+                if row_y[r] == row_y[r]:
+                    band_lo, band_hi = row_y[r], row_y[r]
+                left, right = np.inf, -np.inf
+                for k in range(3):
+                    ax, ay, bx, by = cx[k], cy[k], cx[(k + 1) % 3], cy[(k + 1) % 3]
+                    if band_lo <= ay <= band_hi:
+                        left, right = min(left, ax), max(right, ax)
+                    if ay != by:
+                        lo, hi = min(ay, by), max(ay, by)
+                        if lo <= band_lo <= hi:
+                            x = ax + (band_lo - ay) * (bx - ax) / (by - ay)
+                            left, right = min(left, x), max(right, x)
+                        if lo <= band_hi <= hi:
+                            x = ax + (band_hi - ay) * (bx - ax) / (by - ay)
+                            left, right = min(left, x), max(right, x)
+                if left > right:
+                    continue
+                pad = 1e-9 * (1.0 + abs(left) + abs(right))
+                c_lo = int(max(np.floor(left - pad) - x0, 0.0))
+                c_hi = int(min(np.floor(right + pad) - x0, width - 1.0))
+                if c_lo > c_hi:
+                    continue
+                row = r * width
+                xs, ys = samples[0], samples[1]
+                for j in range(start[row + c_lo], start[row + c_hi + 1]):
+                    # no branch on the (unpredictable) coverage: a sample the face does not cover, or whose ray
+                    # runs in its plane (nd = 0, divided by 1 instead), keeps what it had
+                    e0 = d0x * (ys[j] - p0y) - d0y * (xs[j] - p0x)
+                    e1 = d1x * (ys[j] - p1y) - d1y * (xs[j] - p1x)
+                    e2 = d2x * (ys[j] - p2y) - d2y * (xs[j] - p2x)
+                    inside = (((e0 * s0 > 0) | ((e0 == 0) & t0)) & ((e1 * s1 > 0) | ((e1 == 0) & t1))
+                              & ((e2 * s2 > 0) | ((e2 == 0) & t2)))
+                    nd = nx * samples[2, j] + ny * samples[3, j] + nz * samples[4, j]
+                    t = nd0 / (nd if nd != 0.0 else 1.0)
+                    best, held = nearest[j], face[j]
+                    better = inside & (nd != 0.0) & ((t < best) | ((t == best) & (f < held)))
+                    nearest[j] = t if better else best
+                    face[j] = f if better else held
+
+
+@kernel
+def _barycentrics_kernel(vertices, faces, surface, first, origin, samples, order, face, nearest, geom, prim, u, v,
+                         depth):
+    """geom, prim, u, v, depth (N,) of the original sample order[j] of each SampleGrid row j that a face covers
+    (face[j] >= 0, nearest[j] its depth): the ray (origin (3,) float64, the row's direction) against that face by
+    Moeller-Trumbore in float64 (hit = (1 - u - v) v0 + u v1 + v v2, depth the ray parameter), rounded to float32;
+    a ray in the face's plane to rounding (no determinant) keeps u = v = 0 and nearest[j]."""
+    for j in range(samples.shape[1]):
+        f = face[j]
+        if f < 0:
+            continue
+        i = order[j]
+        geom[i] = surface[f]
+        prim[i] = f - first[surface[f]]
+        ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
+        ox, oy, oz = np.float64(vertices[ia, 0]), np.float64(vertices[ia, 1]), np.float64(vertices[ia, 2])
+        e1x, e1y, e1z = vertices[ib, 0] - ox, vertices[ib, 1] - oy, vertices[ib, 2] - oz
+        e2x, e2y, e2z = vertices[ic, 0] - ox, vertices[ic, 1] - oy, vertices[ic, 2] - oz
+        dx, dy, dz = samples[2, j], samples[3, j], samples[4, j]
+        px, py, pz = dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x
+        det = e1x * px + e1y * py + e1z * pz
+        if det == 0.0:
+            depth[i] = np.float32(nearest[j])
+            continue
+        sx, sy, sz = origin[0] - ox, origin[1] - oy, origin[2] - oz
+        qx, qy, qz = sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x
+        inverse = 1.0 / det
+        u[i] = np.float32((sx * px + sy * py + sz * pz) * inverse)
+        v[i] = np.float32((dx * qx + dy * qy + dz * qz) * inverse)
+        depth[i] = np.float32((e2x * qx + e2y * qy + e2z * qz) * inverse)
