@@ -35,12 +35,12 @@ MODES = ("pixel", "vertex")
 WORST_WRITTEN = 3
 
 
-def mode_settings(mode: str, size: int | None = None, option: str = "shadows") -> dict:
-    """render_rays.default_settings() with ShadingOptions' `option` = mode (and another size)."""
+def mode_settings(mode: str, size: int | None = None) -> dict:
+    """render_rays.default_settings() with ShadingOptions.shadows = mode (and another size)."""
     from benchmarks.render_rays import default_settings
 
     s = default_settings()
-    return {**s, "size": size or s["size"], "shading": {**s["shading"], option: mode}}
+    return {**s, "size": size or s["size"], "shading": {**s["shading"], "shadows": mode}}
 
 
 def shadow_frames(planner, renderers, frames: int) -> list[dict]:
@@ -109,20 +109,19 @@ def image_difference(a: np.ndarray, b: np.ndarray, alpha: np.ndarray) -> dict:
             "mean_over_hand": float(d[hand][:, :3].mean()) if hand.any() else 0.0}
 
 
-def write_comparison(out: Path, index: int, a: np.ndarray, b: np.ndarray, option: str = "shadows") -> list[str]:
-    """<option>-<index>-pixel.png, -vertex.png and -diff.png (8 x |a - b| of RGB, opaque) into out."""
+def write_comparison(out: Path, index: int, a: np.ndarray, b: np.ndarray) -> list[str]:
+    """shadows-<index>-pixel.png, -vertex.png and -diff.png (8 x |a - b| of RGB, opaque) into out."""
     from darthand.render.image import write_png
 
     diff = np.clip(8 * np.abs(a[..., :3].astype(np.int16) - b[..., :3].astype(np.int16)), 0, 255).astype(np.uint8)
-    names = [f"{option}-{index:06d}-{kind}.png" for kind in ("pixel", "vertex", "diff")]
+    names = [f"shadows-{index:06d}-{kind}.png" for kind in ("pixel", "vertex", "diff")]
     for name, img in zip(names, (a, b, diff)):
         write_png(out / name, img)
     return names
 
 
-def compare(jobs: list[dict], renderers, out: Path | None, option: str = "shadows") -> dict:
-    """Agreement, ray counts and image differences of both modes (of ShadingOptions' `option`) over jobs; the worst
-    frames' PNGs into out (named after the option)."""
+def compare(jobs: list[dict], renderers, out: Path | None) -> dict:
+    """Agreement, ray counts and image differences of both modes over jobs; the worst frames' PNGs into out."""
     from darthand.dataset.frames import render_job
 
     totals: dict = {}
@@ -131,9 +130,9 @@ def compare(jobs: list[dict], renderers, out: Path | None, option: str = "shadow
     images = {}
     for job in jobs:
         renderer = renderers[job["side"]]
-        pixel, _ = render_job(renderer, job, mode_settings("pixel", option=option))
+        pixel, _ = render_job(renderer, job, mode_settings("pixel"))
         with compared_visibility(totals):
-            vertex, _ = render_job(renderer, job, mode_settings("vertex", option=option))
+            vertex, _ = render_job(renderer, job, mode_settings("vertex"))
         for mode, frame in zip(MODES, (pixel, vertex)):
             rays[mode].append(int(frame.stats.get("shadow_rays", 0)))
         per_frame.append({"index": job["index"], **image_difference(pixel.rgba, vertex.rgba, pixel.alpha),
@@ -144,7 +143,7 @@ def compare(jobs: list[dict], renderers, out: Path | None, option: str = "shadow
     if out is not None:
         for f in worst:
             if f["pixels"]:
-                written += write_comparison(out, f["index"], *images[f["index"]], option)
+                written += write_comparison(out, f["index"], *images[f["index"]])
     differing = [f["pixels"] for f in per_frame]
     return {
         "pairs": totals.get("pairs", 0), "pairs_differing": totals.get("differ", 0),
@@ -159,10 +158,9 @@ def compare(jobs: list[dict], renderers, out: Path | None, option: str = "shadow
     }
 
 
-def cpu_per_frame(jobs: list[dict], renderers, option: str = "shadows") -> dict:
+def cpu_per_frame(jobs: list[dict], renderers) -> dict:
     """Mean CPU ms per frame and of shade() per mode: blocks of BLOCK jobs alternating the modes, ROUNDS rounds;
-    also the frame's per half of the jobs ('plan': the plan's first frames, 'sunny': the ranked ones). option: the
-    ShadingOptions field the modes set."""
+    also the frame's per half of the jobs ('plan': the plan's first frames, 'sunny': the ranked ones)."""
     from darthand.dataset.frames import render_job
 
     frame_s = {mode: 0.0 for mode in MODES}
@@ -173,7 +171,7 @@ def cpu_per_frame(jobs: list[dict], renderers, option: str = "shadows") -> dict:
     for r in range(ROUNDS):
         for b, block in enumerate(blocks):
             for mode in (MODES if (r + b) % 2 == 0 else MODES[::-1]):
-                settings = mode_settings(mode, option=option)
+                settings = mode_settings(mode)
                 totals: dict = {}
                 with timed_shade(totals):
                     for j, job in enumerate(block):

@@ -226,11 +226,11 @@ def test_a_vertex_that_is_not_finite_sends_the_rays_to_embree(assets, rasterisin
     assert (hits.geom >= 0).any()
 
 
-def test_switched_off_the_camera_rays_are_embrees(assets):
+def test_switched_off_the_camera_rays_are_embrees(assets, monkeypatch):
     frame = Renderer(assets, 1).render("fist", camera="three_quarter", width=48, height=48, labels=False, samples=1)
     ctx = context(frame.subject, frame.camera)
     uv = trace.pixel_centres(0, 48, 0, 48)
-    assert not raster.ENABLED
+    monkeypatch.setattr(raster, "ENABLED", False)
     assert raster.camera_hits(ctx.scene, ctx.camera, uv, np.ascontiguousarray(ctx.directions(uv))) is None
 
 

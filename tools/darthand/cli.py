@@ -792,9 +792,9 @@ def _add_antialiasing_options(p, samples: int, aa_shading: str = "triangle") -> 
 
 
 def _add_shading_options(p, defaults: dict | None = None) -> None:
-    """--ao-rays, --no-interreflection, --skin, --skin-specular, --skin-detail, --shadows, --environment-lookups,
-    defaulting to the renderer's (shade.ShadingOptions) updated with `defaults` (a dataset's)."""
-    from darthand.render.shade import LOOKUP_MODES, SHADOW_MODES, SKIN_MODELS, SKIN_SPECULAR, ShadingOptions
+    """--ao-rays, --no-interreflection, --skin, --skin-specular, --skin-detail, --shadows, defaulting to the
+    renderer's (shade.ShadingOptions) updated with `defaults` (a dataset's)."""
+    from darthand.render.shade import SHADOW_MODES, SKIN_MODELS, SKIN_SPECULAR, ShadingOptions
 
     d = ShadingOptions(**(defaults or {}))
     p.add_argument("--ao-rays", type=number(int, 0, 4096), default=d.ao_rays, metavar="N",
@@ -816,10 +816,6 @@ def _add_shading_options(p, defaults: dict | None = None) -> None:
                    help="the lights' shadow rays: one per pixel sample, or vertex: one per vertex of the triangles "
                         "seen and per sample only where a triangle's corners disagree (a fraction of the rays; "
                         f"nearly the same image) (default {d.shadows})")
-    p.add_argument("--environment-lookups", default=d.environment_lookups, choices=LOOKUP_MODES,
-                   help="the environment map's specular reflection: looked up per pixel sample, or vertex: at the "
-                        "vertices of the triangles seen and blended over each triangle (nearly the same image) "
-                        f"(default {d.environment_lookups})")
 
 
 def _add_engine_options(p, engine: str | None = None, samples: int | None = None) -> None:

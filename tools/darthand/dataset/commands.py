@@ -67,7 +67,7 @@ def dataset_options(args) -> DatasetOptions:
         samples=args.samples, aa_shading=args.aa_shading,
         shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin,
                  "skin_specular": args.skin_specular, "skin_detail": args.skin_detail,
-                 "shadows": args.shadows, "environment_lookups": args.environment_lookups},
+                 "shadows": args.shadows},
         engine=args.engine, cycles_samples=args.cycles_samples, film=args.film, processes=args.processes,
         threads=args.threads,
         geometry={"subdivision": args.subdivision, "arm": args.arm},

@@ -261,7 +261,7 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
                                environment)
     timings["indirect_setup"] = _lap(t)
     ctx = Context(scene, cam, lights, lighting.ambient, threads, indirect, options.skin, environment,
-                  options.skin_specular, float(options.skin_detail), options.shadows, options.environment_lookups)
+                  options.skin_specular, float(options.skin_detail), options.shadows)
 
     t = time.perf_counter()
     r0, r1, c0, c1 = scene_bounds(cam, subject.all_vertices())

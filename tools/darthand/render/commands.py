@@ -69,7 +69,7 @@ def render(args) -> int:
         keypoint_order=args.keypoint_order,
         shading={"ao_rays": args.ao_rays, "interreflection": args.interreflection, "skin": args.skin,
                  "skin_specular": args.skin_specular, "skin_detail": args.skin_detail,
-                 "shadows": args.shadows, "environment_lookups": args.environment_lookups},
+                 "shadows": args.shadows},
         film=load_film(args.film, args.film_seed), film_seed=args.film_seed, subdivision=args.subdivision,
         arm=args.arm)
     paths = write_frame(frame, args.out, depth=args.depth)

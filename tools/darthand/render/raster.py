@@ -28,7 +28,8 @@ camera is render/camera.Camera (a pinhole with an upper-triangular K: straight l
 otherwise `camera_hits` returns None and the caller asks Embree. Shadow, occlusion and indirect rays always go to
 Embree.
 
-The switch is ENABLED (off: every camera ray goes to Embree, the images as before).
+The switch is ENABLED (on by default; off: every camera ray goes to Embree, as before the rasteriser:
+benchmarks/render_raster.py compares the two).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from darthand.jit import kernel
 from darthand.render.camera import Camera
 from darthand.render.scene import Scene
 
-ENABLED = False          # rasterise camera samples (trace.intersect_samples); tests and benchmarks flip it
+ENABLED = True           # rasterise camera samples (trace.intersect_samples); off: Embree's (tests, benchmarks)
 NEAR = 1e-9              # metres of camera z: faces are clipped there (trace.touched_tiles' limit)
 
 

@@ -42,7 +42,6 @@ from darthand.render.shadows import ShadowCorners, vertex_rate_occlusion
 from darthand.render.skin import skin_width, sphere_blend_table, table_rows
 from darthand.render.skin_specular import SKIN_SPECULAR, skin_specular_radiance
 from darthand.render.subject import Material
-from darthand.render.vertex_specular import SpecularCorners, vertex_specular
 
 SHADOW_LIFT = 2e-3          # shadow-ray origin offset, relative to the scene's bounding-box diagonal
 MIN_ROUGHNESS = 0.045       # GGX is singular at alpha = 0
@@ -52,7 +51,6 @@ SKIN_MODELS = ("subsurface", "wrap", "lambert")
 FACE_ROWS = (0, 9, 18, 21, 27)
 DEFAULT_SKIN = "subsurface"
 SHADOW_MODES = ("pixel", "vertex")      # ShadingOptions.shadows: a ray per sample, or per vertex (shadows.py)
-LOOKUP_MODES = ("pixel", "vertex")      # ShadingOptions.environment_lookups: per sample, or per vertex
 
 
 @dataclass(frozen=True)
@@ -64,10 +62,8 @@ class ShadingOptions:
     response ('single': one GGX lobe; 'dual': two lobes and a sheen, skin_specular.py); skin_detail, the strength of
     the skin's fine relief on its shading normal (skin_detail.py; 0: none, 1: nominal depths); shadows, how the
     lights' shadow rays are traced (SHADOW_MODES: 'pixel' one per sample; 'vertex' one per vertex of the faces
-    hit and per sample only where a face's corners disagree, shadows.py); environment_lookups, where the
-    environment's specular is looked up (LOOKUP_MODES: 'pixel' per sample; 'vertex' at the corners of the faces hit,
-    blended per sample, vertex_specular.py). to_json lists skin_specular, skin_detail, shadows and
-    environment_lookups only when they differ from their defaults (records made before them stay)."""
+    hit and per sample only where a face's corners disagree, shadows.py). to_json lists skin_specular, skin_detail
+    and shadows only when they differ from their defaults (records made before them stay)."""
 
     ao_rays: int = DEFAULT_AO_RAYS
     interreflection: bool = True
@@ -75,7 +71,6 @@ class ShadingOptions:
     skin_specular: str = "single"
     skin_detail: float = 0.0
     shadows: str = "pixel"
-    environment_lookups: str = "pixel"
 
     def __post_init__(self):
         if isinstance(self.ao_rays, bool) or not (isinstance(self.ao_rays, (int, np.integer))
@@ -92,9 +87,6 @@ class ShadingOptions:
             raise InputError(f"skin_detail: {self.skin_detail!r} is not a number in 0..4")
         if self.shadows not in SHADOW_MODES:
             raise InputError(f"shadows: {self.shadows!r} is not one of {', '.join(SHADOW_MODES)}")
-        if self.environment_lookups not in LOOKUP_MODES:
-            raise InputError(f"environment_lookups: {self.environment_lookups!r} is not one of "
-                             f"{', '.join(LOOKUP_MODES)}")
 
     def to_json(self) -> dict:
         out = {"ao_rays": int(self.ao_rays), "interreflection": bool(self.interreflection), "skin": self.skin}
@@ -104,8 +96,6 @@ class ShadingOptions:
             out["skin_detail"] = float(self.skin_detail)
         if self.shadows != "pixel":
             out["shadows"] = self.shadows
-        if self.environment_lookups != "pixel":
-            out["environment_lookups"] = self.environment_lookups
         return out
 
 
@@ -118,9 +108,7 @@ class Hits:
     radius (M,) the surface's curvature radius (skin.surface_radius) and skin (M,) bool, not a nail, for the
     subsurface skin model, or None; region (M,) the face labels (model.layout.FACE_LABELS, -1 unlabelled) for
     skin's dual-lobe specular, or None; corners the hits' mesh corners (shadows.ShadowCorners) for shadow rays at
-    vertex rate (ShadingOptions.shadows 'vertex'), or None: a shadow ray per hit; specular_at the hits' corners and
-    barycentrics for the environment's specular at vertex rate (vertex_specular.SpecularCorners;
-    ShadingOptions.environment_lookups 'vertex'), or None: a lookup per hit."""
+    vertex rate (ShadingOptions.shadows 'vertex'), or None: a shadow ray per hit."""
 
     position: np.ndarray
     normal: np.ndarray
@@ -133,7 +121,6 @@ class Hits:
     skin: np.ndarray | None = None
     region: np.ndarray | None = None
     corners: ShadowCorners | None = None
-    specular_at: SpecularCorners | None = None
 
 
 def surface_hits(faces, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray, directions: np.ndarray,
@@ -386,7 +373,7 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
     _radiance_kernel(f32(p.albedo), f32(p.roughness), f0, spec, ambient, irradiance, visible, nv, e2, n, v,
                      position, table, diffuse, reached, out)
     if environment is not None and spec:
-        out += spec * environment_specular(environment, p, n, v, nv, hits.specular_at) * visible
+        out += spec * environment_specular(environment, p, n, v, nv) * visible
     if dual and material.specular:
         out += skin_specular_radiance(hits, p.roughness, p.f0, float(material.specular), table, reached, ambient,
                                       material.roughness_channel is not None, environment)
@@ -394,17 +381,13 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
 
 
 def environment_specular(environment, p: SurfaceParams, normal: np.ndarray, view: np.ndarray,
-                         nv: np.ndarray, at: SpecularCorners | None = None) -> np.ndarray:
+                         nv: np.ndarray) -> np.ndarray:
     """(3, M) float32 the specular ambient term of an environment (environment.FrameEnvironment): its radiance
     prefiltered for the hits' roughness along the reflection directions 2 (n.v) n - v of unit normals and views
-    (3, M), times Karis' F0 A + B at n.v (M,) (clipped as the kernels clip it). at: the hits' corners, to look
-    the radiance up at them instead (vertex_specular.py)."""
-    f0 = np.broadcast_to(p.f0, normal.shape)
-    if at is None:
-        radiance = environment.specular(2 * (normal * view).sum(axis=0) * normal - view, p.roughness)
-    else:
-        radiance = vertex_specular(environment, at, p.roughness, normal, view)
-    return (radiance * ambient_specular(f0, p.roughness, nv)).astype(np.float32)
+    (3, M), times Karis' F0 A + B at n.v (M,) (clipped as the kernels clip it)."""
+    reflect = 2 * (normal * view).sum(axis=0) * normal - view
+    f0 = np.broadcast_to(p.f0, reflect.shape)
+    return (environment.specular(reflect, p.roughness) * ambient_specular(f0, p.roughness, nv)).astype(np.float32)
 
 
 @kernel(error_model="numpy")

@@ -29,7 +29,6 @@ from darthand.render.shade import DEFAULT_SKIN, shade, surface_hits
 from darthand.render.shadows import hit_corners
 from darthand.render.skin import surface_radius
 from darthand.render.skin_detail import detail_at
-from darthand.render.vertex_specular import specular_corners
 
 NAIL = FACE_LABEL_IDS["nail"]
 MIN_CHUNK = 4096          # samples per parallel task, at least
@@ -72,8 +71,8 @@ class Context:
     """What every sample batch of one frame shares; indirect: the frame's indirect light at the vertices
     (indirect.VertexLight), or None; skin: the skin model (shade.SKIN_MODELS); environment: the frame's environment
     map lighting (environment.FrameEnvironment; its lights are among `lights`), or None; skin_specular,
-    skin_detail, shadows and environment_lookups: shade.ShadingOptions' (the skin's specular model, the strength
-    of its relief, shadow rays and the environment's specular lookups per sample or per vertex)."""
+    skin_detail and shadows: shade.ShadingOptions' (the skin's specular model, the strength of its relief, shadow
+    rays per sample or per vertex)."""
 
     scene: Scene
     camera: Camera
@@ -86,7 +85,6 @@ class Context:
     skin_specular: str = "single"
     skin_detail: float = 0.0
     shadows: str = "pixel"
-    environment_lookups: str = "pixel"
     dDdx: np.ndarray = field(init=False)
     dDdy: np.ndarray = field(init=False)
 
@@ -228,7 +226,9 @@ def shade_hits(ctx: Context, hits: RayHits, footprint: float = 1.0,
             skin_at(at, surface, on.prim, on.u, on.v)
         _put_columns_kernel(idx, np.ascontiguousarray(at.normal, np.float32), normal)
         occlusion = skin_surface_at(ctx, at, surface, ctx.scene.faces[g].table, on.prim)
-        corners_at(ctx, at, surface, g, on, occlusion is None)
+        if ctx.shadows == "vertex":
+            at.corners = hit_corners(surface.faces, ctx.scene.faces[g].table, surface.vertices, surface.normals,
+                                     on.prim, at.view)
         colour = shade(surface.material, at, ctx.lights, ctx.ambient, ctx.scene.occluded, ctx.scene.extent,
                        counters, ctx.skin, ctx.environment, ctx.skin_specular)
         if occlusion is not None:
@@ -292,22 +292,6 @@ def prepare_shading(ctx: Context, hits: RayHits, stats: dict | None = None) -> N
             ctx.indirect.ensure(g, prim)
     if stats is not None:
         stats["indirect"] = stats.get("indirect", 0.0) + time.perf_counter() - t0
-
-
-def corners_at(ctx: Context, at, surface, g: int, on: RayHits, plain_normals: bool) -> None:
-    """The corners of hits `at` (those `on` surface g) for shadow rays at vertex rate (ctx.shadows 'vertex') and
-    for the environment's specular at vertex rate (ctx.environment_lookups 'vertex', with an environment, on skin,
-    whose lobes are wide, and only where the shading normals are the mesh's: `plain_normals`, no relief)."""
-    lookups = (ctx.environment_lookups == "vertex" and ctx.environment is not None and plain_normals
-               and surface.material.kind == "skin")
-    if ctx.shadows != "vertex" and not lookups:
-        return
-    corners = hit_corners(surface.faces, ctx.scene.faces[g].table, surface.vertices, surface.normals, on.prim,
-                          at.view)
-    if ctx.shadows == "vertex":
-        at.corners = corners
-    if lookups:
-        at.specular_at = specular_corners(corners, on.u, on.v, ctx.camera.centre)
 
 
 def skin_at(at, surface, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> None:
