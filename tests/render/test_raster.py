@@ -244,6 +244,7 @@ def test_a_frame_rasterised_has_the_same_labels_and_nearly_the_same_image(assets
         return Renderer(assets, 1).render("fist", camera="three_quarter", width=96, height=96, accessory=ring.id,
                                           arm=ARM_M, samples=4)
 
+    monkeypatch.setattr(raster, "ENABLED", False)
     embree = frame()
     monkeypatch.setattr(raster, "ENABLED", True)
     ours = frame()
