@@ -11,7 +11,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 from render_scenes import quad, subject, surface, top_camera
 
-from darthand.render import aa, api, trace
+from darthand.render import aa, api, raster, trace
 from darthand.render.embree_mesh import _Api, add_triangles, device
 from darthand.render.scene import FaceData, Scene, interpolate, interpolate_columns
 from darthand.render.trace import Context, RayHits, Samples
@@ -184,10 +184,14 @@ def test_face_tables_match_the_numpy_chain(assets, ring):
         assert table.shape[0] == (28 if s.uvs is not None else 21)
 
 
-def test_scenes_rebuilt_for_new_poses_trace_as_fresh_ones(assets, ring):
-    """A renderer keeps one scene and rebuilds it when the pose changes; reuse only for the same arrays."""
+@pytest.mark.parametrize("rasterised", [False, True])
+def test_scenes_rebuilt_for_new_poses_trace_as_fresh_ones(assets, ring, monkeypatch, rasterised):
+    """A renderer keeps one scene and rebuilds it when the pose changes; reuse only for the same arrays. Embree's
+    camera rays against the numpy chain on a fresh scene; rasterised ones (raster.SceneMesh, kept per scene arrays)
+    against a fresh scene's, its mesh built anew."""
     from darthand.render.scene import scene_for
 
+    monkeypatch.setattr(raster, "ENABLED", rasterised)
     with_ring, without, moved = posed_subjects(assets, ring)
     scene = scene_for(with_ring)
     assert scene_for(with_ring, scene).embree is scene.embree
@@ -196,7 +200,10 @@ def test_scenes_rebuilt_for_new_poses_trace_as_fresh_ones(assets, ring):
         ctx = hand_context(subj, scene=scene)
         uv = trace.pixel_centres(0, 96, 0, 96)
         new = trace.intersect_samples(ctx, uv)
-        ref = old_intersect(hand_context(subj, scene=Scene(subj)), uv)
+        fresh = hand_context(subj, scene=Scene(subj))
+        monkeypatch.setattr(raster.SceneMesh, "_last", ((), None))      # the reference builds its own mesh
+        ref = trace.intersect_samples(fresh, uv) if rasterised else old_intersect(fresh, uv)
+        assert (new.geom >= 0).any()
         for k in ("geom", "prim", "u", "v", "depth", "directions"):
             assert same(getattr(new, k), getattr(ref, k)), k
         roles = {subj.surfaces[g].role for g in np.unique(new.geom[new.geom >= 0])}
@@ -243,7 +250,8 @@ def test_scatter_matches_the_numpy_chain():
             assert same(getattr(new, k), getattr(ref, k)), k
 
 
-def test_camera_rays_and_hits_with_no_hits_and_empty_batches(assets, ring):
+def test_camera_rays_and_hits_with_no_hits_and_empty_batches(assets, ring, monkeypatch):
+    monkeypatch.setattr(raster, "ENABLED", False)          # Embree's camera rays against the numpy chain
     with_ring, _, _ = posed_subjects(assets, ring)
     ctx = hand_context(with_ring)
     for uv in (np.zeros((0, 2)), np.array([[0.5, 0.5], [95.5, 0.5]]), trace.pixel_centres(20, 70, 10, 90)):
