@@ -16,7 +16,8 @@ registers. `kernel` marks such a loop. Rules the kernels follow:
   `@kernel(error_model="numpy")`: the check goes, the numbers stay (IEEE division either way); SIMD lanes do the
   same float32 operations in the same order, so vectorising changes no bit.
 - Self-contained: a kernel calls no other kernel (so `kernel` can stay lazy, below, and a cached kernel never
-  outlives a change in a function it inlined: numba's cache checks only the kernel's own source file).
+  outlives a change in a function it inlined: numba's cache checks only the kernel's own source file). The one
+  exception is a plain scalar function marked `inlined`, defined in the same source file as the kernels calling it.
 
 Compilation is lazy twice over: numba is imported at the first call of any kernel (importing it costs about 0.2 s
 of CPU, which commands that never run one, like `darthand validate`, should not pay), and each kernel is compiled
@@ -38,6 +39,24 @@ import threading
 from darthand.processes import ctrl_c_held
 
 _LOCK = threading.Lock()
+_INLINED: list = []         # `inlined` functions, registered with numba at the first compilation of any kernel
+_REGISTERED: set = set()
+
+
+def inlined(func):
+    """`func`, a plain scalar function (it stays plain Python outside kernels), made callable from kernels: each
+    kernel calling it compiles it in. It lives in the same source file as those kernels (numba's cache checks only
+    a kernel's own file) and guards its own divisions (it is compiled with error_model="numpy")."""
+    _INLINED.append(func)
+    return func
+
+
+def _register_inlined(numba) -> None:
+    """Make every `inlined` function not yet registered callable from numba (under _LOCK)."""
+    for func in _INLINED:
+        if func not in _REGISTERED:
+            numba.extending.register_jitable(error_model="numpy")(func)
+            _REGISTERED.add(func)
 
 
 def kernel(func=None, *, error_model: str = "python"):
@@ -55,7 +74,9 @@ def kernel(func=None, *, error_model: str = "python"):
             with _LOCK:
                 if compiled is None:
                     import numba
+                    import numba.extending
 
+                    _register_inlined(numba)
                     dispatcher = numba.njit(cache=True, nogil=True, error_model=error_model)(func)
                     # The first call compiles (or loads the cache): a Ctrl-C waits for it (processes.ctrl_c_held)
                     with ctrl_c_held():
