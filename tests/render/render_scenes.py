@@ -105,3 +105,17 @@ def ring_around(model, joint: int, child: int, radius_scale: float = 1.25, tube:
     faces = np.concatenate([np.stack([a_, b_, d_], -1).reshape(-1, 3), np.stack([a_, d_, c_], -1).reshape(-1, 3)])
     return Accessory("ring_test", pts.reshape(-1, 3), faces, parent_joint=joint,
                      material={"base_color": [1.0, 0.77, 0.34], "metallic": 1.0, "roughness": 0.25}, kind="ring")
+
+
+def assert_only_shading_differs(on, off) -> None:
+    """Two renders of one scene (api.Frame) whose shading options differ: the same mask, geometry, depth, truth
+    maps and labels (but the labels' shading record)."""
+    assert np.array_equal(on.alpha, off.alpha) and np.array_equal(on.geom, off.geom)
+    assert np.array_equal(on.depth, off.depth)
+    assert on.maps.keys() == off.maps.keys()
+    for kind in on.maps:
+        assert np.array_equal(on.maps[kind], off.maps[kind]), kind
+
+    def strip(labels):
+        return {**labels, "render": {**labels["render"], "shading": None}}
+    assert strip(on.labels) == strip(off.labels)

@@ -10,6 +10,7 @@ import json
 
 import numpy as np
 import pytest
+from render_scenes import assert_only_shading_differs
 
 from darthand.errors import InputError
 from darthand.render import skin_detail, skin_specular
@@ -314,12 +315,7 @@ def test_labels_mask_and_normals_unchanged_by_skin_options(assets, hand):
     off = r.render("fist", **common)
     on = r.render("fist", shading={"skin_specular": "dual", "skin_detail": 1.0}, **common)
     again = r.render("fist", shading={"skin_specular": "dual", "skin_detail": 1.0}, **common)
-    assert np.array_equal(on.alpha, off.alpha) and np.array_equal(on.geom, off.geom)
-    assert np.array_equal(on.depth, off.depth)
-    for kind in ("depth", "normals", "parts"):
-        assert np.array_equal(on.maps[kind], off.maps[kind])
-    strip = lambda labels: {**labels, "render": {**labels["render"], "shading": None}}
-    assert strip(on.labels) == strip(off.labels)
+    assert_only_shading_differs(on, off)
     assert on.labels["render"]["shading"]["skin_specular"] == "dual"
     assert not np.array_equal(on.rgba, off.rgba)
     assert np.array_equal(on.rgba[off.alpha == 0], off.rgba[off.alpha == 0])
@@ -366,7 +362,8 @@ def test_render_and_render_dataset_take_the_options_and_frames_repeat_to_the_byt
               "--skin-specular", "dual", "--skin-detail", "1"]
     for name in ("a", "b"):
         assert main(["render-dataset", *common, "--out", str(tmp_path / name)]) == 0
-    want = {"ao_rays": 16, "interreflection": True, "skin": "subsurface", "skin_specular": "dual", "skin_detail": 1.0}
+    want = {"ao_rays": 16, "interreflection": True, "skin": "subsurface", "skin_specular": "dual", "skin_detail": 1.0,
+            "shadows": "vertex"}                       # the dataset default
     doc = json.loads((tmp_path / "a" / "dataset.json").read_text())
     assert doc["shading"] == want
     for path in sorted((tmp_path / "a" / "labels").iterdir()):
