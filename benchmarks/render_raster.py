@@ -79,26 +79,6 @@ def compared_samples(totals: dict):
         trace.intersect_samples = original
 
 
-@contextlib.contextmanager
-def timed_visibility(totals: list):
-    """Within the context, trace.intersect_samples adds its CPU seconds into totals[0]."""
-    from darthand.render import trace
-
-    original = trace.intersect_samples
-
-    def timed(ctx, uv, stats=None):
-        c = time.process_time()
-        hits = original(ctx, uv, stats)
-        totals[0] += time.process_time() - c
-        return hits
-
-    trace.intersect_samples = timed
-    try:
-        yield totals
-    finally:
-        trace.intersect_samples = original
-
-
 def sample_figures(entry: dict) -> dict:
     """A compared_samples entry as figures: share differing, max and mean |du|, |dv|, relative depth."""
     out = {"samples": entry["samples"], "differ": entry["differ"],
@@ -154,18 +134,20 @@ def agreement(renderers, jobs, settings) -> dict:
 
 def cpu_per_frame(renderers, jobs, settings, rounds: int = ROUNDS) -> dict:
     """CPU ms a frame of the render and of its camera visibility, Embree and raster, in alternating blocks."""
+    from benchmarks.render_rays import cpu_timed
     from darthand.dataset.frames import render_job
+    from darthand.render import trace
 
     blocks: dict = {"embree": [], "raster": []}                    # per block: (frame ms, visibility ms)
     for _ in range(rounds):
         for mode in ("embree", "raster"):
-            visibility = [0.0]
-            with rasterising(mode == "raster"), timed_visibility(visibility):
+            visibility: dict = {}
+            with rasterising(mode == "raster"), cpu_timed(trace, "intersect_samples", visibility, "s"):
                 c = time.process_time()
                 for job in jobs:
                     render_job(renderers[job["side"]], job, settings)
                 frame = time.process_time() - c
-            blocks[mode].append((1e3 * frame / len(jobs), 1e3 * visibility[0] / len(jobs)))
+            blocks[mode].append((1e3 * frame / len(jobs), 1e3 * visibility.get("s", 0.0) / len(jobs)))
     out: dict = {mode: {"frame_ms": round(float(np.mean([b[0] for b in runs])), 2),
                         "visibility_ms": round(float(np.mean([b[1] for b in runs])), 2),
                         "blocks_frame_ms": [round(b[0], 2) for b in runs],

@@ -48,6 +48,25 @@ def timed_queries(totals: dict):
             setattr(Scene, name, method)
 
 
+@contextlib.contextmanager
+def cpu_timed(owner, name: str, totals: dict, key: str):
+    """Within the context, owner.name (a module's or class's function) adds its CPU seconds into totals[key]."""
+    original = getattr(owner, name)
+
+    def timed(*args, **kwargs):
+        c = time.process_time()
+        try:
+            return original(*args, **kwargs)
+        finally:
+            totals[key] = totals.get(key, 0.0) + time.process_time() - c
+
+    setattr(owner, name, timed)
+    try:
+        yield totals
+    finally:
+        setattr(owner, name, original)
+
+
 def default_settings() -> dict:
     """render_job's settings of `render-dataset`'s defaults (dataset/options.py)."""
     from darthand.dataset.options import DEFAULT_SAMPLES, DEFAULT_SIZE, PHOTO_GEOMETRY, PHOTO_SHADING

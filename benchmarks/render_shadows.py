@@ -79,27 +79,6 @@ def compared_visibility(totals: dict):
         shade.vertex_rate_occlusion = original
 
 
-@contextlib.contextmanager
-def timed_shade(totals: dict):
-    """Within the context, trace.shade adds its CPU seconds into totals['shade']."""
-    from darthand.render import trace
-
-    original = trace.shade
-
-    def timed(*args, **kwargs):
-        c = time.process_time()
-        try:
-            return original(*args, **kwargs)
-        finally:
-            totals["shade"] = totals.get("shade", 0.0) + time.process_time() - c
-
-    trace.shade = timed
-    try:
-        yield totals
-    finally:
-        trace.shade = original
-
-
 def image_difference(a: np.ndarray, b: np.ndarray, alpha: np.ndarray) -> dict:
     """8-bit RGBA images a, b (H, W, 4): pixels that differ, their largest channel difference, and the mean
     absolute channel difference over the hand's pixels (alpha > 0)."""
@@ -161,7 +140,9 @@ def compare(jobs: list[dict], renderers, out: Path | None) -> dict:
 def cpu_per_frame(jobs: list[dict], renderers) -> dict:
     """Mean CPU ms per frame and of shade() per mode: blocks of BLOCK jobs alternating the modes, ROUNDS rounds;
     also the frame's per half of the jobs ('plan': the plan's first frames, 'sunny': the ranked ones)."""
+    from benchmarks.render_rays import cpu_timed
     from darthand.dataset.frames import render_job
+    from darthand.render import trace
 
     frame_s = {mode: 0.0 for mode in MODES}
     shade_s = {mode: 0.0 for mode in MODES}
@@ -173,7 +154,7 @@ def cpu_per_frame(jobs: list[dict], renderers) -> dict:
             for mode in (MODES if (r + b) % 2 == 0 else MODES[::-1]):
                 settings = mode_settings(mode)
                 totals: dict = {}
-                with timed_shade(totals):
+                with cpu_timed(trace, "shade", totals, "shade"):
                     for j, job in enumerate(block):
                         c = time.process_time()
                         render_job(renderers[job["side"]], job, settings)

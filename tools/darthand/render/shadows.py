@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from darthand.jit import kernel
+from darthand.jit import inlined, kernel
 
 
 @dataclass
@@ -92,26 +92,29 @@ def sample_rays(position: np.ndarray, normal: np.ndarray, hit: np.ndarray, light
     return origins, directions, tfar
 
 
+@inlined
+def toward_light(x, y, z, light, lift):
+    """(dx, dy, dz, tfar) float32 of a shadow ray from the surface point (x, y, z) float32 to a light (its
+    lights.light_table row): a point light's unit direction and distance less `lift`, or a directional light's
+    direction and inf; in shade._lights_kernel's float32 operations and order."""
+    if light[0] != np.float32(0.0):
+        lx, ly, lz = light[1] - x, light[2] - y, light[3] - z
+        dist = np.sqrt(lx * lx + ly * ly + lz * lz)
+        d = max(dist, np.float32(1e-9))
+        return lx / d, ly / d, lz / d, max(dist - lift, np.float32(0.0))
+    return light[1], light[2], light[3], np.float32(np.inf)
+
+
 @kernel(error_model="numpy")
 def _sample_rays_kernel(position, normal, hit, light, lift, origins, directions, tfar):
     """sample_rays' rays, in _lights_kernel's float32 operations and order."""
-    zero, tiny = np.float32(0.0), np.float32(1e-9)
-    point = light[0] != zero
-    px, py, pz = light[1], light[2], light[3]
     for r in range(hit.shape[0]):
         i = hit[r]
         origins[r, 0] = position[0, i] + lift * normal[0, i]
         origins[r, 1] = position[1, i] + lift * normal[1, i]
         origins[r, 2] = position[2, i] + lift * normal[2, i]
-        if point:
-            lx, ly, lz = px - position[0, i], py - position[1, i], pz - position[2, i]
-            dist = np.sqrt(lx * lx + ly * ly + lz * lz)
-            d = max(dist, tiny)
-            directions[r, 0], directions[r, 1], directions[r, 2] = lx / d, ly / d, lz / d
-            tfar[r] = max(dist - lift, zero)
-        else:
-            directions[r, 0], directions[r, 1], directions[r, 2] = px, py, pz
-            tfar[r] = np.float32(np.inf)
+        directions[r, 0], directions[r, 1], directions[r, 2], tfar[r] = toward_light(
+            position[0, i], position[1, i], position[2, i], light, lift)
 
 
 @kernel(error_model="numpy")
@@ -120,9 +123,6 @@ def _corner_rays_kernel(slots, ray_hit, positions, normals, light, lift, slot_ra
     (2V,) -1 in, the slot's ray index out; origin the vertex + lift x its unit normal (negated for side 1),
     direction toward the light (light: a light_table row), tfar inf, or the point light's distance less lift (the
     per-sample rays' float32 formulas). Returns how many."""
-    zero, tiny = np.float32(0.0), np.float32(1e-9)
-    point = light[0] != zero
-    px, py, pz = light[1], light[2], light[3]
     r = 0
     for j in range(ray_hit.shape[0]):
         i = ray_hit[j]
@@ -139,15 +139,8 @@ def _corner_rays_kernel(slots, ray_hit, positions, normals, light, lift, slot_ra
             oy = positions[v, 1] + lift * (ny / length)
             oz = positions[v, 2] + lift * (nz / length)
             origins[r, 0], origins[r, 1], origins[r, 2] = ox, oy, oz
-            if point:
-                lx, ly, lz = px - positions[v, 0], py - positions[v, 1], pz - positions[v, 2]
-                dist = np.sqrt(lx * lx + ly * ly + lz * lz)
-                d = max(dist, tiny)
-                directions[r, 0], directions[r, 1], directions[r, 2] = lx / d, ly / d, lz / d
-                tfar[r] = max(dist - lift, zero)
-            else:
-                directions[r, 0], directions[r, 1], directions[r, 2] = px, py, pz
-                tfar[r] = np.float32(np.inf)
+            directions[r, 0], directions[r, 1], directions[r, 2], tfar[r] = toward_light(
+                positions[v, 0], positions[v, 1], positions[v, 2], light, lift)
             slot_ray[s] = r
             r += 1
     return r
