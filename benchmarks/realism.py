@@ -21,6 +21,8 @@ keypoints visible, for the frames without an accessory ('bare', the headline), w
 - washed_out: whether skin washes out (issue 28: "the tone a frame's labels record is the tone its image shows"):
   of the bare counted frames, how many have over 5 % and over 20 % of their hand's inner pixels (the mask's full
   pixels eroded by one: an edge pixel mixes in the backdrop) at 255 in some channel, and the mean share;
+- tone_agreement: the rank correlation (Spearman) across the bare counted frames between the skin tone a frame's
+  labels record (texture.tone_srgb's luminance) and its image's (the inner hand pixels' median luminance);
 - cpu_s_per_frame: CPU seconds of the whole render-dataset command (its workers included, start-up too) per frame
   rendered; cpu_ms_per_image: the run's own steady-state figure (dataset.json timings).
 
@@ -49,12 +51,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
+from scipy import ndimage, stats
 
 from darthand.dataset.frames import frame_names
 from darthand.fileio import write_json
 from darthand.model.layout import KEYPOINT_ORDERS
 from darthand.render.image import over_black, read_straight_png
+from darthand.textures.color import srgb_to_linear
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "build" / "model" / "right.npz"
@@ -294,17 +297,41 @@ def measure_setting(folder: Path, frames: int, options: list[str], confidence: f
     counted = [r["index"] for r in records if r["visible"] >= MIN_VISIBLE and not r["accessory"]]
     result = {**render, **subsets(records), "order_check": order_check(records, labels, by_index),
               "washed_out": washed_out([clipped_share(folder, i) for i in counted]),
+              "tone_agreement": tone_agreement(folder, labels, counted),
               "harness_cpu_s": round(time.process_time() - t0, 2)}
     return result, by_index
 
 
-def clipped_share(folder: Path, index: int) -> float:
-    """The share of frame `index`'s inner hand pixels (its mask's full pixels eroded by one) that are 255 in some
-    channel of its image (0 without any)."""
+def inner_hand(folder: Path, index: int) -> np.ndarray:
+    """(K, 3) uint8 frame `index`'s inner hand pixels: its mask's full pixels eroded by one (an edge pixel mixes in
+    the backdrop)."""
     names = frame_names(index)
     image = read_straight_png(folder / names["image"])[..., :3]
-    hand = ndimage.binary_erosion(read_straight_png(folder / names["mask"])[..., 0] == 255)
-    return float((image[hand].max(axis=1) == 255).mean()) if hand.any() else 0.0
+    return image[ndimage.binary_erosion(read_straight_png(folder / names["mask"])[..., 0] == 255)]
+
+
+def clipped_share(folder: Path, index: int) -> float:
+    """The share of frame `index`'s inner hand pixels that are 255 in some channel of its image (0 without any)."""
+    hand = inner_hand(folder, index)
+    return float((hand.max(axis=1) == 255).mean()) if len(hand) else 0.0
+
+
+def luminance(srgb: np.ndarray) -> np.ndarray:
+    """(...,) linear Rec. 709 luminance of sRGB values (..., 3) in [0, 1]."""
+    return srgb_to_linear(np.asarray(srgb, np.float64)) @ np.array([0.2126, 0.7152, 0.0722])
+
+
+def tone_agreement(folder: Path, labels: dict, counted: list[int]) -> dict:
+    """{'frames', 'spearman'}: over the counted frames whose labels record a tone (texture.tone_srgb), the rank
+    correlation between that tone's luminance and the median luminance of the frame's inner hand pixels. The
+    issue's "the tone a frame's labels record is the tone its image shows", measured across frames (light and
+    exposure vary per frame, so 1 is not the aim; higher is closer)."""
+    pairs = [(float(luminance(np.asarray(labels[i]["texture"]["tone_srgb"]))),
+              float(np.median(luminance(inner_hand(folder, i) / 255.0)))) for i in counted
+             if labels[i].get("texture", {}).get("tone_srgb") is not None and len(inner_hand(folder, i))]
+    if len(pairs) < 3:
+        return {"frames": len(pairs), "spearman": None}
+    return {"frames": len(pairs), "spearman": round(float(stats.spearmanr(*zip(*pairs)).statistic), 3)}
 
 
 def washed_out(shares: list[float]) -> dict:
@@ -467,24 +494,26 @@ def summary(res: dict) -> str:
              f"(no accessory, >= {res['min_visible']} of 21 keypoints visible; seed {res['seed']}, {res['frames']} "
              "frames planned).", "",
              "| setting | frames | detection (95 %) | PCK 0.1 | PCK 0.2 | handedness | with accessory: detection | "
-             "skin clipped: frames over 5 % | CPU ms/frame: steady, whole command |", "|---" * 9 + "|"]
+             "skin clipped: frames over 5 % | tone: labels vs image (Spearman) | CPU ms/frame: steady, whole command |",
+             "|---" * 10 + "|"]
     for name in res.get("order", res["settings"]):       # the table's order (JSON files sort their keys)
         r = res["settings"][name]
         if "error" in r:
-            lines.append(f"| {name} | failed: {r['error']} (`{r['command']}`) | | | | | | | |")
+            lines.append(f"| {name} | failed: {r['error']} (`{r['command']}`) | | | | | | | | |")
             continue
         b = r["bare"]
         lo, hi = b["detection_rate_95"]
         lines.append(f"| {name} | {b['frames']} | {_pct(b['detection_rate'])} ({_pct(lo)}-{_pct(hi)}) | "
                      f"{_num(b['pck_0.1'])} | {_num(b['pck_0.2'])} | {_pct(b['handedness'])} | "
                      f"{_pct(r['accessory']['detection_rate'])} of {r['accessory']['frames']} | "
-                     f"{_clipped(r.get('washed_out'))} | {_ms(r['cpu_ms_per_image'])}, "
+                     f"{_clipped(r.get('washed_out'))} | {_num((r.get('tone_agreement') or {}).get('spearman'))} | "
+                     f"{_ms(r['cpu_ms_per_image'])}, "
                      f"{_ms(r['cpu_s_per_frame'] and 1000 * r['cpu_s_per_frame'])} |")
         if r.get("compared_with"):
             c = r["compared_with"]
             lines.append(f"| ({c['setting']} on {name}'s frames) | {c['bare']['frames']} | "
                          f"{_pct(c['bare']['detection_rate'])} | {_num(c['bare']['pck_0.1'])} | "
-                         f"{_num(c['bare']['pck_0.2'])} | {_pct(c['bare']['handedness'])} | | | |")
+                         f"{_num(c['bare']['pck_0.2'])} | {_pct(c['bare']['handedness'])} | | | | |")
     if res.get("sheet"):
         lines += ["", f"Contact sheet: `{res['sheet']}` (frames {', '.join(map(str, res['sheet_frames']))})."]
     return "\n".join(lines)

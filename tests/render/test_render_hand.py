@@ -161,7 +161,7 @@ def test_background_and_skin_tone_offset(renderer, tmp_path):
     lighter = renderer.render("flat", camera="palmar", width=SIZE, height=SIZE, skin_tone_offset=0.0)
     covered = (darker.alpha == 1) & (lighter.alpha == 1)
     assert darker.colour[covered].mean() < 0.8 * lighter.colour[covered].mean()
-    assert darker.labels["texture"] == {"id": "skin_test", "skin_tone_offset": -0.15}
+    assert darker.labels["texture"] == {"id": "skin_test", "skin_tone_offset": -0.15, "tone_srgb": None}
 
 
 @pytest.mark.parametrize("kw, match", [

@@ -169,11 +169,23 @@ class HandAssets:
         else:
             surfaces.append(cap)                     # last: surface indices 0 hand, 1 accessory
         info = {"source": self.source, "texture": texture, "skin_tone_offset": float(skin_tone_offset),
-                "accessory": accessory, "gesture": gesture, **({} if worn is None else {"ring_worn": worn.record}),
+                "tone_srgb": self.skin_tone(texture, skin_tone_offset), "accessory": accessory, "gesture": gesture,
+                **({} if worn is None else {"ring_worn": worn.record}),
                 "accessory_parent_joint": None if accessory == NONE else self.accessories[accessory].parent_joint,
                 "base_faces": (m.meta.get("wrist") or {}).get("base_faces")}     # before the wrist rings (truth.py)
         return Subject(tuple(surfaces), posed.joints[0].astype(np.float64), posed.keypoints[0].astype(np.float64),
                        m.side, pose_vec, keypoint_order, info, framing=framing)
+
+    def skin_tone(self, texture: str, offset: float = 0.0) -> list | None:
+        """(3,) sRGB the back of the hand's albedo for a texture id and skin-tone offset (the offset added, clipped
+        to [0, 1], as the decoding adds it), None for the checker or a texture whose catalogue has no tone."""
+        if texture == PLAIN:
+            base = linear_to_srgb(np.array(PLAIN_SKIN))
+        elif texture == CHECKER or self.textures[texture].tone_srgb is None:
+            return None
+        else:
+            base = np.asarray(self.textures[texture].tone_srgb)
+        return [round(float(c), 6) for c in np.clip(base + offset, 0.0, 1.0)]
 
     def skin(self, texture: str, offset: float = 0.0) -> Material:
         """The hand's material for a texture id and skin-tone offset (added to the sRGB albedo)."""

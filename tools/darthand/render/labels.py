@@ -181,7 +181,8 @@ def hand_fields(subject: Subject, camera: Camera, scene: Scene, alpha: np.ndarra
         "joints_3d_world": np.asarray(subject.joints, np.float64).tolist(),
         "mano_pose": np.asarray(subject.pose, np.float64).tolist(),
         "gesture": info.get("gesture"),
-        "texture": {"id": info.get("texture"), "skin_tone_offset": info.get("skin_tone_offset", 0.0)},
+        "texture": {"id": info.get("texture"), "skin_tone_offset": info.get("skin_tone_offset", 0.0),
+                    "tone_srgb": info.get("tone_srgb")},
         "accessory": {"id": info.get("accessory", "none"),
                       "parent_joint": info.get("accessory_parent_joint"),
                       "kind": "none" if acc is None else ("rigid" if info.get("accessory_parent_joint") is not None
