@@ -42,11 +42,7 @@ class Camera:
 
     def __post_init__(self):
         for name, shape in (("K", (3, 3)), ("R", (3, 3)), ("t", (3,))):
-            a = np.asarray(getattr(self, name), dtype=np.float64)
-            if a.shape != shape or not (np.abs(a) <= MAX_MAGNITUDE).all():
-                raise InputError(f"camera: field '{name}' must be finite (within +-{MAX_MAGNITUDE:g}) with shape "
-                                 f"{shape}, got {a.shape}")
-            object.__setattr__(self, name, a)
+            object.__setattr__(self, name, checked_field(name, getattr(self, name), shape))
         if not (np.abs(self.R @ self.R.T - np.eye(3)).max() < 1e-6 and np.linalg.det(self.R) > 0):
             raise InputError("camera: field 'R' is not a rotation matrix")
         check_intrinsics(self.K)
@@ -73,10 +69,7 @@ class Camera:
 
     def project(self, points) -> tuple[np.ndarray, np.ndarray]:
         """World points (N, 3) -> pixel positions (N, 2) (u, v) and camera depths z (N,)."""
-        X = self.to_camera(points)
-        uvw = X @ self.K.T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return uvw[:, :2] / uvw[:, 2:3], X[:, 2]
+        return project_rotated(np.asarray(points, dtype=np.float64) @ self.R.T, self.t, self.K)
 
     def directions(self, uv) -> np.ndarray:
         """(N, 3) float64 world ray directions through pixel positions uv (N, 2), scaled so camera z = 1."""
@@ -92,6 +85,15 @@ class Camera:
     def to_json(self) -> dict:
         return {"width": self.width, "height": self.height, "K": self.K.tolist(), "R": self.R.tolist(),
                 "t": self.t.tolist()}
+
+
+def checked_field(name: str, value, shape: tuple) -> np.ndarray:
+    """`value` as a float64 array, or InputError unless it has `shape` and entries within +-MAX_MAGNITUDE."""
+    a = np.asarray(value, dtype=np.float64)
+    if a.shape != shape or not (np.abs(a) <= MAX_MAGNITUDE).all():
+        raise InputError(f"camera: field '{name}' must be finite (within +-{MAX_MAGNITUDE:g}) with shape {shape}, "
+                         f"got {a.shape}")
+    return a
 
 
 def check_intrinsics(K: np.ndarray) -> None:
@@ -187,10 +189,11 @@ def frame_points(points, view="three_quarter", *, width: int = 512, height: int 
     half = np.arctan(0.5 * min(width / K[0, 0], height / K[1, 1]))
     d = radius / np.sin(half) if distance is None else float(distance)
     target = centre
+    Camera(K, R, -R @ (target - d * R[2]), width, height)       # R and K checked once: only t changes below
+    rotated = pts @ R.T
     for _ in range(1 if distance is not None else 4):
         eye = target - d * R[2]
-        cam = Camera(K, R, -R @ eye, width, height)
-        uv, z = cam.project(pts)
+        uv, z = project_rotated(rotated, checked_field("t", -R @ eye, (3,)), K)
         if (z <= 0).any():
             d *= 2
             continue
@@ -203,6 +206,15 @@ def frame_points(points, view="three_quarter", *, width: int = 512, height: int 
             d *= fill / (1 - 2 * margin)
     eye = target - d * R[2]
     return Camera(K, R, -R @ eye, width, height)
+
+
+def project_rotated(rotated: np.ndarray, t: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Camera.project of points whose rotation into the camera, points @ R.T (N, 3), is given: the same pixel
+    positions (N, 2) and depths (N,), bit for bit, when a camera moves along its axes and keeps R."""
+    X = rotated + t
+    uvw = X @ K.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return uvw[:, :2] / uvw[:, 2:3], X[:, 2]
 
 
 # ------------------------------------------------------------------------------------------------ camera files
