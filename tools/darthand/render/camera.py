@@ -191,6 +191,7 @@ def frame_points(points, view="three_quarter", *, width: int = 512, height: int 
     target = centre
     Camera(K, R, -R @ (target - d * R[2]), width, height)       # R and K checked once: only t changes below
     rotated = pts @ R.T
+    middle = middle_rows(rotated[:, 2])
     for _ in range(1 if distance is not None else 4):
         eye = target - d * R[2]
         uv, z = project_rotated(rotated, checked_field("t", -R @ eye, (3,)), K)
@@ -199,13 +200,25 @@ def frame_points(points, view="three_quarter", *, width: int = 512, height: int 
             continue
         lo, hi = point_bounds(uv)
         # Recentre: move the target by the pixel offset of the projection's centre, at the points' depth.
-        shift = (0.5 * (lo + hi) - K[:2, 2]) / K[[0, 1], [0, 1]] * float(np.median(z))
+        depth = np.median(z) if middle is None else np.mean(z[middle])         # np.median's own numbers
+        shift = (0.5 * (lo + hi) - K[:2, 2]) / K[[0, 1], [0, 1]] * float(depth)
         target = target + shift[0] * R[0] + shift[1] * R[1]
         if distance is None:
             fill = max((hi - lo)[0] / width, (hi - lo)[1] / height)
             d *= fill / (1 - 2 * margin)
     eye = target - d * R[2]
     return Camera(K, R, -R @ eye, width, height)
+
+
+def middle_rows(values: np.ndarray) -> np.ndarray | None:
+    """Indices of the middle value (odd count) or two middle values (even) of `values` (N,) in sorted order, the ones
+    np.median averages; None for NaN values or none. A depth z = r + t_z of every point moved by one t_z keeps that
+    order (rounding never swaps two sums), so the framing's four medians are np.mean(z[middle]) with one partition."""
+    n = len(values)
+    if n == 0 or np.isnan(values).any():
+        return None
+    kth = [n // 2] if n % 2 else [n // 2 - 1, n // 2]
+    return np.argpartition(values, kth)[kth]
 
 
 def project_rotated(rotated: np.ndarray, t: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
