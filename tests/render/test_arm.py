@@ -79,6 +79,18 @@ def test_the_seam_stays_closed(hand, assets, betas):
     assert radius(tube.vertices[-len(loop):]) > 1.2 * radius(tube.vertices[:len(loop)])
 
 
+def test_the_arm_keeps_its_rest_arrays_across_frames(hand, assets):
+    """Each frame's arm surfaces carry the same rest arrays (the skin's curvature is kept per rest array, not worked
+    out again each frame), equal to the arm's own rest mesh."""
+    rng = np.random.default_rng(5)
+    first, second = (assets.subject(rng.normal(0, 0.3, 48), betas=rng.normal(0, 1, 3), arm=ARM_M) for _ in range(2))
+    arm = forearm_arm(hand, ARM_M)
+    for name, rest in ((ARM, arm.skin.vertices[:arm.tube_vertices]),
+                       (ARM_END, arm.skin.vertices[arm.tube_vertices - arm.ring_size:])):
+        a, b = (next(s for s in subject.surfaces if s.name == name) for subject in (first, second))
+        assert a.rest is b.rest and np.array_equal(a.rest, rest)
+
+
 def test_the_uvs_continue_the_wrist_band(hand):
     arm = forearm_arm(hand, ARM_M)
     cap = forearm_cap(hand)

@@ -11,6 +11,7 @@ import OpenImageIO as oiio
 import pytest
 from render_scenes import flat_material, one_light, quad, render, subject, top_camera
 
+from darthand.errors import InputError
 from darthand.render.camera import look_at
 from darthand.render.scene import Scene
 from darthand.render.shade import surface_hits
@@ -385,3 +386,23 @@ def test_lookups_match_the_definition_on_random_uvs_and_levels(shape, coded):
     assert np.array_equal(tex.bilinear(uv, levels), tex.sample(uv, levels.astype(np.float32)))
     # NaN levels read level 0 rather than failing
     assert np.isfinite(tex.sample(uv[:, :4], np.full(4, np.nan, np.float32))).all()
+
+
+def test_file_key_is_the_resolved_path_and_follows_a_moved_symlink(tmp_path, monkeypatch):
+    """_file_key keeps each path's resolution (one stat a frame) and gives what Path.resolve and stat give, also
+    for a relative path and for a symlink moved to another file."""
+    for name in ("a.png", "b.png"):
+        (tmp_path / name).write_bytes(name.encode())
+    os.utime(tmp_path / "b.png", ns=(1, 2_000_000_000))
+    link = tmp_path / "skin.png"
+    link.symlink_to(tmp_path / "a.png")
+    monkeypatch.chdir(tmp_path)
+    truth = lambda p: (str(p.resolve()), p.stat().st_mtime_ns)
+    for _ in range(2):
+        assert texture_module._file_key("skin.png") == truth(link)
+        assert texture_module._file_key(link) == truth(link)
+    link.unlink()
+    link.symlink_to(tmp_path / "b.png")
+    assert texture_module._file_key("skin.png") == truth(link) == (str(tmp_path.resolve() / "b.png"), 2_000_000_000)
+    with pytest.raises(InputError, match="nothing.png: texture file not found"):
+        texture_module._file_key(tmp_path / "nothing.png")

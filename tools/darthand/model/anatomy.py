@@ -34,6 +34,7 @@ from scipy.spatial.transform import Rotation
 from darthand.errors import InputError
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import FACE_LABEL_IDS, FINGER_JOINTS, FINGERS, JOINT_NAMES, NUM_JOINTS
+from darthand.model.per_model import per_model
 from darthand.model.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from darthand.model.topology import face_joints
 
@@ -125,7 +126,13 @@ def thumb_pad_direction(model: HandModel, bone: np.ndarray, palm: np.ndarray) ->
 
 def joint_frames(model: HandModel) -> np.ndarray:
     """(16, 3, 3) orthonormal right-handed frame per joint; columns are the twist, spread and bend axes in the
-    model's rest frame (see the module docstring)."""
+    model's rest frame (see the module docstring). A copy of the model's own (3.7 ms to work out: a dataset wears a
+    ring on each ring frame's new shape of the same model)."""
+    return _joint_frames(model).copy()
+
+
+@per_model
+def _joint_frames(model: HandModel) -> np.ndarray:
     joints = rest_joints(model)
     t = bone_ends(model, joints) - joints
     length = np.linalg.norm(t, axis=1)

@@ -20,6 +20,7 @@ Shapes (V vertices, F faces, J = 16 joints, S shape directions, T UV coordinates
 from __future__ import annotations
 
 import dataclasses
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -92,6 +93,7 @@ class HandModel:
         f["meta"] = dict(f.get("meta") or {})
         model = cls(**f)
         check_model(model, source)
+        _CHECKED.add(model)
         return model
 
     def replace(self, **changes) -> "HandModel":
@@ -111,7 +113,19 @@ class HandModel:
         previous = np.asarray(self.meta.get("betas", np.zeros(self.num_betas)), dtype=np.float64)
         if previous.shape == baked.shape:
             baked = baked + previous
-        return self.replace(v_template=shaped_vertices(self, b), meta={**self.meta, "betas": baked.tolist()})
+        meta = {**self.meta, "betas": baked.tolist()}
+        if self not in _CHECKED:
+            return self.replace(v_template=shaped_vertices(self, b), meta=meta)
+        # Only the template is new: every other field passed check_model with this model (1 ms a refit saved).
+        source = self.meta.get("source", "model")
+        v_template = _converted(_float, shaped_vertices(self, b), "v_template", source)
+        check_finite(source, "v_template", v_template)
+        model = dataclasses.replace(self, v_template=v_template, meta=meta)
+        _CHECKED.add(model)
+        return model
+
+
+_CHECKED: "weakref.WeakSet[HandModel]" = weakref.WeakSet()     # models made by create (check_model passed)
 
 
 def _converted(convert, value, key: str, source: str) -> np.ndarray:
@@ -150,6 +164,20 @@ def _int8(a) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(a, dtype=np.int8))
 
 
+def check_finite(source: str, fieldname: str, arr: np.ndarray) -> None:
+    """InputError naming `source` and the field at the first value of `arr` that is not finite or beyond
+    +-MAX_MAGNITUDE."""
+    if not arr.size or arr.min() >= -MAX_MAGNITUDE and arr.max() <= MAX_MAGNITUDE:
+        return          # every value within the bounds (a NaN makes min and max NaN): two fast reductions
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(arr) <= MAX_MAGNITUDE)
+    if bad.any():
+        idx = np.unravel_index(int(np.argmax(bad)), arr.shape)
+        what = "a non-finite value" if not np.isfinite(arr[idx]) else f"a value beyond +-{MAX_MAGNITUDE:g}"
+        raise InputError(f"{source}: field '{fieldname}' has {what} ({arr[idx]}) at index "
+                         f"{tuple(int(i) for i in idx)}")
+
+
 def check_model(m: HandModel, source: str = "model") -> None:
     """Raise InputError naming `source` and the field if any field has the wrong shape, a non-finite value,
     an out-of-range index, or if the parents do not form a tree rooted at joint 0."""
@@ -162,16 +190,6 @@ def check_model(m: HandModel, source: str = "model") -> None:
         if arr.ndim != len(expected) or any(e is not None and s != e for s, e in zip(arr.shape, expected)):
             want = "x".join("?" if e is None else str(e) for e in expected)
             fail(fieldname, f"has shape {'x'.join(map(str, arr.shape))}, expected {want}")
-
-    def finite(fieldname: str, arr: np.ndarray):
-        if not arr.size or arr.min() >= -MAX_MAGNITUDE and arr.max() <= MAX_MAGNITUDE:
-            return          # every value within the bounds (a NaN makes min and max NaN): two fast reductions
-        with np.errstate(invalid="ignore"):
-            bad = ~(np.abs(arr) <= MAX_MAGNITUDE)
-        if bad.any():
-            idx = np.unravel_index(int(np.argmax(bad)), arr.shape)
-            what = "a non-finite value" if not np.isfinite(arr[idx]) else f"a value beyond +-{MAX_MAGNITUDE:g}"
-            fail(fieldname, f"has {what} ({arr[idx]}) at index {tuple(int(i) for i in idx)}")
 
     shape("v_template", m.v_template, (None, 3))
     if V < 4:
@@ -189,8 +207,8 @@ def check_model(m: HandModel, source: str = "model") -> None:
     shape("hands_components", m.hands_components, (None, 45))
     shape("tip_ids", m.tip_ids, (5,))
     for name in ("v_template", "weights", "posedirs", "shapedirs", "hands_mean", "hands_components"):
-        finite(name, getattr(m, name))
-    finite("J_regressor", m.J_regressor.data)
+        check_finite(source, name, getattr(m, name))
+    check_finite(source, "J_regressor", m.J_regressor.data)
     if (m.weights < 0).any():
         fail("weights", f"has a negative weight at vertex {int(np.argmax((m.weights < 0).any(1)))}")
     if m.tip_ids.min() < 0 or m.tip_ids.max() >= V:
@@ -203,7 +221,7 @@ def check_model(m: HandModel, source: str = "model") -> None:
             fail("uvs", "and 'faces_uv' must be given together")
         assert m.uvs is not None and m.faces_uv is not None
         shape("uvs", m.uvs, (None, 2))
-        finite("uvs", m.uvs)
+        check_finite(source, "uvs", m.uvs)
         shape("faces_uv", m.faces_uv, (F, 3))
         if F and (m.faces_uv.min() < 0 or m.faces_uv.max() >= len(m.uvs)):
             fail("faces_uv", f"indexes a UV outside 0..{len(m.uvs) - 1}")

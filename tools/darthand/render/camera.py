@@ -42,11 +42,7 @@ class Camera:
 
     def __post_init__(self):
         for name, shape in (("K", (3, 3)), ("R", (3, 3)), ("t", (3,))):
-            a = np.asarray(getattr(self, name), dtype=np.float64)
-            if a.shape != shape or not (np.abs(a) <= MAX_MAGNITUDE).all():
-                raise InputError(f"camera: field '{name}' must be finite (within +-{MAX_MAGNITUDE:g}) with shape "
-                                 f"{shape}, got {a.shape}")
-            object.__setattr__(self, name, a)
+            object.__setattr__(self, name, checked_field(name, getattr(self, name), shape))
         if not (np.abs(self.R @ self.R.T - np.eye(3)).max() < 1e-6 and np.linalg.det(self.R) > 0):
             raise InputError("camera: field 'R' is not a rotation matrix")
         check_intrinsics(self.K)
@@ -73,10 +69,7 @@ class Camera:
 
     def project(self, points) -> tuple[np.ndarray, np.ndarray]:
         """World points (N, 3) -> pixel positions (N, 2) (u, v) and camera depths z (N,)."""
-        X = self.to_camera(points)
-        uvw = X @ self.K.T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return uvw[:, :2] / uvw[:, 2:3], X[:, 2]
+        return project_rotated(np.asarray(points, dtype=np.float64) @ self.R.T, self.t, self.K)
 
     def directions(self, uv) -> np.ndarray:
         """(N, 3) float64 world ray directions through pixel positions uv (N, 2), scaled so camera z = 1."""
@@ -92,6 +85,15 @@ class Camera:
     def to_json(self) -> dict:
         return {"width": self.width, "height": self.height, "K": self.K.tolist(), "R": self.R.tolist(),
                 "t": self.t.tolist()}
+
+
+def checked_field(name: str, value, shape: tuple) -> np.ndarray:
+    """`value` as a float64 array, or InputError unless it has `shape` and entries within +-MAX_MAGNITUDE."""
+    a = np.asarray(value, dtype=np.float64)
+    if a.shape != shape or not (np.abs(a) <= MAX_MAGNITUDE).all():
+        raise InputError(f"camera: field '{name}' must be finite (within +-{MAX_MAGNITUDE:g}) with shape {shape}, "
+                         f"got {a.shape}")
+    return a
 
 
 def check_intrinsics(K: np.ndarray) -> None:
@@ -187,22 +189,45 @@ def frame_points(points, view="three_quarter", *, width: int = 512, height: int 
     half = np.arctan(0.5 * min(width / K[0, 0], height / K[1, 1]))
     d = radius / np.sin(half) if distance is None else float(distance)
     target = centre
+    Camera(K, R, -R @ (target - d * R[2]), width, height)       # R and K checked once: only t changes below
+    rotated = pts @ R.T
+    middle = middle_rows(rotated[:, 2])
     for _ in range(1 if distance is not None else 4):
         eye = target - d * R[2]
-        cam = Camera(K, R, -R @ eye, width, height)
-        uv, z = cam.project(pts)
+        uv, z = project_rotated(rotated, checked_field("t", -R @ eye, (3,)), K)
         if (z <= 0).any():
             d *= 2
             continue
         lo, hi = point_bounds(uv)
         # Recentre: move the target by the pixel offset of the projection's centre, at the points' depth.
-        shift = (0.5 * (lo + hi) - K[:2, 2]) / K[[0, 1], [0, 1]] * float(np.median(z))
+        depth = np.median(z) if middle is None else np.mean(z[middle])         # np.median's own numbers
+        shift = (0.5 * (lo + hi) - K[:2, 2]) / K[[0, 1], [0, 1]] * float(depth)
         target = target + shift[0] * R[0] + shift[1] * R[1]
         if distance is None:
             fill = max((hi - lo)[0] / width, (hi - lo)[1] / height)
             d *= fill / (1 - 2 * margin)
     eye = target - d * R[2]
     return Camera(K, R, -R @ eye, width, height)
+
+
+def middle_rows(values: np.ndarray) -> np.ndarray | None:
+    """Indices of the middle value (odd count) or two middle values (even) of `values` (N,) in sorted order, the ones
+    np.median averages; None for NaN values or none. A depth z = r + t_z of every point moved by one t_z keeps that
+    order (rounding never swaps two sums), so the framing's four medians are np.mean(z[middle]) with one partition."""
+    n = len(values)
+    if n == 0 or np.isnan(values).any():
+        return None
+    kth = [n // 2] if n % 2 else [n // 2 - 1, n // 2]
+    return np.argpartition(values, kth)[kth]
+
+
+def project_rotated(rotated: np.ndarray, t: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Camera.project of points whose rotation into the camera, points @ R.T (N, 3), is given: the same pixel
+    positions (N, 2) and depths (N,), bit for bit, when a camera moves along its axes and keeps R."""
+    X = rotated + t
+    uvw = X @ K.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return uvw[:, :2] / uvw[:, 2:3], X[:, 2]
 
 
 # ------------------------------------------------------------------------------------------------ camera files

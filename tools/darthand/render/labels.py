@@ -29,6 +29,7 @@ import numpy as np
 
 from darthand.jit import kernel
 from darthand.model.layout import FINGER_JOINTS, FINGERS, JOINT_NAMES, KEYPOINT_ORDERS, MANO_PARENTS
+from darthand.model.per_model import per_model
 from darthand.model.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from darthand.render.arm import ARM, ARM_END
 from darthand.render.camera import Camera
@@ -305,6 +306,13 @@ def contacts_with(hand: Subject, other: Subject) -> list[int]:
     return contact_vertices(own.hand_vertices, theirs.hand.vertices, theirs.hand.faces).tolist()
 
 
+@per_model
+def root_regressor(model):
+    """(1, V) sparse: the root joint's row of the model's joint regressor (kept per model: slicing a sparse row takes
+    a third of a millisecond, and every dataset frame's labels ask for it)."""
+    return model.J_regressor[0]
+
+
 def mano_camera_parameters(model, pose, R, t, betas=None) -> dict:
     """MANO parameters of a posed hand in the camera frame: {'global_orient' (3,), 'hand_pose' (45,), 'betas' (S,),
     'trans' (3,)}, axis-angle relative to the flat hand (flat_hand_mean true), metres, such that
@@ -319,7 +327,7 @@ def mano_camera_parameters(model, pose, R, t, betas=None) -> dict:
     n_betas = model.num_betas
     b = np.zeros(n_betas) if betas is None else np.asarray(betas, np.float64).reshape(-1)
     shaped = np.asarray(model.v_template) + (np.asarray(model.shapedirs)[..., :len(b)] @ b if len(b) else 0)
-    j0 = np.asarray(model.J_regressor[0] @ shaped).reshape(3)
+    j0 = np.asarray(root_regressor(model) @ shaped).reshape(3)
     root = matrix_to_axis_angle(R @ axis_angle_to_matrix(pose[:3]))
     return {"global_orient": root.tolist(), "hand_pose": pose[3:].tolist(), "betas": b.tolist(),
             "trans": (R @ j0 + t - j0).tolist(), "frame": "camera", "flat_hand_mean": True}

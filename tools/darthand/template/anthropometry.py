@@ -22,6 +22,7 @@ import numpy as np
 
 from darthand.model.hand_model import HandModel
 from darthand.model.layout import FINGER_JOINTS
+from darthand.model.per_model import per_model
 
 KNUCKLE_SLAB = 0.09  # half-thickness of the slab the breadth is taken in, relative to the index-pinky MCP distance
 
@@ -33,8 +34,10 @@ ANSUR_II = {
 }
 
 
+@per_model
 def digit_masks(model: HandModel) -> tuple[np.ndarray, np.ndarray]:
-    """(V,) bool vertices whose dominant joint is in the middle finger, and in the thumb."""
+    """(V,) bool vertices whose dominant joint is in the middle finger, and in the thumb (read-only, kept per
+    model: a dataset frame measures its shape)."""
     dominant = np.argmax(model.weights, axis=1)
     return np.isin(dominant, FINGER_JOINTS["middle"]), np.isin(dominant, FINGER_JOINTS["thumb"])
 
@@ -67,10 +70,16 @@ def hand_sizes(model: HandModel, vertices: np.ndarray) -> dict:
     """{"hand_length_mm": (B,), "hand_breadth_mm": (B,)} of rest-pose vertices (B, V, 3), joints regressed from
     them."""
     vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, model.num_vertices, 3)
-    joints = np.einsum("jv,bvc->bjc", model.J_regressor.toarray(), vertices)
-    masks = digit_masks(model)          # once for both (0.2 ms each; a dataset frame measures its shape)
+    joints = np.einsum("jv,bvc->bjc", dense_regressor(model), vertices)
+    masks = digit_masks(model)
     return {"hand_length_mm": 1000 * hand_length(model, vertices, joints, masks),
             "hand_breadth_mm": 1000 * hand_breadth(model, vertices, joints, masks)}
+
+
+@per_model
+def dense_regressor(model: HandModel) -> np.ndarray:
+    """(16, V) the model's joint regressor as a dense array (read-only, kept per model)."""
+    return model.J_regressor.toarray()
 
 
 def survey_mixture(measure: str, share_male: float = 0.5, survey: dict = ANSUR_II) -> tuple[float, float]:
