@@ -49,6 +49,7 @@ def test_kept_values_are_read_only_and_dropped_with_their_model():
     assert vertex_sum(model) is first and len(calls) == 1
     with pytest.raises(ValueError):
         first[0][0] = 1.0
+    gc.collect()                                     # models of earlier tests gone first: only this one dies below
     n = len(_VALUES)
     del model, first
     gc.collect()
