@@ -57,7 +57,7 @@ from darthand.dataset.frames import frame_names
 from darthand.fileio import write_json
 from darthand.model.layout import KEYPOINT_ORDERS
 from darthand.render.image import over_black, read_straight_png
-from darthand.textures.color import srgb_to_linear
+from darthand.textures.color import luminance, srgb_to_linear
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "build" / "model" / "right.npz"
@@ -295,9 +295,10 @@ def measure_setting(folder: Path, frames: int, options: list[str], confidence: f
     by_index = {i: found[Path(frame_names(i)["image"]).name] for i in labels}
     records = [{"index": i, **frame_record(labels[i], by_index[i])} for i in sorted(labels)]
     counted = [r["index"] for r in records if r["visible"] >= MIN_VISIBLE and not r["accessory"]]
+    hands = {i: inner_hand(folder, i) for i in counted}
     result = {**render, **subsets(records), "order_check": order_check(records, labels, by_index),
-              "washed_out": washed_out([clipped_share(folder, i) for i in counted]),
-              "tone_agreement": tone_agreement(folder, labels, counted),
+              "washed_out": washed_out([clipped_share(hand) for hand in hands.values()]),
+              "tone_agreement": tone_agreement(hands, labels),
               "harness_cpu_s": round(time.process_time() - t0, 2)}
     return result, by_index
 
@@ -310,25 +311,21 @@ def inner_hand(folder: Path, index: int) -> np.ndarray:
     return image[ndimage.binary_erosion(read_straight_png(folder / names["mask"])[..., 0] == 255)]
 
 
-def clipped_share(folder: Path, index: int) -> float:
-    """The share of frame `index`'s inner hand pixels that are 255 in some channel of its image (0 without any)."""
-    hand = inner_hand(folder, index)
+def clipped_share(hand: np.ndarray) -> float:
+    """The share of a frame's inner hand pixels (K, 3) uint8 (inner_hand) that are 255 in some channel (0 without
+    any)."""
     return float((hand.max(axis=1) == 255).mean()) if len(hand) else 0.0
 
 
-def luminance(srgb: np.ndarray) -> np.ndarray:
-    """(...,) linear Rec. 709 luminance of sRGB values (..., 3) in [0, 1]."""
-    return srgb_to_linear(np.asarray(srgb, np.float64)) @ np.array([0.2126, 0.7152, 0.0722])
-
-
-def tone_agreement(folder: Path, labels: dict, counted: list[int]) -> dict:
-    """{'frames', 'spearman'}: over the counted frames whose labels record a tone (texture.tone_srgb), the rank
-    correlation between that tone's luminance and the median luminance of the frame's inner hand pixels. The
-    issue's "the tone a frame's labels record is the tone its image shows", measured across frames (light and
-    exposure vary per frame, so 1 is not the aim; higher is closer)."""
-    pairs = [(float(luminance(np.asarray(labels[i]["texture"]["tone_srgb"]))),
-              float(np.median(luminance(inner_hand(folder, i) / 255.0)))) for i in counted
-             if labels[i].get("texture", {}).get("tone_srgb") is not None and len(inner_hand(folder, i))]
+def tone_agreement(hands: dict, labels: dict) -> dict:
+    """{'frames', 'spearman'}: over the frames of `hands` ({frame index: its inner hand pixels}) with pixels and
+    whose labels record a tone (texture.tone_srgb), the rank correlation between that tone's luminance and the
+    median luminance of the frame's inner hand pixels. The issue's "the tone a frame's labels record is the tone its
+    image shows", measured across frames (light and exposure vary per frame, so 1 is not the aim; higher is
+    closer)."""
+    pairs = [(float(luminance(srgb_to_linear(labels[i]["texture"]["tone_srgb"]))),
+              float(np.median(luminance(srgb_to_linear(hand / 255.0))))) for i, hand in hands.items()
+             if labels[i].get("texture", {}).get("tone_srgb") is not None and len(hand)]
     if len(pairs) < 3:
         return {"frames": len(pairs), "spearman": None}
     return {"frames": len(pairs), "spearman": round(float(stats.spearmanr(*zip(*pairs)).statistic), 3)}

@@ -176,14 +176,15 @@ def test_clipped_share_counts_the_hands_inner_pixels_at_255(tmp_path):
     for key, pixels in (("image", image), ("mask", mask)):
         (tmp_path / names[key]).parent.mkdir(parents=True, exist_ok=True)
         write_png(tmp_path / names[key], pixels)
-    assert realism.clipped_share(tmp_path, 7) == pytest.approx(4 / 16)
+    assert realism.clipped_share(realism.inner_hand(tmp_path, 7)) == pytest.approx(4 / 16)
     figures = realism.washed_out([0.0, 0.06, 0.25, 0.01])
     assert figures == {"frames": 4, "over_5": 2, "over_20": 1, "mean": pytest.approx(0.08)}
 
 
 def test_tone_agreement_ranks_the_labels_tone_against_the_images_hand(tmp_path):
     """Four frames whose hands are painted at grey levels in the labels' tone order: Spearman 1; reversed: -1. The
-    backdrop (white) and the hand's edge (black) do not count, nor a frame whose labels have no tone."""
+    backdrop (white) and the hand's edge (black) do not count, nor a frame whose labels have no tone or
+    that has no inner hand pixels."""
     from darthand.dataset.frames import frame_names
     from darthand.render.image import write_png
 
@@ -201,7 +202,10 @@ def test_tone_agreement_ranks_the_labels_tone_against_the_images_hand(tmp_path):
             write_png(tmp_path / names[key], pixels)
         labels[i] = {"texture": {"tone_srgb": [grey / 255 * 0.9 + 0.05] * 3}}
     labels[4] = {"texture": {"tone_srgb": None}}
-    assert realism.tone_agreement(tmp_path, labels, [0, 1, 2, 3, 4]) == {"frames": 4, "spearman": 1.0}
+    hands = {i: realism.inner_hand(tmp_path, i) for i in greys}
+    assert realism.tone_agreement({**hands, 4: hands[0]}, labels) == {"frames": 4, "spearman": 1.0}
+    assert realism.tone_agreement({**hands, 5: hands[0][:0]}, {**labels, 5: labels[0]}) == \
+        {"frames": 4, "spearman": 1.0}
     reversed_labels = {i: {"texture": {"tone_srgb": [1 - grey / 255] * 3}} for i, grey in greys.items()}
-    assert realism.tone_agreement(tmp_path, reversed_labels, [0, 1, 2, 3]) == {"frames": 4, "spearman": -1.0}
-    assert realism.tone_agreement(tmp_path, labels, [0, 1]) == {"frames": 2, "spearman": None}
+    assert realism.tone_agreement(hands, reversed_labels) == {"frames": 4, "spearman": -1.0}
+    assert realism.tone_agreement({i: hands[i] for i in (0, 1)}, labels) == {"frames": 2, "spearman": None}

@@ -12,7 +12,7 @@ import pytest
 from darthand.render.api import Renderer
 from darthand.render.assets import HandAssets
 from darthand.schemas import check_schema
-from darthand.textures.color import srgb_to_linear
+from darthand.textures.color import luminance, srgb_to_linear
 from darthand.textures.loader import TextureSet, load_texture_catalog
 from darthand.textures.imageio import read_image
 
@@ -45,9 +45,9 @@ def test_tone_orders_darker_textures_darker(small_build):
     source = HandAssets.load(small_build / "model" / "right.npz", tex_dir, None)
     tones = {t.id: source.skin_tone(t.id) for t in load_texture_catalog(tex_dir)}
     shown = {t.id: back_of_hand_median(tex_dir, t.albedo) for t in load_texture_catalog(tex_dir)}
-    luminance = lambda srgb: float(srgb_to_linear(np.asarray(srgb)) @ [0.2126, 0.7152, 0.0722])
-    assert (luminance(tones["brown_moles_00"]) < luminance(tones["light_tattoos_07"])) == \
-        (luminance(shown["brown_moles_00"]) < luminance(shown["light_tattoos_07"]))
+    lum = lambda srgb: float(luminance(srgb_to_linear(np.asarray(srgb))))
+    assert (lum(tones["brown_moles_00"]) < lum(tones["light_tattoos_07"])) == \
+        (lum(shown["brown_moles_00"]) < lum(shown["light_tattoos_07"]))
 
 
 def test_checker_and_sets_without_tones_record_null(small_build):

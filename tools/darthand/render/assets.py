@@ -180,17 +180,17 @@ class HandAssets:
         """(3,) sRGB the back of the hand's albedo for a texture id and skin-tone offset (the offset added, clipped
         to [0, 1], as the decoding adds it), None for the checker or a texture whose catalogue has no tone."""
         if texture == PLAIN:
-            base = linear_to_srgb(np.array(PLAIN_SKIN))
+            tone = plain_srgb(offset)
         elif texture == CHECKER or self.textures[texture].tone_srgb is None:
             return None
         else:
-            base = np.asarray(self.textures[texture].tone_srgb)
-        return [round(float(c), 6) for c in np.clip(base + offset, 0.0, 1.0)]
+            tone = np.clip(np.asarray(self.textures[texture].tone_srgb) + offset, 0.0, 1.0)
+        return [round(float(c), 6) for c in tone]
 
     def skin(self, texture: str, offset: float = 0.0) -> Material:
         """The hand's material for a texture id and skin-tone offset (added to the sRGB albedo)."""
         if texture == PLAIN:
-            plain = srgb_to_linear(np.clip(linear_to_srgb(np.array(PLAIN_SKIN)) + offset, 0, 1))
+            plain = srgb_to_linear(plain_srgb(offset))
             return skin_material(constant_texture(plain), name=PLAIN, detail=self.detail_map())
         if texture == CHECKER:
             return checker_material()
@@ -341,3 +341,7 @@ def default_catalogues(model_path: str | Path) -> tuple[Path | None, Path | None
     return (tex if tex.is_file() else None,
             acc if (acc / "catalog.json").is_file() or any(acc.glob("*/catalog.json")) else None)
 
+
+def plain_srgb(offset: float) -> np.ndarray:
+    """(3,) the plain skin's sRGB colour with a skin-tone offset added, clipped to [0, 1]."""
+    return np.clip(linear_to_srgb(np.array(PLAIN_SKIN)) + offset, 0, 1)

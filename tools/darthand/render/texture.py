@@ -516,24 +516,21 @@ def load_maps(albedo: str | os.PathLike | None, *, offset: float = 0.0, data: st
 
 
 def _file_key(path: str | os.PathLike) -> tuple[str, int]:
-    """(the file's resolved path, its modification time): what a texture is cached by. The resolved path is
-    remembered per (path as given, device, inode), so a frame pays one stat, not a walk of every component of the
-    path (0.1 ms a file, two files a frame); a path that comes to name another file (a symlink moved) has another
-    inode and is resolved again."""
+    """(the file's resolved path, its modification time): what a texture is cached by. The resolution is kept per
+    (path as given, device, inode) (_resolved), so a frame pays one stat, not a walk of every component of the path
+    (0.1 ms a file, two files a frame); a path that comes to name another file (a symlink moved) has another inode
+    and is resolved again."""
     try:
         st = os.stat(path)
     except OSError:
         raise InputError(f"{Path(path)}: texture file not found") from None
-    key = (os.fspath(path), st.st_dev, st.st_ino)
-    resolved = _RESOLVED.get(key)
-    if resolved is None:
-        if len(_RESOLVED) >= 4096:
-            _RESOLVED.clear()
-        resolved = _RESOLVED[key] = str(Path(path).resolve())
-    return resolved, st.st_mtime_ns
+    return _resolved(os.fspath(path), st.st_dev, st.st_ino), st.st_mtime_ns
 
 
-_RESOLVED: dict = {}
+@functools.lru_cache(maxsize=4096)
+def _resolved(path: str, device: int, inode: int) -> str:
+    """The resolved path of `path`, the file (device, inode) (the cache key only)."""
+    return str(Path(path).resolve())
 
 
 @functools.lru_cache(maxsize=4096)
