@@ -79,6 +79,32 @@ def test_frame_specular_lobes_agree_with_specular_per_row():
         np.testing.assert_array_equal(many[k], frame.specular(d, rough[k]))
 
 
+def test_sky_of_some_rows_and_the_share_it_gives_are_the_whole_lookups():
+    """FrameEnvironment.sky(d, rows) is sky(d) on those rows and 0 elsewhere; and _environment_seen, which looks up
+    only the rays of vertices neither open nor closed, gives the shares of every ray looked up, bit for bit (an open
+    vertex's share is 1 and a closed one's 0 whatever its sky)."""
+    from darthand.render.indirect import _sky_share_kernel
+
+    rng = np.random.default_rng(9)
+    sh = rng.normal(size=(9, 3))
+    lighting = env.MapLighting(np.zeros((0, 3)), np.zeros((0, 3)), random_levels(rng), sh, [])
+    frame = env.FrameEnvironment([], lighting, env.frame_matrix("camera", np.eye(3), 30.0), np.array([1.0, 0.9, 0.8]))
+    k, n = 16, 400
+    d = unit_directions(rng, n * k)
+    blocked = rng.random((n, k)) < rng.random((n, 1))
+    blocked[: n // 4] = False
+    blocked[n // 4: n // 2] = True
+    closed = blocked.sum(axis=1)
+    rows = np.repeat((closed > 0) & (closed < k), k)
+    whole, some = frame.sky(d), frame.sky(d, rows)
+    assert some[rows].tobytes() == whole[rows].tobytes() and not some[~rows].any()
+    open_sky = frame.irradiance(unit_directions(rng, n).T).T.copy()
+    want, got = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32)
+    _sky_share_kernel(open_sky, whole, blocked.ravel(), k, want)
+    _sky_share_kernel(open_sky, some, blocked.ravel(), k, got)
+    assert got.tobytes() == want.tobytes()
+
+
 def separable_blend(image: np.ndarray, step: int, height: int, width: int) -> np.ndarray:
     """upsample's contract written out in numpy: rows blended, then columns, float32."""
     def axis(n: int, m: int):

@@ -563,11 +563,17 @@ class FrameEnvironment:
     M: np.ndarray
     scale: np.ndarray
 
-    def sky(self, directions: np.ndarray) -> np.ndarray:
+    def sky(self, directions: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
         """(N, 3) float32 the remainder's radiance seen along world directions (N, 3), blurred at SKY_WIDTH (what an
-        indirect ray that escapes brings back)."""
+        indirect ray that escapes brings back); with rows (N,) bool, only those rows are looked up (the others are
+        0), each the same number as without."""
         level = level_of_width(self.lighting.remainder, SKY_WIDTH)
-        return (bilinear(level, np.asarray(directions, np.float64) @ self.M.T) * self.scale).astype(np.float32)
+        d = np.asarray(directions, np.float64) @ self.M.T
+        if rows is None:
+            return (bilinear(level, d) * self.scale).astype(np.float32)
+        out = np.zeros((len(d), 3), np.float32)
+        out[rows] = (bilinear(level, d[rows]) * self.scale).astype(np.float32)
+        return out
 
     def irradiance(self, normals: np.ndarray) -> np.ndarray:
         """(3, N) float32 the remainder's unoccluded pi-folded irradiance at world unit normals (3, N)."""

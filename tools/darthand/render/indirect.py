@@ -326,10 +326,13 @@ class VertexLight:
         bright patch that the blocked rays' sky does not, and their difference went below zero in one channel
         (blue blotches between fingers under a blue sky)."""
         assert self.environment is not None
+        blocked = np.ascontiguousarray(blocked, np.bool_)
         open_sky = np.ascontiguousarray(self.environment.irradiance(normals.T).T, np.float32)
-        sky = np.ascontiguousarray(self.environment.sky(dirs), np.float32)
+        # a vertex whose rays all escape, or none, takes share 1 or 0 whatever the sky: looked up for the others only
+        closed = blocked.reshape(-1, k).sum(axis=1)
+        sky = self.environment.sky(dirs, np.repeat((closed > 0) & (closed < k), k))
         out = np.empty((len(normals), 3), np.float32)
-        _sky_share_kernel(open_sky, sky, np.ascontiguousarray(blocked, np.bool_), int(k), out)
+        _sky_share_kernel(open_sky, sky, blocked, int(k), out)
         return out
 
     def at(self, g: int, prim: np.ndarray, bu: np.ndarray, bv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
