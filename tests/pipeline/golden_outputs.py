@@ -4,6 +4,11 @@ jobs files), every file they write hashed. A restructuring of the code must leav
 
     python tests/pipeline/golden_outputs.py WORKDIR > tests/pipeline/golden_outputs.json   (from the reference commit)
 
+The run happens in a process of its own whose numerics do not depend on the machine's CPU (REFERENCE_CPU): numpy's
+ufuncs (exp, arctan2, ...) and OpenBLAS choose their kernels by the CPU's features, and an AVX-512 machine's last
+bits differ from an AVX2 machine's (55 of the 168 hashes, from the fixture model's QR and exp on). The script starts
+itself again with those settings when they are not set.
+
 Files are hashed with the fixture, output and checkout folders' paths replaced by '<fx>', '<out>' and '<repo>' (labels
 and records name their inputs by path) and,
 for JSON documents, without their wall-clock fields (`timings`, `seconds`, `wall_s`...): what the run measured, not
@@ -19,6 +24,8 @@ import contextlib
 import hashlib
 import io
 import json
+import os
+import subprocess
 import sys
 import tarfile
 from pathlib import Path
@@ -31,6 +38,21 @@ sys.path[:0] = [str(HERE.parent), str(HERE.parent / "robustness"), str(HERE.pare
 # Keys of JSON documents whose values are measurements of the run (times, memory, process ids), not its output.
 VOLATILE = {"timings", "seconds", "wall_s", "cpu_s", "elapsed_s", "ms", "cpu_ms", "end", "pid", "maxrss_mb",
             "open_s", "steps", "runner", "created", "date"}
+
+
+# The CPU features the reference numbers are made with, whatever machine runs them: numpy's dispatch without its
+# AVX-512 targets (the wheel's dispatch list, so the same names on every x86-64 machine) and OpenBLAS's Haswell
+# kernels (AVX2). Read by numpy and OpenBLAS when they load: set before the process starts.
+REFERENCE_CPU = {"NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR", "OPENBLAS_CORETYPE": "Haswell"}
+
+
+def reference_run(workdir: Path) -> dict:
+    """run_all(workdir/fx, workdir/out) in a new process with REFERENCE_CPU: {name: sha256}."""
+    done = subprocess.run([sys.executable, __file__, str(workdir)], env={**os.environ, **REFERENCE_CPU},
+                          capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise RuntimeError(f"golden_outputs.py {workdir} exited {done.returncode}: {done.stderr[-2000:]}")
+    return json.loads(done.stdout)
 
 
 def commands(fx: Path, out: Path) -> list[list[str]]:
@@ -155,4 +177,6 @@ def _drop_volatile(value):
 
 
 if __name__ == "__main__":
+    if any(os.environ.get(k) != v for k, v in REFERENCE_CPU.items()):
+        os.execve(sys.executable, [sys.executable, *sys.argv], {**os.environ, **REFERENCE_CPU})
     print(json.dumps(run_all(Path(sys.argv[1]) / "fx", Path(sys.argv[1]) / "out"), indent=1, sort_keys=True))
