@@ -43,6 +43,8 @@ from darthand.render.scene import Scene
 ENABLED = True           # rasterise camera samples (trace.intersect_samples); off: Embree's (tests, benchmarks)
 NEAR = 1e-9              # metres of camera z: faces are clipped there (trace.touched_tiles' limit)
 TINY = 5e-324            # the smallest positive double: e > 0 is e >= TINY
+HIDDEN_MARGIN = 1e-3     # share of depth below a face's nearest corner that rounding cannot reach (_hidden_depth)
+TILE = 8                 # pixels: the blocks whose farthest sample decides whether a face is hidden
 
 
 def camera_hits(scene: Scene, camera: Camera, uv: np.ndarray, directions: np.ndarray) -> tuple | None:
@@ -316,6 +318,110 @@ def _row_span(cx, cy, edges, band_lo, band_hi):
     return left, right
 
 
+@inlined(always=True)
+def _plane(f, faces, vertices, origin):
+    """(nx, ny, nz, nd0): face f's normal (e1 x e2 of its float32 world corners, in float64) and its dot with the
+    first corner from the ray origin (3,): a ray o + t d meets the plane at t = nd0 / (n . d)."""
+    ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
+    ox, oy, oz = np.float64(vertices[ia, 0]), np.float64(vertices[ia, 1]), np.float64(vertices[ia, 2])
+    e1x, e1y, e1z = vertices[ib, 0] - ox, vertices[ib, 1] - oy, vertices[ib, 2] - oz
+    e2x, e2y, e2z = vertices[ic, 0] - ox, vertices[ic, 1] - oy, vertices[ic, 2] - oz
+    nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+    return nx, ny, nz, nx * (ox - origin[0]) + ny * (oy - origin[1]) + nz * (oz - origin[2])
+
+
+@inlined(always=True)
+def _hidden_depth(f, faces, vertices, z, origin, nx, ny, nz, nd0):
+    """A camera z (metres) below the depth t any sample face f covers can compute, for a face turned away from the
+    camera (nd0 > 0) that is neither seen edge-on nor near the camera; 0 for any other face (drawn at once).
+
+    A covered sample's exact ray (from the camera centre through its position) meets the plane inside the face, at
+    a camera z between the corners'; the computed t differs by the float32 rounding of the ray's direction (5e-7
+    of it; the plane's distance from the origin at least 5 % of the farthest corner's: at most 1e-5 of t) and of
+    the origin (6e-8 of |origin|; the corners' z and the plane's distance at least 1 cm + 1 % of |origin|: at most
+    1e-5 of t), which move the hit at most 1e-4 of t off the face: HIDDEN_MARGIN is ten times all that."""
+    zmin = min(z[faces[f, 0]], z[faces[f, 1]], z[faces[f, 2]])
+    reach = 1e-2 * (1.0 + np.sqrt(origin[0] ** 2 + origin[1] ** 2 + origin[2] ** 2))
+    if nd0 <= 0.0 or zmin < reach:
+        return 0.0
+    far = 0.0
+    for k in range(3):
+        v = faces[f, k]
+        far = max(far, (vertices[v, 0] - origin[0]) ** 2 + (vertices[v, 1] - origin[1]) ** 2
+                  + (vertices[v, 2] - origin[2]) ** 2)
+    distance = nd0 / np.sqrt(nx * nx + ny * ny + nz * nz)
+    if distance < reach or distance * distance < 0.0025 * far:
+        return 0.0
+    return zmin * (1.0 - HIDDEN_MARGIN)
+
+
+@inlined(always=True)
+def _tile_maxima(nearest, start, width, height, tiles):
+    """tiles (ceil(height / TILE), ceil(width / TILE)): the largest nearest (N,) of the samples in each TILE x TILE
+    block of a SampleGrid's box (start: its pixels' columns), -inf for a block without samples."""
+    tiles[:] = -np.inf
+    for r in range(height):
+        for c in range(tiles.shape[1]):
+            most = tiles[r // TILE, c]
+            for j in range(start[r * width + c * TILE], start[r * width + min((c + 1) * TILE, width)]):
+                most = max(most, nearest[j])
+            tiles[r // TILE, c] = most
+
+
+@inlined(always=True)
+def _hidden(f, faces, xy, depth, tiles, x0, y0, width, height):
+    """Whether every sample in the box of face f's corners (xy (V, 2) pixel positions; all in front of the camera) is
+    nearer than `depth` (tiles: _tile_maxima's)."""
+    ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
+    r_lo = max(np.floor(min(xy[ia, 1], xy[ib, 1], xy[ic, 1])) - y0, 0.0)
+    r_hi = min(np.floor(max(xy[ia, 1], xy[ib, 1], xy[ic, 1])) - y0, height - 1.0)
+    c_lo = max(np.floor(min(xy[ia, 0], xy[ib, 0], xy[ic, 0])) - x0, 0.0)
+    c_hi = min(np.floor(max(xy[ia, 0], xy[ib, 0], xy[ic, 0])) - x0, width - 1.0)
+    for tr in range(int(r_lo) // TILE, int(r_hi) // TILE + 1):
+        for tc in range(int(c_lo) // TILE, int(c_hi) // TILE + 1):
+            if not tiles[tr, tc] < depth:
+                return False
+    return True
+
+
+@inlined(always=True)
+def _draw(f, corners, poly, nx, ny, nz, nd0, samples, x0, y0, width, height, start, row_y, nearest, face, cx, cy,
+          edges):
+    """Face f's part in front (poly (4, 2), `corners` of them, fanned into triangles) over the samples: each
+    triangle visits, row by row of pixels, only the columns its outline spans in that row (cx, cy (3,), edges
+    (3, 6): scratch)."""
+    for fan in range(corners - 2):
+        for k in range(3):
+            corner = 0 if k == 0 else fan + k
+            cx[k], cy[k] = poly[corner, 0], poly[corner, 1]
+        area = (cx[1] - cx[0]) * (cy[2] - cy[0]) - (cy[1] - cy[0]) * (cx[2] - cx[0])
+        if area == 0.0 or not np.isfinite(area):
+            continue
+        r_lo = max(np.floor(min(cy[0], cy[1], cy[2])) - y0, 0.0)
+        r_hi = min(np.floor(max(cy[0], cy[1], cy[2])) - y0, height - 1.0)
+        box_lo = max(np.floor(min(cx[0], cx[1], cx[2])) - x0, 0.0)
+        box_hi = min(np.floor(max(cx[0], cx[1], cx[2])) - x0, width - 1.0)
+        if r_lo > r_hi or box_lo > box_hi:
+            continue
+        b_lo, b_hi = int(box_lo), int(box_hi) + 1
+        _edge_functions(cx, cy, 1.0 if area > 0 else -1.0, edges)
+        for r in range(int(r_lo), int(r_hi) + 1):
+            if start[r * width + b_lo] == start[r * width + b_hi]:
+                continue                 # no sample in this row of the face's box (edge sub-samples are sparse)
+            # the outline's columns in this row of pixels: between the band's two lines, or on the one line the
+            # row's samples share, widened by rounding's share so no sample on the outline is left out
+            y = row_y[r]
+            left, right = _row_span(cx, cy, edges, y if y == y else y0 + r, y if y == y else y0 + r + 1.0)
+            if left > right:
+                continue
+            pad = 1e-9 * (1.0 + abs(left) + abs(right))
+            c_lo = int(max(np.floor(left - pad) - x0, 0.0))
+            c_hi = int(min(np.floor(right + pad) - x0, width - 1.0))
+            if c_lo <= c_hi:
+                _cover_run(samples, start[r * width + c_lo], start[r * width + c_hi + 1], y, edges, nx, ny, nz, nd0,
+                           f, nearest, face)
+
+
 @kernel(error_model="numpy")
 def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, samples, x0, y0, width, height, start, row_y,
                   nearest, face):
@@ -324,52 +430,46 @@ def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, samples, 
     face covers a sample (edge functions, top-left rule) and its plane is nearer along the sample's ray (from
     origin (3,)) than nearest[j] (float64, per grid row), or as near and a lower face, the sample takes it
     (nearest, face (N,) int64). A face with corners at or behind `near` is clipped there first (its part in front,
-    a triangle or a quad, fanned into triangles); one wholly behind is skipped. A triangle visits, row by row of
-    pixels, only the columns its outline spans in that row."""
+    a triangle or a quad, fanned into triangles); one wholly behind is skipped.
+
+    The outcome does not depend on the order (each sample keeps the least depth, then the least face), so the
+    faces turned away from the camera (_hidden_depth) are drawn last, and only where their box holds a sample
+    farther than their nearest corner: on a closed surface those turned toward it already hide most of them. Only
+    for pixel centres (some row_y known): edge sub-samples lie on outlines, where a tile rarely hides a face (it
+    measured slower there), and so did also drawing last the faces turned toward the camera beyond a quarter of the
+    depth range."""
     edges = np.empty((3, 6))             # _edge_functions'
-    cx = np.empty(3)
-    cy = np.empty(3)
+    cx, cy = np.empty(3), np.empty(3)
     poly = np.empty((4, 2))              # the face's part in front of `near`, projected
     X = np.empty(3)
-    for m in range(face_order.shape[0]):
-        f = face_order[m]
+    n = face_order.shape[0]
+    later, later_depth = np.empty(n, np.int64), np.empty(n)     # the faces drawn last, their _hidden_depth
+    n_later = 0
+    dense = not np.isnan(row_y).all()   # pixel centres; edge sub-samples lie where tiles rarely hide a face
+    tiles = np.empty(((height + TILE - 1) // TILE, (width + TILE - 1) // TILE))
+    for m in range(n + n):
+        if m < n:
+            f = face_order[m]
+        elif m - n < n_later:
+            if m == n:
+                _tile_maxima(nearest, start, width, height, tiles)
+            f = later[m - n]
+            if _hidden(f, faces, xy, later_depth[m - n], tiles, x0, y0, width, height):
+                continue
+        else:
+            break
         corners = _front_part(f, faces, xy, z, vertices, P, near, poly, X)
-        ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
-        ox, oy, oz = np.float64(vertices[ia, 0]), np.float64(vertices[ia, 1]), np.float64(vertices[ia, 2])
-        e1x, e1y, e1z = vertices[ib, 0] - ox, vertices[ib, 1] - oy, vertices[ib, 2] - oz
-        e2x, e2y, e2z = vertices[ic, 0] - ox, vertices[ic, 1] - oy, vertices[ic, 2] - oz
-        nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
-        nd0 = nx * (ox - origin[0]) + ny * (oy - origin[1]) + nz * (oz - origin[2])
-        for fan in range(corners - 2):
-            for k in range(3):
-                corner = 0 if k == 0 else fan + k
-                cx[k], cy[k] = poly[corner, 0], poly[corner, 1]
-            area = (cx[1] - cx[0]) * (cy[2] - cy[0]) - (cy[1] - cy[0]) * (cx[2] - cx[0])
-            if area == 0.0 or not np.isfinite(area):
+        if corners == 0:
+            continue
+        nx, ny, nz, nd0 = _plane(f, faces, vertices, origin)
+        if m < n and dense:
+            depth = _hidden_depth(f, faces, vertices, z, origin, nx, ny, nz, nd0)
+            if depth > 0.0:
+                later[n_later], later_depth[n_later] = f, depth
+                n_later += 1
                 continue
-            r_lo = max(np.floor(min(cy[0], cy[1], cy[2])) - y0, 0.0)
-            r_hi = min(np.floor(max(cy[0], cy[1], cy[2])) - y0, height - 1.0)
-            box_lo = max(np.floor(min(cx[0], cx[1], cx[2])) - x0, 0.0)
-            box_hi = min(np.floor(max(cx[0], cx[1], cx[2])) - x0, width - 1.0)
-            if r_lo > r_hi or box_lo > box_hi:
-                continue
-            b_lo, b_hi = int(box_lo), int(box_hi) + 1
-            _edge_functions(cx, cy, 1.0 if area > 0 else -1.0, edges)
-            for r in range(int(r_lo), int(r_hi) + 1):
-                if start[r * width + b_lo] == start[r * width + b_hi]:
-                    continue                 # no sample in this row of the face's box (edge sub-samples are sparse)
-                # the outline's columns in this row of pixels: between the band's two lines, or on the one line
-                # the row's samples share, widened by rounding's share so no sample on the outline is left out
-                y = row_y[r]
-                left, right = _row_span(cx, cy, edges, y if y == y else y0 + r, y if y == y else y0 + r + 1.0)
-                if left > right:
-                    continue
-                pad = 1e-9 * (1.0 + abs(left) + abs(right))
-                c_lo = int(max(np.floor(left - pad) - x0, 0.0))
-                c_hi = int(min(np.floor(right + pad) - x0, width - 1.0))
-                if c_lo <= c_hi:
-                    _cover_run(samples, start[r * width + c_lo], start[r * width + c_hi + 1], y, edges, nx, ny, nz,
-                               nd0, f, nearest, face)
+        _draw(f, corners, poly, nx, ny, nz, nd0, samples, x0, y0, width, height, start, row_y, nearest, face, cx, cy,
+              edges)
 
 
 @kernel
