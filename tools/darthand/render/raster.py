@@ -386,10 +386,10 @@ def _hidden(f, faces, xy, depth, tiles, x0, y0, width, height):
 
 @inlined(always=True)
 def _draw(f, corners, poly, nx, ny, nz, nd0, samples, x0, y0, width, height, start, row_y, nearest, face, cx, cy,
-          edges):
+          edges, hidden):
     """Face f's part in front (poly (4, 2), `corners` of them, fanned into triangles) over the samples: each
     triangle visits, row by row of pixels, only the columns its outline spans in that row (cx, cy (3,), edges
-    (3, 6): scratch)."""
+    (3, 6): scratch), but for a row whose samples are all nearer than `hidden` (_hidden_depth's, or 0)."""
     for fan in range(corners - 2):
         for k in range(3):
             corner = 0 if k == 0 else fan + k
@@ -417,9 +417,16 @@ def _draw(f, corners, poly, nx, ny, nz, nd0, samples, x0, y0, width, height, sta
             pad = 1e-9 * (1.0 + abs(left) + abs(right))
             c_lo = int(max(np.floor(left - pad) - x0, 0.0))
             c_hi = int(min(np.floor(right + pad) - x0, width - 1.0))
-            if c_lo <= c_hi:
-                _cover_run(samples, start[r * width + c_lo], start[r * width + c_hi + 1], y, edges, nx, ny, nz, nd0,
-                           f, nearest, face)
+            if c_lo > c_hi:
+                continue
+            a, b = start[r * width + c_lo], start[r * width + c_hi + 1]
+            if hidden > 0.0:
+                farthest = -np.inf
+                for j in range(a, b):
+                    farthest = max(farthest, nearest[j])
+                if farthest < hidden:
+                    continue
+            _cover_run(samples, a, b, y, edges, nx, ny, nz, nd0, f, nearest, face)
 
 
 @kernel(error_model="numpy")
@@ -433,11 +440,11 @@ def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, samples, 
     a triangle or a quad, fanned into triangles); one wholly behind is skipped.
 
     The outcome does not depend on the order (each sample keeps the least depth, then the least face), so the
-    faces turned away from the camera (_hidden_depth) are drawn last, and only where their box holds a sample
-    farther than their nearest corner: on a closed surface those turned toward it already hide most of them. Only
-    for pixel centres (some row_y known): edge sub-samples lie on outlines, where a tile rarely hides a face (it
-    measured slower there), and so did also drawing last the faces turned toward the camera beyond a quarter of the
-    depth range."""
+    faces turned away from the camera (_hidden_depth) are drawn last, and only where their box, then each row of
+    their outline, holds a sample farther than their nearest corner: on a closed surface those turned toward it
+    already hide most of them. Only for pixel centres (some row_y known): edge sub-samples lie on outlines, where a
+    tile rarely hides a face (it measured slower there, and so did also drawing last the faces turned toward the
+    camera beyond a quarter of the depth range)."""
     edges = np.empty((3, 6))             # _edge_functions'
     cx, cy = np.empty(3), np.empty(3)
     poly = np.empty((4, 2))              # the face's part in front of `near`, projected
@@ -469,7 +476,7 @@ def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, samples, 
                 n_later += 1
                 continue
         _draw(f, corners, poly, nx, ny, nz, nd0, samples, x0, y0, width, height, start, row_y, nearest, face, cx, cy,
-              edges)
+              edges, later_depth[m - n] if m >= n else 0.0)
 
 
 @kernel
