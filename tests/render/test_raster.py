@@ -125,6 +125,36 @@ def test_a_nearer_square_hides_a_farther_one(rasterising):
         assert np.allclose(hits.depth[in_near], 1.5, rtol=1e-6)
 
 
+def test_faces_turned_away_are_seen_wherever_nothing_nearer_hides_them(rasterising):
+    """Faces turned away from the camera are drawn last, and skipped where the samples around them are already
+    nearer (raster._hidden_depth): a square turned away in front of one facing the camera, wholly inside its
+    outline, is seen; one behind it is seen only outside it, and a small one wholly behind it is not seen; in
+    closed form, on pixel centres and on sub-samples."""
+    from darthand.render.aa import sample_offsets
+
+    cam = down_camera()
+
+    def away(sq):                        # the same square wound the other way: its normal points down, away
+        return surface(sq.vertices, sq.faces[:, ::-1])
+
+    squares = [((-1.0, 0.5, -1.0, 0.5), 0.0, False), ((-0.25, 1.0, -0.25, 1.0), -0.5, True),
+               ((-0.6, -0.2, -0.6, -0.2), -0.5, True), ((-0.55, -0.1, -0.55, 0.1), 0.5, True)]
+    surfaces = [away(square(*box, z=z)) if turned else square(*box, z=z) for box, z, turned in squares]
+    centres = trace.pixel_centres(0, 64, 0, 64)
+    for uv in (centres, (centres[:, None, :] + sample_offsets(4)[None]).reshape(-1, 2)):
+        hits = trace.intersect_samples(context(subject(*surfaces), cam), uv)
+        expected, nearest = np.full(len(uv), -1), np.full(len(uv), np.inf)
+        for k, ((x0, x1, y0, y1), z, _) in enumerate(squares):
+            focal = 32 / (2.0 - z)                                  # image x = 32 + focal X, y = 32 - focal Y
+            inside = (uv[:, 0] > 32 + focal * x0) & (uv[:, 0] < 32 + focal * x1) & \
+                     (uv[:, 1] > 32 - focal * y1) & (uv[:, 1] < 32 - focal * y0)
+            wins = inside & (2.0 - z < nearest)
+            expected[wins], nearest[wins] = k, 2.0 - z
+        assert {0, 1, 3} <= set(np.unique(expected)) and not (expected == 2).any()
+        assert np.array_equal(hits.geom, expected)
+        assert np.allclose(hits.depth[expected >= 0], nearest[expected >= 0], rtol=1e-6)
+
+
 def test_a_posed_hand_with_a_ring_and_its_arm_as_embree_sees_it(assets, ring):
     """Every pixel centre and the four sub-samples of every pixel of a 128^2 frame: the same surface and face as
     Embree's camera rays on 99.9 % of them; where they agree, u, v and relative depth within 1e-4 (on 99.9 %: on

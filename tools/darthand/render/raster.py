@@ -36,12 +36,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from darthand.jit import kernel
+from darthand.jit import inlined, kernel
 from darthand.render.camera import Camera
 from darthand.render.scene import Scene
 
 ENABLED = True           # rasterise camera samples (trace.intersect_samples); off: Embree's (tests, benchmarks)
 NEAR = 1e-9              # metres of camera z: faces are clipped there (trace.touched_tiles' limit)
+TINY = 5e-324            # the smallest positive double: e > 0 is e >= TINY
+HIDDEN_MARGIN = 1e-3     # share of depth below a face's nearest corner that rounding cannot reach (_hidden_depth)
+TILE = 8                 # pixels: the blocks whose farthest sample decides whether a face is hidden
 
 
 def camera_hits(scene: Scene, camera: Camera, uv: np.ndarray, directions: np.ndarray) -> tuple | None:
@@ -218,6 +221,214 @@ def _face_order_kernel(xy, faces, y0, height, order):
         count[rows[f]] += 1
 
 
+@inlined(always=True)
+def _cover_run(samples, a, b, y, edges, nx, ny, nz, nd0, f, nearest, face):
+    """Columns a .. b - 1 of a SampleGrid's samples (5, N) against one triangle: its edges (3, 6) (p, the inside-
+    signed q - p, the tie threshold), its plane (normal nx, ny, nz; nd0 the normal's dot with a corner from the ray
+    origin) and index f. A covered sample whose ray meets the plane nearer than nearest[j] (N,), or as near and
+    f < face[j] (N,), takes it. y: the run's shared sample y, or NaN (each sample's own)."""
+    p0x, p0y, d0x, d0y, h0 = edges[0, 0], edges[0, 1], edges[0, 2], edges[0, 3], edges[0, 4]
+    p1x, p1y, d1x, d1y, h1 = edges[1, 0], edges[1, 1], edges[1, 2], edges[1, 3], edges[1, 4]
+    p2x, p2y, d2x, d2y, h2 = edges[2, 0], edges[2, 1], edges[2, 2], edges[2, 3], edges[2, 4]
+    y0, y1, y2 = d0x * (y - p0y), d1x * (y - p1y), d2x * (y - p2y)
+    xs, ys = samples[0], samples[1]
+    for j in range(a, b):
+        if y == y:                   # the same products as below: ys[j] is y
+            e0 = y0 - d0y * (xs[j] - p0x)
+            e1 = y1 - d1y * (xs[j] - p1x)
+            e2 = y2 - d2y * (xs[j] - p2x)
+        else:
+            e0 = d0x * (ys[j] - p0y) - d0y * (xs[j] - p0x)
+            e1 = d1x * (ys[j] - p1y) - d1y * (xs[j] - p1x)
+            e2 = d2x * (ys[j] - p2y) - d2y * (xs[j] - p2x)
+        # no branch on the (unpredictable) coverage: a sample the face does not cover, or whose ray runs in its
+        # plane (nd = 0, divided by 1 instead), keeps what it had
+        nd = nx * samples[2, j] + ny * samples[3, j] + nz * samples[4, j]
+        t = nd0 / (nd if nd != 0.0 else 1.0)
+        best, held = nearest[j], face[j]
+        better = (e0 >= h0) & (e1 >= h1) & (e2 >= h2) & (nd != 0.0) & ((t < best) | ((t == best) & (f < held)))
+        nearest[j] = t if better else best
+        face[j] = f if better else held
+
+
+@inlined(always=True)
+def _front_part(f, faces, xy, z, vertices, P, near, poly, X):
+    """The number of corners (0, 3 or 4) of face f's part in front of `near`, projected, written to poly (4, 2):
+    its corners in front and the points where its edges cross `near` (X (3,) scratch); 0 when it is wholly behind
+    (no camera ray, t > near, reaches it)."""
+    ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
+    if max(z[ia], z[ib], z[ic]) <= near:
+        return 0
+    corners = 0
+    for k in range(3):
+        a, b = faces[f, k], faces[f, (k + 1) % 3]
+        if z[a] > near:
+            poly[corners, 0], poly[corners, 1] = xy[a, 0], xy[a, 1]
+            corners += 1
+        if (z[a] > near) != (z[b] > near):
+            # where the edge crosses `near`, from its endpoints in index order (the same point for both faces)
+            ea, eb = min(a, b), max(a, b)
+            w = (near - z[ea]) / (z[eb] - z[ea])
+            for c in range(3):
+                X[c] = np.float64(vertices[ea, c]) + w * (np.float64(vertices[eb, c]) - vertices[ea, c])
+            depth = P[2, 0] * X[0] + P[2, 1] * X[1] + P[2, 2] * X[2] + P[2, 3]
+            poly[corners, 0] = (P[0, 0] * X[0] + P[0, 1] * X[1] + P[0, 2] * X[2] + P[0, 3]) / depth
+            poly[corners, 1] = (P[1, 0] * X[0] + P[1, 1] * X[1] + P[1, 2] * X[2] + P[1, 3]) / depth
+            corners += 1
+    return corners
+
+
+@inlined(always=True)
+def _edge_functions(cx, cy, turn, edges):
+    """edges (3, 6) of the triangle (cx, cy) (3,) wound `turn` (the sign of its doubled area): per edge k (corner k
+    to k + 1) p (x, y) and q - p (x, y), the endpoints in canonical order (the smaller point first: both faces of a
+    shared edge compute the same function) and q - p times the inside sign (negating both factors negates the
+    function exactly, so the inside is where it is positive); the tie threshold (0: the edge claims samples on it
+    by the top-left rule, e >= 0; TINY: e > 0); and dx/dy (0 for a level edge), for the row spans."""
+    for k in range(3):
+        ax, ay, bx, by = cx[k], cy[k], cx[(k + 1) % 3], cy[(k + 1) % 3]
+        first = ax < bx or (ax == bx and ay < by)
+        px, py, qx, qy = (ax, ay, bx, by) if first else (bx, by, ax, ay)
+        sign = turn if first else -turn
+        edges[k, 0], edges[k, 1], edges[k, 2], edges[k, 3] = px, py, sign * (qx - px), sign * (qy - py)
+        # top-left: the edge as the face winds it clockwise on screen (y down) goes up, or right when level
+        dx, dy = turn * (bx - ax), turn * (by - ay)
+        edges[k, 4] = 0.0 if dy < 0 or (dy == 0 and dx > 0) else TINY
+        edges[k, 5] = (bx - ax) / (by - ay) if ay != by else 0.0
+
+
+@inlined(always=True)
+def _row_span(cx, cy, edges, band_lo, band_hi):
+    """(left, right) pixel x of the triangle (cx, cy) (3,)'s outline between the lines y = band_lo and band_hi
+    (band_lo <= band_hi): its corners in the band and its edges' crossings of the two lines (edges[:, 5] their
+    dx/dy); left > right when it misses the band."""
+    left, right = np.inf, -np.inf
+    for k in range(3):
+        ax, ay, by = cx[k], cy[k], cy[(k + 1) % 3]
+        if band_lo <= ay <= band_hi:
+            left, right = min(left, ax), max(right, ax)
+        if ay != by:
+            lo, hi = min(ay, by), max(ay, by)
+            if lo <= band_lo <= hi:
+                x = ax + (band_lo - ay) * edges[k, 5]
+                left, right = min(left, x), max(right, x)
+            if band_hi != band_lo and lo <= band_hi <= hi:
+                x = ax + (band_hi - ay) * edges[k, 5]
+                left, right = min(left, x), max(right, x)
+    return left, right
+
+
+@inlined(always=True)
+def _plane(f, faces, vertices, origin):
+    """(nx, ny, nz, nd0): face f's normal (e1 x e2 of its float32 world corners, in float64) and its dot with the
+    first corner from the ray origin (3,): a ray o + t d meets the plane at t = nd0 / (n . d)."""
+    ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
+    ox, oy, oz = np.float64(vertices[ia, 0]), np.float64(vertices[ia, 1]), np.float64(vertices[ia, 2])
+    e1x, e1y, e1z = vertices[ib, 0] - ox, vertices[ib, 1] - oy, vertices[ib, 2] - oz
+    e2x, e2y, e2z = vertices[ic, 0] - ox, vertices[ic, 1] - oy, vertices[ic, 2] - oz
+    nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+    return nx, ny, nz, nx * (ox - origin[0]) + ny * (oy - origin[1]) + nz * (oz - origin[2])
+
+
+@inlined(always=True)
+def _hidden_depth(f, faces, vertices, z, origin, nx, ny, nz, nd0):
+    """A camera z (metres) below the depth t any sample face f covers can compute, for a face turned away from the
+    camera (nd0 > 0) that is neither seen edge-on nor near the camera; 0 for any other face (drawn at once).
+
+    A covered sample's exact ray (from the camera centre through its position) meets the plane inside the face, at
+    a camera z between the corners'; the computed t differs by the float32 rounding of the ray's direction (5e-7
+    of it; the plane's distance from the origin at least 5 % of the farthest corner's: at most 1e-5 of t) and of
+    the origin (6e-8 of |origin|; the corners' z and the plane's distance at least 1 cm + 1 % of |origin|: at most
+    1e-5 of t), which move the hit at most 1e-4 of t off the face: HIDDEN_MARGIN is ten times all that."""
+    zmin = min(z[faces[f, 0]], z[faces[f, 1]], z[faces[f, 2]])
+    reach = 1e-2 * (1.0 + np.sqrt(origin[0] ** 2 + origin[1] ** 2 + origin[2] ** 2))
+    if nd0 <= 0.0 or zmin < reach:
+        return 0.0
+    far = 0.0
+    for k in range(3):
+        v = faces[f, k]
+        far = max(far, (vertices[v, 0] - origin[0]) ** 2 + (vertices[v, 1] - origin[1]) ** 2
+                  + (vertices[v, 2] - origin[2]) ** 2)
+    distance = nd0 / np.sqrt(nx * nx + ny * ny + nz * nz)
+    if distance < reach or distance * distance < 0.0025 * far:
+        return 0.0
+    return zmin * (1.0 - HIDDEN_MARGIN)
+
+
+@inlined(always=True)
+def _tile_maxima(nearest, start, width, height, tiles):
+    """tiles (ceil(height / TILE), ceil(width / TILE)): the largest nearest (N,) of the samples in each TILE x TILE
+    block of a SampleGrid's box (start: its pixels' columns), -inf for a block without samples."""
+    tiles[:] = -np.inf
+    for r in range(height):
+        for c in range(tiles.shape[1]):
+            most = tiles[r // TILE, c]
+            for j in range(start[r * width + c * TILE], start[r * width + min((c + 1) * TILE, width)]):
+                most = max(most, nearest[j])
+            tiles[r // TILE, c] = most
+
+
+@inlined(always=True)
+def _hidden(f, faces, xy, depth, tiles, x0, y0, width, height):
+    """Whether every sample in the box of face f's corners (xy (V, 2) pixel positions; all in front of the camera) is
+    nearer than `depth` (tiles: _tile_maxima's)."""
+    ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
+    r_lo = max(np.floor(min(xy[ia, 1], xy[ib, 1], xy[ic, 1])) - y0, 0.0)
+    r_hi = min(np.floor(max(xy[ia, 1], xy[ib, 1], xy[ic, 1])) - y0, height - 1.0)
+    c_lo = max(np.floor(min(xy[ia, 0], xy[ib, 0], xy[ic, 0])) - x0, 0.0)
+    c_hi = min(np.floor(max(xy[ia, 0], xy[ib, 0], xy[ic, 0])) - x0, width - 1.0)
+    for tr in range(int(r_lo) // TILE, int(r_hi) // TILE + 1):
+        for tc in range(int(c_lo) // TILE, int(c_hi) // TILE + 1):
+            if not tiles[tr, tc] < depth:
+                return False
+    return True
+
+
+@inlined(always=True)
+def _draw(f, corners, poly, nx, ny, nz, nd0, samples, x0, y0, width, height, start, row_y, nearest, face, cx, cy,
+          edges, hidden):
+    """Face f's part in front (poly (4, 2), `corners` of them, fanned into triangles) over the samples: each
+    triangle visits, row by row of pixels, only the columns its outline spans in that row (cx, cy (3,), edges
+    (3, 6): scratch), but for a row whose samples are all nearer than `hidden` (_hidden_depth's, or 0)."""
+    for fan in range(corners - 2):
+        for k in range(3):
+            corner = 0 if k == 0 else fan + k
+            cx[k], cy[k] = poly[corner, 0], poly[corner, 1]
+        area = (cx[1] - cx[0]) * (cy[2] - cy[0]) - (cy[1] - cy[0]) * (cx[2] - cx[0])
+        if area == 0.0 or not np.isfinite(area):
+            continue
+        r_lo = max(np.floor(min(cy[0], cy[1], cy[2])) - y0, 0.0)
+        r_hi = min(np.floor(max(cy[0], cy[1], cy[2])) - y0, height - 1.0)
+        box_lo = max(np.floor(min(cx[0], cx[1], cx[2])) - x0, 0.0)
+        box_hi = min(np.floor(max(cx[0], cx[1], cx[2])) - x0, width - 1.0)
+        if r_lo > r_hi or box_lo > box_hi:
+            continue
+        b_lo, b_hi = int(box_lo), int(box_hi) + 1
+        _edge_functions(cx, cy, 1.0 if area > 0 else -1.0, edges)
+        for r in range(int(r_lo), int(r_hi) + 1):
+            if start[r * width + b_lo] == start[r * width + b_hi]:
+                continue                 # no sample in this row of the face's box (edge sub-samples are sparse)
+            # the outline's columns in this row of pixels: between the band's two lines, or on the one line the
+            # row's samples share, widened by rounding's share so no sample on the outline is left out
+            y = row_y[r]
+            left, right = _row_span(cx, cy, edges, y if y == y else y0 + r, y if y == y else y0 + r + 1.0)
+            if left > right:
+                continue
+            pad = 1e-9 * (1.0 + abs(left) + abs(right))
+            c_lo = int(max(np.floor(left - pad) - x0, 0.0))
+            c_hi = int(min(np.floor(right + pad) - x0, width - 1.0))
+            if c_lo > c_hi:
+                continue
+            a, b = start[r * width + c_lo], start[r * width + c_hi + 1]
+            if hidden > 0.0:
+                farthest = -np.inf
+                for j in range(a, b):
+                    farthest = max(farthest, nearest[j])
+                if farthest < hidden:
+                    continue
+            _cover_run(samples, a, b, y, edges, nx, ny, nz, nd0, f, nearest, face)
+
+
 @kernel(error_model="numpy")
 def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, samples, x0, y0, width, height, start, row_y,
                   nearest, face):
@@ -226,114 +437,46 @@ def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, samples, 
     face covers a sample (edge functions, top-left rule) and its plane is nearer along the sample's ray (from
     origin (3,)) than nearest[j] (float64, per grid row), or as near and a lower face, the sample takes it
     (nearest, face (N,) int64). A face with corners at or behind `near` is clipped there first (its part in front,
-    a triangle or a quad, fanned into triangles); one wholly behind is skipped. A triangle visits, row by row of
-    pixels, only the columns its outline spans in that row."""
-    edges = np.empty((3, 6))             # per edge: p (x, y), q - p (x, y), inside sign, claims ties (1 or 0)
-    cx = np.empty(3)
-    cy = np.empty(3)
+    a triangle or a quad, fanned into triangles); one wholly behind is skipped.
+
+    The outcome does not depend on the order (each sample keeps the least depth, then the least face), so the
+    faces turned away from the camera (_hidden_depth) are drawn last, and only where their box, then each row of
+    their outline, holds a sample farther than their nearest corner: on a closed surface those turned toward it
+    already hide most of them. Only for pixel centres (some row_y known): edge sub-samples lie on outlines, where a
+    tile rarely hides a face (it measured slower there, and so did also drawing last the faces turned toward the
+    camera beyond a quarter of the depth range)."""
+    edges = np.empty((3, 6))             # _edge_functions'
+    cx, cy = np.empty(3), np.empty(3)
     poly = np.empty((4, 2))              # the face's part in front of `near`, projected
     X = np.empty(3)
-    for m in range(face_order.shape[0]):
-        f = face_order[m]
-        ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
-        if max(z[ia], z[ib], z[ic]) <= near:
-            continue                     # wholly behind: no camera ray (t > near) reaches it
-        corners = 0
-        for k in range(3):
-            a, b = faces[f, k], faces[f, (k + 1) % 3]
-            if z[a] > near:
-                poly[corners, 0], poly[corners, 1] = xy[a, 0], xy[a, 1]
-                corners += 1
-            if (z[a] > near) != (z[b] > near):
-                # where the edge crosses `near`, from its endpoints in index order (the same point for both faces)
-                ea, eb = min(a, b), max(a, b)
-                w = (near - z[ea]) / (z[eb] - z[ea])
-                for c in range(3):
-                    X[c] = np.float64(vertices[ea, c]) + w * (np.float64(vertices[eb, c]) - vertices[ea, c])
-                depth = P[2, 0] * X[0] + P[2, 1] * X[1] + P[2, 2] * X[2] + P[2, 3]
-                poly[corners, 0] = (P[0, 0] * X[0] + P[0, 1] * X[1] + P[0, 2] * X[2] + P[0, 3]) / depth
-                poly[corners, 1] = (P[1, 0] * X[0] + P[1, 1] * X[1] + P[1, 2] * X[2] + P[1, 3]) / depth
-                corners += 1
-        ox, oy, oz = np.float64(vertices[ia, 0]), np.float64(vertices[ia, 1]), np.float64(vertices[ia, 2])
-        e1x, e1y, e1z = vertices[ib, 0] - ox, vertices[ib, 1] - oy, vertices[ib, 2] - oz
-        e2x, e2y, e2z = vertices[ic, 0] - ox, vertices[ic, 1] - oy, vertices[ic, 2] - oz
-        nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
-        nd0 = nx * (ox - origin[0]) + ny * (oy - origin[1]) + nz * (oz - origin[2])
-        for fan in range(corners - 2):
-            for k in range(3):
-                corner = 0 if k == 0 else fan + k
-                cx[k], cy[k] = poly[corner, 0], poly[corner, 1]
-            area = (cx[1] - cx[0]) * (cy[2] - cy[0]) - (cy[1] - cy[0]) * (cx[2] - cx[0])
-            if area == 0.0 or not np.isfinite(area):
+    n = face_order.shape[0]
+    later, later_depth = np.empty(n, np.int64), np.empty(n)     # the faces drawn last, their _hidden_depth
+    n_later = 0
+    dense = not np.isnan(row_y).all()   # pixel centres; edge sub-samples lie where tiles rarely hide a face
+    tiles = np.empty(((height + TILE - 1) // TILE, (width + TILE - 1) // TILE))
+    for m in range(n + n):
+        if m < n:
+            f = face_order[m]
+        elif m - n < n_later:
+            if m == n:
+                _tile_maxima(nearest, start, width, height, tiles)
+            f = later[m - n]
+            if _hidden(f, faces, xy, later_depth[m - n], tiles, x0, y0, width, height):
                 continue
-            top, bottom = min(cy[0], cy[1], cy[2]), max(cy[0], cy[1], cy[2])
-            r_lo = max(np.floor(top) - y0, 0.0)
-            r_hi = min(np.floor(bottom) - y0, height - 1.0)
-            box_lo = max(np.floor(min(cx[0], cx[1], cx[2])) - x0, 0.0)
-            box_hi = min(np.floor(max(cx[0], cx[1], cx[2])) - x0, width - 1.0)
-            if r_lo > r_hi or box_lo > box_hi:
+        else:
+            break
+        corners = _front_part(f, faces, xy, z, vertices, P, near, poly, X)
+        if corners == 0:
+            continue
+        nx, ny, nz, nd0 = _plane(f, faces, vertices, origin)
+        if m < n and dense:
+            depth = _hidden_depth(f, faces, vertices, z, origin, nx, ny, nz, nd0)
+            if depth > 0.0:
+                later[n_later], later_depth[n_later] = f, depth
+                n_later += 1
                 continue
-            b_lo, b_hi = int(box_lo), int(box_hi) + 1
-            turn = 1.0 if area > 0 else -1.0
-            for k in range(3):
-                ax, ay, bx, by = cx[k], cy[k], cx[(k + 1) % 3], cy[(k + 1) % 3]
-                # canonical order (the smaller point first): both faces of a shared edge compute the same function
-                first = ax < bx or (ax == bx and ay < by)
-                px, py, qx, qy = (ax, ay, bx, by) if first else (bx, by, ax, ay)
-                edges[k, 0], edges[k, 1], edges[k, 2], edges[k, 3] = px, py, qx - px, qy - py
-                edges[k, 4] = turn if first else -turn
-                # top-left: the edge as the face winds it clockwise on screen (y down) goes up, or right when level
-                dx, dy = turn * (bx - ax), turn * (by - ay)
-                edges[k, 5] = 1.0 if dy < 0 or (dy == 0 and dx > 0) else 0.0
-            p0x, p0y, d0x, d0y, s0 = edges[0, 0], edges[0, 1], edges[0, 2], edges[0, 3], edges[0, 4]
-            p1x, p1y, d1x, d1y, s1 = edges[1, 0], edges[1, 1], edges[1, 2], edges[1, 3], edges[1, 4]
-            p2x, p2y, d2x, d2y, s2 = edges[2, 0], edges[2, 1], edges[2, 2], edges[2, 3], edges[2, 4]
-            t0, t1, t2 = edges[0, 5] > 0, edges[1, 5] > 0, edges[2, 5] > 0
-            for r in range(int(r_lo), int(r_hi) + 1):
-                if start[r * width + b_lo] == start[r * width + b_hi]:
-                    continue                 # no sample in this row of the face's box (edge sub-samples are sparse)
-                # the outline's columns in this row of pixels: its corners in the band and its edges' crossings of
-                # the band's two lines (one line when the row's samples share their y), widened by rounding's share
-                # so no sample on the outline is left out
-                band_lo, band_hi = np.float64(y0 + r), np.float64(y0 + r + 1)
-                if row_y[r] == row_y[r]:
-                    band_lo, band_hi = row_y[r], row_y[r]
-                left, right = np.inf, -np.inf
-                for k in range(3):
-                    ax, ay, bx, by = cx[k], cy[k], cx[(k + 1) % 3], cy[(k + 1) % 3]
-                    if band_lo <= ay <= band_hi:
-                        left, right = min(left, ax), max(right, ax)
-                    if ay != by:
-                        lo, hi = min(ay, by), max(ay, by)
-                        if lo <= band_lo <= hi:
-                            x = ax + (band_lo - ay) * (bx - ax) / (by - ay)
-                            left, right = min(left, x), max(right, x)
-                        if lo <= band_hi <= hi:
-                            x = ax + (band_hi - ay) * (bx - ax) / (by - ay)
-                            left, right = min(left, x), max(right, x)
-                if left > right:
-                    continue
-                pad = 1e-9 * (1.0 + abs(left) + abs(right))
-                c_lo = int(max(np.floor(left - pad) - x0, 0.0))
-                c_hi = int(min(np.floor(right + pad) - x0, width - 1.0))
-                if c_lo > c_hi:
-                    continue
-                row = r * width
-                xs, ys = samples[0], samples[1]
-                for j in range(start[row + c_lo], start[row + c_hi + 1]):
-                    # no branch on the (unpredictable) coverage: a sample the face does not cover, or whose ray
-                    # runs in its plane (nd = 0, divided by 1 instead), keeps what it had
-                    e0 = d0x * (ys[j] - p0y) - d0y * (xs[j] - p0x)
-                    e1 = d1x * (ys[j] - p1y) - d1y * (xs[j] - p1x)
-                    e2 = d2x * (ys[j] - p2y) - d2y * (xs[j] - p2x)
-                    inside = (((e0 * s0 > 0) | ((e0 == 0) & t0)) & ((e1 * s1 > 0) | ((e1 == 0) & t1))
-                              & ((e2 * s2 > 0) | ((e2 == 0) & t2)))
-                    nd = nx * samples[2, j] + ny * samples[3, j] + nz * samples[4, j]
-                    t = nd0 / (nd if nd != 0.0 else 1.0)
-                    best, held = nearest[j], face[j]
-                    better = inside & (nd != 0.0) & ((t < best) | ((t == best) & (f < held)))
-                    nearest[j] = t if better else best
-                    face[j] = f if better else held
+        _draw(f, corners, poly, nx, ny, nz, nd0, samples, x0, y0, width, height, start, row_y, nearest, face, cx, cy,
+              edges, later_depth[m - n] if m >= n else 0.0)
 
 
 @kernel
