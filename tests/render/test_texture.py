@@ -388,6 +388,78 @@ def test_lookups_match_the_definition_on_random_uvs_and_levels(shape, coded):
     assert np.isfinite(tex.sample(uv[:, :4], np.full(4, np.nan, np.float32))).all()
 
 
+def numpy_lookup(tex: MipTexture, uv: np.ndarray, lod: np.ndarray, band: float) -> np.ndarray:
+    """(C, N) float32 lookups written in numpy from the definition, float32 arithmetic in the documented order
+    (MipTexture.sample; texture._lookup_kernel): x = u W - 1/2, y = (1 - v) H - 1/2, fx = x - floor(x), the four
+    texels clamped to the edge (8-bit codes decoded through the table first), top = (b - a) fx + a, bottom likewise,
+    value = (bottom - top) fy + top; the other level blended in as value + (other - value) t. The level: NaN and
+    negative read 0, clamped to the last; frac = lod - floor(lod) (float64), the nearer level rounding half up,
+    w = clip((frac - (1/2 - band)) / (2 band), 0, 1) (float64), blended where 0 < w < 1 below the last level."""
+    last = len(tex.levels) - 1
+    level = np.minimum(np.where(lod > 0, lod, np.float32(0)), np.float32(last))
+    base = np.floor(level).astype(np.int64)
+    frac = level.astype(np.float64) - base
+    near = np.where(frac < 0.5, base, np.minimum(base + 1, last))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = np.clip((frac - (0.5 - np.float64(band))) / (2 * np.float64(band)), 0.0, 1.0)
+    blend = (band > 0) & (base < last) & (w > 0) & (w < 1)
+    other = np.where(frac < 0.5, base + 1, base)
+    t = np.where(frac < 0.5, w, 1 - w).astype(np.float32)
+
+    def bilinear(k: np.ndarray) -> np.ndarray:
+        out = np.zeros((tex.channels, len(k)), np.float32)
+        for level_k in np.unique(k):
+            at = k == level_k
+            stored = tex.texels(int(level_k))
+            h, wd = stored.shape[:2]
+            x = uv[0, at] * np.float32(wd) - np.float32(0.5)
+            y = (np.float32(1) - uv[1, at]) * np.float32(h) - np.float32(0.5)
+            x0, y0 = np.floor(x), np.floor(y)
+            fx, fy = x - x0, y - y0
+            xi = np.clip(x0, -1, wd).astype(np.int64)
+            yi = np.clip(y0, -1, h).astype(np.int64)
+            xa, xb = np.clip(xi, 0, wd - 1), np.clip(xi + 1, 0, wd - 1)
+            ya, yb = np.clip(yi, 0, h - 1), np.clip(yi + 1, 0, h - 1)
+            for c in range(tex.channels):
+                texel = stored[..., c] if tex.decode is None else tex.decode[c][stored[..., c]]
+                a, b, cc, d = texel[ya, xa], texel[ya, xb], texel[yb, xa], texel[yb, xb]
+                top = (b - a) * fx + a
+                bottom = (d - cc) * fx + cc
+                out[c, at] = (bottom - top) * fy + top
+        return out
+
+    value = bilinear(near)
+    second = bilinear(np.where(blend, other, near))
+    return np.where(blend, value + (second - value) * t, value)
+
+
+@pytest.mark.parametrize("shape,coded", [((37, 64, 4), True), ((64, 37, 4), False), ((1, 1, 3), True),
+                                          ((1, 9, 2), False), ((16, 16, 5), True), ((33, 20, 4), True)])
+def test_lookups_are_the_numpy_definition_to_the_bit(shape, coded):
+    """The compiled lookup (sample and bilinear) gives the float32 numpy definition's bits: one level and two,
+    uv far outside [0, 1] and on texel centres and edges (the edge clamp, coordinates past the int range), levels
+    below 0, past the last, NaN and on the blend band's edges, 8-bit and float storage, 2 to 5 channels."""
+    rng = np.random.default_rng(sum(shape) + coded)
+    h, w, c = shape
+    if coded:
+        tex = code_pyramid(random_codes(h, w, c, seed=3), colour=min(3, c))
+        tex = tex.with_decode(decode_tables(c, min(3, c), offset=0.04))
+    else:
+        tex = MipTexture(mip_levels(rng.standard_normal((h, w, c)).astype(np.float32)))
+    n = 4000
+    uv = rng.uniform(-0.3, 1.3, (2, n)).astype(np.float32)
+    uv[:, :800] = (np.round(uv[:, :800] * 4 * max(h, w)) / (4 * max(h, w))).astype(np.float32)
+    uv[:, 800:840] = rng.choice(np.float32([-1e20, -1e12, 1e12, 1e20]), (2, 40))
+    last = len(tex.levels) - 1
+    lod = rng.uniform(-1, last + 1, n).astype(np.float32)
+    lod[:1000] = np.round(lod[:1000] * 8) / 8
+    lod[1000:1010] = np.nan
+    for band in (texture_module.BLEND, 0.0):
+        got = tex.sample(uv, lod) if band else tex.bilinear(uv, np.floor(np.where(lod > 0, lod, 0) + 0.5))
+        want = numpy_lookup(tex, uv, lod if band else np.floor(np.where(lod > 0, lod, 0) + 0.5), band)
+        assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+
+
 def test_file_key_is_the_resolved_path_and_follows_a_moved_symlink(tmp_path, monkeypatch):
     """_file_key keeps each path's resolution (one stat a frame) and gives what Path.resolve and stat give, also
     for a relative path and for a symlink moved to another file."""

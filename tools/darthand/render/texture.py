@@ -38,7 +38,7 @@ import OpenImageIO as oiio
 from darthand.budget import check_memory
 from darthand.errors import InputError
 from darthand.fileio import regular_file
-from darthand.jit import kernel
+from darthand.jit import inlined, kernel
 from darthand.render.png import Png8, open_png8
 from darthand.textures.color import srgb8_table, srgb_to_linear
 
@@ -220,53 +220,98 @@ def _lookup_kernel(flat, decode, offsets, heights, widths, uv, lod, band, out):
     centres (c + 0.5) / W_k, 1 - (r + 0.5) / H_k, clamped to the edge; where frac(lod) is within `band` of 0.5 the
     other level's bilinear value is blended in, with weight rising linearly across the band. Float32 arithmetic in
     the order of the numpy lookup it replaced (uv * W - 0.5; top = a + (b - a) fx; ...), so the values are the
-    same to the bit."""
+    same to the bit. Indices are unsigned (no negative-index wraparound to test) into the flat storage and
+    tables (_level_table, _corners); both levels' corners are found before any texel is read."""
     n = uv.shape[1]
     channels = flat.shape[1]
+    values = flat.reshape(-1)
+    table = None if decode is None else decode.reshape(-1)
+    sizes, starts = _level_table(offsets, heights, widths, channels)
     last = len(offsets) - 1
-    half, one = np.float32(0.5), np.float32(1.0)
+    lo, span = 0.5 - band, 2 * band
+    one = np.float32(1.0)
     for i in range(n):
-        level = lod[i]
-        if not level > 0:                           # also NaN
-            level = np.float32(0.0)
-        if level > last:
-            level = np.float32(last)
-        base = int(np.floor(level))
-        frac = float(level) - base
-        near = base if frac < 0.5 else min(base + 1, last)
-        t = np.float32(0.0)
-        other = near
-        if band > 0 and base < last:
-            w = min(max((frac - (0.5 - band)) / (2 * band), 0.0), 1.0)
-            if 0 < w < 1:
-                other, t = (base + 1, np.float32(w)) if frac < 0.5 else (base, np.float32(1 - w))
-        for step in range(2 if t > 0 else 1):
-            k = near if step == 0 else other
-            w_k, h_k = widths[k], heights[k]
-            x = uv[0, i] * np.float32(w_k) - half
-            y = (one - uv[1, i]) * np.float32(h_k) - half
-            x0, y0 = np.floor(x), np.floor(y)
-            fx, fy = x - x0, y - y0
-            # clamp in float first: the int conversion of a NaN or huge coordinate is undefined
-            xi = int(min(max(x0, np.float32(-1)), np.float32(w_k)))
-            yi = int(min(max(y0, np.float32(-1)), np.float32(h_k)))
-            xa, xb = min(max(xi, 0), w_k - 1), min(max(xi + 1, 0), w_k - 1)
-            row_a = offsets[k] + min(max(yi, 0), h_k - 1) * w_k
-            row_b = offsets[k] + min(max(yi + 1, 0), h_k - 1) * w_k
+        near, other, t = _level_pair(lod[i], last, band, lo, span)
+        u, down = uv[0, i], one - uv[1, i]
+        pa, pb, pc, pd, fx, fy = _corners(sizes, starts, near, u, down, channels)
+        if t > 0:
+            qa, qb, qc, qd, gx, gy = _corners(sizes, starts, other, u, down, channels)
             for c in range(channels):
-                if decode is None:
-                    a, b = flat[row_a + xa, c], flat[row_a + xb, c]
-                    cc, d = flat[row_b + xa, c], flat[row_b + xb, c]
-                else:
-                    a, b = decode[c, flat[row_a + xa, c]], decode[c, flat[row_a + xb, c]]
-                    cc, d = decode[c, flat[row_b + xa, c]], decode[c, flat[row_b + xb, c]]
-                top = (b - a) * fx + a
-                bottom = (d - cc) * fx + cc
-                value = (bottom - top) * fy + top
-                if step == 0:
-                    out[c, i] = value
-                else:
-                    out[c, i] += (value - out[c, i]) * t
+                value = _bilinear(values, table, pa, pb, pc, pd, fx, fy, c)
+                second = _bilinear(values, table, qa, qb, qc, qd, gx, gy, c)
+                out[c, i] = value + (second - value) * t
+        else:
+            for c in range(channels):
+                out[c, i] = _bilinear(values, table, pa, pb, pc, pd, fx, fy, c)
+
+
+@inlined
+def _level_table(offsets, heights, widths, channels):
+    """(sizes (L, 2) float32: W_k, H_k; starts (L, 4) int64: W_k - 1, H_k - 1, and in elements of the flat storage
+    the row length W_k C and level k's start) of a pyramid's L levels, for _corners."""
+    sizes = np.empty((len(offsets), 2), np.float32)
+    starts = np.empty((len(offsets), 4), np.int64)
+    for k in range(len(offsets)):
+        sizes[k, 0], sizes[k, 1] = np.float32(widths[k]), np.float32(heights[k])
+        starts[k, 0], starts[k, 1] = widths[k] - 1, heights[k] - 1
+        starts[k, 2], starts[k, 3] = widths[k] * channels, offsets[k] * channels
+    return sizes, starts
+
+
+@inlined
+def _level_pair(level, last, band, lo, span):
+    """(near, other, t) of a sample at mip level `level` (float32) in a pyramid of levels 0..last: the nearer level
+    (round half up; NaN and negative levels read 0, levels past the last the last), the other level and its blend
+    weight t (float32, 0: near only) within `band` of the middle; lo, span = 0.5 - band, 2 band (float64)."""
+    if not level > 0:                           # also NaN
+        level = np.float32(0.0)
+    if level > np.float32(last):
+        level = np.float32(last)
+    base = int(level)
+    frac = float(level) - base
+    near = base if frac < 0.5 else min(base + 1, last)
+    if band > 0 and base < last and frac > lo:  # frac <= lo would give w <= 0
+        w = min(max((frac - lo) / span, 0.0), 1.0)
+        if 0 < w < 1:
+            return (near, base + 1, np.float32(w)) if frac < 0.5 else (near, base, np.float32(1 - w))
+    return near, near, np.float32(0.0)
+
+
+@inlined
+def _corners(sizes, starts, k, u, down, channels):
+    """(pa, pb, pc, pd, fx, fy): the flat storage's element indices (uint64; `channels` elements a texel) of channel
+    0 of the 2x2 texels around (u, v) in level k, down = 1 - v (float32): top-left, top-right, bottom-left,
+    bottom-right, clamped to the edge; and the bilinear weights fx, fy float32 of the right and bottom ones."""
+    half = np.float32(0.5)
+    w_k, h_k = sizes[k, 0], sizes[k, 1]
+    x = u * w_k - half
+    y = down * h_k - half
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    # clamp in float first: the int conversion of a NaN or huge coordinate is undefined
+    xi = int(min(max(x0, np.float32(-1)), w_k))
+    yi = int(min(max(y0, np.float32(-1)), h_k))
+    x_last, y_last, row, start = starts[k, 0], starts[k, 1], starts[k, 2], starts[k, 3]
+    xa, xb = min(max(xi, 0), x_last) * channels, min(max(xi + 1, 0), x_last) * channels
+    row_a = start + min(max(yi, 0), y_last) * row
+    row_b = start + min(max(yi + 1, 0), y_last) * row
+    return (np.uint64(row_a + xa), np.uint64(row_a + xb), np.uint64(row_b + xa), np.uint64(row_b + xb), fx, fy)
+
+
+@inlined
+def _bilinear(values, table, pa, pb, pc, pd, fx, fy, c):
+    """Channel c's bilinear value (float32) of the 2x2 texels at element indices pa..pd (uint64, _corners) of the
+    flat storage `values`: float32 values (table None) or uint8 codes read through table (C * 256,) float32."""
+    cu = np.uint64(c)
+    if table is None:
+        a, b, cc, d = values[pa + cu], values[pb + cu], values[pc + cu], values[pd + cu]
+    else:
+        row = cu * np.uint64(256)
+        a, b = table[row + np.uint64(values[pa + cu])], table[row + np.uint64(values[pb + cu])]
+        cc, d = table[row + np.uint64(values[pc + cu])], table[row + np.uint64(values[pd + cu])]
+    top = (b - a) * fx + a
+    bottom = (d - cc) * fx + cc
+    return (bottom - top) * fy + top
 
 
 # ------------------------------------------------------------------------------------------------ pyramids
