@@ -293,20 +293,20 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
     stats["aa_rays"] = int(edge_count * samples)
 
     t = time.perf_counter()
-    region = (slice(r0, r1), slice(c0, c1))
-    full_alpha = np.zeros((H, W), np.float32)
-    full_alpha[region] = alpha
-    full_geom = np.full((H, W), -1, np.int8)
-    full_geom[region] = geom
-    full_depth = np.zeros((H, W), np.float32)
-    full_depth[region] = np.where(geom >= 0, primary.depth.reshape(h, w), 0)
     # the environment backdrop's grid is blended in the compositing itself unless a film needs its pixels
     bg, bg_name = frame_background(background, lighting, cam, grid=film is None)
     if isinstance(bg, Backdrop):
         colour, rgba = compose_over_grid(premult, alpha, (r0, c0), bg.grid, bg.axes(), (H, W))
     else:
         colour, rgba = compose(premult, alpha, (r0, c0), bg, (H, W))
-    full_alpha = model_coverage(full_alpha, full_geom, subject.surfaces)      # the image's alpha keeps an arm
+    region = (slice(r0, r1), slice(c0, c1))
+    full_alpha = np.zeros((H, W), np.float32)
+    # the image's alpha keeps an arm; outside the region nothing was hit: the model's coverage is the region's
+    full_alpha[region] = model_coverage(alpha, geom, subject.surfaces)
+    full_geom = np.full((H, W), -1, np.int8)
+    full_geom[region] = geom
+    full_depth = np.zeros((H, W), np.float32)
+    full_depth[region] = np.where(geom >= 0, primary.depth.reshape(h, w), 0)
     timings["compose"] = _lap(t)
     film_record = None
     if film is not None:
