@@ -1,14 +1,15 @@
 """Compositing and 8-bit encoding of a frame (render/image.compose, a compiled pass) against the formulas in float64:
 over a background, premult + (1 - alpha) B and its sRGB codes; transparent, the straight colour's codes and the
 8-bit coverage; the frame outside the rendered region is the background (or empty). compose_over_grid against
-compose over the grid upsampled by a numpy blend written here."""
+compose over the grid upsampled by a numpy blend written here; encode_mask8 against numpy's float32 rint of the
+clipped coverage."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from darthand.render.image import compose, compose_over_grid
+from darthand.render.image import compose, compose_over_grid, encode_mask8
 from darthand.textures.color import encode_srgb8
 
 
@@ -95,3 +96,13 @@ def test_compose_over_grid_is_compose_over_the_blended_grid(step, region, size):
     colour, rgba = compose_over_grid(premult, alpha, region, grid, axes, (H, W))
     want_colour, want_rgba = compose(premult, alpha, region, blend_grid(grid, *axes), (H, W))
     assert colour.tobytes() == want_colour.tobytes() and rgba.tobytes() == want_rgba.tobytes()
+
+
+def test_encode_mask8_is_the_rounded_clipped_coverage():
+    rng = np.random.default_rng(2)
+    alpha = np.concatenate([rng.uniform(-0.5, 1.5, 5000), np.arange(256) / 255, (np.arange(510) + 0.5) / 510,
+                            [-0.0, np.inf, -np.inf, 1.0, 0.0]]).astype(np.float32)
+    want = np.rint(np.clip(alpha, 0, 1) * np.float32(255))                   # numpy's float32 arithmetic
+    got = encode_mask8(alpha.reshape(1, -1, 1)[..., 0])
+    assert got.dtype == np.uint8 and got.shape == (1, alpha.size) and np.array_equal(got[0], want)
+    assert encode_mask8(np.array([[np.nan]], np.float32))[0, 0] == 0
