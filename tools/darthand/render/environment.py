@@ -709,15 +709,20 @@ def _backdrop_kernel(level, coarser, weight, second, weight2, to_map, scale, out
     """out[i, j] (h, w, 3) float32 = scale (3,) x (weight x level's bilinear lookup (+ weight2 x coarser's when
     `second`)) along the ray of grid pixel centre (j + 0.5, i + 0.5, 1) times to_map (3, 3): _lookup_kernel's
     numbers (its coordinates, its blend, accumulated in float64 from 0, level then coarser), times scale, rounded
-    to float32; the ray's map angles are found once for both levels."""
+    to float32; the ray's map angles are found once for both levels, a grid row's at a time in a loop of their own
+    (it vectorises: 0.6x the time of one loop doing both)."""
+    us, ts = np.empty(out.shape[1]), np.empty(out.shape[1])
     for i in range(out.shape[0]):
+        py = i + 0.5
         for j in range(out.shape[1]):
-            px, py = j + 0.5, i + 0.5
+            px = j + 0.5
             d0 = px * to_map[0, 0] + py * to_map[1, 0] + to_map[2, 0]
             d1 = px * to_map[0, 1] + py * to_map[1, 1] + to_map[2, 1]
             d2 = px * to_map[0, 2] + py * to_map[1, 2] + to_map[2, 2]
-            u = fast_atan2(d1, -d0) / (2 * np.pi) + 0.5
-            t = 0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi
+            us[j] = fast_atan2(d1, -d0) / (2 * np.pi) + 0.5
+            ts[j] = 0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi
+        for j in range(out.shape[1]):
+            u, t = us[j], ts[j]
             v0 = v1 = v2 = 0.0
             for k in range(2 if second else 1):
                 lv = level if k == 0 else coarser
