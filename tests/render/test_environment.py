@@ -170,6 +170,33 @@ def test_background_view_shows_the_map_quadrants_where_the_camera_looks(tmp_path
     assert 0.05 < blurred[19, 19, 0] < 0.95
 
 
+def test_backdrop_grid_is_the_blurred_map_along_the_grid_pixels_rays(tmp_path):
+    rng = np.random.default_rng(8)
+    path = write_exr(tmp_path / "noise.exr", rng.uniform(0, 2, (64, 128, 3)).astype(np.float32))
+    environment = env.Environment(str(path), rotation=20, strength=1.5, white_balance=(1.0, 0.8, 1.2))
+    R = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    R *= np.sign(np.linalg.det(R))
+    camera = Camera(intrinsics(61, 47, fov_deg=50), R, np.zeros(3), 61, 47)
+    levels = env.map_lighting(str(path)).full
+    for blur in (0.0, 9.0, 17.0):
+        backdrop = env.backdrop_grid(environment, camera, blur)
+        step = backdrop.step
+        h, w = backdrop.grid.shape[:2]
+        assert (h, w) == (-(-47 // step), -(-61 // step)) and (step > 1) == (blur > 0)
+        # grid sample (i, j): the ray of the frame's point (step (j + 0.5), step (i + 0.5)) in the map's frame
+        i, j = np.mgrid[:h, :w]
+        p = np.stack([step * (j.ravel() + 0.5), step * (i.ravel() + 0.5), np.ones(h * w)])
+        d = (env.frame_matrix("camera", R, 20) @ R.T @ np.linalg.inv(camera.K) @ p).T
+        lod = float(env.level_of_detail(levels, np.array([blur]))[0])
+        k, frac = int(lod), lod - int(lod)
+        want = (1 - frac) * env.bilinear(levels[k], d)
+        if k + 1 < len(levels):
+            want += frac * env.bilinear(levels[k + 1], d)
+        want = want * environment.scale
+        np.testing.assert_allclose(backdrop.grid.reshape(-1, 3), want, rtol=1e-5, atol=1e-6)
+        assert np.array_equal(backdrop.pixels(), env.background_view(environment, camera, blur))
+
+
 # ------------------------------------------------------------------------------------------------ bad input
 
 

@@ -1,7 +1,7 @@
 """Per-frame work done once, on less of the frame or in one pass, with the same bits as the plain computation: the
 cotangent curvature's face-only structure (render/skin.mesh_structure, remembered per face array) against the
-Laplacian assembled by scipy with np.add.at's sums, the one-pixel dilation on a mask's bounding box
-(render/dress.beside) against scipy's dilation of the whole image, and the keypoints' nearest-vertex distances
+Laplacian assembled by scipy with np.add.at's sums, the model's coverage (render/dress.model_coverage, a compiled
+pass) against np.isin, scipy's dilation and np.where, and the keypoints' nearest-vertex distances
 (render/labels.keypoint_thickness) and the share of the sky a vertex's rays see (render/indirect._sky_share_kernel)
 against numpy's broadcasts."""
 
@@ -14,7 +14,6 @@ from scipy import ndimage
 
 from darthand.model.topology import boundary_loops
 from darthand.render import skin
-from darthand.render.dress import beside
 from darthand.render.labels import keypoint_thickness
 
 
@@ -99,20 +98,6 @@ def test_vertices_no_face_uses_keep_the_plain_results():
     assert skin.curvature_radius(v, f).tobytes() == plain_curvature_radius(v, f).tobytes()
 
 
-def test_dilation_on_the_bounding_box_is_the_whole_images():
-    rng = np.random.default_rng(0)
-    full = np.ones((3, 3), bool)
-    for k in range(200):
-        h, w = rng.integers(1, 40, 2)
-        mask = np.zeros((h, w), bool)
-        if k % 9:                                          # some empty masks
-            r0, c0 = rng.integers(0, h), rng.integers(0, w)
-            r1, c1 = r0 + rng.integers(1, h + 1), c0 + rng.integers(1, w + 1)     # past the edge at times
-            mask[r0:r1, c0:c1] = rng.random(mask[r0:r1, c0:c1].shape) < 0.4
-        assert (beside(mask) == ndimage.binary_dilation(mask, full)).all()
-        assert beside(mask).dtype == bool
-
-
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_keypoint_thickness_is_numpys_nearest_distance(dtype):
     rng = np.random.default_rng(4)
@@ -142,8 +127,9 @@ def test_model_coverage_is_the_plain_mask_of_the_models_pixels():
                 SimpleNamespace(name="mug", role="object"))
     left_out = [1, 3, 4]
     rng = np.random.default_rng(6)
-    for k in range(40):
-        geom = rng.integers(-1, 5, (30, 41)).astype(np.int8)
+    for k in range(60):
+        shape = [(30, 41), (1, 17), (13, 1), (2, 2)][k % 4] if k >= 40 else (30, 41)     # one-pixel edges too
+        geom = rng.integers(-1, 5, shape).astype(np.int8)
         geom[rng.random(geom.shape) < (0.2 * (k % 5))] = -1
         alpha = (rng.random(geom.shape) * (rng.random(geom.shape) < 0.8)).astype(np.float32)
         alpha[0, 0], alpha[-1, -1] = np.nan, -0.0
@@ -152,6 +138,8 @@ def test_model_coverage_is_the_plain_mask_of_the_models_pixels():
         want = np.where(keep, alpha, 0).astype(np.float32)
         assert model_coverage(alpha, geom, surfaces).tobytes() == want.tobytes()
     assert model_coverage(alpha, geom, surfaces[:1]) is alpha                # nothing left out: alpha itself
+    wide = geom.astype(np.int32)                    # a traced geom (int32) reads as the frame's int8 map does
+    assert model_coverage(alpha, wide, surfaces).tobytes() == model_coverage(alpha, geom, surfaces).tobytes()
 
 
 def test_sky_share_is_numpys_where_and_sums():

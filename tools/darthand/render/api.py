@@ -25,10 +25,11 @@ from darthand.render import aa, truth
 from darthand.render.assets import HandAssets, default_catalogues
 from darthand.render.bodies import body_pose, is_group, pose_group
 from darthand.render.camera import Camera, load_camera
-from darthand.render.environment import ENVIRONMENT_BACKGROUND, backdrop_blur, background_view, frame_environment
+from darthand.render.environment import (ENVIRONMENT_BACKGROUND, Backdrop, backdrop_blur, backdrop_grid,
+                                         frame_environment)
 from darthand.render.film import Film, develop_frame
 from darthand.render.dress import Dresser, geometry_options, model_coverage
-from darthand.render.image import compose, encode_mask8, load_background, write_exr, write_png
+from darthand.render.image import compose, compose_over_grid, encode_mask8, load_background, write_exr, write_png
 from darthand.render.indirect import VertexLight
 from darthand.render.labels import frame_labels, group_labels
 from darthand.render.lights import Lighting, load_lighting, world_lights
@@ -292,16 +293,20 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
     stats["aa_rays"] = int(edge_count * samples)
 
     t = time.perf_counter()
+    # the environment backdrop's grid is blended in the compositing itself unless a film needs its pixels
+    bg, bg_name = frame_background(background, lighting, cam, grid=film is None)
+    if isinstance(bg, Backdrop):
+        colour, rgba = compose_over_grid(premult, alpha, (r0, c0), bg.grid, bg.axes(), (H, W))
+    else:
+        colour, rgba = compose(premult, alpha, (r0, c0), bg, (H, W))
     region = (slice(r0, r1), slice(c0, c1))
     full_alpha = np.zeros((H, W), np.float32)
-    full_alpha[region] = alpha
+    # the image's alpha keeps an arm; outside the region nothing was hit: the model's coverage is the region's
+    full_alpha[region] = model_coverage(alpha, geom, subject.surfaces)
     full_geom = np.full((H, W), -1, np.int8)
     full_geom[region] = geom
     full_depth = np.zeros((H, W), np.float32)
     full_depth[region] = np.where(geom >= 0, primary.depth.reshape(h, w), 0)
-    bg, bg_name = frame_background(background, lighting, cam)
-    colour, rgba = compose(premult, alpha, (r0, c0), bg, (H, W))
-    full_alpha = model_coverage(full_alpha, full_geom, subject.surfaces)      # the image's alpha keeps an arm
     timings["compose"] = _lap(t)
     film_record = None
     if film is not None:
@@ -336,16 +341,19 @@ def render_subject(subject: Subject, scene: TraceScene, cam: Camera, lighting: L
     return Frame(rgba, colour, full_alpha, full_geom, full_depth, doc, subject, cam, timings, stats, truth_maps)
 
 
-def frame_background(background, lighting: Lighting, cam: Camera) -> tuple:
+def frame_background(background, lighting: Lighting, cam: Camera, grid: bool = False) -> tuple:
     """(pixels (H, W, 3) float32 linear or None, the name labels record or None) of `render`'s background argument:
     the environment seen through `cam` (environment.background_view) for 'environment' or {'environment': True,
-    'blur': degrees}, an image path loaded to the camera's size, an array as given, None for none."""
+    'blur': degrees}, an image path loaded to the camera's size, an array as given, None for none. grid: the
+    environment as its environment.Backdrop (looked up on a grid coarser than the pixels) when that grid is
+    coarser, in place of its pixels."""
     H, W = cam.height, cam.width
     blur = backdrop_blur(background)
     if blur is not None:
         if lighting.environment is None:
             raise InputError("background: 'environment' needs lights with an environment (--environment)")
-        return background_view(lighting.environment, cam, blur), ENVIRONMENT_BACKGROUND
+        backdrop = backdrop_grid(lighting.environment, cam, blur)
+        return backdrop if grid and backdrop.step > 1 else backdrop.pixels(), ENVIRONMENT_BACKGROUND
     if background is None:
         return None, None
     path = isinstance(background, (str, Path))

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from darthand.errors import InputError
+from darthand.jit import kernel
 from darthand.model.topology import vertex_normals
 from darthand.render.arm import ARM, ARM_END, check_length, shorten_before
 from darthand.render.camera import Camera
@@ -106,37 +107,36 @@ def model_coverage(alpha: np.ndarray, geom: np.ndarray, surfaces: tuple) -> np.n
     the pixels whose centre ray hit an arm surface (render/arm.py, `geom` (H, W) the surface index) left out, and
     the background-centred edge pixels kept only beside a pixel of the model. The mask, bbox and coverage then mean
     what they meant before the arm (`alpha` itself, without an arm). A held object's pixels (role 'object') are
-    left out likewise: the mask is the hand's (the object's is in the instance map)."""
+    left out likewise: the mask is the hand's (the object's is in the instance map). Beside: one of the 8
+    neighbours (scipy's binary_dilation with a 3 x 3 square). alpha's bits are copied where kept, 0 elsewhere."""
     arm = [i for i, s in enumerate(surfaces) if s.name in (ARM, ARM_END) or s.role == "object"]
     if not arm:
         return alpha
+    geom = np.ascontiguousarray(geom, np.int8)          # as the frame's geom map holds it (a traced int32 one too)
     model = geom >= 0
     for index in arm:                   # a comparison per left-out surface (one to three): cheaper than np.isin's
         model &= geom != index
-    keep = model | ((geom < 0) & beside(model))
-    out = np.zeros(alpha.shape, np.float32)
-    np.copyto(out, alpha, where=keep)
+    out = np.empty(alpha.shape, np.float32)
+    _coverage_kernel(np.ascontiguousarray(alpha, np.float32), geom, model.view(np.uint8), out)
     return out
 
 
-def beside(mask: np.ndarray) -> np.ndarray:
-    """(H, W) bool: `mask` (H, W) bool dilated by one pixel (8-neighbourhood: scipy's binary_dilation with a 3 x 3
-    square), as two one-pixel dilations, along rows then columns, on its bounding box and a pixel around it only
-    (nothing farther can change)."""
-    rows, cols = np.flatnonzero(mask.any(1)), np.flatnonzero(mask.any(0))
-    out = np.zeros_like(mask)
-    if not len(rows):
-        return out
-    box = (slice(max(rows[0] - 1, 0), rows[-1] + 2), slice(max(cols[0] - 1, 0), cols[-1] + 2))
-    m = mask[box]
-    across = m.copy()
-    across[:, 1:] |= m[:, :-1]
-    across[:, :-1] |= m[:, 1:]
-    grown = across.copy()
-    grown[1:] |= across[:-1]
-    grown[:-1] |= across[1:]
-    out[box] = grown
-    return out
+@kernel
+def _coverage_kernel(alpha, geom, model, out):
+    """out (H, W) float32 = alpha's value where model (H, W) uint8 0/1 is set, or where geom (H, W) int8 is
+    background (< 0) with a model pixel among its 8 neighbours, else 0. Per row: the column-wise OR
+    of the model's three rows (clamped at the frame's edges: a row repeated changes no OR), then each pixel's
+    three of it, in 0/1 arithmetic (no branch to keep the loop from vectorising)."""
+    H, W = alpha.shape
+    near = np.zeros(W + 2, np.uint8)
+    zero = np.float32(0.0)
+    for r in range(H):
+        up, down = max(r - 1, 0), min(r + 1, H - 1)
+        for c in range(W):
+            near[c + 1] = model[up, c] | model[r, c] | model[down, c]
+        for c in range(W):
+            keep = model[r, c] | (np.uint8(geom[r, c] < 0) & (near[c] | near[c + 1] | near[c + 2]))
+            out[r, c] = alpha[r, c] if keep else zero
 
 
 def clear_of_camera(surfaces: tuple, camera: Camera) -> tuple:

@@ -660,7 +660,36 @@ def backdrop_blur(background) -> float | None:
 def background_view(environment: Environment, camera, blur_deg: float = 0.0) -> np.ndarray:
     """(H, W, 3) float32 linear: the environment seen through `camera` (render/camera.Camera), each pixel centre's
     ray looked up in the whole map (sun included), blurred over about `blur_deg` degrees (0: bilinear at full
-    resolution)."""
+    resolution): `backdrop_grid`'s lookups upsampled (Backdrop.pixels)."""
+    return backdrop_grid(environment, camera, blur_deg).pixels()
+
+
+@dataclass(frozen=True)
+class Backdrop:
+    """The environment backdrop of a height x width frame as looked up: grid (h, w, 3) float32 linear, its sample
+    (i, j) standing for the frame's pixel centre (step i + (step - 1) / 2, step j + (step - 1) / 2) (every pixel
+    when step is 1). `pixels()` is the frame's background; a compositor may blend the grid itself (`axes`)."""
+
+    grid: np.ndarray
+    step: int
+    height: int
+    width: int
+
+    def pixels(self) -> np.ndarray:
+        """(height, width, 3) float32: the grid upsampled (bilinear, `upsample`)."""
+        return self.grid if self.step == 1 else upsample(self.grid, self.step, self.height, self.width)
+
+    def axes(self) -> tuple:
+        """((r0, r1, fr), (c0, c1, fc)): `upsample`'s blend of the grid, per frame row and per frame column (see
+        `upsample_axis`)."""
+        return (upsample_axis(self.step, self.height, self.grid.shape[0]),
+                upsample_axis(self.step, self.width, self.grid.shape[1]))
+
+
+def backdrop_grid(environment: Environment, camera, blur_deg: float = 0.0) -> Backdrop:
+    """The Backdrop of `background_view`: the whole map blurred over `blur_deg` degrees (bilinear in the two mip
+    levels whose texels span it, blended by the fractional level, in float64, times the colour scale, then
+    float32) along the rays of every backdrop_step-th pixel centre."""
     if not (np.isfinite(blur_deg) and 0 <= blur_deg <= 180):
         raise InputError(f"background_blur: {blur_deg!r} is not a number of degrees in 0..180")
     levels = map_lighting(environment.map).full
@@ -673,14 +702,57 @@ def background_view(environment: Environment, camera, blur_deg: float = 0.0) -> 
                                                                              environment.rotation).T
     lod = float(level_of_detail(levels, np.array([float(blur_deg)]))[0])
     k, frac = int(lod), lod - int(lod)
-    colour = np.zeros((height * width, 3), np.float64)
-    none = np.zeros((0, 3))
-    for level, weight in ((k, 1 - frac), (k + 1, frac)):
-        if weight > 0 and level < len(levels):
-            _lookup_kernel(np.ascontiguousarray(levels[level], np.float32), none, to_map, width, weight, colour)
-    colour *= environment.scale
-    view = colour.reshape(height, width, 3).astype(np.float32)
-    return view if step == 1 else upsample(view, step, camera.height, camera.width)
+    second = frac > 0 and k + 1 < len(levels)
+    grid = np.empty((height, width, 3), np.float32)
+    _backdrop_kernel(np.ascontiguousarray(levels[k], np.float32),
+                     np.ascontiguousarray(levels[k + 1 if second else k], np.float32), 1 - frac, second, frac,
+                     to_map, np.asarray(environment.scale, np.float64), grid)
+    return Backdrop(grid, step, camera.height, camera.width)
+
+
+@kernel(error_model="numpy")
+def _backdrop_kernel(level, coarser, weight, second, weight2, to_map, scale, out):
+    """out[i, j] (h, w, 3) float32 = scale (3,) x (weight x level's bilinear lookup (+ weight2 x coarser's when
+    `second`)) along the ray of grid pixel centre (j + 0.5, i + 0.5, 1) times to_map (3, 3): _lookup_kernel's
+    numbers (its coordinates, its blend, accumulated in float64 from 0, level then coarser), times scale, rounded
+    to float32; the ray's map angles are found once for both levels, a grid row's at a time in a loop of their own
+    (it vectorises: 0.6x the time of one loop doing both)."""
+    us, ts = np.empty(out.shape[1]), np.empty(out.shape[1])
+    for i in range(out.shape[0]):
+        py = i + 0.5
+        for j in range(out.shape[1]):
+            px = j + 0.5
+            d0 = px * to_map[0, 0] + py * to_map[1, 0] + to_map[2, 0]
+            d1 = px * to_map[0, 1] + py * to_map[1, 1] + to_map[2, 1]
+            d2 = px * to_map[0, 2] + py * to_map[1, 2] + to_map[2, 2]
+            us[j] = fast_atan2(d1, -d0) / (2 * np.pi) + 0.5
+            ts[j] = 0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi
+        for j in range(out.shape[1]):
+            u, t = us[j], ts[j]
+            v0 = v1 = v2 = 0.0
+            for k in range(2 if second else 1):
+                lv = level if k == 0 else coarser
+                wk = weight if k == 0 else weight2
+                h, w = lv.shape[0], lv.shape[1]
+                x, y = u * w - 0.5, t * h - 0.5
+                fx0, fy0 = np.floor(x), np.floor(y)
+                fx, fy = x - fx0, y - fy0
+                x0 = int(fx0) % w
+                x1 = (x0 + 1) % w
+                y0 = min(max(int(fy0), 0), h - 1)
+                y1 = min(max(int(fy0) + 1, 0), h - 1)
+                top = lv[y0, x0, 0] * (1 - fx) + lv[y0, x1, 0] * fx
+                bottom = lv[y1, x0, 0] * (1 - fx) + lv[y1, x1, 0] * fx
+                v0 += wk * (top * (1 - fy) + bottom * fy)
+                top = lv[y0, x0, 1] * (1 - fx) + lv[y0, x1, 1] * fx
+                bottom = lv[y1, x0, 1] * (1 - fx) + lv[y1, x1, 1] * fx
+                v1 += wk * (top * (1 - fy) + bottom * fy)
+                top = lv[y0, x0, 2] * (1 - fx) + lv[y0, x1, 2] * fx
+                bottom = lv[y1, x0, 2] * (1 - fx) + lv[y1, x1, 2] * fx
+                v2 += wk * (top * (1 - fy) + bottom * fy)
+            out[i, j, 0] = v0 * scale[0]
+            out[i, j, 1] = v1 * scale[1]
+            out[i, j, 2] = v2 * scale[2]
 
 
 def backdrop_step(K: np.ndarray, blur_deg: float) -> int:
@@ -695,16 +767,20 @@ def backdrop_step(K: np.ndarray, blur_deg: float) -> int:
 def upsample(image: np.ndarray, step: int, height: int, width: int) -> np.ndarray:
     """(height, width, C) float32 bilinear upsampling of a grid (h, w, C) whose sample (i, j) stands for the fine
     pixel centre (step i + (step - 1) / 2, step j + (step - 1) / 2); edges clamped."""
-    def axis(n: int, m: int):
-        x = np.clip((np.arange(n) - (step - 1) / 2) / step, 0, m - 1)
-        lo = np.minimum(x.astype(np.int64), m - 1)
-        hi = np.minimum(lo + 1, m - 1)
-        return lo, hi, (x - lo).astype(np.float32)
-    r0, r1, fr = axis(height, image.shape[0])
-    c0, c1, fc = axis(width, image.shape[1])
+    r0, r1, fr = upsample_axis(step, height, image.shape[0])
+    c0, c1, fc = upsample_axis(step, width, image.shape[1])
     out = np.empty((height, width, image.shape[2]), np.float32)
     _upsample_kernel(np.ascontiguousarray(image, np.float32), r0, r1, fr, c0, c1, fc, out)
     return out
+
+
+def upsample_axis(step: int, n: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(lo, hi (n,) int64, frac (n,) float32): fine pixel k of an axis of n lies between grid samples lo[k] and
+    hi[k] of m, at frac[k] from lo[k] (upsample's blend: lo x (1 - frac) + hi x frac; edges clamped)."""
+    x = np.clip((np.arange(n) - (step - 1) / 2) / step, 0, m - 1)
+    lo = np.minimum(x.astype(np.int64), m - 1)
+    hi = np.minimum(lo + 1, m - 1)
+    return lo, hi, (x - lo).astype(np.float32)
 
 
 @kernel

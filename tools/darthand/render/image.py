@@ -33,8 +33,23 @@ PNG_COMPRESSION = 1
 
 
 def encode_mask8(alpha: np.ndarray) -> np.ndarray:
-    """(H, W) uint8 coverage, 0..255."""
-    return np.rint(np.clip(alpha, 0, 1) * 255).astype(np.uint8)
+    """(H, W) uint8 coverage, 0..255: rint(clip(alpha, 0, 1) x 255) in float32 (NaN as 0), in one compiled pass."""
+    alpha = np.asarray(alpha)
+    out = np.empty(alpha.shape, np.uint8)
+    _mask8_kernel(np.ascontiguousarray(alpha, np.float32).reshape(-1), out.reshape(-1))
+    return out
+
+
+@kernel
+def _mask8_kernel(alpha, out):
+    """out[i] = rint(alpha[i] clipped to [0, 1] x 255) (float32, NaN as 0): numpy's clip, product and rint, a
+    third of their time."""
+    one, zero, scale = np.float32(1.0), np.float32(0.0), np.float32(255)
+    for i in range(alpha.shape[0]):
+        v = alpha[i]
+        v = v if v > zero else zero
+        v = v if v < one else one
+        out[i] = np.uint8(np.rint(v * scale))
 
 
 def compose(premult: np.ndarray, alpha: np.ndarray, region: tuple[int, int], background: np.ndarray | None,
@@ -101,6 +116,60 @@ def _compose_kernel(premult, alpha, r0, c0, background, over, table, colour, rgb
                 rgba[r, c, k] = table[int(code * top + half)]
             m = zero if not a > zero else (a if a < one else one)          # clipped; NaN as 0
             rgba[r, c, 3] = int(np.rint(m * np.float32(255)))
+
+
+def compose_over_grid(premult: np.ndarray, alpha: np.ndarray, region: tuple[int, int], grid: np.ndarray,
+                      axes: tuple, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """`compose` over the background given as a grid (h, w, 3) float32 linear and its bilinear upsampling `axes`
+    ((r0, r1, fr), (c0, c1, fc): frame row i is grid rows r0[i], r1[i] blended by fr[i], then column j grid columns
+    c0[j], c1[j] blended by fc[j]; environment.Backdrop.axes): the same colour and rgba as `compose` over the
+    upsampled background (environment.upsample's float32 numbers), without making it. One compiled pass."""
+    (r0, r1, fr), (c0, c1, fc) = axes
+    H, W = size
+    colour = np.empty((H, W, 3), np.float32)
+    rgba = np.empty((H, W, 4), np.uint8)
+    index = lambda a: np.ascontiguousarray(a, np.int64)
+    weight = lambda a: np.ascontiguousarray(a, np.float32)
+    _compose_grid_kernel(weight(premult), weight(alpha), int(region[0]), int(region[1]), weight(grid), index(r0),
+                         index(r1), weight(fr), index(c0), index(c1), weight(fc), srgb8_table(0.0), colour, rgba)
+    return colour, rgba
+
+
+@kernel
+def _compose_grid_kernel(premult, alpha, r0, c0, grid, gr0, gr1, gfr, gc0, gc1, gfc, table, colour, rgba):
+    """colour, rgba of `compose_over_grid`, a frame row at a time: the grid's two rows blended (_upsample_kernel's
+    numbers), the row's background blended from it into colour, the region's columns composited over it, then the
+    row encoded, each as _compose_kernel does (the same float32 operations in the same order). Three plain loops
+    per row rather than one with per-pixel branches: a third less time."""
+    H, W = colour.shape[0], colour.shape[1]
+    h, w = alpha.shape
+    top, half, one, zero = np.float32(len(table) - 1), np.float32(0.5), np.float32(1.0), np.float32(0.0)
+    row = np.empty((grid.shape[1], 3), np.float32)
+    lo, hi = min(max(c0, 0), W), min(max(c0 + w, 0), W)
+    for r in range(H):
+        a, b, f = gr0[r], gr1[r], gfr[r]
+        g = one - f
+        for q in range(grid.shape[1]):
+            for k in range(3):
+                row[q, k] = grid[a, q, k] * g + grid[b, q, k] * f
+        out = colour[r]
+        for c in range(W):
+            p, q, e = gc0[c], gc1[c], gfc[c]
+            d = one - e
+            for k in range(3):
+                out[c, k] = row[p, k] * d + row[q, k] * e
+        if r0 <= r < r0 + h:
+            for c in range(lo, hi):
+                m = one - alpha[r - r0, c - c0]
+                for k in range(3):
+                    out[c, k] = premult[k, r - r0, c - c0] + m * out[c, k]
+        codes = rgba[r]
+        for c in range(W):
+            for k in range(3):
+                v = out[c, k]
+                v = one if v > 1 else (v if v > 0 else zero)        # clipped to [0, 1], NaN as 0
+                codes[c, k] = table[np.uint32(v * top + half)]
+            codes[c, 3] = 255
 
 
 def read_image_buf(path: str | os.PathLike, what: str = "image") -> oiio.ImageBuf:
