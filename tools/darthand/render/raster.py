@@ -13,7 +13,7 @@ on an edge (Direct3D's: a sample on an edge shared by two triangles, or on a ver
 one of them). Each edge's function is evaluated with its endpoints in one canonical order (the smaller projected
 point first), so the two triangles of a shared edge compute the same number and the tie rule decides. Depth and
 barycentrics are those of the ray through the sample and the triangle's plane (Moeller-Trumbore), from the same
-float32 ray direction trace._camera_rays_kernel gives Embree, in float64: the camera centre is a metre or less
+float32 ray direction trace._directions_kernel gives Embree, in float64: the camera centre is a metre or less
 from the hand and the triangles are millimetres wide, so float32 differences of camera-relative positions would
 add errors of 1e-4 to the barycentrics, which float64 keeps at 1e-12; what remains against Embree is Embree's own
 float32 rounding. u, v: hit = (1 - u - v) v0 + u v1 + v v2 over faces[prim] (Embree's); depth: the ray parameter
@@ -135,7 +135,7 @@ class SampleGrid:
     """Samples at pixel positions uv (N, 2) grouped by the pixel they lie in (floor of each coordinate), over the
     box of pixels [x0, x0 + width) x [y0, y0 + height) that holds them, each pixel's samples side by side in
     memory, in pixel order (row-major over the box, then ascending sample index): `samples` (5, N) float64, rows
-    x, y (the position as the ray saw it: rounded to float32, as trace._camera_rays_kernel does) and the ray's
+    x, y (the position as the ray saw it: rounded to float32, as trace._directions_kernel does) and the ray's
     float32 direction (x, y, z); `order` (N,) int64 the sample index of each column; the columns of pixel (r, c)
     of the box are start[r * width + c]:start[r * width + c + 1]. One row a quantity: a face's test of a run of
     samples reads contiguous vectors. row_y (height,): the y all samples of a pixel row share (pixel
