@@ -524,29 +524,37 @@ def _barycentrics_kernel(vertices, faces, surface, first, origin, directions, or
     SampleGrid column j: where a face covers it (face[j] >= 0, nearest[j] its depth), the ray (origin (3,) float64,
     direction directions[:, j] float32) against that face by Moeller-Trumbore in float64 (hit = (1 - u - v) v0 +
     u v1 + v v2, depth the ray parameter), rounded to float32, and a ray in the face's plane to rounding (no
-    determinant) u = v = 0 and depth nearest[j]; elsewhere background (-1, -1, 0, 0, inf)."""
+    determinant) u = v = 0 and depth nearest[j]; elsewhere background (-1, -1, 0, 0, inf). What depends on the face
+    alone (its corners, edges, s = origin - v0, q = s x e1 and e2 . q) is computed once per run of columns on one
+    face: the same operations, once."""
     identity = order.shape[0] == 0
+    held = -1                            # the face whose values below are held: runs of a row share a face
+    ox = oy = oz = e1x = e1y = e1z = e2x = e2y = e2z = qx = qy = qz = sx = sy = sz = tq = 0.0
+    g, p = np.int32(-1), np.int32(-1)
     for j in range(face.shape[0]):
         i = j if identity else order[j]
         f = face[j]
         if f < 0:
             geom[i], prim[i], u[i], v[i], depth[i] = -1, -1, np.float32(0.0), np.float32(0.0), np.float32(np.inf)
             continue
-        geom[i] = surface[f]
-        prim[i] = f - first[surface[f]]
-        ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
-        ox, oy, oz = np.float64(vertices[ia, 0]), np.float64(vertices[ia, 1]), np.float64(vertices[ia, 2])
-        e1x, e1y, e1z = vertices[ib, 0] - ox, vertices[ib, 1] - oy, vertices[ib, 2] - oz
-        e2x, e2y, e2z = vertices[ic, 0] - ox, vertices[ic, 1] - oy, vertices[ic, 2] - oz
+        if f != held:
+            held = f
+            g, p = surface[f], np.int32(f - first[surface[f]])
+            ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
+            ox, oy, oz = np.float64(vertices[ia, 0]), np.float64(vertices[ia, 1]), np.float64(vertices[ia, 2])
+            e1x, e1y, e1z = vertices[ib, 0] - ox, vertices[ib, 1] - oy, vertices[ib, 2] - oz
+            e2x, e2y, e2z = vertices[ic, 0] - ox, vertices[ic, 1] - oy, vertices[ic, 2] - oz
+            sx, sy, sz = origin[0] - ox, origin[1] - oy, origin[2] - oz
+            qx, qy, qz = sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x
+            tq = e2x * qx + e2y * qy + e2z * qz
+        geom[i], prim[i] = g, p
         dx, dy, dz = np.float64(directions[0, j]), np.float64(directions[1, j]), np.float64(directions[2, j])
         px, py, pz = dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x
         det = e1x * px + e1y * py + e1z * pz
         if det == 0.0:
             u[i], v[i], depth[i] = np.float32(0.0), np.float32(0.0), np.float32(nearest[j])
             continue
-        sx, sy, sz = origin[0] - ox, origin[1] - oy, origin[2] - oz
-        qx, qy, qz = sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x
         inverse = 1.0 / det
         u[i] = np.float32((sx * px + sy * py + sz * pz) * inverse)
         v[i] = np.float32((dx * qx + dy * qy + dz * qz) * inverse)
-        depth[i] = np.float32((e2x * qx + e2y * qy + e2z * qz) * inverse)
+        depth[i] = np.float32(tq * inverse)
