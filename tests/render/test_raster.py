@@ -287,7 +287,7 @@ def test_a_frame_rasterised_has_the_same_labels_and_nearly_the_same_image(assets
 
 def grid_by_numpy(uv, directions):
     """SampleGrid's fields by numpy: a stable sort of the samples by (row, column) of the pixel of their
-    float32-rounded position, counts per pixel of the box, and the y each pixel row's samples share."""
+    float32-rounded position, counts per pixel of the box, and the least and greatest y of each pixel row's."""
     xy = uv.astype(np.float32).astype(np.float64)
     col, row = np.floor(xy[:, 0]).astype(np.int64), np.floor(xy[:, 1]).astype(np.int64)
     x0, y0 = col.min(), row.min()
@@ -295,12 +295,12 @@ def grid_by_numpy(uv, directions):
     pixel = (row - y0) * width + col - x0
     order = np.argsort(pixel, kind="stable")
     start = np.concatenate([[0], np.cumsum(np.bincount(pixel, minlength=width * height))])
-    row_y = np.full(height, np.nan)
+    row_band = np.full((2, height), np.nan)
     for r in range(height):
         ys = xy[order[start[r * width]:start[(r + 1) * width]], 1]
-        if len(ys) and (ys == ys[0]).all():
-            row_y[r] = ys[0]
-    return x0, y0, width, height, order, start, xy[order].T, directions[:, order], row_y
+        if len(ys):
+            row_band[:, r] = ys.min(), ys.max()
+    return x0, y0, width, height, order, start, xy[order].T, directions[:, order], row_band
 
 
 def test_the_sample_grid_is_the_stable_sort_by_pixel_in_order_or_not():
@@ -318,12 +318,12 @@ def test_the_sample_grid_is_the_stable_sort_by_pixel_in_order_or_not():
                          (scattered, False), (late, False), (leftward, False), (centres[:1], True)):
         directions = rng.standard_normal((3, len(uv))).astype(np.float32)
         grid = raster.SampleGrid(uv, directions)
-        x0, y0, width, height, order, start, xy, dirs, row_y = grid_by_numpy(uv, directions)
+        x0, y0, width, height, order, start, xy, dirs, row_band = grid_by_numpy(uv, directions)
         assert (grid.x0, grid.y0, grid.width, grid.height) == (x0, y0, width, height)
         assert np.array_equal(grid.order if len(grid.order) else np.arange(len(uv)), order)
         assert (len(grid.order) == 0) == in_order
         assert np.array_equal(grid.start, start) and np.array_equal(grid.xy, xy)
-        assert np.array_equal(grid.directions, dirs) and np.array_equal(grid.row_y, row_y, equal_nan=True)
+        assert np.array_equal(grid.directions, dirs) and np.array_equal(grid.row_band, row_band, equal_nan=True)
 
 
 def test_samples_in_any_order_have_the_same_hits(assets, ring, rasterising):

@@ -69,7 +69,7 @@ def camera_hits(scene: Scene, camera: Camera, uv: np.ndarray, directions: np.nda
     origin = camera.centre.astype(np.float32).astype(np.float64)
     nearest, face = np.full(n, np.inf, np.float64), np.full(n, -1, np.int64)
     _cover_kernel(xy, z, P, NEAR, mesh.vertices, mesh.faces, grid.face_order(xy, mesh.faces), origin, grid.xy,
-                  grid.directions, grid.x0, grid.y0, grid.width, grid.height, grid.start, grid.row_y, nearest, face)
+                  grid.directions, grid.x0, grid.y0, grid.width, grid.height, grid.start, grid.row_band, nearest, face)
     _barycentrics_kernel(mesh.vertices, mesh.faces, mesh.surface, mesh.first, origin, grid.directions, grid.order,
                          face, nearest, geom, prim, u, v, depth)
     return geom, prim, u, v, depth
@@ -139,9 +139,9 @@ class SampleGrid:
     sub-samples do), `xy` (2, N) float64 its position as the ray saw it (rounded to float32, as
     trace._directions_kernel does) and `directions` (3, N) float32 its ray's direction (the given array itself when
     `order` is empty); the columns of pixel (r, c) of the box are start[r * width + c]:start[r * width + c + 1].
-    One row a quantity: a face's test of a run of samples reads contiguous vectors. row_y (height,): the y all
-    samples of a pixel row share (pixel centres, or one sub-sample offset), NaN where they differ or there are
-    none. N >= 1."""
+    One row a quantity: a face's test of a run of samples reads contiguous vectors. row_band (2, height): the
+    least and the greatest y of each pixel row's samples (NaN for none); equal where they all share it (pixel
+    centres). N >= 1."""
 
     def __init__(self, uv: np.ndarray, directions: np.ndarray):
         n = len(uv)
@@ -153,7 +153,7 @@ class SampleGrid:
         self.width, self.height = int(box[2] - box[0] + 1), int(box[3] - box[1] + 1)
         self.start = np.empty(self.width * self.height + 1, np.int32)
         self.xy = np.empty((2, n), np.float64)
-        self.row_y = np.empty(self.height, np.float64)
+        self.row_band = np.empty((2, self.height), np.float64)
         if in_order:
             self.order, self.directions = np.empty(0, np.int64), directions
             _runs_kernel(uv, self.x0, self.y0, self.width, self.start, self.xy)
@@ -162,7 +162,7 @@ class SampleGrid:
             self.start[:] = 0
             _bucket_kernel(uv, directions, self.x0, self.y0, self.width, self.start, self.order, self.xy,
                            self.directions)
-        _row_y_kernel(self.xy, self.start, self.width, self.row_y)
+        _row_band_kernel(self.xy, self.start, self.width, self.row_band)
 
     def face_order(self, xy: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """(F,) int64 the faces (F, 3) of vertices at pixel positions xy (V, 2) by their top pixel row in the box
@@ -231,15 +231,15 @@ def _bucket_kernel(uv, directions, x0, y0, width, start, order, xy, sorted_direc
 
 
 @kernel
-def _row_y_kernel(xy, start, width, row_y):
-    """row_y (height,): the y (xy (2, N) row 1) all samples of each pixel row of the box share, else NaN."""
-    for r in range(row_y.shape[0]):
+def _row_band_kernel(xy, start, width, row_band):
+    """row_band (2, height): the least and greatest y (xy (2, N) row 1) of the samples of each pixel row of the
+    box (start: its pixels' columns), NaN for a row without samples."""
+    for r in range(row_band.shape[1]):
         a, b = start[r * width], start[(r + 1) * width]
-        row_y[r] = xy[1, a] if a < b else np.nan
+        lo = hi = xy[1, a] if a < b else np.nan
         for j in range(a + 1, b):
-            if xy[1, j] != row_y[r]:
-                row_y[r] = np.nan
-                break
+            lo, hi = min(lo, xy[1, j]), max(hi, xy[1, j])
+        row_band[0, r], row_band[1, r] = lo, hi
 
 
 @kernel
@@ -422,7 +422,7 @@ def _hidden(f, faces, xy, depth, tiles, x0, y0, width, height):
 
 
 @inlined(always=True)
-def _draw(f, corners, poly, nx, ny, nz, nd0, xy, directions, x0, y0, width, height, start, row_y, nearest, face, cx,
+def _draw(f, corners, poly, nx, ny, nz, nd0, xy, directions, x0, y0, width, height, start, row_band, nearest, face, cx,
           cy, edges, hidden):
     """Face f's part in front (poly (4, 2), `corners` of them, fanned into triangles) over the samples: each
     triangle visits, row by row of pixels, only the columns its outline spans in that row (cx, cy (3,), edges
@@ -445,10 +445,11 @@ def _draw(f, corners, poly, nx, ny, nz, nd0, xy, directions, x0, y0, width, heig
         for r in range(int(r_lo), int(r_hi) + 1):
             if start[r * width + b_lo] == start[r * width + b_hi]:
                 continue                 # no sample in this row of the face's box (edge sub-samples are sparse)
-            # the outline's columns in this row of pixels: between the band's two lines, or on the one line the
-            # row's samples share, widened by rounding's share so no sample on the outline is left out
-            y = row_y[r]
-            left, right = _row_span(cx, cy, edges, y if y == y else y0 + r, y if y == y else y0 + r + 1.0)
+            # the outline's columns between the least and the greatest y of the row's samples (one line for pixel
+            # centres), widened by rounding's share so no sample on the outline is left out
+            lo, hi = row_band[0, r], row_band[1, r]
+            y = lo if lo == hi else np.nan
+            left, right = _row_span(cx, cy, edges, lo, hi)
             if left > right:
                 continue
             pad = 1e-9 * (1.0 + abs(left) + abs(right))
@@ -468,10 +469,10 @@ def _draw(f, corners, poly, nx, ny, nz, nd0, xy, directions, x0, y0, width, heig
 
 @kernel(error_model="numpy")
 def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, sample_xy, directions, x0, y0, width, height,
-                  start, row_y, nearest, face):
+                  start, row_band, nearest, face):
     """Rasterise the faces (F, 3) (vertices (V, 3) float32 world, xy (V, 2) their pixel positions and z (V,) camera
     z under P (3, 4)), in face_order, over a SampleGrid's samples (sample_xy, directions, x0, y0, width, height,
-    start, row_y): where a
+    start, row_band): where a
     face covers a sample (edge functions, top-left rule) and its plane is nearer along the sample's ray (from
     origin (3,)) than nearest[j] (float64, per grid row), or as near and a lower face, the sample takes it
     (nearest, face (N,) int64). A face with corners at or behind `near` is clipped there first (its part in front,
@@ -480,9 +481,9 @@ def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, sample_xy
     The outcome does not depend on the order (each sample keeps the least depth, then the least face), so the
     faces turned away from the camera (_hidden_depth) are drawn last, and only where their box, then each row of
     their outline, holds a sample farther than their nearest corner: on a closed surface those turned toward it
-    already hide most of them. Only for pixel centres (some row_y known): edge sub-samples lie on outlines, where a
-    tile rarely hides a face (it measured slower there, and so did also drawing last the faces turned toward the
-    camera beyond a quarter of the depth range)."""
+    already hide most of them. Only for pixel centres (rows whose samples share y): edge sub-samples lie on
+    outlines, where a tile rarely hides a face (it measured slower there, and so did also drawing last the faces
+    turned toward the camera beyond a quarter of the depth range)."""
     edges = np.empty((3, 6))             # _edge_functions'
     cx, cy = np.empty(3), np.empty(3)
     poly = np.empty((4, 2))              # the face's part in front of `near`, projected
@@ -490,7 +491,7 @@ def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, sample_xy
     n = face_order.shape[0]
     later, later_depth = np.empty(n, np.int64), np.empty(n)     # the faces drawn last, their _hidden_depth
     n_later = 0
-    dense = not np.isnan(row_y).all()   # pixel centres; edge sub-samples lie where tiles rarely hide a face
+    dense = (row_band[0] == row_band[1]).any()   # pixel centres; edge sub-samples lie where tiles rarely hide a face
     tiles = np.empty(((height + TILE - 1) // TILE, (width + TILE - 1) // TILE))
     for m in range(n + n):
         if m < n:
@@ -513,7 +514,7 @@ def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, sample_xy
                 later[n_later], later_depth[n_later] = f, depth
                 n_later += 1
                 continue
-        _draw(f, corners, poly, nx, ny, nz, nd0, sample_xy, directions, x0, y0, width, height, start, row_y, nearest,
+        _draw(f, corners, poly, nx, ny, nz, nd0, sample_xy, directions, x0, y0, width, height, start, row_band, nearest,
               face, cx, cy, edges, later_depth[m - n] if m >= n else 0.0)
 
 
