@@ -283,3 +283,66 @@ def test_a_frame_rasterised_has_the_same_labels_and_nearly_the_same_image(assets
     assert np.array_equal(ours.geom, embree.geom) or (ours.geom != embree.geom).mean() < 1e-3
     differ = np.abs(ours.rgba.astype(int) - embree.rgba.astype(int)).max(axis=2) > 0
     assert differ.mean() < 2e-3
+
+
+def grid_by_numpy(uv, directions):
+    """SampleGrid's fields by numpy: a stable sort of the samples by (row, column) of the pixel of their
+    float32-rounded position, counts per pixel of the box, and the least and greatest y of each pixel row's."""
+    xy = uv.astype(np.float32).astype(np.float64)
+    col, row = np.floor(xy[:, 0]).astype(np.int64), np.floor(xy[:, 1]).astype(np.int64)
+    x0, y0 = col.min(), row.min()
+    width, height = col.max() - x0 + 1, row.max() - y0 + 1
+    pixel = (row - y0) * width + col - x0
+    order = np.argsort(pixel, kind="stable")
+    start = np.concatenate([[0], np.cumsum(np.bincount(pixel, minlength=width * height))])
+    row_band = np.full((2, height), np.nan)
+    for r in range(height):
+        ys = xy[order[start[r * width]:start[(r + 1) * width]], 1]
+        if len(ys):
+            row_band[:, r] = ys.min(), ys.max()
+    return x0, y0, width, height, order, start, xy[order].T, directions[:, order], row_band
+
+
+def test_the_sample_grid_is_the_stable_sort_by_pixel_in_order_or_not():
+    """Samples that come in pixel order (pixel centres, edge sub-samples) skip the sort (order left empty: the
+    identity) and those that do not are sorted; both give numpy's stable sort of the samples by pixel."""
+    from darthand.render.aa import sample_offsets
+
+    rng = np.random.default_rng(5)
+    centres = trace.pixel_positions(np.flatnonzero(rng.random(40 * 30) < 0.3), 7, -3, 30)
+    sub = (centres[:, None, :] + sample_offsets(16)[None]).reshape(-1, 2)
+    scattered = rng.uniform(-5.0, 9.0, (200, 2))
+    late = np.vstack([centres, centres[:1]])                        # in order but for its last sample
+    leftward = centres[np.lexsort((-centres[:, 0], centres[:, 1]))]   # rows in order, each right to left
+    for uv, in_order in ((centres, True), (sub, True), (centres[::-1], False), (sub[rng.permutation(len(sub))], False),
+                         (scattered, False), (late, False), (leftward, False), (centres[:1], True)):
+        directions = rng.standard_normal((3, len(uv))).astype(np.float32)
+        grid = raster.SampleGrid(uv, directions)
+        x0, y0, width, height, order, start, xy, dirs, row_band = grid_by_numpy(uv, directions)
+        assert (grid.x0, grid.y0, grid.width, grid.height) == (x0, y0, width, height)
+        assert np.array_equal(grid.order if len(grid.order) else np.arange(len(uv)), order)
+        assert (len(grid.order) == 0) == in_order
+        assert np.array_equal(grid.start, start) and np.array_equal(grid.xy, xy)
+        assert np.array_equal(grid.directions, dirs) and np.array_equal(grid.row_band, row_band, equal_nan=True)
+
+
+def test_samples_in_any_order_have_the_same_hits(assets, ring, rasterising):
+    """A posed hand with a ring, its arm and a face reaching behind the camera (clipped): the pixel centres and
+    the sub-samples of every pixel, in pixel order (the sort skipped) and shuffled (sorted), hit the same surface
+    and face with the same u, v and depth, to the bit."""
+    from darthand.render.aa import sample_offsets
+
+    frame = Renderer(assets, 1).render("fist", camera="three_quarter", width=64, height=64, accessory=ring.id,
+                                       arm=ARM_M, labels=False, samples=1)
+    cam, hand = frame.camera, frame.subject.hand
+    behind = (cam.centre - 0.1 * cam.R[2] + 0.02 * cam.R[1]).astype(np.float32)
+    clipped = surface(np.vstack([hand.vertices, behind[None]]), np.vstack([hand.faces, [[0, 1, len(hand.vertices)]]]))
+    ctx = context(subject(clipped, *frame.subject.surfaces[1:]), cam)
+    rng = np.random.default_rng(2)
+    centres = trace.pixel_centres(0, 64, 0, 64)
+    for uv in (centres, (centres[:, None, :] + sample_offsets(8)[None]).reshape(-1, 2)):
+        shuffle = rng.permutation(len(uv))
+        hits, shuffled = trace.intersect_samples(ctx, uv), trace.intersect_samples(ctx, uv[shuffle])
+        assert ((hits.geom == 0) & (hits.prim == len(hand.faces))).any() and {0, 1, 2} <= set(hits.geom.tolist())
+        for k in ("geom", "prim", "u", "v", "depth", "directions"):
+            assert getattr(shuffled, k).tobytes() == getattr(hits.take(shuffle), k).tobytes(), k

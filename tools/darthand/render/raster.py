@@ -4,16 +4,16 @@ Every camera ray leaves the camera centre, so which triangle it meets first is a
 each posed surface's vertices into the image (surfaces in the world frame Embree sees: a rigid accessory's world
 vertices), cover the samples inside each projected triangle, keep the nearest. The samples are any pixel
 positions (trace.intersect_samples': the pixel centres of the traced tiles, or an edge pixel's sub-samples, each
-offset of aa.sample_offsets a shifted grid); they are bucketed by the pixel they lie in, and a triangle visits,
-row by row, the buckets of the pixels its outline spans (faces sorted by their top row, so the samples' memory
-is walked top to bottom).
+offset of aa.sample_offsets a shifted grid); they are bucketed by the pixel they lie in (without a sort when
+they come in pixel order, as both do), and a triangle visits, row by row, the buckets of the pixels its outline
+spans (faces sorted by their top row, so the samples' memory is walked top to bottom).
 
 Coverage is decided in the image plane with edge functions in float64, with the top-left rule for samples exactly
 on an edge (Direct3D's: a sample on an edge shared by two triangles, or on a vertex shared by a fan, is covered by
 one of them). Each edge's function is evaluated with its endpoints in one canonical order (the smaller projected
 point first), so the two triangles of a shared edge compute the same number and the tie rule decides. Depth and
 barycentrics are those of the ray through the sample and the triangle's plane (Moeller-Trumbore), from the same
-float32 ray direction trace._camera_rays_kernel gives Embree, in float64: the camera centre is a metre or less
+float32 ray direction trace._directions_kernel gives Embree, in float64: the camera centre is a metre or less
 from the hand and the triangles are millimetres wide, so float32 differences of camera-relative positions would
 add errors of 1e-4 to the barycentrics, which float64 keeps at 1e-12; what remains against Embree is Embree's own
 float32 rounding. u, v: hit = (1 - u - v) v0 + u v1 + v v2 over faces[prim] (Embree's); depth: the ray parameter
@@ -61,17 +61,17 @@ def camera_hits(scene: Scene, camera: Camera, uv: np.ndarray, directions: np.nda
         return None
     xy, z = projected
     n = len(uv)
-    geom, prim = np.full(n, -1, np.int32), np.full(n, -1, np.int32)
-    u, v, depth = np.zeros(n, np.float32), np.zeros(n, np.float32), np.full(n, np.inf, np.float32)
+    geom, prim = np.empty(n, np.int32), np.empty(n, np.int32)
+    u, v, depth = np.empty(n, np.float32), np.empty(n, np.float32), np.empty(n, np.float32)
     if not n:
         return geom, prim, u, v, depth
     grid = SampleGrid(uv, directions)
     origin = camera.centre.astype(np.float32).astype(np.float64)
     nearest, face = np.full(n, np.inf, np.float64), np.full(n, -1, np.int64)
-    _cover_kernel(xy, z, P, NEAR, mesh.vertices, mesh.faces, grid.face_order(xy, mesh.faces), origin, grid.samples,
-                  grid.x0, grid.y0, grid.width, grid.height, grid.start, grid.row_y, nearest, face)
-    _barycentrics_kernel(mesh.vertices, mesh.faces, mesh.surface, mesh.first, origin, grid.samples, grid.order, face,
-                         nearest, geom, prim, u, v, depth)
+    _cover_kernel(xy, z, P, NEAR, mesh.vertices, mesh.faces, grid.face_order(xy, mesh.faces), origin, grid.xy,
+                  grid.directions, grid.x0, grid.y0, grid.width, grid.height, grid.start, grid.row_band, nearest, face)
+    _barycentrics_kernel(mesh.vertices, mesh.faces, mesh.surface, mesh.first, origin, grid.directions, grid.order,
+                         face, nearest, geom, prim, u, v, depth)
     return geom, prim, u, v, depth
 
 
@@ -134,25 +134,35 @@ def _project_kernel(vertices, P, near, xy, z):
 class SampleGrid:
     """Samples at pixel positions uv (N, 2) grouped by the pixel they lie in (floor of each coordinate), over the
     box of pixels [x0, x0 + width) x [y0, y0 + height) that holds them, each pixel's samples side by side in
-    memory, in pixel order (row-major over the box, then ascending sample index): `samples` (5, N) float64, rows
-    x, y (the position as the ray saw it: rounded to float32, as trace._camera_rays_kernel does) and the ray's
-    float32 direction (x, y, z); `order` (N,) int64 the sample index of each column; the columns of pixel (r, c)
-    of the box are start[r * width + c]:start[r * width + c + 1]. One row a quantity: a face's test of a run of
-    samples reads contiguous vectors. row_y (height,): the y all samples of a pixel row share (pixel
-    centres, or one sub-sample offset), NaN where they differ or there are none. N >= 1."""
+    memory, in pixel order (row-major over the box, then ascending sample index): column j is the sample order[j]
+    (`order` (N,) int64; empty when that is j itself: the samples came in pixel order, as pixel centres and edge
+    sub-samples do), `xy` (2, N) float64 its position as the ray saw it (rounded to float32, as
+    trace._directions_kernel does) and `directions` (3, N) float32 its ray's direction (the given array itself when
+    `order` is empty); the columns of pixel (r, c) of the box are start[r * width + c]:start[r * width + c + 1].
+    One row a quantity: a face's test of a run of samples reads contiguous vectors. row_band (2, height): the
+    least and the greatest y of each pixel row's samples (NaN for none); equal where they all share it (pixel
+    centres). N >= 1."""
 
     def __init__(self, uv: np.ndarray, directions: np.ndarray):
         n = len(uv)
+        uv = np.ascontiguousarray(uv, np.float64)
+        directions = np.ascontiguousarray(directions, np.float32)
         box = np.empty(4, np.int64)
-        _box_kernel(np.ascontiguousarray(uv, np.float64), box)
+        in_order = _box_kernel(uv, box)
         self.x0, self.y0 = int(box[0]), int(box[1])
         self.width, self.height = int(box[2] - box[0] + 1), int(box[3] - box[1] + 1)
-        self.start = np.zeros(self.width * self.height + 1, np.int32)
-        self.order = np.empty(n, np.int64)
-        self.samples = np.empty((5, n), np.float64)
-        self.row_y = np.empty(self.height, np.float64)
-        _bucket_kernel(np.ascontiguousarray(uv, np.float64), np.ascontiguousarray(directions, np.float32), self.x0,
-                       self.y0, self.width, self.start, self.order, self.samples, self.row_y)
+        self.start = np.empty(self.width * self.height + 1, np.int32)
+        self.xy = np.empty((2, n), np.float64)
+        self.row_band = np.empty((2, self.height), np.float64)
+        if in_order:
+            self.order, self.directions = np.empty(0, np.int64), directions
+            _runs_kernel(uv, self.x0, self.y0, self.width, self.start, self.xy)
+        else:
+            self.order, self.directions = np.empty(n, np.int64), np.empty((3, n), np.float32)
+            self.start[:] = 0
+            _bucket_kernel(uv, directions, self.x0, self.y0, self.width, self.start, self.order, self.xy,
+                           self.directions)
+        _row_band_kernel(self.xy, self.start, self.width, self.row_band)
 
     def face_order(self, xy: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """(F,) int64 the faces (F, 3) of vertices at pixel positions xy (V, 2) by their top pixel row in the box
@@ -165,10 +175,14 @@ class SampleGrid:
 @kernel
 def _box_kernel(uv, box):
     """box (4,) int64: the smallest and largest pixel column and row (x0, y0, x1, y1) holding the float32-rounded
-    positions uv (N >= 1, 2)."""
+    positions uv (N >= 1, 2). Returns whether the samples come in pixel order (row, then column, never down)."""
+    in_order, previous = True, np.int64(0)
     for i in range(uv.shape[0]):
         c = np.int64(np.floor(np.float32(uv[i, 0])))
         r = np.int64(np.floor(np.float32(uv[i, 1])))
+        if i > 0 and (r < box[3] or (r == box[3] and c < previous)):
+            in_order = False
+        previous = c
         if i == 0 or c < box[0]:
             box[0] = c
         if i == 0 or r < box[1]:
@@ -177,11 +191,28 @@ def _box_kernel(uv, box):
             box[2] = c
         if i == 0 or r > box[3]:
             box[3] = r
+    return in_order
 
 
 @kernel
-def _bucket_kernel(uv, directions, x0, y0, width, start, order, samples, row_y):
-    """SampleGrid's start, order, samples and row_y by a counting sort of the samples uv (N, 2) by pixel."""
+def _runs_kernel(uv, x0, y0, width, start, xy):
+    """SampleGrid's start and xy of samples uv (N, 2) that come in pixel order (order: the identity)."""
+    b = 0                                # the next pixel whose first column is not yet known
+    for i in range(uv.shape[0]):
+        x, y = np.float32(uv[i, 0]), np.float32(uv[i, 1])
+        pixel = (np.int64(np.floor(y)) - y0) * width + np.int64(np.floor(x)) - x0
+        while b <= pixel:
+            start[b] = i
+            b += 1
+        xy[0, i], xy[1, i] = x, y
+    for k in range(b, start.shape[0]):
+        start[k] = uv.shape[0]
+
+
+@kernel
+def _bucket_kernel(uv, directions, x0, y0, width, start, order, xy, sorted_directions):
+    """SampleGrid's start (zeros on entry), order, xy and directions by a counting sort of the samples uv (N, 2)
+    by pixel (directions (3, N) theirs, in input order)."""
     n = uv.shape[0]
     pixel = np.empty(n, np.int64)
     for i in range(n):
@@ -194,15 +225,21 @@ def _bucket_kernel(uv, directions, x0, y0, width, start, order, samples, row_y):
         start[pixel[i]] -= 1
         j = start[pixel[i]]
         order[j] = i
-        samples[0, j], samples[1, j] = np.float32(uv[i, 0]), np.float32(uv[i, 1])
-        samples[2, j], samples[3, j], samples[4, j] = directions[0, i], directions[1, i], directions[2, i]
-    for r in range(row_y.shape[0]):
+        xy[0, j], xy[1, j] = np.float32(uv[i, 0]), np.float32(uv[i, 1])
+        for c in range(3):
+            sorted_directions[c, j] = directions[c, i]
+
+
+@kernel
+def _row_band_kernel(xy, start, width, row_band):
+    """row_band (2, height): the least and greatest y (xy (2, N) row 1) of the samples of each pixel row of the
+    box (start: its pixels' columns), NaN for a row without samples."""
+    for r in range(row_band.shape[1]):
         a, b = start[r * width], start[(r + 1) * width]
-        row_y[r] = samples[1, a] if a < b else np.nan
+        lo = hi = xy[1, a] if a < b else np.nan
         for j in range(a + 1, b):
-            if samples[1, j] != row_y[r]:
-                row_y[r] = np.nan
-                break
+            lo, hi = min(lo, xy[1, j]), max(hi, xy[1, j])
+        row_band[0, r], row_band[1, r] = lo, hi
 
 
 @kernel
@@ -222,16 +259,16 @@ def _face_order_kernel(xy, faces, y0, height, order):
 
 
 @inlined(always=True)
-def _cover_run(samples, a, b, y, edges, nx, ny, nz, nd0, f, nearest, face):
-    """Columns a .. b - 1 of a SampleGrid's samples (5, N) against one triangle: its edges (3, 6) (p, the inside-
-    signed q - p, the tie threshold), its plane (normal nx, ny, nz; nd0 the normal's dot with a corner from the ray
-    origin) and index f. A covered sample whose ray meets the plane nearer than nearest[j] (N,), or as near and
-    f < face[j] (N,), takes it. y: the run's shared sample y, or NaN (each sample's own)."""
+def _cover_run(xy, directions, a, b, y, edges, nx, ny, nz, nd0, f, nearest, face):
+    """Columns a .. b - 1 of a SampleGrid's samples (xy (2, N), directions (3, N)) against one triangle: its edges
+    (3, 6) (p, the inside-signed q - p, the tie threshold), its plane (normal nx, ny, nz; nd0 the normal's dot with
+    a corner from the ray origin) and index f. A covered sample whose ray meets the plane nearer than nearest[j]
+    (N,), or as near and f < face[j] (N,), takes it. y: the run's shared sample y, or NaN (each sample's own)."""
     p0x, p0y, d0x, d0y, h0 = edges[0, 0], edges[0, 1], edges[0, 2], edges[0, 3], edges[0, 4]
     p1x, p1y, d1x, d1y, h1 = edges[1, 0], edges[1, 1], edges[1, 2], edges[1, 3], edges[1, 4]
     p2x, p2y, d2x, d2y, h2 = edges[2, 0], edges[2, 1], edges[2, 2], edges[2, 3], edges[2, 4]
     y0, y1, y2 = d0x * (y - p0y), d1x * (y - p1y), d2x * (y - p2y)
-    xs, ys = samples[0], samples[1]
+    xs, ys = xy[0], xy[1]
     for j in range(a, b):
         if y == y:                   # the same products as below: ys[j] is y
             e0 = y0 - d0y * (xs[j] - p0x)
@@ -243,7 +280,7 @@ def _cover_run(samples, a, b, y, edges, nx, ny, nz, nd0, f, nearest, face):
             e2 = d2x * (ys[j] - p2y) - d2y * (xs[j] - p2x)
         # no branch on the (unpredictable) coverage: a sample the face does not cover, or whose ray runs in its
         # plane (nd = 0, divided by 1 instead), keeps what it had
-        nd = nx * samples[2, j] + ny * samples[3, j] + nz * samples[4, j]
+        nd = nx * directions[0, j] + ny * directions[1, j] + nz * directions[2, j]
         t = nd0 / (nd if nd != 0.0 else 1.0)
         best, held = nearest[j], face[j]
         better = (e0 >= h0) & (e1 >= h1) & (e2 >= h2) & (nd != 0.0) & ((t < best) | ((t == best) & (f < held)))
@@ -385,8 +422,8 @@ def _hidden(f, faces, xy, depth, tiles, x0, y0, width, height):
 
 
 @inlined(always=True)
-def _draw(f, corners, poly, nx, ny, nz, nd0, samples, x0, y0, width, height, start, row_y, nearest, face, cx, cy,
-          edges, hidden):
+def _draw(f, corners, poly, nx, ny, nz, nd0, xy, directions, x0, y0, width, height, start, row_band, nearest, face, cx,
+          cy, edges, hidden):
     """Face f's part in front (poly (4, 2), `corners` of them, fanned into triangles) over the samples: each
     triangle visits, row by row of pixels, only the columns its outline spans in that row (cx, cy (3,), edges
     (3, 6): scratch), but for a row whose samples are all nearer than `hidden` (_hidden_depth's, or 0)."""
@@ -408,10 +445,11 @@ def _draw(f, corners, poly, nx, ny, nz, nd0, samples, x0, y0, width, height, sta
         for r in range(int(r_lo), int(r_hi) + 1):
             if start[r * width + b_lo] == start[r * width + b_hi]:
                 continue                 # no sample in this row of the face's box (edge sub-samples are sparse)
-            # the outline's columns in this row of pixels: between the band's two lines, or on the one line the
-            # row's samples share, widened by rounding's share so no sample on the outline is left out
-            y = row_y[r]
-            left, right = _row_span(cx, cy, edges, y if y == y else y0 + r, y if y == y else y0 + r + 1.0)
+            # the outline's columns between the least and the greatest y of the row's samples (one line for pixel
+            # centres), widened by rounding's share so no sample on the outline is left out
+            lo, hi = row_band[0, r], row_band[1, r]
+            y = lo if lo == hi else np.nan
+            left, right = _row_span(cx, cy, edges, lo, hi)
             if left > right:
                 continue
             pad = 1e-9 * (1.0 + abs(left) + abs(right))
@@ -426,14 +464,15 @@ def _draw(f, corners, poly, nx, ny, nz, nd0, samples, x0, y0, width, height, sta
                     farthest = max(farthest, nearest[j])
                 if farthest < hidden:
                     continue
-            _cover_run(samples, a, b, y, edges, nx, ny, nz, nd0, f, nearest, face)
+            _cover_run(xy, directions, a, b, y, edges, nx, ny, nz, nd0, f, nearest, face)
 
 
 @kernel(error_model="numpy")
-def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, samples, x0, y0, width, height, start, row_y,
-                  nearest, face):
+def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, sample_xy, directions, x0, y0, width, height,
+                  start, row_band, nearest, face):
     """Rasterise the faces (F, 3) (vertices (V, 3) float32 world, xy (V, 2) their pixel positions and z (V,) camera
-    z under P (3, 4)), in face_order, over a SampleGrid's samples (x0, y0, width, height, start, row_y): where a
+    z under P (3, 4)), in face_order, over a SampleGrid's samples (sample_xy, directions, x0, y0, width, height,
+    start, row_band): where a
     face covers a sample (edge functions, top-left rule) and its plane is nearer along the sample's ray (from
     origin (3,)) than nearest[j] (float64, per grid row), or as near and a lower face, the sample takes it
     (nearest, face (N,) int64). A face with corners at or behind `near` is clipped there first (its part in front,
@@ -442,9 +481,9 @@ def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, samples, 
     The outcome does not depend on the order (each sample keeps the least depth, then the least face), so the
     faces turned away from the camera (_hidden_depth) are drawn last, and only where their box, then each row of
     their outline, holds a sample farther than their nearest corner: on a closed surface those turned toward it
-    already hide most of them. Only for pixel centres (some row_y known): edge sub-samples lie on outlines, where a
-    tile rarely hides a face (it measured slower there, and so did also drawing last the faces turned toward the
-    camera beyond a quarter of the depth range)."""
+    already hide most of them. Only for pixel centres (rows whose samples share y): edge sub-samples lie on
+    outlines, where a tile rarely hides a face (it measured slower there, and so did also drawing last the faces
+    turned toward the camera beyond a quarter of the depth range)."""
     edges = np.empty((3, 6))             # _edge_functions'
     cx, cy = np.empty(3), np.empty(3)
     poly = np.empty((4, 2))              # the face's part in front of `near`, projected
@@ -452,7 +491,7 @@ def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, samples, 
     n = face_order.shape[0]
     later, later_depth = np.empty(n, np.int64), np.empty(n)     # the faces drawn last, their _hidden_depth
     n_later = 0
-    dense = not np.isnan(row_y).all()   # pixel centres; edge sub-samples lie where tiles rarely hide a face
+    dense = (row_band[0] == row_band[1]).any()   # pixel centres; edge sub-samples lie where tiles rarely hide a face
     tiles = np.empty(((height + TILE - 1) // TILE, (width + TILE - 1) // TILE))
     for m in range(n + n):
         if m < n:
@@ -475,37 +514,48 @@ def _cover_kernel(xy, z, P, near, vertices, faces, face_order, origin, samples, 
                 later[n_later], later_depth[n_later] = f, depth
                 n_later += 1
                 continue
-        _draw(f, corners, poly, nx, ny, nz, nd0, samples, x0, y0, width, height, start, row_y, nearest, face, cx, cy,
-              edges, later_depth[m - n] if m >= n else 0.0)
+        _draw(f, corners, poly, nx, ny, nz, nd0, sample_xy, directions, x0, y0, width, height, start, row_band, nearest,
+              face, cx, cy, edges, later_depth[m - n] if m >= n else 0.0)
 
 
 @kernel
-def _barycentrics_kernel(vertices, faces, surface, first, origin, samples, order, face, nearest, geom, prim, u, v,
+def _barycentrics_kernel(vertices, faces, surface, first, origin, directions, order, face, nearest, geom, prim, u, v,
                          depth):
-    """geom, prim, u, v, depth (N,) of the original sample order[j] of each SampleGrid row j that a face covers
-    (face[j] >= 0, nearest[j] its depth): the ray (origin (3,) float64, the row's direction) against that face by
-    Moeller-Trumbore in float64 (hit = (1 - u - v) v0 + u v1 + v v2, depth the ray parameter), rounded to float32;
-    a ray in the face's plane to rounding (no determinant) keeps u = v = 0 and nearest[j]."""
-    for j in range(samples.shape[1]):
+    """geom, prim, u, v, depth (N,) of the original sample i = order[j] (j itself when order is empty) of each
+    SampleGrid column j: where a face covers it (face[j] >= 0, nearest[j] its depth), the ray (origin (3,) float64,
+    direction directions[:, j] float32) against that face by Moeller-Trumbore in float64 (hit = (1 - u - v) v0 +
+    u v1 + v v2, depth the ray parameter), rounded to float32, and a ray in the face's plane to rounding (no
+    determinant) u = v = 0 and depth nearest[j]; elsewhere background (-1, -1, 0, 0, inf). What depends on the face
+    alone (its corners, edges, s = origin - v0, q = s x e1 and e2 . q) is computed once per run of columns on one
+    face: the same operations, once."""
+    identity = order.shape[0] == 0
+    held = -1                            # the face whose values below are held: runs of a row share a face
+    ox = oy = oz = e1x = e1y = e1z = e2x = e2y = e2z = qx = qy = qz = sx = sy = sz = tq = 0.0
+    g, p = np.int32(-1), np.int32(-1)
+    for j in range(face.shape[0]):
+        i = j if identity else order[j]
         f = face[j]
         if f < 0:
+            geom[i], prim[i], u[i], v[i], depth[i] = -1, -1, np.float32(0.0), np.float32(0.0), np.float32(np.inf)
             continue
-        i = order[j]
-        geom[i] = surface[f]
-        prim[i] = f - first[surface[f]]
-        ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
-        ox, oy, oz = np.float64(vertices[ia, 0]), np.float64(vertices[ia, 1]), np.float64(vertices[ia, 2])
-        e1x, e1y, e1z = vertices[ib, 0] - ox, vertices[ib, 1] - oy, vertices[ib, 2] - oz
-        e2x, e2y, e2z = vertices[ic, 0] - ox, vertices[ic, 1] - oy, vertices[ic, 2] - oz
-        dx, dy, dz = samples[2, j], samples[3, j], samples[4, j]
+        if f != held:
+            held = f
+            g, p = surface[f], np.int32(f - first[surface[f]])
+            ia, ib, ic = faces[f, 0], faces[f, 1], faces[f, 2]
+            ox, oy, oz = np.float64(vertices[ia, 0]), np.float64(vertices[ia, 1]), np.float64(vertices[ia, 2])
+            e1x, e1y, e1z = vertices[ib, 0] - ox, vertices[ib, 1] - oy, vertices[ib, 2] - oz
+            e2x, e2y, e2z = vertices[ic, 0] - ox, vertices[ic, 1] - oy, vertices[ic, 2] - oz
+            sx, sy, sz = origin[0] - ox, origin[1] - oy, origin[2] - oz
+            qx, qy, qz = sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x
+            tq = e2x * qx + e2y * qy + e2z * qz
+        geom[i], prim[i] = g, p
+        dx, dy, dz = np.float64(directions[0, j]), np.float64(directions[1, j]), np.float64(directions[2, j])
         px, py, pz = dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x
         det = e1x * px + e1y * py + e1z * pz
         if det == 0.0:
-            depth[i] = np.float32(nearest[j])
+            u[i], v[i], depth[i] = np.float32(0.0), np.float32(0.0), np.float32(nearest[j])
             continue
-        sx, sy, sz = origin[0] - ox, origin[1] - oy, origin[2] - oz
-        qx, qy, qz = sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x
         inverse = 1.0 / det
         u[i] = np.float32((sx * px + sy * py + sz * pz) * inverse)
         v[i] = np.float32((dx * qx + dy * qy + dz * qz) * inverse)
-        depth[i] = np.float32((e2x * qx + e2y * qy + e2z * qz) * inverse)
+        depth[i] = np.float32(tq * inverse)

@@ -158,14 +158,15 @@ def intersect_samples(ctx: Context, uv: np.ndarray, stats: dict | None = None) -
     and applies, else Embree's. stats: adds seconds 'trace', counts 'rays' and 'rasterised' (of them)."""
     t0 = time.perf_counter()
     n = len(uv)
-    origins, rays, directions = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32), np.empty((3, n), np.float32)
-    _camera_rays_kernel(np.ascontiguousarray(uv, np.float64), ctx.camera.centre.astype(np.float32), ctx.D0,
-                        ctx.dDdx, ctx.dDdy, origins, rays, directions)
+    directions = np.empty((3, n), np.float32)
+    _directions_kernel(np.ascontiguousarray(uv, np.float64), ctx.D0, ctx.dDdx, ctx.dDdy, directions)
     rasterised = camera_hits(ctx.scene, ctx.camera, uv, directions)      # None: off, or Embree must answer
     if rasterised is not None:
         geom, prim, u, v, depth = rasterised
     else:
-        hit = ctx.scene.intersect(origins, rays)
+        origins = np.empty((n, 3), np.float32)
+        origins[:] = ctx.camera.centre.astype(np.float32)
+        hit = ctx.scene.intersect(origins, np.ascontiguousarray(directions.T))
         prim, u, v = hit["primID"].astype(np.int32), hit["u"], hit["v"]
         geom, depth = np.empty(n, np.int32), np.empty(n, np.float32)
         _closest_kernel(np.ascontiguousarray(hit["geomID"], np.int32), prim,
@@ -179,16 +180,13 @@ def intersect_samples(ctx: Context, uv: np.ndarray, stats: dict | None = None) -
 
 
 @kernel
-def _camera_rays_kernel(uv, centre, D0, dDdx, dDdy, origins, rays, directions):
-    """Camera rays through pixel positions uv (N, 2) float64: origins (N, 3) the centre, rays (N, 3) and directions
-    (3, N) float32 D0 + u dDdx + v dDdy (u, v rounded to float32 first), as Context.directions computes them."""
+def _directions_kernel(uv, D0, dDdx, dDdy, directions):
+    """directions (3, N) float32 of the camera rays through pixel positions uv (N, 2) float64: D0 + u dDdx + v dDdy
+    (u, v rounded to float32 first), as Context.directions computes them."""
     for i in range(uv.shape[0]):
         u, v = np.float32(uv[i, 0]), np.float32(uv[i, 1])
         for c in range(3):
-            d = D0[c] + u * dDdx[c] + v * dDdy[c]
-            origins[i, c] = centre[c]
-            rays[i, c] = d
-            directions[c, i] = d
+            directions[c, i] = D0[c] + u * dDdx[c] + v * dDdy[c]
 
 
 @kernel
