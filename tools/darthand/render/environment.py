@@ -382,41 +382,60 @@ def _blurred_kernel(texels, offsets, heights, d, lods, scale, out):
     """out[k, :, i] = scale (3,) x the blurred value of direction d[i] (N, 3) float64 at fractional mip level
     lods[k, i] (K, N) float64 in [0, L - 1] over packed levels (texels (T, 3) float32, offsets, heights (L,) int64;
     level l is heights[l] x 2 heights[l]): bilinear in its two levels (as _lookup_kernel, its coordinates too) and
-    linear between them,
-    in float64, rounded once to out's dtype."""
+    linear between them, in float64, rounded once to out's dtype. NaN in d or lods gives NaN or some texel's value,
+    never a read outside the texels.
+
+    256 directions at a time, in three loops: their map angles, then per row k their two levels' texels,
+    fractions and weights (these two vectorise: 0.7x the time of one loop doing all), then the texel reads."""
     top = len(offsets) - 1
-    value = np.zeros(3)
-    for i in range(d.shape[0]):
-        d0, d1, d2 = d[i, 0], d[i, 1], d[i, 2]
-        u = fast_atan2(d1, -d0) / (2 * np.pi) + 0.5
-        t = 0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi
+    us, ts = np.empty(256), np.empty(256)
+    corner = np.empty((2, 4, 256), np.int64)            # per level (lo, lo + 1): the four texels' rows in texels
+    fxs, fys, weights = np.empty((2, 256)), np.empty((2, 256)), np.empty((2, 256))
+    for start in range(0, d.shape[0], 256):
+        m = min(256, d.shape[0] - start)
+        for j in range(m):
+            d0, d1, d2 = d[start + j, 0], d[start + j, 1], d[start + j, 2]
+            us[j] = fast_atan2(d1, -d0) / (2 * np.pi) + 0.5
+            ts[j] = 0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi
         for k in range(lods.shape[0]):
-            lod = lods[k, i]
-            lo = min(int(lod), top)
-            frac = lod - lo
-            value[:] = 0.0
-            for level in range(lo, min(lo + 1, top) + 1):
-                weight = 1 - frac if level == lo else frac
-                if weight == 0 and level > lo:
-                    continue
-                h = heights[level]
-                w = 2 * h
-                x, y = u * w - 0.5, t * h - 0.5
-                fx0, fy0 = np.floor(x), np.floor(y)
-                fx, fy = x - fx0, y - fy0
-                x0 = int(fx0)                       # -1 .. w - 1: wraps as x0 % w
-                x0 = x0 + w if x0 < 0 else x0
-                x1 = x0 + 1 if x0 + 1 < w else 0
-                row = int(fy0)
-                y0 = offsets[level] + min(max(row, 0), h - 1) * w
-                y1 = offsets[level] + min(max(row + 1, 0), h - 1) * w
-                a, b, c_, e = y0 + x0, y0 + x1, y1 + x0, y1 + x1
-                for c in range(3):
-                    upper = texels[a, c] * (1 - fx) + texels[b, c] * fx
-                    lower = texels[c_, c] * (1 - fx) + texels[e, c] * fx
-                    value[c] += weight * (upper * (1 - fy) + lower * fy)
-            for c in range(3):
-                out[k, c, i] = value[c] * scale[c]
+            for j in range(m):
+                lod = lods[k, start + j]
+                lo = min(max(int(lod), 0), top)
+                frac = lod - lo
+                for s in range(2):
+                    level = min(lo + s, top)
+                    weights[s, j] = 1 - frac if s == 0 else (frac if lo < top else 0.0)    # 0: level lo only
+                    h = heights[level]
+                    w = 2 * h
+                    x, y = us[j] * w - 0.5, ts[j] * h - 0.5
+                    fx0, fy0 = np.floor(x), np.floor(y)
+                    fxs[s, j], fys[s, j] = x - fx0, y - fy0
+                    x0 = min(max(int(fx0), -1), w - 1)      # -1 .. w - 1 (clamped for NaN): wraps as x0 % w
+                    x0 = x0 + w if x0 < 0 else x0
+                    x1 = x0 + 1 if x0 + 1 < w else 0
+                    row = int(fy0)
+                    y0 = offsets[level] + min(max(row, 0), h - 1) * w
+                    y1 = offsets[level] + min(max(row + 1, 0), h - 1) * w
+                    corner[s, 0, j], corner[s, 1, j], corner[s, 2, j], corner[s, 3, j] = (y0 + x0, y0 + x1,
+                                                                                          y1 + x0, y1 + x1)
+            for j in range(m):
+                v0 = v1 = v2 = 0.0
+                for s in range(2):
+                    weight = weights[s, j]
+                    if s == 1 and weight == 0:
+                        continue
+                    a, b, c, e = corner[s, 0, j], corner[s, 1, j], corner[s, 2, j], corner[s, 3, j]
+                    fx, fy = fxs[s, j], fys[s, j]
+                    gx, gy = 1 - fx, 1 - fy
+                    v0 += weight * ((texels[a, 0] * gx + texels[b, 0] * fx) * gy
+                                    + (texels[c, 0] * gx + texels[e, 0] * fx) * fy)
+                    v1 += weight * ((texels[a, 1] * gx + texels[b, 1] * fx) * gy
+                                    + (texels[c, 1] * gx + texels[e, 1] * fx) * fy)
+                    v2 += weight * ((texels[a, 2] * gx + texels[b, 2] * fx) * gy
+                                    + (texels[c, 2] * gx + texels[e, 2] * fx) * fy)
+                out[k, 0, start + j] = v0 * scale[0]
+                out[k, 1, start + j] = v1 * scale[1]
+                out[k, 2, start + j] = v2 * scale[2]
 
 
 # ------------------------------------------------------------------------------------------------ per map
