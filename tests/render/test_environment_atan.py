@@ -137,6 +137,11 @@ def test_blurred_lookup_between_levels_matches_the_contract_formula():
         assert np.abs(got[k].T - want).max() <= 1e-5 * np.abs(levels[0]).max()
 
 
+def test_bilinear_lookup_of_zero_vectors_matches_the_contract_formula():
+    level = coordinate_map()
+    assert np.abs(env.bilinear(level, ZERO_VECTORS) - contract_bilinear(level, ZERO_VECTORS)).max() < 1e-4
+
+
 def test_nan_directions_and_blurs_read_inside_the_map_and_leave_the_others_alone():
     levels = env.pyramid(coordinate_map(64))
     d = np.concatenate([lookup_directions()[:600], [[np.nan, 0.0, 1.0], [1.0, np.nan, np.nan], [np.nan] * 3]])
@@ -147,3 +152,6 @@ def test_nan_directions_and_blurs_read_inside_the_map_and_leave_the_others_alone
     alone = env.lookup_blurred_many(env.pack_levels(levels), d[finite], angles[:, finite])[0]
     assert np.array_equal(got[:, finite], alone)
     assert (np.isnan(got[:, ~finite]) | (np.abs(got[:, ~finite]) <= np.abs(levels[0]).max())).all()
+    sky = env.bilinear(coordinate_map(), d)
+    assert np.array_equal(sky[:600], env.bilinear(coordinate_map(), d[:600]))
+    assert (np.isnan(sky[600:]) | (np.abs(sky[600:]) <= np.abs(coordinate_map()).max())).all()

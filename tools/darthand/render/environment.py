@@ -301,39 +301,40 @@ def bilinear(level: np.ndarray, d: np.ndarray) -> np.ndarray:
     """(N, 3) float64 bilinear lookup of a map level (H, W, 3) along lookup directions d (N, 3) (direction_uv's
     convention), wrapping in u and clamping at the poles."""
     out = np.zeros((len(d), 3), np.float64)
-    _lookup_kernel(np.ascontiguousarray(level, np.float32), np.ascontiguousarray(d, np.float64), np.eye(3), 0, 1.0,
-                   out)
+    _lookup_kernel(np.ascontiguousarray(level, np.float32), np.ascontiguousarray(d, np.float64), 1.0, out)
     return out
 
 
 @kernel(error_model="numpy")
-def _lookup_kernel(level, d, to_map, width, weight, out):
-    """out[i] += weight x the bilinear lookup of level (H, W, 3) float32 along the i-th direction: d[i] (N, 3)
-    float64, or with width > 0 the direction of pixel centre (i % width + 0.5, i // width + 0.5, 1) times to_map
-    (3, 3) (a row vector times the matrix; d unused). u, v as direction_uv, with fast_atan2 for np.arctan2 and
-    sqrt(d0^2 + d1^2) for hypot (the same to ~1e-9 rad, a third of the time); texel coordinates x = u W - 0.5,
-    y = (1 - v) H - 0.5 (texel centres at integers), x wrapping, y clamped."""
+def _lookup_kernel(level, d, weight, out):
+    """out[i] += weight x the bilinear lookup of level (H, W, 3) float32 along direction d[i] (N, 3) float64. u, v
+    as direction_uv, with fast_atan2 for np.arctan2 and sqrt(d0^2 + d1^2) for hypot (the same to ~1e-9 rad, a third
+    of the time); texel coordinates x = u W - 0.5, y = (1 - v) H - 0.5 (texel centres at integers), x wrapping, y
+    clamped. 256 directions at a time: their texels and fractions in a loop of their own (it vectorises), then the
+    texel reads."""
     h, w = level.shape[0], level.shape[1]
-    for i in range(out.shape[0]):
-        if width > 0:
-            px, py = i % width + 0.5, i // width + 0.5
-            d0 = px * to_map[0, 0] + py * to_map[1, 0] + to_map[2, 0]
-            d1 = px * to_map[0, 1] + py * to_map[1, 1] + to_map[2, 1]
-            d2 = px * to_map[0, 2] + py * to_map[1, 2] + to_map[2, 2]
-        else:
-            d0, d1, d2 = d[i, 0], d[i, 1], d[i, 2]
-        x = (fast_atan2(d1, -d0) / (2 * np.pi) + 0.5) * w - 0.5
-        y = (0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi) * h - 0.5
-        fx0, fy0 = np.floor(x), np.floor(y)
-        fx, fy = x - fx0, y - fy0
-        x0 = int(fx0) % w
-        x1 = (x0 + 1) % w
-        y0 = min(max(int(fy0), 0), h - 1)
-        y1 = min(max(int(fy0) + 1, 0), h - 1)
-        for c in range(3):
-            top = level[y0, x0, c] * (1 - fx) + level[y0, x1, c] * fx
-            bottom = level[y1, x0, c] * (1 - fx) + level[y1, x1, c] * fx
-            out[i, c] += weight * (top * (1 - fy) + bottom * fy)
+    corner = np.empty((4, 256), np.int64)           # y0, y1, x0, x1
+    fxs, fys = np.empty(256), np.empty(256)
+    for start in range(0, out.shape[0], 256):
+        m = min(256, out.shape[0] - start)
+        for j in range(m):
+            d0, d1, d2 = d[start + j, 0], d[start + j, 1], d[start + j, 2]
+            x = (fast_atan2(d1, -d0) / (2 * np.pi) + 0.5) * w - 0.5
+            y = (0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi) * h - 0.5
+            fx0, fy0 = np.floor(x), np.floor(y)
+            fxs[j], fys[j] = x - fx0, y - fy0
+            x0 = min(max(int(fx0), -1), w - 1)          # -1 .. w - 1 (clamped for NaN): wraps as x0 % w
+            x0 = x0 + w if x0 < 0 else x0
+            corner[0, j] = min(max(int(fy0), 0), h - 1)
+            corner[1, j] = min(max(int(fy0) + 1, 0), h - 1)
+            corner[2, j], corner[3, j] = x0, x0 + 1 if x0 + 1 < w else 0
+        for j in range(m):
+            y0, y1, x0, x1 = corner[0, j], corner[1, j], corner[2, j], corner[3, j]
+            fx, fy = fxs[j], fys[j]
+            for c in range(3):
+                top = level[y0, x0, c] * (1 - fx) + level[y0, x1, c] * fx
+                bottom = level[y1, x0, c] * (1 - fx) + level[y1, x1, c] * fx
+                out[start + j, c] += weight * (top * (1 - fy) + bottom * fy)
 
 
 def level_of_detail(levels: list[np.ndarray], angle_deg: np.ndarray) -> np.ndarray:
