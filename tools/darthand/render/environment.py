@@ -310,17 +310,23 @@ def _lookup_kernel(level, d, weight, out):
     """out[i] += weight x the bilinear lookup of level (H, W, 3) float32 along direction d[i] (N, 3) float64. u, v
     as direction_uv, with fast_atan2 for np.arctan2 and sqrt(d0^2 + d1^2) for hypot (the same to ~1e-9 rad, a third
     of the time); texel coordinates x = u W - 0.5, y = (1 - v) H - 0.5 (texel centres at integers), x wrapping, y
-    clamped. 256 directions at a time: their texels and fractions in a loop of their own (it vectorises), then the
-    texel reads."""
+    clamped. 256 directions at a time, each step a loop of its own: their components copied out (to contiguous
+    arrays, as _blurred_kernel), their texel coordinates (vectorised), their texels and fractions, then the texel
+    reads."""
     h, w = level.shape[0], level.shape[1]
     corner = np.empty((4, 256), np.int64)           # y0, y1, x0, x1
+    e0, e1, e2, xs, ys = np.empty(256), np.empty(256), np.empty(256), np.empty(256), np.empty(256)
     fxs, fys = np.empty(256), np.empty(256)
     for start in range(0, out.shape[0], 256):
         m = min(256, out.shape[0] - start)
         for j in range(m):
-            d0, d1, d2 = d[start + j, 0], d[start + j, 1], d[start + j, 2]
-            x = (fast_atan2(d1, -d0) / (2 * np.pi) + 0.5) * w - 0.5
-            y = (0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi) * h - 0.5
+            e0[j], e1[j], e2[j] = d[start + j, 0], d[start + j, 1], d[start + j, 2]
+        for j in range(m):
+            d0, d1, d2 = e0[j], e1[j], e2[j]
+            xs[j] = (fast_atan2(d1, -d0) / (2 * np.pi) + 0.5) * w - 0.5
+            ys[j] = (0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi) * h - 0.5
+        for j in range(m):
+            x, y = xs[j], ys[j]
             fx0, fy0 = np.floor(x), np.floor(y)
             fxs[j], fys[j] = x - fx0, y - fy0
             x0 = min(max(int(fx0), -1), w - 1)          # -1 .. w - 1 (clamped for NaN): wraps as x0 % w
@@ -389,16 +395,19 @@ def _blurred_kernel(texels, offsets, heights, d, lods, scale, out):
     linear between them, in float64, rounded once to out's dtype. NaN in d or lods gives NaN or some texel's value,
     never a read outside the texels.
 
-    256 directions at a time, in three loops: their map angles, then per row k their two levels' texels,
-    fractions and weights (these two vectorise: 0.7x the time of one loop doing all), then the texel reads."""
+    256 directions at a time, each step a loop of its own: their components copied out (to contiguous arrays:
+    LLVM vectorises no loop reading d's rows in place), their map angles (vectorised), then per row k their two
+    levels' texels, fractions and weights, then the texel reads (0.6x the time of one loop doing all)."""
     top = len(offsets) - 1
-    us, ts = np.empty(256), np.empty(256)
+    e0, e1, e2, us, ts = np.empty(256), np.empty(256), np.empty(256), np.empty(256), np.empty(256)
     corner = np.empty((2, 4, 256), np.int64)            # per level (lo, lo + 1): the four texels' rows in texels
     fxs, fys, weights = np.empty((2, 256)), np.empty((2, 256)), np.empty((2, 256))
     for start in range(0, d.shape[0], 256):
         m = min(256, d.shape[0] - start)
         for j in range(m):
-            d0, d1, d2 = d[start + j, 0], d[start + j, 1], d[start + j, 2]
+            e0[j], e1[j], e2[j] = d[start + j, 0], d[start + j, 1], d[start + j, 2]
+        for j in range(m):
+            d0, d1, d2 = e0[j], e1[j], e2[j]
             us[j] = fast_atan2(d1, -d0) / (2 * np.pi) + 0.5
             ts[j] = 0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi
         for k in range(lods.shape[0]):
