@@ -1,7 +1,7 @@
 """The environment lookups' arctangent (render/environment.fast_atan2) against np.arctan2 (the independent truth): its
 error bound around the whole circle, the signed zeros and axes it must hit exactly (the seam, the poles), and map
-lookups through it against a numpy bilinear lookup by the contract's own formula (direction_uv, np.arctan2), on a
-map whose texels hold their own coordinates."""
+lookups through it (bilinear, and blurred between mip levels) against numpy lookups by the contract's own formula
+(direction_uv, np.arctan2), on a map whose texels hold their own coordinates; NaN inputs read inside the map."""
 
 from __future__ import annotations
 
@@ -101,3 +101,57 @@ def test_blurred_lookup_at_the_finest_level_matches_the_contract_formula():
     d = lookup_directions()
     got = env.lookup_blurred_many(env.pack_levels(levels), d, np.zeros((1, len(d))))[0].T
     assert np.abs(got - contract_bilinear(level, d)).max() <= 1e-5 * np.abs(level).max()
+
+
+ZERO_VECTORS = np.array([[a, b, c] for a in (0.0, -0.0) for b in (0.0, -0.0) for c in (0.0, -0.0)])
+
+
+def contract_blurred(levels: list[np.ndarray], d: np.ndarray, lod: np.ndarray) -> np.ndarray:
+    """(N, 3) trilinear by the contract's formula: contract_bilinear in the levels floor(lod) and the next one,
+    blended by lod's fraction (N,)."""
+    lo = np.minimum(np.floor(lod).astype(int), len(levels) - 1)
+    out = np.zeros((len(d), 3))
+    for k in np.unique(lo):
+        at = lo == k
+        frac = (lod[at] - k)[:, None]
+        out[at] = contract_bilinear(levels[k], d[at]) * (1 - frac)
+        if k + 1 < len(levels):
+            out[at] += contract_bilinear(levels[k + 1], d[at]) * frac
+    return out
+
+
+def test_blurred_lookup_between_levels_matches_the_contract_formula():
+    # directions at the seam, the poles, zero vectors and at random, each at two random blurs, whole levels and the
+    # coarsest among them; a count that is not a multiple of the kernel's batch of 256
+    levels = env.pyramid(coordinate_map(64))
+    d = np.concatenate([lookup_directions(), ZERO_VECTORS])
+    rng = np.random.default_rng(8)
+    lod = rng.uniform(0, len(levels) - 1, (2, len(d)))
+    lod[:, :40] = np.arange(40) % len(levels)
+    finest = 360.0 / levels[0].shape[1]
+    angles = finest * 2.0 ** lod
+    packed = env.pack_levels(levels)
+    got = env.lookup_blurred_many(packed, d, angles, (1.0, 2.0, 0.5))
+    for k in range(2):
+        want = contract_blurred(levels, d, env.level_of_detail(levels, angles[k])) * [1.0, 2.0, 0.5]
+        assert np.abs(got[k].T - want).max() <= 1e-5 * np.abs(levels[0]).max()
+
+
+def test_bilinear_lookup_of_zero_vectors_matches_the_contract_formula():
+    level = coordinate_map()
+    assert np.abs(env.bilinear(level, ZERO_VECTORS) - contract_bilinear(level, ZERO_VECTORS)).max() < 1e-4
+
+
+def test_nan_directions_and_blurs_read_inside_the_map_and_leave_the_others_alone():
+    levels = env.pyramid(coordinate_map(64))
+    d = np.concatenate([lookup_directions()[:600], [[np.nan, 0.0, 1.0], [1.0, np.nan, np.nan], [np.nan] * 3]])
+    angles = np.random.default_rng(9).uniform(0, 90, (1, len(d)))
+    angles[0, :3] = np.nan
+    finite = np.isfinite(d).all(axis=1) & np.isfinite(angles[0])
+    got = env.lookup_blurred_many(env.pack_levels(levels), d, angles)[0]
+    alone = env.lookup_blurred_many(env.pack_levels(levels), d[finite], angles[:, finite])[0]
+    assert np.array_equal(got[:, finite], alone)
+    assert (np.isnan(got[:, ~finite]) | (np.abs(got[:, ~finite]) <= np.abs(levels[0]).max())).all()
+    sky = env.bilinear(coordinate_map(), d)
+    assert np.array_equal(sky[:600], env.bilinear(coordinate_map(), d[:600]))
+    assert (np.isnan(sky[600:]) | (np.abs(sky[600:]) <= np.abs(coordinate_map()).max())).all()

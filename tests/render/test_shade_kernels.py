@@ -234,3 +234,34 @@ def test_empty_batches_and_no_lights():
         compare(mats[name], hits, lights, "subsurface")           # subsurface without radii: Lambert
     hits.uv = hits.footprint = None                               # no UVs: the texture's mean
     compare(mats["metal_map"], hits, lights, "wrap")
+
+
+def random_environment(rng):
+    """A FrameEnvironment of a random positive map (no lights), turned and coloured."""
+    from darthand.render import environment as env
+    levels = env.pyramid(rng.uniform(0.0, 4.0, (32, 64, 3)).astype(np.float32))
+    lighting = env.MapLighting(np.zeros((0, 3)), np.zeros((0, 3)), levels, np.zeros((9, 3)), [])
+    return env.FrameEnvironment([], lighting, env.frame_matrix("camera", np.eye(3), 30.0), np.array([1.0, 0.9, 0.8]))
+
+
+def test_the_environment_specular_is_its_numpy_definition_to_the_bit():
+    # the term: spec x the prefiltered lookup along 2 (n.v) n - v x Karis' F0 A + B (numpy's ambient_specular at
+    # the clipped n.v) x the open fraction, added to the rest of the shading
+    rng = np.random.default_rng(17)
+    environment = random_environment(rng)
+    for name, material in materials(rng).items():
+        for indirect in (False, True):
+            hits = random_hits(rng, 2000, (0.3, -0.8, 0.5), indirect=indirect)
+            lights = lights_for(rng, (0.3, -0.8, 0.5), np.array([300.0, -900.0, 400.0]))
+            want = reference_shade(material, hits, lights, AMBIENT, Occluder(), 0.3, {}, "wrap")
+            spec = np.float32(material.specular)
+            if spec:
+                p = sh.material_params(material, hits)
+                n, v = hits.normal, hits.view
+                nv = np.clip(dot(n, v), 1e-4, 1)
+                reflect = 2 * dot(n, v) * n - v
+                term = environment.specular(reflect, p.roughness) * sh.ambient_specular(p.f0, p.roughness, nv)
+                visible = np.ones(n.shape[1], np.float32) if hits.visible is None else hits.visible
+                want += spec * term * visible
+            got = sh.shade(material, hits, lights, AMBIENT, Occluder(), 0.3, {}, "wrap", environment)
+            assert np.array_equal(got, want), (name, indirect, int(np.sum(got != want)))

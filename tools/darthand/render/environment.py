@@ -301,39 +301,46 @@ def bilinear(level: np.ndarray, d: np.ndarray) -> np.ndarray:
     """(N, 3) float64 bilinear lookup of a map level (H, W, 3) along lookup directions d (N, 3) (direction_uv's
     convention), wrapping in u and clamping at the poles."""
     out = np.zeros((len(d), 3), np.float64)
-    _lookup_kernel(np.ascontiguousarray(level, np.float32), np.ascontiguousarray(d, np.float64), np.eye(3), 0, 1.0,
-                   out)
+    _lookup_kernel(np.ascontiguousarray(level, np.float32), np.ascontiguousarray(d, np.float64), 1.0, out)
     return out
 
 
 @kernel(error_model="numpy")
-def _lookup_kernel(level, d, to_map, width, weight, out):
-    """out[i] += weight x the bilinear lookup of level (H, W, 3) float32 along the i-th direction: d[i] (N, 3)
-    float64, or with width > 0 the direction of pixel centre (i % width + 0.5, i // width + 0.5, 1) times to_map
-    (3, 3) (a row vector times the matrix; d unused). u, v as direction_uv, with fast_atan2 for np.arctan2 and
-    sqrt(d0^2 + d1^2) for hypot (the same to ~1e-9 rad, a third of the time); texel coordinates x = u W - 0.5,
-    y = (1 - v) H - 0.5 (texel centres at integers), x wrapping, y clamped."""
+def _lookup_kernel(level, d, weight, out):
+    """out[i] += weight x the bilinear lookup of level (H, W, 3) float32 along direction d[i] (N, 3) float64. u, v
+    as direction_uv, with fast_atan2 for np.arctan2 and sqrt(d0^2 + d1^2) for hypot (the same to ~1e-9 rad, a third
+    of the time); texel coordinates x = u W - 0.5, y = (1 - v) H - 0.5 (texel centres at integers), x wrapping, y
+    clamped. 256 directions at a time, each step a loop of its own: their components copied out (to contiguous
+    arrays, as _blurred_kernel), their texel coordinates (vectorised), their texels and fractions, then the texel
+    reads."""
     h, w = level.shape[0], level.shape[1]
-    for i in range(out.shape[0]):
-        if width > 0:
-            px, py = i % width + 0.5, i // width + 0.5
-            d0 = px * to_map[0, 0] + py * to_map[1, 0] + to_map[2, 0]
-            d1 = px * to_map[0, 1] + py * to_map[1, 1] + to_map[2, 1]
-            d2 = px * to_map[0, 2] + py * to_map[1, 2] + to_map[2, 2]
-        else:
-            d0, d1, d2 = d[i, 0], d[i, 1], d[i, 2]
-        x = (fast_atan2(d1, -d0) / (2 * np.pi) + 0.5) * w - 0.5
-        y = (0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi) * h - 0.5
-        fx0, fy0 = np.floor(x), np.floor(y)
-        fx, fy = x - fx0, y - fy0
-        x0 = int(fx0) % w
-        x1 = (x0 + 1) % w
-        y0 = min(max(int(fy0), 0), h - 1)
-        y1 = min(max(int(fy0) + 1, 0), h - 1)
-        for c in range(3):
-            top = level[y0, x0, c] * (1 - fx) + level[y0, x1, c] * fx
-            bottom = level[y1, x0, c] * (1 - fx) + level[y1, x1, c] * fx
-            out[i, c] += weight * (top * (1 - fy) + bottom * fy)
+    corner = np.empty((4, 256), np.int64)           # y0, y1, x0, x1
+    e0, e1, e2, xs, ys = np.empty(256), np.empty(256), np.empty(256), np.empty(256), np.empty(256)
+    fxs, fys = np.empty(256), np.empty(256)
+    for start in range(0, out.shape[0], 256):
+        m = min(256, out.shape[0] - start)
+        for j in range(m):
+            e0[j], e1[j], e2[j] = d[start + j, 0], d[start + j, 1], d[start + j, 2]
+        for j in range(m):
+            d0, d1, d2 = e0[j], e1[j], e2[j]
+            xs[j] = (fast_atan2(d1, -d0) / (2 * np.pi) + 0.5) * w - 0.5
+            ys[j] = (0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi) * h - 0.5
+        for j in range(m):
+            x, y = xs[j], ys[j]
+            fx0, fy0 = np.floor(x), np.floor(y)
+            fxs[j], fys[j] = x - fx0, y - fy0
+            x0 = min(max(int(fx0), -1), w - 1)          # -1 .. w - 1 (clamped for NaN): wraps as x0 % w
+            x0 = x0 + w if x0 < 0 else x0
+            corner[0, j] = min(max(int(fy0), 0), h - 1)
+            corner[1, j] = min(max(int(fy0) + 1, 0), h - 1)
+            corner[2, j], corner[3, j] = x0, x0 + 1 if x0 + 1 < w else 0
+        for j in range(m):
+            y0, y1, x0, x1 = corner[0, j], corner[1, j], corner[2, j], corner[3, j]
+            fx, fy = fxs[j], fys[j]
+            for c in range(3):
+                top = level[y0, x0, c] * (1 - fx) + level[y0, x1, c] * fx
+                bottom = level[y1, x0, c] * (1 - fx) + level[y1, x1, c] * fx
+                out[start + j, c] += weight * (top * (1 - fy) + bottom * fy)
 
 
 def level_of_detail(levels: list[np.ndarray], angle_deg: np.ndarray) -> np.ndarray:
@@ -370,9 +377,12 @@ def lookup_blurred_many(packed: PackedLevels, d: np.ndarray, angle_deg: np.ndarr
     d = np.ascontiguousarray(d, np.float64)
     angles = np.broadcast_to(np.asarray(angle_deg, np.float64), (len(angle_deg), len(d)))
     finest = 360.0 / (2 * float(packed.heights[0]))
-    lod = np.clip(np.log2(np.maximum(angles, finest) / finest), 0, len(packed.heights) - 1)     # level_of_detail's
+    lod = np.maximum(angles, finest)            # level_of_detail's numbers, in place (0.4x the time)
+    lod /= finest
+    np.log2(lod, out=lod)
+    np.clip(lod, 0, len(packed.heights) - 1, out=lod)
     out = np.empty((len(angles), 3, len(d)), dtype)
-    _blurred_kernel(packed.texels, packed.offsets, packed.heights, d, np.ascontiguousarray(lod),
+    _blurred_kernel(packed.texels, packed.offsets, packed.heights, d, lod,
                     np.asarray(scale, np.float64), out)
     return out
 
@@ -382,41 +392,63 @@ def _blurred_kernel(texels, offsets, heights, d, lods, scale, out):
     """out[k, :, i] = scale (3,) x the blurred value of direction d[i] (N, 3) float64 at fractional mip level
     lods[k, i] (K, N) float64 in [0, L - 1] over packed levels (texels (T, 3) float32, offsets, heights (L,) int64;
     level l is heights[l] x 2 heights[l]): bilinear in its two levels (as _lookup_kernel, its coordinates too) and
-    linear between them,
-    in float64, rounded once to out's dtype."""
+    linear between them, in float64, rounded once to out's dtype. NaN in d or lods gives NaN or some texel's value,
+    never a read outside the texels.
+
+    256 directions at a time, each step a loop of its own: their components copied out (to contiguous arrays:
+    LLVM vectorises no loop reading d's rows in place), their map angles (vectorised), then per row k their two
+    levels' texels, fractions and weights, then the texel reads (0.6x the time of one loop doing all)."""
     top = len(offsets) - 1
-    value = np.zeros(3)
-    for i in range(d.shape[0]):
-        d0, d1, d2 = d[i, 0], d[i, 1], d[i, 2]
-        u = fast_atan2(d1, -d0) / (2 * np.pi) + 0.5
-        t = 0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi
+    e0, e1, e2, us, ts = np.empty(256), np.empty(256), np.empty(256), np.empty(256), np.empty(256)
+    corner = np.empty((2, 4, 256), np.int64)            # per level (lo, lo + 1): the four texels' rows in texels
+    fxs, fys, weights = np.empty((2, 256)), np.empty((2, 256)), np.empty((2, 256))
+    for start in range(0, d.shape[0], 256):
+        m = min(256, d.shape[0] - start)
+        for j in range(m):
+            e0[j], e1[j], e2[j] = d[start + j, 0], d[start + j, 1], d[start + j, 2]
+        for j in range(m):
+            d0, d1, d2 = e0[j], e1[j], e2[j]
+            us[j] = fast_atan2(d1, -d0) / (2 * np.pi) + 0.5
+            ts[j] = 0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi
         for k in range(lods.shape[0]):
-            lod = lods[k, i]
-            lo = min(int(lod), top)
-            frac = lod - lo
-            value[:] = 0.0
-            for level in range(lo, min(lo + 1, top) + 1):
-                weight = 1 - frac if level == lo else frac
-                if weight == 0 and level > lo:
-                    continue
-                h = heights[level]
-                w = 2 * h
-                x, y = u * w - 0.5, t * h - 0.5
-                fx0, fy0 = np.floor(x), np.floor(y)
-                fx, fy = x - fx0, y - fy0
-                x0 = int(fx0)                       # -1 .. w - 1: wraps as x0 % w
-                x0 = x0 + w if x0 < 0 else x0
-                x1 = x0 + 1 if x0 + 1 < w else 0
-                row = int(fy0)
-                y0 = offsets[level] + min(max(row, 0), h - 1) * w
-                y1 = offsets[level] + min(max(row + 1, 0), h - 1) * w
-                a, b, c_, e = y0 + x0, y0 + x1, y1 + x0, y1 + x1
-                for c in range(3):
-                    upper = texels[a, c] * (1 - fx) + texels[b, c] * fx
-                    lower = texels[c_, c] * (1 - fx) + texels[e, c] * fx
-                    value[c] += weight * (upper * (1 - fy) + lower * fy)
-            for c in range(3):
-                out[k, c, i] = value[c] * scale[c]
+            for j in range(m):
+                lod = lods[k, start + j]
+                lo = min(max(int(lod), 0), top)
+                frac = lod - lo
+                for s in range(2):
+                    level = min(lo + s, top)
+                    weights[s, j] = 1 - frac if s == 0 else (frac if lo < top else 0.0)    # 0: level lo only
+                    h = heights[level]
+                    w = 2 * h
+                    x, y = us[j] * w - 0.5, ts[j] * h - 0.5
+                    fx0, fy0 = np.floor(x), np.floor(y)
+                    fxs[s, j], fys[s, j] = x - fx0, y - fy0
+                    x0 = min(max(int(fx0), -1), w - 1)      # -1 .. w - 1 (clamped for NaN): wraps as x0 % w
+                    x0 = x0 + w if x0 < 0 else x0
+                    x1 = x0 + 1 if x0 + 1 < w else 0
+                    row = int(fy0)
+                    y0 = offsets[level] + min(max(row, 0), h - 1) * w
+                    y1 = offsets[level] + min(max(row + 1, 0), h - 1) * w
+                    corner[s, 0, j], corner[s, 1, j], corner[s, 2, j], corner[s, 3, j] = (y0 + x0, y0 + x1,
+                                                                                          y1 + x0, y1 + x1)
+            for j in range(m):
+                v0 = v1 = v2 = 0.0
+                for s in range(2):
+                    weight = weights[s, j]
+                    if s == 1 and weight == 0:
+                        continue
+                    a, b, c, e = corner[s, 0, j], corner[s, 1, j], corner[s, 2, j], corner[s, 3, j]
+                    fx, fy = fxs[s, j], fys[s, j]
+                    gx, gy = 1 - fx, 1 - fy
+                    v0 += weight * ((texels[a, 0] * gx + texels[b, 0] * fx) * gy
+                                    + (texels[c, 0] * gx + texels[e, 0] * fx) * fy)
+                    v1 += weight * ((texels[a, 1] * gx + texels[b, 1] * fx) * gy
+                                    + (texels[c, 1] * gx + texels[e, 1] * fx) * fy)
+                    v2 += weight * ((texels[a, 2] * gx + texels[b, 2] * fx) * gy
+                                    + (texels[c, 2] * gx + texels[e, 2] * fx) * fy)
+                out[k, 0, start + j] = v0 * scale[0]
+                out[k, 1, start + j] = v1 * scale[1]
+                out[k, 2, start + j] = v2 * scale[2]
 
 
 # ------------------------------------------------------------------------------------------------ per map
@@ -598,7 +630,8 @@ class FrameEnvironment:
     def specular_lobes(self, directions: np.ndarray, roughness: np.ndarray) -> np.ndarray:
         """(K, 3, N) float32: `specular` along world directions (3, N) for each row of GGX roughness (K, N)."""
         d = np.asarray(directions, np.float64).T @ self.M.T
-        angle = 90.0 * np.asarray(roughness, np.float64) ** 2
+        angle = np.asarray(roughness, np.float64) ** 2
+        angle *= 90.0
         packed = self.lighting.packed or pack_levels(self.lighting.remainder)
         return lookup_blurred_many(packed, d, angle, self.scale, np.float32)
 

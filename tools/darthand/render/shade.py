@@ -370,24 +370,24 @@ def shade(material: Material, hits: Hits, lights: list[dict], ambient: np.ndarra
     irradiance = f32(np.broadcast_to(ambient[:, None], (3, m)) if hits.indirect is None else hits.indirect)
     visible = np.ones(m, np.float32) if hits.visible is None else f32(hits.visible)
     out = np.empty((3, m), np.float32)
+    kept = m if environment is not None and spec else 0
+    karis, reflect = np.empty((3, kept), np.float32), np.empty((3, kept), np.float64)
     _radiance_kernel(f32(p.albedo), f32(p.roughness), f0, spec, ambient, irradiance, visible, nv, e2, n, v,
-                     position, table, diffuse, reached, out)
+                     position, table, diffuse, reached, karis, reflect, out)
     if environment is not None and spec:
-        out += spec * environment_specular(environment, p, n, v, nv) * visible
+        out += spec * environment_specular(environment, p, reflect, karis) * visible
     if dual and material.specular:
         out += skin_specular_radiance(hits, p.roughness, p.f0, float(material.specular), table, reached, ambient,
                                       material.roughness_channel is not None, environment)
     return out
 
 
-def environment_specular(environment, p: SurfaceParams, normal: np.ndarray, view: np.ndarray,
-                         nv: np.ndarray) -> np.ndarray:
+def environment_specular(environment, p: SurfaceParams, reflect: np.ndarray, karis: np.ndarray) -> np.ndarray:
     """(3, M) float32 the specular ambient term of an environment (environment.FrameEnvironment): its radiance
-    prefiltered for the hits' roughness along the reflection directions 2 (n.v) n - v of unit normals and views
-    (3, M), times Karis' F0 A + B at n.v (M,) (clipped as the kernels clip it)."""
-    reflect = 2 * (normal * view).sum(axis=0) * normal - view
-    f0 = np.broadcast_to(p.f0, reflect.shape)
-    return (environment.specular(reflect, p.roughness) * ambient_specular(f0, p.roughness, nv)).astype(np.float32)
+    prefiltered for the hits' roughness along the reflection directions (3, M) float64 (2 (n.v) n - v of the unit
+    normals and views, in float32), times Karis' F0 A + B (3, M) float32 (ambient_specular at the kernels' clipped
+    n.v); _radiance_kernel leaves both."""
+    return environment.specular(reflect, p.roughness) * karis
 
 
 @kernel(error_model="numpy")
@@ -490,15 +490,18 @@ def _lights_kernel(normal, view, position, lights, kind, by_cosine, wrap, row_r,
 
 @kernel(error_model="numpy")
 def _radiance_kernel(albedo, roughness, f0, spec, ambient, irradiance, visible, nv, e2, normal, view, position,
-                     lights, diffuse, reached, out):
+                     lights, diffuse, reached, karis, reflect, out):
     """out (3, M): per hit, ambient_light (albedo x irradiance (3, M) (the indirect irradiance, or the ambient
     light), plus spec x ambient (3,) x Karis' F0 A + B x visible (M,), e2 = exp2(-9.28 n.v)), then per reached light
     (lights, diffuse, reached as _lights_kernel left them) albedo x diffuse + spec x ggx_specular, times its radiance
-    (over the squared distance for a point light). f0 (3, M). Float32 in the numpy formulas' order."""
+    (over the squared distance for a point light). f0 (3, M). Float32 in the numpy formulas' order. karis (3, M)
+    float32 and reflect (3, M) float64, or (3, 0) for none: F0 A + B and the reflection direction 2 (n.v) n - v
+    (float32, unclipped n.v summed x, y, z, as numpy's sum over axis 0) are left there (environment_specular's)."""
     zero, one, half = np.float32(0.0), np.float32(1.0), np.float32(0.5)
     tiny, eps = np.float32(1e-30), np.float32(1e-7)
     m = albedo.shape[1]
     with_spec = spec != zero
+    keep = karis.shape[1] == m
     s0, s1, s2 = spec * ambient[0], spec * ambient[1], spec * ambient[2]
     for i in range(m):
         o0, o1, o2 = albedo[0, i] * irradiance[0, i], albedo[1, i] * irradiance[1, i], albedo[2, i] * irradiance[2, i]
@@ -509,9 +512,17 @@ def _radiance_kernel(albedo, roughness, f0, spec, ambient, irradiance, visible, 
             a004 = min(r0 * r0, e2[i]) * r0 + r1
             A = a004 * np.float32(-1.04) + (rough * np.float32(-0.572) + np.float32(1.04))
             B = a004 * np.float32(1.04) + (rough * np.float32(0.022) + np.float32(-0.04))
-            o0 = o0 + s0 * (f0[0, i] * A + B) * visible[i]
-            o1 = o1 + s1 * (f0[1, i] * A + B) * visible[i]
-            o2 = o2 + s2 * (f0[2, i] * A + B) * visible[i]
+            k0, k1, k2 = f0[0, i] * A + B, f0[1, i] * A + B, f0[2, i] * A + B
+            o0 = o0 + s0 * k0 * visible[i]
+            o1 = o1 + s1 * k1 * visible[i]
+            o2 = o2 + s2 * k2 * visible[i]
+            if keep:
+                karis[0, i], karis[1, i], karis[2, i] = k0, k1, k2
+                twice = np.float32(2) * (normal[0, i] * view[0, i] + normal[1, i] * view[1, i]
+                                         + normal[2, i] * view[2, i])
+                reflect[0, i] = twice * normal[0, i] - view[0, i]
+                reflect[1, i] = twice * normal[1, i] - view[1, i]
+                reflect[2, i] = twice * normal[2, i] - view[2, i]
         out[0, i], out[1, i], out[2, i] = o0, o1, o2
     for k in range(lights.shape[0]):
         point = lights[k, 0] != zero
