@@ -232,6 +232,14 @@ def fast_atan2(y: float, x: float) -> float:
     return math.copysign(r, y)
 
 
+@inlined(always=True)
+def map_angles(d0: float, d1: float, d2: float) -> tuple[float, float]:
+    """(u, 1 - v) of a lookup direction (float64 components, need not be unit): direction_uv's u, and its v as the
+    share of the map's height from the top row, with fast_atan2 for np.arctan2 and sqrt(d0^2 + d1^2) for hypot:
+    what the map lookups find texel coordinates from (x = u W - 0.5, y = (1 - v) H - 0.5)."""
+    return fast_atan2(d1, -d0) / (2 * np.pi) + 0.5, 0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi
+
+
 def atan2_many(y: np.ndarray, x: np.ndarray) -> np.ndarray:
     """(N,) float64 fast_atan2 of float64 arrays y, x (N,) (what the map lookups compute, for tests and
     benchmarks)."""
@@ -322,9 +330,8 @@ def _lookup_kernel(level, d, weight, out):
         for j in range(m):
             e0[j], e1[j], e2[j] = d[start + j, 0], d[start + j, 1], d[start + j, 2]
         for j in range(m):
-            d0, d1, d2 = e0[j], e1[j], e2[j]
-            xs[j] = (fast_atan2(d1, -d0) / (2 * np.pi) + 0.5) * w - 0.5
-            ys[j] = (0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi) * h - 0.5
+            u, t = map_angles(e0[j], e1[j], e2[j])
+            xs[j], ys[j] = u * w - 0.5, t * h - 0.5
         for j in range(m):
             x, y = xs[j], ys[j]
             fx0, fy0 = np.floor(x), np.floor(y)
@@ -407,9 +414,7 @@ def _blurred_kernel(texels, offsets, heights, d, lods, scale, out):
         for j in range(m):
             e0[j], e1[j], e2[j] = d[start + j, 0], d[start + j, 1], d[start + j, 2]
         for j in range(m):
-            d0, d1, d2 = e0[j], e1[j], e2[j]
-            us[j] = fast_atan2(d1, -d0) / (2 * np.pi) + 0.5
-            ts[j] = 0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi
+            us[j], ts[j] = map_angles(e0[j], e1[j], e2[j])
         for k in range(lods.shape[0]):
             for j in range(m):
                 lod = lods[k, start + j]
@@ -758,8 +763,7 @@ def _backdrop_kernel(level, coarser, weight, second, weight2, to_map, scale, out
             d0 = px * to_map[0, 0] + py * to_map[1, 0] + to_map[2, 0]
             d1 = px * to_map[0, 1] + py * to_map[1, 1] + to_map[2, 1]
             d2 = px * to_map[0, 2] + py * to_map[1, 2] + to_map[2, 2]
-            us[j] = fast_atan2(d1, -d0) / (2 * np.pi) + 0.5
-            ts[j] = 0.5 - fast_atan2(d2, math.sqrt(d0 * d0 + d1 * d1)) / np.pi
+            us[j], ts[j] = map_angles(d0, d1, d2)
         for j in range(out.shape[1]):
             u, t = us[j], ts[j]
             v0 = v1 = v2 = 0.0
