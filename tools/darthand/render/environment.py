@@ -605,6 +605,7 @@ class FrameEnvironment:
         indirect ray that escapes brings back); with rows (N,) bool, only those rows are looked up (the others are
         0), each the same number as without."""
         level = level_of_width(self.lighting.remainder, SKY_WIDTH)
+        # every row turned, then the rows picked: OpenBLAS may round a row of a smaller product differently
         d = np.asarray(directions, np.float64) @ self.M.T
         if rows is None:
             return (bilinear(level, d) * self.scale).astype(np.float32)
